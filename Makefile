@@ -1,0 +1,31 @@
+# The two commands: `make run` (set up, then a short local search) and `make test` (set up, then the tests).
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: install run test test-all lint bench clean
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[dev]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+run: $(STAMP)
+	$(VENV)/bin/spinefarm search tetraspine --trials 200 --workers 2 --duration 5 --out runs/tetraspine-demo.h5
+
+test: $(STAMP)
+	$(PY) -m ruff check .
+	$(PY) -m pytest -q -ra
+
+test-all: $(STAMP)
+	$(PY) -m pytest -q -ra -m ''
+
+bench: $(STAMP)
+	$(PY) bench/trial_speed.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache

@@ -1,0 +1,42 @@
+"""`spinefarm` console script: one sub-command per user task, registered by topic modules."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from protocol.errors import SpinefarmError
+
+# Each module exposes register(subparsers); a sub-command sets `func(args) -> int`.
+COMMAND_MODULES = ("cli.sim_commands", "cli.service_commands")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="spinefarm", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:
+                raise
+            continue
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except SpinefarmError as exc:
+        print(f"spinefarm {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

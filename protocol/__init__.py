@@ -1,0 +1,1 @@
+"""Contracts every spinefarm service shares. Imports only numpy and the standard library."""

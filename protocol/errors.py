@@ -1,0 +1,84 @@
+"""One root error class; every message says what was received and what was expected."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class SpinefarmError(Exception):
+    """Root of every error spinefarm raises on purpose.
+
+    `code` is a stable machine-readable identifier (used in HTTP error details);
+    the message names what was received and what was expected.
+    """
+
+    code = "spinefarm_error"
+
+    def __init__(self, message: str, *, received: Any = None, expected: Any = None) -> None:
+        self.received = received
+        self.expected = expected
+        parts = [message]
+        if received is not None:
+            parts.append(f"received {received!r}")
+        if expected is not None:
+            parts.append(f"expected {expected}")
+        super().__init__("; ".join(parts))
+
+    def to_detail(self) -> dict[str, Any]:
+        return {"code": self.code, "message": str(self)}
+
+
+class ConfigError(SpinefarmError, ValueError):
+    """A configuration value is out of range or of the wrong kind."""
+
+    code = "invalid_config"
+
+
+class ParameterError(SpinefarmError, ValueError):
+    """A parameter vector has the wrong length, a non-finite value or an unknown name."""
+
+    code = "invalid_parameters"
+
+
+class UnknownMorphologyError(SpinefarmError, KeyError):
+    """A morphology name is not registered and is not a readable spec file."""
+
+    code = "unknown_morphology"
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return Exception.__str__(self)
+
+
+class MorphologySpecError(SpinefarmError, ValueError):
+    """A structure file is malformed; the message names the field (and line when known)."""
+
+    code = "invalid_morphology_spec"
+
+
+class MessageError(SpinefarmError, ValueError):
+    """A transport message is malformed, foreign or of another schema version."""
+
+    code = "malformed_message"
+
+
+class StorageError(SpinefarmError):
+    """The results store cannot be opened or does not hold what was asked for."""
+
+    code = "storage_error"
+
+
+def check_range(field: str, value: float, low: float | None = None, high: float | None = None,
+                *, low_inclusive: bool = True) -> None:
+    """Raise ConfigError naming `field` unless low <= value <= high (and finite)."""
+    import math
+
+    ok = isinstance(value, int | float) and math.isfinite(value)
+    if ok and low is not None:
+        ok = value >= low if low_inclusive else value > low
+    if ok and high is not None:
+        ok = value <= high
+    if not ok:
+        lo = "-inf" if low is None else f"{low:g}"
+        hi = "inf" if high is None else f"{high:g}"
+        bracket = "[" if low_inclusive else "("
+        raise ConfigError(f"{field} out of range", received=value, expected=f"a finite number in {bracket}{lo}, {hi}]")
