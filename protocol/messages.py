@@ -6,6 +6,7 @@ the wrong kind raises MessageError naming what was received and what was expecte
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field, fields
@@ -13,6 +14,7 @@ from enum import StrEnum
 from typing import Any
 
 from protocol.errors import MessageError
+from protocol.params import ParamSpace, ParamSpec
 
 SCHEMA_VERSION = 1
 
@@ -155,3 +157,266 @@ def decode(payload: bytes | str, expected_kind: str | None = None) -> tuple[str,
         raise MessageError("message body is not an object", received=type(envelope["body"]).__name__,
                            expected="a JSON object")
     return kind, _restore_floats(envelope["body"])
+
+
+# --- Distributed search messages (worker <-> coordinator over Zenoh) ---------------------------------
+
+_MAX_BATCH = 4096
+
+
+def _field(data: Any, name: str, kinds: type | tuple[type, ...], what: str) -> Any:
+    """data[name] checked against `kinds` (bool is never accepted as a number)."""
+    if not isinstance(data, dict):
+        raise MessageError(f"{what} is not an object", received=type(data).__name__, expected="a JSON object")
+    if name not in data:
+        raise MessageError(f"{what} lacks field {name!r}", received=sorted(data), expected=f"field {name!r}")
+    value = data[name]
+    numeric = kinds in (int, float, (int, float))
+    if (numeric and isinstance(value, bool)) or not isinstance(value, kinds):
+        names = kinds.__name__ if isinstance(kinds, type) else " or ".join(k.__name__ for k in kinds)
+        raise MessageError(f"{what} field {name!r} has the wrong type", received=value, expected=names)
+    return value
+
+
+def _finite(value: float, name: str, what: str) -> float:
+    if not math.isfinite(value):
+        raise MessageError(f"{what} field {name!r} is not finite", received=value, expected="a finite number")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class WorkRequest:
+    """A worker asks a run for up to `capacity` trials."""
+
+    KIND = "work_request"
+    worker_id: str
+    capacity: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"worker_id": self.worker_id, "capacity": self.capacity}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> WorkRequest:
+        worker_id = _field(data, "worker_id", str, "work request")
+        capacity = _field(data, "capacity", int, "work request")
+        if not worker_id or not 1 <= capacity <= _MAX_BATCH:
+            raise MessageError("work request is out of range", received=(worker_id, capacity),
+                               expected=f"a non-empty worker id and 1 <= capacity <= {_MAX_BATCH}")
+        return cls(worker_id, capacity)
+
+
+@dataclass(frozen=True)
+class TrialAssignment:
+    """One leased trial: run `params_unit` (unit cube of the run's space) with `seed`.
+
+    lease_id identifies this issue of the trial; a result must quote it, so a late result for a
+    re-issued trial is recognised and dropped. lease_s: time the coordinator waits for it.
+    """
+
+    trial_id: int
+    lease_id: int
+    params_unit: tuple[float, ...]
+    seed: int
+    lease_s: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"trial_id": self.trial_id, "lease_id": self.lease_id, "params_unit": list(self.params_unit),
+                "seed": self.seed, "lease_s": self.lease_s}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> TrialAssignment:
+        what = "trial assignment"
+        params = _field(data, "params_unit", list, what)
+        if not all(isinstance(p, int | float) and not isinstance(p, bool) for p in params):
+            raise MessageError("trial assignment has non-numeric parameters", received=params[:8],
+                               expected="a list of numbers in [0, 1]")
+        return cls(_field(data, "trial_id", int, what), _field(data, "lease_id", int, what),
+                   tuple(float(p) for p in params), _field(data, "seed", int, what),
+                   _finite(_field(data, "lease_s", (int, float), what), "lease_s", what))
+
+
+@dataclass(frozen=True)
+class WorkGrant:
+    """The coordinator's answer to a WorkRequest.
+
+    An empty grant says why: `run_done` (budget met, stop asking) or wait `retry_after_s`.
+    """
+
+    KIND = "work_grant"
+    run_id: str
+    config_hash: str
+    assignments: tuple[TrialAssignment, ...]
+    retry_after_s: float = 0.0
+    run_done: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"run_id": self.run_id, "config_hash": self.config_hash,
+                "assignments": [a.to_dict() for a in self.assignments],
+                "retry_after_s": self.retry_after_s, "run_done": self.run_done}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> WorkGrant:
+        what = "work grant"
+        items = _field(data, "assignments", list, what)
+        return cls(_field(data, "run_id", str, what), _field(data, "config_hash", str, what),
+                   tuple(TrialAssignment.from_dict(a) for a in items),
+                   _finite(_field(data, "retry_after_s", (int, float), what), "retry_after_s", what),
+                   _field(data, "run_done", bool, what))
+
+
+@dataclass(frozen=True)
+class SubmittedResult:
+    """A TrialResult with the lease it answers."""
+
+    lease_id: int
+    result: TrialResult
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"lease_id": self.lease_id, "result": self.result.to_dict()}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> SubmittedResult:
+        result = TrialResult.from_dict(_field(data, "result", dict, "submitted result"))
+        if result.trial_id < 0:
+            raise MessageError("submitted result has no trial id", received=result.trial_id,
+                               expected="a trial id >= 0")
+        return cls(_field(data, "lease_id", int, "submitted result"), result)
+
+
+@dataclass(frozen=True)
+class ResultSubmission:
+    """A worker returns finished trials; it resends them until each is acknowledged."""
+
+    KIND = "result_submission"
+    worker_id: str
+    items: tuple[SubmittedResult, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"worker_id": self.worker_id, "items": [i.to_dict() for i in self.items]}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ResultSubmission:
+        items = _field(data, "items", list, "result submission")
+        if len(items) > _MAX_BATCH:
+            raise MessageError("result submission is too large", received=len(items),
+                               expected=f"at most {_MAX_BATCH} results")
+        return cls(_field(data, "worker_id", str, "result submission"),
+                   tuple(SubmittedResult.from_dict(i) for i in items))
+
+
+class Verdict(StrEnum):
+    """What the coordinator did with one submitted result. Every verdict is final for the worker."""
+
+    STORED = "stored"          # new, stored now
+    DUPLICATE = "duplicate"    # already stored (a resend after a lost ack)
+    STALE = "stale"            # the lease expired or the trial was re-issued: dropped
+    UNKNOWN = "unknown"        # no such trial in this run: dropped
+    INVALID = "invalid"        # the result does not fit the trial (e.g. seed mismatch): dropped
+
+
+@dataclass(frozen=True)
+class ResultAck:
+    KIND = "result_ack"
+    verdicts: tuple[tuple[int, Verdict], ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"verdicts": [[t, str(v)] for t, v in self.verdicts]}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ResultAck:
+        raw = _field(data, "verdicts", list, "result ack")
+        try:
+            verdicts = tuple((int(t), Verdict(v)) for t, v in raw)
+        except (TypeError, ValueError) as exc:
+            raise MessageError("result ack has malformed verdicts", received=raw[:4],
+                               expected=f"[trial_id, one of {[v.value for v in Verdict]}] pairs") from exc
+        return cls(verdicts)
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """A coordinator announces its run so stateless workers can find it."""
+
+    KIND = "run_info"
+    run_id: str
+    config_hash: str
+    trials_budget: int
+    run_done: bool
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Any) -> RunInfo:
+        what = "run info"
+        return cls(_field(data, "run_id", str, what), _field(data, "config_hash", str, what),
+                   _field(data, "trials_budget", int, what), _field(data, "run_done", bool, what))
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything a stateless worker needs to run trials of one run; fetched by hash and cached.
+
+    morphology: a registered name (or the built-in test objective "sphere");
+    morphology_spec: the morphology's to_dict() (empty for test objectives);
+    param_space: ParamSpace.describe() of the space the unit-cube vectors map into;
+    trial_config: TrialConfig.to_dict() (empty for test objectives).
+    """
+
+    KIND = "run_config"
+    run_id: str
+    morphology: str
+    morphology_spec: dict[str, Any]
+    controller: str | None
+    param_space: tuple[dict[str, Any], ...]
+    trial_config: dict[str, Any]
+    objective: str
+    seed: int
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["param_space"] = [dict(p) for p in self.param_space]
+        return d
+
+    def config_hash(self) -> str:
+        blob = json.dumps(_finite_or_str(self.to_dict()), sort_keys=True, default=_json_default)
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+    def space(self) -> ParamSpace:
+        return ParamSpace(self.morphology, tuple(
+            ParamSpec(p["name"], float(p["low"]), float(p["high"]), str(p.get("unit", "")),
+                      str(p.get("doc", "")))
+            for p in self.param_space))
+
+    @classmethod
+    def from_dict(cls, data: Any) -> RunConfig:
+        what = "run config"
+        controller = data.get("controller") if isinstance(data, dict) else None
+        if controller is not None and not isinstance(controller, str):
+            raise MessageError("run config field 'controller' has the wrong type", received=controller,
+                               expected="a string or null")
+        space = _field(data, "param_space", list, what)
+        if not all(isinstance(p, dict) and {"name", "low", "high"} <= set(p) for p in space):
+            raise MessageError("run config has a malformed parameter space", received=space[:2],
+                               expected="a list of {name, low, high, unit}")
+        return cls(_field(data, "run_id", str, what), _field(data, "morphology", str, what),
+                   _field(data, "morphology_spec", dict, what), controller, tuple(space),
+                   _field(data, "trial_config", dict, what), _field(data, "objective", str, what),
+                   _field(data, "seed", int, what))
+
+
+def encode_message(message: Any) -> bytes:
+    """Encode one of the dataclasses above (each has KIND and to_dict)."""
+    return encode(message.KIND, message.to_dict())
+
+
+def decode_message(payload: bytes | str, cls: Any) -> Any:
+    """Decode an envelope of `cls.KIND` into `cls`; MessageError for anything else."""
+    _, body = decode(payload, cls.KIND)
+    try:
+        return cls.from_dict(body)
+    except MessageError:
+        raise
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+        raise MessageError(f"{cls.KIND} message is malformed: {exc}", received=str(body)[:120],
+                           expected=f"a valid {cls.KIND} body") from exc
