@@ -1,0 +1,156 @@
+"""The only module that imports pybullet: builds a scene of compound rigid segments and steps it.
+
+Gravity is -981 cm/s^2 along Y (Y up, NTRT's frame). Each segment is one maximal-coordinate
+rigid body with explicit mass, COM and inertia. Per step the loop does one pose read per body,
+two applyExternalForce calls per body (its net wrench as a force pair) and one stepSimulation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import chain
+
+import numpy as np
+import pybullet as pb
+
+from worker.sim.bodies import BodyModel
+
+GRAVITY_CM_S2 = 981.0
+
+
+@dataclass(frozen=True)
+class EngineSettings:
+    """Bullet settings; defaults are Bullet 2.8x's sequential-impulse defaults (spec 0a.7)."""
+
+    dt_s: float = 1e-3
+    solver_iterations: int = 10
+    erp: float = 0.2
+    split_impulse: bool = True
+    split_impulse_threshold: float = -0.04
+    warm_starting_factor: float = 0.85
+    cone_friction: bool = False
+
+
+@dataclass(frozen=True)
+class GroundSpec:
+    """Flat static box whose top is at top_y_cm (NTRT [P]: half-height 0.5, top at y = 0.5)."""
+
+    top_y_cm: float = 0.5
+    half_extent_cm: float = 500.0
+    half_height_cm: float = 0.5
+    friction: float = 0.5
+
+
+def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
+    tr = r[0, 0] + r[1, 1] + r[2, 2]
+    if tr > 0:
+        s = np.sqrt(tr + 1.0) * 2
+        w, x, y, z = 0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s
+    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+        s = np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
+        w, x, y, z = (r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s
+    elif r[1, 1] > r[2, 2]:
+        s = np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
+        w, x, y, z = (r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s
+    else:
+        s = np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
+        w, x, y, z = (r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s
+    return (float(x), float(y), float(z), float(w))
+
+
+# pybullet cylinders run along Z; our rods along their frame's Y.
+_Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+class PhysicsScene:
+    """A pybullet DIRECT world holding the segments and the ground."""
+
+    def __init__(self, bodies: list[BodyModel], engine: EngineSettings, ground: GroundSpec,
+                 start_offsets_cm: np.ndarray | None = None,
+                 collision_pairs_off: list[tuple[int, int]] | None = None) -> None:
+        self.client = pb.connect(pb.DIRECT)
+        c = self.client
+        pb.resetSimulation(physicsClientId=c)
+        pb.setGravity(0.0, -GRAVITY_CM_S2, 0.0, physicsClientId=c)
+        pb.setPhysicsEngineParameter(
+            fixedTimeStep=engine.dt_s, numSubSteps=1, numSolverIterations=engine.solver_iterations,
+            erp=engine.erp, contactERP=engine.erp, frictionERP=engine.erp,
+            useSplitImpulse=int(engine.split_impulse),
+            splitImpulsePenetrationThreshold=engine.split_impulse_threshold,
+            enableConeFriction=int(engine.cone_friction), deterministicOverlappingPairs=1,
+            restitutionVelocityThreshold=0.0, physicsClientId=c)
+        pb.setPhysicsEngineParameter(warmStartingFactor=engine.warm_starting_factor, physicsClientId=c)
+        self.dt_s = engine.dt_s
+        gshape = pb.createCollisionShape(
+            pb.GEOM_BOX, halfExtents=[ground.half_extent_cm, ground.half_height_cm, ground.half_extent_cm],
+            physicsClientId=c)
+        self.ground_id = pb.createMultiBody(0.0, gshape, -1, [0.0, ground.top_y_cm - ground.half_height_cm, 0.0],
+                                            useMaximalCoordinates=True, physicsClientId=c)
+        pb.changeDynamics(self.ground_id, -1, lateralFriction=ground.friction, restitution=0.0,
+                          rollingFriction=0.0, spinningFriction=0.0, physicsClientId=c)
+        self.body_ids: list[int] = []
+        for i, body in enumerate(bodies):
+            self.body_ids.append(self._add_body(body, None if start_offsets_cm is None else start_offsets_cm[i]))
+        for a, b in collision_pairs_off or []:
+            pb.setCollisionFilterPair(self.body_ids[a], self.body_ids[b], -1, -1, 0, physicsClientId=c)
+        self._get_pose = pb.getBasePositionAndOrientation
+        self._apply = pb.applyExternalForce
+        self._step = pb.stepSimulation
+        self._world = pb.WORLD_FRAME
+
+    def _add_body(self, body: BodyModel, offset: np.ndarray | None) -> int:
+        c = self.client
+        n = len(body.rods)
+        shape = pb.createCollisionShapeArray(
+            shapeTypes=[pb.GEOM_CYLINDER] * n,
+            radii=[r.radius_cm for r in body.rods],
+            lengths=[r.length_cm for r in body.rods],
+            collisionFramePositions=[list(map(float, r.centre_cm)) for r in body.rods],
+            collisionFrameOrientations=[_quat_from_matrix(r.rotation @ _Z_TO_Y) for r in body.rods],
+            physicsClientId=c)
+        pos = body.com_cm if offset is None else body.com_cm + offset
+        bid = pb.createMultiBody(body.mass_kg, shape, -1, list(map(float, pos)), [0, 0, 0, 1],
+                                 useMaximalCoordinates=True, physicsClientId=c)
+        # mass in the same call as the inertia, or pybullet zeroes the mass
+        pb.changeDynamics(bid, -1, mass=body.mass_kg, localInertiaDiagonal=list(map(float, body.inertia_kg_cm2)),
+                          lateralFriction=body.friction, rollingFriction=body.rolling_friction,
+                          spinningFriction=0.0, restitution=body.restitution, linearDamping=0.0,
+                          angularDamping=0.0, activationState=pb.ACTIVATION_STATE_DISABLE_SLEEPING,
+                          physicsClientId=c)
+        return bid
+
+    def read_poses(self) -> np.ndarray:
+        """(n_bodies, 7): COM position (cm) and quaternion (x, y, z, w) of each segment."""
+        get, c = self._get_pose, self.client
+        return np.array([tuple(chain.from_iterable(get(b, physicsClientId=c))) for b in self.body_ids])
+
+    def apply_force_pairs(self, points_cm: np.ndarray, forces: np.ndarray) -> None:
+        """Apply forces (2 n_bodies, 3) kg*cm/s^2 at world points (2 n_bodies, 3); rows 2b, 2b+1 on body b."""
+        apply, world, c = self._apply, self._world, self.client
+        pts = points_cm.tolist()
+        fs = forces.tolist()
+        for i, b in enumerate(self.body_ids):
+            apply(b, -1, fs[2 * i], pts[2 * i], world, physicsClientId=c)
+            apply(b, -1, fs[2 * i + 1], pts[2 * i + 1], world, physicsClientId=c)
+
+    def step(self) -> None:
+        self._step(physicsClientId=self.client)
+
+    def velocities(self) -> np.ndarray:
+        """(n_bodies, 6): linear (cm/s) and angular (rad/s) velocity; for checks, not the hot loop."""
+        return np.array([tuple(chain.from_iterable(pb.getBaseVelocity(b, physicsClientId=self.client)))
+                         for b in self.body_ids])
+
+    def body_dynamics(self, index: int) -> tuple:
+        return pb.getDynamicsInfo(self.body_ids[index], -1, physicsClientId=self.client)
+
+    def close(self) -> None:
+        if self.client is not None and pb.isConnected(self.client):
+            pb.disconnect(self.client)
+        self.client = None
+
+    def __enter__(self) -> PhysicsScene:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

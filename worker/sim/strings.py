@@ -1,0 +1,248 @@
+"""The string kernel: anchors, lengths, impedance, motor, force law and per-body wrenches in one pass.
+
+One compiled call per physics step, nothing per string in Python. Internal units: cm, kg, s;
+forces in kg*cm/s^2 (1 N = 100). Columns of the packed arrays are named below.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# params (n_strings, N_PARAM)
+P_K, P_B, P_TMAX, P_V, P_A, P_LMIN, P_LACT, P_T0, P_KI, P_BI, P_LC, P_MODE, P_NODE, P_DRIVE = range(14)
+N_PARAM = 14
+# state (n_strings, N_STATE): rest length, length at the previous evaluation, its rate, motor speed
+S_REST, S_LPREV, S_V, S_U = range(4)
+N_STATE = 4
+
+MODE_FIXED, MODE_IMPEDANCE, MODE_DRIVEN = 0, 1, 2
+MOTOR_PHYSICAL, MOTOR_NTRT2014 = 0, 1
+COUPLE_LEVER_CM = 1.0
+
+STATUS_OK, STATUS_NONFINITE = 0, 1
+
+
+@njit(cache=True, inline="always")
+def _sign(x):
+    return 1.0 if x > 0.0 else (-1.0 if x < 0.0 else 0.0)
+
+
+@njit(cache=True)
+def motor_physical(rest, target, length, k, tmax, vmax, amax, lmin, lact, u, dt):
+    """Rest-length motor with speed and acceleration limits in physical units (dt-independent).
+
+    Returns (new rest length, new motor speed). It approaches the target on a profile that can stop
+    in time (speed <= sqrt(2 A |delta|)), never shortens the string while its tension exceeds tmax,
+    and never goes below lmin.
+    """
+    tension = k * (length - rest)
+    if k * (length - target) > tmax:
+        target = length - tmax / k
+    delta = target - rest
+    if not (length > lact or delta > 0.0):
+        delta = 0.0
+    mag = abs(delta)
+    speed = min(vmax, np.sqrt(2.0 * amax * mag), mag / dt) * _sign(delta)
+    dv = speed - u
+    lim = amax * dt
+    if dv > lim:
+        dv = lim
+    elif dv < -lim:
+        dv = -lim
+    u_new = u + dv
+    if tension > tmax and u_new < 0.0:
+        u_new = 0.0  # brake: no reeling in above the tension limit
+    new_rest = rest + u_new * dt
+    if new_rest < lmin:
+        new_rest = lmin
+        u_new = 0.0
+    return new_rest, u_new
+
+
+@njit(cache=True)
+def motor_ntrt2014(rest, target, length, k, tmax, vmax, amax, lmin, lact, vc, dt):
+    """NTRT's 2014 per-step motor (spec 3.3 [P]); its caps V dt and A dt^2 tie speed to dt."""
+    s = vmax * dt
+    a = amax * dt
+    if k * (length - target) > tmax:
+        target = length - tmax / k
+    delta = target - rest
+    if length > lact or delta > 0.0:
+        if abs(delta) > s:
+            if abs(_sign(delta) * vmax - vc) > a:
+                s = a * dt
+            rest += _sign(delta) * s
+        else:
+            if abs(delta / dt - vc) > a:
+                delta = _sign(delta) * a * dt
+                if delta == 0.0:
+                    delta = -_sign(vc) * a * dt
+            rest += delta
+    if rest < lmin:
+        rest = lmin
+    return rest
+
+
+@njit(cache=True)
+def _quat_to_matrix(q):
+    x, y, z, w = q[0], q[1], q[2], q[3]
+    r = np.empty((3, 3))
+    r[0, 0] = 1 - 2 * (y * y + z * z)
+    r[0, 1] = 2 * (x * y - z * w)
+    r[0, 2] = 2 * (x * z + y * w)
+    r[1, 0] = 2 * (x * y + z * w)
+    r[1, 1] = 1 - 2 * (x * x + z * z)
+    r[1, 2] = 2 * (y * z - x * w)
+    r[2, 0] = 2 * (x * z - y * w)
+    r[2, 1] = 2 * (y * z + x * w)
+    r[2, 2] = 1 - 2 * (x * x + y * y)
+    return r
+
+
+@njit(cache=True)
+def world_anchors(poses, body, anchors, out):
+    """out (n, 3) = world positions of body-frame anchors (n, 3) on bodies posed by poses (nb, 7)."""
+    nb = poses.shape[0]
+    rots = np.empty((nb, 3, 3))
+    for b in range(nb):
+        rots[b] = _quat_to_matrix(poses[b, 3:7])
+    for i in range(anchors.shape[0]):
+        b = body[i]
+        for r in range(3):
+            out[i, r] = poses[b, r] + rots[b, r, 0] * anchors[i, 0] + rots[b, r, 1] * anchors[i, 1] \
+                + rots[b, r, 2] * anchors[i, 2]
+
+
+@njit(cache=True)
+def string_step(poses, body_a, body_b, anc_a, anc_b, params, state, cpg_out, dt, motor_mode,
+                out_points, out_forces, out_tension, work):
+    """One control + force step for every string.
+
+    poses (nb, 7) COM position (cm) and quaternion (x, y, z, w); cpg_out (n_nodes,) cm/s.
+    Writes out_points/out_forces (2 nb, 3): each body's net wrench as two forces (net force at the
+    COM plus a couple, since pybullet's applyExternalTorque misbehaves on maximal-coordinate
+    bodies); out_tension (n,) spring tension max(0, k (L - rest)); adds reel-in work to work[0].
+    Returns STATUS_NONFINITE if any length or force is not finite.
+    """
+    nb = poses.shape[0]
+    n = params.shape[0]
+    wa = np.empty((n, 3))
+    wb = np.empty((n, 3))
+    world_anchors(poses, body_a, anc_a, wa)
+    world_anchors(poses, body_b, anc_b, wb)
+    force = np.zeros((nb, 3))
+    torque = np.zeros((nb, 3))
+    status = STATUS_OK
+    for i in range(n):
+        dx = wb[i, 0] - wa[i, 0]
+        dy = wb[i, 1] - wa[i, 1]
+        dz = wb[i, 2] - wa[i, 2]
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if not np.isfinite(length):
+            status = STATUS_NONFINITE
+            continue
+        k = params[i, P_K]
+        rest = state[i, S_REST]
+        v_old = state[i, S_V]
+        mode = params[i, P_MODE]
+        new_rest = rest
+        if mode != MODE_FIXED:
+            if mode == MODE_IMPEDANCE:
+                node = int(params[i, P_NODE])
+                v0 = cpg_out[node] if node >= 0 else 0.0
+                tension = max(0.0, k * (length - rest))
+                target_t = params[i, P_T0] + params[i, P_KI] * (length - params[i, P_LC]) \
+                    + params[i, P_BI] * (v_old - v0)
+                target_t = max(0.0, target_t)
+                target = max(rest - (target_t - tension) / k, params[i, P_LMIN])
+            else:
+                target = params[i, P_DRIVE]
+            if motor_mode == MOTOR_PHYSICAL:
+                new_rest, state[i, S_U] = motor_physical(
+                    rest, target, length, k, params[i, P_TMAX], params[i, P_V], params[i, P_A],
+                    params[i, P_LMIN], params[i, P_LACT], state[i, S_U], dt)
+            else:
+                new_rest = motor_ntrt2014(rest, target, length, k, params[i, P_TMAX], params[i, P_V],
+                                          params[i, P_A], params[i, P_LMIN], params[i, P_LACT], v_old, dt)
+            if new_rest < rest:
+                work[0] += max(0.0, k * (length - rest)) * (rest - new_rest)
+        v_new = (length - state[i, S_LPREV]) / dt
+        f_spring = k * (length - new_rest)
+        f_damp = params[i, P_B] * v_new
+        if abs(f_damp) > abs(f_spring):
+            f_damp = abs(f_spring) * _sign(f_damp)
+        out_tension[i] = max(0.0, f_spring)
+        state[i, S_REST] = new_rest
+        state[i, S_LPREV] = length
+        state[i, S_V] = v_new
+        if length > new_rest and length > 0.0:
+            f = (f_spring + f_damp) / length
+            fx, fy, fz = f * dx, f * dy, f * dz
+            a = body_a[i]
+            b = body_b[i]
+            ra0 = wa[i, 0] - poses[a, 0]
+            ra1 = wa[i, 1] - poses[a, 1]
+            ra2 = wa[i, 2] - poses[a, 2]
+            rb0 = wb[i, 0] - poses[b, 0]
+            rb1 = wb[i, 1] - poses[b, 1]
+            rb2 = wb[i, 2] - poses[b, 2]
+            force[a, 0] += fx
+            force[a, 1] += fy
+            force[a, 2] += fz
+            torque[a, 0] += ra1 * fz - ra2 * fy
+            torque[a, 1] += ra2 * fx - ra0 * fz
+            torque[a, 2] += ra0 * fy - ra1 * fx
+            force[b, 0] -= fx
+            force[b, 1] -= fy
+            force[b, 2] -= fz
+            torque[b, 0] -= rb1 * fz - rb2 * fy
+            torque[b, 1] -= rb2 * fx - rb0 * fz
+            torque[b, 2] -= rb0 * fy - rb1 * fx
+    wrench_to_force_pairs(poses, force, torque, out_points, out_forces)
+    for b in range(nb):
+        for c in range(3):
+            if not (np.isfinite(force[b, c]) and np.isfinite(torque[b, c])):
+                status = STATUS_NONFINITE
+    return status
+
+
+@njit(cache=True)
+def wrench_to_force_pairs(poses, force, torque, out_points, out_forces):
+    """Net force F and torque tau about the COM as two forces F/2 +- Fc at COM +- s u, u perpendicular
+    to tau and Fc = (tau x u) / (2 s): they sum to F and their moment is u x (tau x u) = tau."""
+    s = COUPLE_LEVER_CM
+    for b in range(poses.shape[0]):
+        tx, ty, tz = torque[b, 0], torque[b, 1], torque[b, 2]
+        ax, ay, az = abs(tx), abs(ty), abs(tz)
+        if ax <= ay and ax <= az:
+            ex, ey, ez = 1.0, 0.0, 0.0
+        elif ay <= az:
+            ex, ey, ez = 0.0, 1.0, 0.0
+        else:
+            ex, ey, ez = 0.0, 0.0, 1.0
+        ux = ty * ez - tz * ey
+        uy = tz * ex - tx * ez
+        uz = tx * ey - ty * ex
+        norm = np.sqrt(ux * ux + uy * uy + uz * uz)
+        if norm > 0.0:
+            ux, uy, uz = ux / norm, uy / norm, uz / norm
+        else:
+            ux, uy, uz = 1.0, 0.0, 0.0
+        cx = (ty * uz - tz * uy) / (2.0 * s)
+        cy = (tz * ux - tx * uz) / (2.0 * s)
+        cz = (tx * uy - ty * ux) / (2.0 * s)
+        i0 = 2 * b
+        i1 = 2 * b + 1
+        out_points[i0, 0] = poses[b, 0] + s * ux
+        out_points[i0, 1] = poses[b, 1] + s * uy
+        out_points[i0, 2] = poses[b, 2] + s * uz
+        out_points[i1, 0] = poses[b, 0] - s * ux
+        out_points[i1, 1] = poses[b, 1] - s * uy
+        out_points[i1, 2] = poses[b, 2] - s * uz
+        out_forces[i0, 0] = 0.5 * force[b, 0] + cx
+        out_forces[i0, 1] = 0.5 * force[b, 1] + cy
+        out_forces[i0, 2] = 0.5 * force[b, 2] + cz
+        out_forces[i1, 0] = 0.5 * force[b, 0] - cx
+        out_forces[i1, 1] = 0.5 * force[b, 1] - cy
+        out_forces[i1, 2] = 0.5 * force[b, 2] - cz

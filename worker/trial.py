@@ -1,0 +1,324 @@
+"""The episode loop: build the scene, run CPG -> impedance -> motor -> strings -> engine, guard
+against divergence, record, score. The only module that knows physics, control and scoring."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
+
+import numpy as np
+
+from protocol.errors import ConfigError, ParameterError, check_range
+from protocol.messages import TrialResult, TrialStatus
+from worker import scoring
+from worker.control.cpg import CpgIntegrator
+from worker.morphology.model import Morphology
+from worker.morphology.registry import load_morphology
+from worker.morphology.structure import NEWTON
+from worker.sim import strings as sk
+from worker.sim.bodies import build_bodies, build_strings
+
+MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014}
+
+
+@dataclass(frozen=True)
+class TrialConfig:
+    """How to run one trial. None means "the morphology's default".
+
+    motor_model: "physical" (limits in cm/s and cm/s^2, independent of dt) or "ntrt2014" (NTRT's
+    per-step caps, only faithful at dt = 1 ms, for replaying published gaits).
+    cpg_update_period_s: NTRT's controlTime (CPG output held in between).
+    pose_jitter_cm: seeded Gaussian offset of every segment's start position (0: the seed is unused).
+    """
+
+    duration_s: float | None = None
+    dt_s: float = 1e-3
+    solver_iterations: int = 10
+    motor_model: str = "physical"
+    controller: str | None = None
+    cpg_update_period_s: float | None = None
+    cpg_max_step_s: float = 1e-3
+    relocate_anchors: bool = True
+    pose_jitter_cm: float = 0.0
+    ground_friction: float | None = None
+    check_every_s: float = 0.01
+    max_body_speed_m_s: float = 5.0
+    min_height_m: float = -0.5
+    max_height_m: float = 5.0
+    max_stretch_ratio: float = 4.0
+    max_kinetic_energy_j: float = 200.0
+    record_every_s: float | None = None
+    extras: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.duration_s is not None:
+            check_range("duration_s", self.duration_s, 0.0, 3600.0, low_inclusive=False)
+        check_range("dt_s", self.dt_s, 1e-6, 0.02)
+        if not isinstance(self.solver_iterations, int) or not 1 <= self.solver_iterations <= 1000:
+            raise ConfigError("solver_iterations out of range", received=self.solver_iterations,
+                              expected="an integer in [1, 1000]")
+        if self.motor_model not in MOTOR_MODELS:
+            raise ConfigError("unknown motor_model", received=self.motor_model, expected=sorted(MOTOR_MODELS))
+        if self.cpg_update_period_s is not None:
+            check_range("cpg_update_period_s", self.cpg_update_period_s, 1e-6, 10.0)
+        check_range("cpg_max_step_s", self.cpg_max_step_s, 1e-6, 0.1)
+        check_range("pose_jitter_cm", self.pose_jitter_cm, 0.0, 10.0)
+        if self.ground_friction is not None:
+            check_range("ground_friction", self.ground_friction, 0.0, 10.0)
+        check_range("check_every_s", self.check_every_s, 1e-6, 10.0)
+        check_range("max_body_speed_m_s", self.max_body_speed_m_s, 0.0, None, low_inclusive=False)
+        check_range("max_stretch_ratio", self.max_stretch_ratio, 1.0, None, low_inclusive=False)
+        check_range("max_kinetic_energy_j", self.max_kinetic_energy_j, 0.0, None, low_inclusive=False)
+        if self.record_every_s is not None:
+            check_range("record_every_s", self.record_every_s, 1e-6, 10.0)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> TrialConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError("unknown trial config fields", received=unknown, expected=sorted(known))
+        return cls(**dict(d))
+
+    def config_hash(self) -> str:
+        blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+@dataclass
+class Trajectory:
+    """Recorded at a chosen rate: time_s (n,), poses (n, n_bodies, 7) cm + quaternion,
+    tension_n (n, n_strings), cpg_output_cm_s (n, n_nodes), rest_length_cm (n, n_strings)."""
+
+    time_s: list[float] = field(default_factory=list)
+    poses: list[np.ndarray] = field(default_factory=list)
+    tension_n: list[np.ndarray] = field(default_factory=list)
+    cpg_output_cm_s: list[np.ndarray] = field(default_factory=list)
+    rest_length_cm: list[np.ndarray] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"time_s": np.array(self.time_s), "poses": np.array(self.poses),
+                "tension_n": np.array(self.tension_n), "cpg_output_cm_s": np.array(self.cpg_output_cm_s),
+                "rest_length_cm": np.array(self.rest_length_cm)}
+
+
+@dataclass
+class TrialOutcome:
+    result: TrialResult
+    trajectory: Trajectory | None
+    com_path_cm: np.ndarray  # (n_checks, 3) robot COM at every guard check, for path comparisons
+
+
+def resolve_params(morph: Morphology, params: np.ndarray | Mapping[str, float] | list,
+                   controller: str | None) -> np.ndarray:
+    """Physical parameter vector from a unit-cube vector or a mapping of named physical values."""
+    space = morph.param_space(controller)
+    if isinstance(params, Mapping):
+        physical = space.from_named(params)
+        space.to_unit(physical)  # bounds check with a named error
+        return physical
+    return space.from_unit(params)
+
+
+def string_tables(morph: Morphology, start_length_cm: np.ndarray, node_of_string: dict[int, int]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Packed per-string parameters (n, N_PARAM) and initial state (n, N_STATE) in internal units."""
+    spec = morph.structure
+    n = len(spec.strings)
+    params = np.zeros((n, sk.N_PARAM))
+    state = np.zeros((n, sk.N_STATE))
+    for i, s in enumerate(spec.strings):
+        mat = spec.string_material(s.tag)
+        k = mat.stiffness_n_per_m
+        params[i, sk.P_K] = k
+        params[i, sk.P_B] = mat.damping_n_s_per_m
+        params[i, sk.P_TMAX] = mat.max_tension_n * NEWTON
+        params[i, sk.P_V] = mat.motor_speed_cm_s
+        params[i, sk.P_A] = mat.motor_accel_cm_s2
+        params[i, sk.P_LMIN] = mat.min_rest_length_cm
+        params[i, sk.P_LACT] = mat.min_actuated_length_cm
+        params[i, sk.P_NODE] = node_of_string.get(i, -1)
+        gains = morph.control.gains(s.tag)
+        if gains is not None:
+            params[i, sk.P_MODE] = sk.MODE_IMPEDANCE
+            params[i, sk.P_T0] = gains.tension_offset_n * NEWTON
+            params[i, sk.P_KI] = gains.position_gain_n_per_m
+            params[i, sk.P_BI] = gains.velocity_gain_n_s_per_m
+            lc = gains.control_length_cm
+            params[i, sk.P_LC] = start_length_cm[i] if lc is None else lc
+        elif mat.drive_offset_cm is not None:
+            params[i, sk.P_MODE] = sk.MODE_DRIVEN
+            params[i, sk.P_DRIVE] = start_length_cm[i] - mat.drive_offset_cm
+        rest = start_length_cm[i] - mat.pretension_n * NEWTON / k
+        if rest <= 0:
+            raise ConfigError(f"pretension of string {i} ({s.tag}) exceeds k * start length",
+                              received=mat.pretension_n, expected=f"< {k * start_length_cm[i] / NEWTON:.3g} N")
+        state[i, sk.S_REST] = rest
+        state[i, sk.S_LPREV] = start_length_cm[i]
+    return params, state
+
+
+def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mapping[str, float] | list,
+             config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None,
+             scene_factory=None) -> TrialOutcome:
+    """Run one trial and return its result with the recorded trajectory (if config asks for one)."""
+    t_wall = time.perf_counter()
+    cfg = config or TrialConfig()
+    morph = load_morphology(morphology)
+    controller = controller or cfg.controller
+    physical = resolve_params(morph, params, controller)
+    network = morph.controller_space(controller).network(physical)
+    if not isinstance(seed, int | np.integer):
+        raise ParameterError("seed is not an integer", received=seed, expected="an integer")
+
+    from worker.sim.physics import EngineSettings, GroundSpec, PhysicsScene
+
+    bodies = build_bodies(morph.structure)
+    geom = build_strings(morph.structure, bodies, cfg.relocate_anchors)
+    node_of_string = {int(s): n for n, s in enumerate(network.node_string)}
+    sparams, sstate = string_tables(morph, geom.start_length_cm, node_of_string)
+    masses = np.array([b.mass_kg for b in bodies])
+    total_mass = float(masses.sum())
+    rng = np.random.default_rng(seed)
+    offsets = rng.normal(0.0, cfg.pose_jitter_cm, (len(bodies), 3)) if cfg.pose_jitter_cm > 0 else None
+
+    dt = cfg.dt_s
+    duration = cfg.duration_s or morph.duration_s
+    n_steps = int(round(duration / dt))
+    period = cfg.cpg_update_period_s or morph.control.cpg_update_period_s
+    cpg_every = max(1, int(round(period / dt)))
+    check_every = max(1, int(round(cfg.check_every_s / dt)))
+    record_every = None if cfg.record_every_s is None else max(1, int(round(cfg.record_every_s / dt)))
+    motor = MOTOR_MODELS[cfg.motor_model]
+
+    engine = EngineSettings(dt_s=dt, solver_iterations=cfg.solver_iterations)
+    ground = GroundSpec(friction=cfg.ground_friction if cfg.ground_friction is not None
+                        else morph.ground_friction)
+    scene = (scene_factory or PhysicsScene)(bodies, engine, ground, offsets)
+    cpg = CpgIntegrator(network, cfg.cpg_max_step_s)
+    cpg_out = cpg.output_cm_s
+    nb = len(bodies)
+    points = np.zeros((2 * nb, 3))
+    forces = np.zeros((2 * nb, 3))
+    tension = np.zeros(len(geom.start_length_cm))
+    work = np.zeros(1)
+    traj = Trajectory() if record_every else None
+    reason = ""
+    try:
+        poses = scene.read_poses()
+        start_poses = poses.copy()
+        last_check = poses[:, :3].copy()
+        com_path = [scoring.robot_com_cm(poses, masses)]
+        read, apply, step, advance = scene.read_poses, scene.apply_force_pairs, scene.step, cpg.advance
+        kernel = sk.string_step
+        ba, bb, aa, ab = geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm
+        steps_done = 0
+        for n in range(n_steps):
+            if n:
+                poses = read()
+            if (n + 1) % cpg_every == 0:
+                advance(period)
+            if kernel(poses, ba, bb, aa, ab, sparams, sstate, cpg_out, dt, motor, points, forces, tension,
+                      work) != sk.STATUS_OK:
+                reason = f"diverged: non-finite string state at t={n * dt:.3f} s"
+                break
+            if record_every and n % record_every == 0:
+                _record(traj, n * dt, poses, tension, cpg_out, sstate)
+            apply(points, forces)
+            step()
+            steps_done = n + 1
+            if steps_done % check_every == 0:
+                poses = read()
+                reason = _check(poses, last_check, masses, sstate, geom.start_length_cm, check_every * dt, cfg)
+                last_check = poses[:, :3].copy()
+                com_path.append(scoring.robot_com_cm(poses, masses))
+                if reason:
+                    reason = f"{reason} at t={steps_done * dt:.3f} s"
+                    break
+        end_poses = scene.read_poses()
+        if not reason and not np.all(np.isfinite(end_poses)):
+            reason = "diverged: non-finite pose"
+        if record_every and not reason:
+            _record(traj, steps_done * dt, end_poses, tension, cpg_out, sstate)
+    finally:
+        scene.close()
+
+    sim_time = steps_done * dt
+    if not np.all(np.isfinite(end_poses)):
+        end_poses = poses if np.all(np.isfinite(poses)) else start_poses
+    start_com = scoring.robot_com_cm(start_poses if offsets is None else _build_poses(bodies), masses)
+    distance_cm = scoring.planar_distance_cm(start_com, scoring.robot_com_cm(end_poses, masses))
+    seg = morph.scored_segment
+    seg_start = bodies[seg].com_cm
+    ntrt_cm = scoring.planar_distance_cm(seg_start, end_poses[seg, :3])
+    work_j = float(work[0]) * scoring.WORK_J_PER_INTERNAL
+    distance_m = distance_cm * scoring.CM
+    result = TrialResult(
+        status=TrialStatus.FAILED if reason else TrialStatus.COMPLETE, reason=reason,
+        distance_m=distance_m, ntrt_distance_cm=ntrt_cm,
+        speed_cm_s=distance_cm / sim_time if sim_time > 0 else 0.0,
+        work_j=work_j, cot=scoring.cost_of_transport(work_j, total_mass, distance_m),
+        sim_time_s=sim_time, wall_time_s=time.perf_counter() - t_wall, mass_kg=total_mass, seed=int(seed),
+    )
+    return TrialOutcome(result, traj, np.array(com_path))
+
+
+def _build_poses(bodies) -> np.ndarray:
+    return np.array([[*b.com_cm, 0.0, 0.0, 0.0, 1.0] for b in bodies])
+
+
+def _record(traj: Trajectory, t: float, poses, tension, cpg_out, sstate) -> None:
+    traj.time_s.append(t)
+    traj.poses.append(poses.copy())
+    traj.tension_n.append(tension / NEWTON)
+    traj.cpg_output_cm_s.append(cpg_out.copy())
+    traj.rest_length_cm.append(sstate[:, sk.S_REST].copy())
+
+
+def _check(poses: np.ndarray, last: np.ndarray, masses: np.ndarray, sstate: np.ndarray,
+           start_length: np.ndarray, interval_s: float, cfg: TrialConfig) -> str:
+    """A divergence reason, or "" while the state is physically sane."""
+    if not np.all(np.isfinite(poses)):
+        return "diverged: non-finite pose"
+    vel_m_s = (poses[:, :3] - last) / interval_s * scoring.CM
+    speed = np.sqrt((vel_m_s**2).sum(axis=1))
+    if speed.max() > cfg.max_body_speed_m_s:
+        b = int(speed.argmax())
+        return f"diverged: segment {b} speed {speed[b]:.3g} m/s exceeds {cfg.max_body_speed_m_s:g} m/s"
+    kinetic = 0.5 * float((masses * speed**2).sum())
+    if kinetic > cfg.max_kinetic_energy_j:
+        return f"diverged: kinetic energy {kinetic:.3g} J exceeds {cfg.max_kinetic_energy_j:g} J"
+    y_m = poses[:, 1] * scoring.CM
+    if y_m.min() < cfg.min_height_m or y_m.max() > cfg.max_height_m:
+        b = int(np.argmax(np.maximum(cfg.min_height_m - y_m, y_m - cfg.max_height_m)))
+        return (f"diverged: segment {b} height {y_m[b]:.3g} m outside "
+                f"[{cfg.min_height_m:g}, {cfg.max_height_m:g}] m")
+    ratio = sstate[:, sk.S_LPREV] / start_length
+    if ratio.max() > cfg.max_stretch_ratio:
+        i = int(ratio.argmax())
+        return (f"diverged: string {i} stretched to {sstate[i, sk.S_LPREV]:.3g} cm, "
+                f"{ratio[i]:.3g}x its start length (limit {cfg.max_stretch_ratio:g}x)")
+    return ""
+
+
+def run_trial(morphology: Morphology | str | Mapping, params: np.ndarray | Mapping[str, float] | list,
+              config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None) -> TrialResult:
+    """One trial -> TrialResult. `params`: unit-cube vector of the controller space, or a mapping of
+    named physical values. Divergence is a failed result, never an exception; bad parameters raise
+    ParameterError."""
+    return simulate(morphology, params, config, seed, controller=controller).result
+
+
+def random_unit_params(morph: Morphology, seed: int, controller: str | None = None) -> np.ndarray:
+    """A seeded uniform sample of the controller space's unit cube."""
+    return np.random.default_rng(seed).random(len(morph.param_space(controller)))
+
+
+__all__ = ["TrialConfig", "TrialOutcome", "Trajectory", "math", "random_unit_params", "run_trial", "simulate"]
