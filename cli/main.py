@@ -9,7 +9,7 @@ import sys
 from protocol.errors import SpinefarmError
 
 # Each module exposes register(subparsers); a sub-command sets `func(args) -> int`.
-COMMAND_MODULES = ("cli.sim_commands", "cli.service_commands")
+COMMAND_MODULES = ("cli.sim_commands", "cli.morph_commands", "cli.service_commands")
 
 
 def build_parser() -> argparse.ArgumentParser:
