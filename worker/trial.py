@@ -204,11 +204,9 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     scene = (scene_factory or PhysicsScene)(bodies, engine, ground, offsets)
     cpg = CpgIntegrator(network, cfg.cpg_max_step_s)
     cpg_out = cpg.output_cm_s
-    nb = len(bodies)
-    points = np.zeros((2 * nb, 3))
-    forces = np.zeros((2 * nb, 3))
-    tension = np.zeros(len(geom.start_length_cm))
-    work = np.zeros(1)
+    bank = sk.StringBank(len(bodies), geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm,
+                         sparams, sstate)
+    sstate = bank.state
     traj = Trajectory() if record_every else None
     reason = ""
     try:
@@ -217,16 +215,14 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
         last_check = poses[:, :3].copy()
         com_path = [scoring.robot_com_cm(poses, masses)]
         read, apply, step, advance = scene.read_poses, scene.apply_force_pairs, scene.step, cpg.advance
-        kernel = sk.string_step
-        ba, bb, aa, ab = geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm
+        strings_step, points, forces, tension = bank.step, bank.points, bank.forces, bank.tension
         steps_done = 0
         for n in range(n_steps):
             if n:
                 poses = read()
             if (n + 1) % cpg_every == 0:
                 advance(period)
-            if kernel(poses, ba, bb, aa, ab, sparams, sstate, cpg_out, dt, motor, points, forces, tension,
-                      work) != sk.STATUS_OK:
+            if strings_step(poses, cpg_out, dt, motor) != sk.STATUS_OK:
                 reason = f"diverged: non-finite string state at t={n * dt:.3f} s"
                 break
             if record_every and n % record_every == 0:
@@ -258,7 +254,7 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     seg = morph.scored_segment
     seg_start = bodies[seg].com_cm
     ntrt_cm = scoring.planar_distance_cm(seg_start, end_poses[seg, :3])
-    work_j = float(work[0]) * scoring.WORK_J_PER_INTERNAL
+    work_j = float(bank.work[0]) * scoring.WORK_J_PER_INTERNAL
     distance_m = distance_cm * scoring.CM
     result = TrialResult(
         status=TrialStatus.FAILED if reason else TrialStatus.COMPLETE, reason=reason,

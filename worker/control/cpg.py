@@ -44,13 +44,13 @@ class CpgNetwork:
 
 
 @njit(cache=True)
-def _rhs(state, omega, amp, indptr, source, wc, a, out):
+def _rhs(state, omega, amp, indptr, source, wc, a, out, cs, sn, zr, zi):
     n = state.shape[0]
-    zr = np.empty(n)
-    zi = np.empty(n)
     for j in range(n):
-        zr[j] = state[j, 1] * np.cos(state[j, 0])
-        zi[j] = state[j, 1] * np.sin(state[j, 0])
+        cs[j] = np.cos(state[j, 0])
+        sn[j] = np.sin(state[j, 0])
+        zr[j] = state[j, 1] * cs[j]
+        zi[j] = state[j, 1] * sn[j]
     for m in range(n):
         sr = 0.0
         si = 0.0
@@ -59,9 +59,7 @@ def _rhs(state, omega, amp, indptr, source, wc, a, out):
             w = wc[e]
             sr += w.real * zr[t] - w.imag * zi[t]
             si += w.real * zi[t] + w.imag * zr[t]
-        c = np.cos(state[m, 0])
-        s = np.sin(state[m, 0])
-        out[m, 0] = omega[m] + c * si - s * sr  # Im(e^{-i phi} S)
+        out[m, 0] = omega[m] + cs[m] * si - sn[m] * sr  # Im(e^{-i phi} S)
         out[m, 1] = state[m, 2]
         out[m, 2] = a * (0.25 * a * (amp[m] - state[m, 1]) - state[m, 2])
 
@@ -75,20 +73,24 @@ def rk4_advance(state, omega, amp, indptr, source, wc, a, h, n_steps):
     k3 = np.empty((n, 3))
     k4 = np.empty((n, 3))
     tmp = np.empty((n, 3))
+    cs = np.empty(n)
+    sn = np.empty(n)
+    zr = np.empty(n)
+    zi = np.empty(n)
     for _ in range(n_steps):
-        _rhs(state, omega, amp, indptr, source, wc, a, k1)
+        _rhs(state, omega, amp, indptr, source, wc, a, k1, cs, sn, zr, zi)
         for i in range(n):
             for c in range(3):
                 tmp[i, c] = state[i, c] + 0.5 * h * k1[i, c]
-        _rhs(tmp, omega, amp, indptr, source, wc, a, k2)
+        _rhs(tmp, omega, amp, indptr, source, wc, a, k2, cs, sn, zr, zi)
         for i in range(n):
             for c in range(3):
                 tmp[i, c] = state[i, c] + 0.5 * h * k2[i, c]
-        _rhs(tmp, omega, amp, indptr, source, wc, a, k3)
+        _rhs(tmp, omega, amp, indptr, source, wc, a, k3, cs, sn, zr, zi)
         for i in range(n):
             for c in range(3):
                 tmp[i, c] = state[i, c] + h * k3[i, c]
-        _rhs(tmp, omega, amp, indptr, source, wc, a, k4)
+        _rhs(tmp, omega, amp, indptr, source, wc, a, k4, cs, sn, zr, zi)
         for i in range(n):
             for c in range(3):
                 state[i, c] += h / 6.0 * (k1[i, c] + 2.0 * k2[i, c] + 2.0 * k3[i, c] + k4[i, c])

@@ -29,6 +29,7 @@ class EngineSettings:
     split_impulse_threshold: float = -0.04
     warm_starting_factor: float = 0.85
     cone_friction: bool = False
+    gravity_cm_s2: float = GRAVITY_CM_S2
 
 
 @dataclass(frozen=True)
@@ -71,7 +72,7 @@ class PhysicsScene:
         self.client = pb.connect(pb.DIRECT)
         c = self.client
         pb.resetSimulation(physicsClientId=c)
-        pb.setGravity(0.0, -GRAVITY_CM_S2, 0.0, physicsClientId=c)
+        pb.setGravity(0.0, -engine.gravity_cm_s2, 0.0, physicsClientId=c)
         pb.setPhysicsEngineParameter(
             fixedTimeStep=engine.dt_s, numSubSteps=1, numSolverIterations=engine.solver_iterations,
             erp=engine.erp, contactERP=engine.erp, frictionERP=engine.erp,
@@ -122,7 +123,9 @@ class PhysicsScene:
     def read_poses(self) -> np.ndarray:
         """(n_bodies, 7): COM position (cm) and quaternion (x, y, z, w) of each segment."""
         get, c = self._get_pose, self.client
-        return np.array([tuple(chain.from_iterable(get(b, physicsClientId=c))) for b in self.body_ids])
+        # positional client id: the keyword form costs ~0.6 us more per call
+        flat = chain.from_iterable(chain.from_iterable([get(b, c) for b in self.body_ids]))
+        return np.fromiter(flat, float, 7 * len(self.body_ids)).reshape(-1, 7)
 
     def apply_force_pairs(self, points_cm: np.ndarray, forces: np.ndarray) -> None:
         """Apply forces (2 n_bodies, 3) kg*cm/s^2 at world points (2 n_bodies, 3); rows 2b, 2b+1 on body b."""
@@ -130,11 +133,11 @@ class PhysicsScene:
         pts = points_cm.tolist()
         fs = forces.tolist()
         for i, b in enumerate(self.body_ids):
-            apply(b, -1, fs[2 * i], pts[2 * i], world, physicsClientId=c)
-            apply(b, -1, fs[2 * i + 1], pts[2 * i + 1], world, physicsClientId=c)
+            apply(b, -1, fs[2 * i], pts[2 * i], world, c)
+            apply(b, -1, fs[2 * i + 1], pts[2 * i + 1], world, c)
 
     def step(self) -> None:
-        self._step(physicsClientId=self.client)
+        self._step(self.client)
 
     def velocities(self) -> np.ndarray:
         """(n_bodies, 6): linear (cm/s) and angular (rad/s) velocity; for checks, not the hot loop."""

@@ -116,19 +116,19 @@ def world_anchors(poses, body, anchors, out):
 
 @njit(cache=True)
 def string_step(poses, body_a, body_b, anc_a, anc_b, params, state, cpg_out, dt, motor_mode,
-                out_points, out_forces, out_tension, work):
+                out_points, out_forces, out_tension, work, wa, wb, string_force):
     """One control + force step for every string.
 
     poses (nb, 7) COM position (cm) and quaternion (x, y, z, w); cpg_out (n_nodes,) cm/s.
     Writes out_points/out_forces (2 nb, 3): each body's net wrench as two forces (net force at the
     COM plus a couple, since pybullet's applyExternalTorque misbehaves on maximal-coordinate
-    bodies); out_tension (n,) spring tension max(0, k (L - rest)); adds reel-in work to work[0].
+    bodies); out_tension (n,) spring tension max(0, k (L - rest)); adds reel-in work to work[0];
+    wa, wb (n, 3) world anchors (cm) and string_force (n, 3) the force on end a (end b gets its
+    negative), kept for checks and recording.
     Returns STATUS_NONFINITE if any length or force is not finite.
     """
     nb = poses.shape[0]
     n = params.shape[0]
-    wa = np.empty((n, 3))
-    wb = np.empty((n, 3))
     world_anchors(poses, body_a, anc_a, wa)
     world_anchors(poses, body_b, anc_b, wb)
     force = np.zeros((nb, 3))
@@ -173,12 +173,18 @@ def string_step(poses, body_a, body_b, anc_a, anc_b, params, state, cpg_out, dt,
         if abs(f_damp) > abs(f_spring):
             f_damp = abs(f_spring) * _sign(f_damp)
         out_tension[i] = max(0.0, f_spring)
+        string_force[i, 0] = 0.0
+        string_force[i, 1] = 0.0
+        string_force[i, 2] = 0.0
         state[i, S_REST] = new_rest
         state[i, S_LPREV] = length
         state[i, S_V] = v_new
         if length > new_rest and length > 0.0:
             f = (f_spring + f_damp) / length
             fx, fy, fz = f * dx, f * dy, f * dz
+            string_force[i, 0] = fx
+            string_force[i, 1] = fy
+            string_force[i, 2] = fz
             a = body_a[i]
             b = body_b[i]
             ra0 = wa[i, 0] - poses[a, 0]
@@ -246,3 +252,33 @@ def wrench_to_force_pairs(poses, force, torque, out_points, out_forces):
         out_forces[i1, 0] = 0.5 * force[b, 0] - cx
         out_forces[i1, 1] = 0.5 * force[b, 1] - cy
         out_forces[i1, 2] = 0.5 * force[b, 2] - cz
+
+
+class StringBank:
+    """Every string of a scene: geometry, packed parameters, state and output buffers.
+
+    body_a/body_b (n,), anchor_a_cm/anchor_b_cm (n, 3) body frame, params (n, N_PARAM),
+    state (n, N_STATE). After step(): tension (n,) internal units, points/forces (2 nb, 3) the
+    force pairs to apply, wa/wb (n, 3) world anchors, string_force (n, 3) force on end a.
+    """
+
+    def __init__(self, n_bodies: int, body_a, body_b, anchor_a_cm, anchor_b_cm, params, state) -> None:
+        n = params.shape[0]
+        self.body_a = np.ascontiguousarray(body_a, dtype=np.int64)
+        self.body_b = np.ascontiguousarray(body_b, dtype=np.int64)
+        self.anchor_a = np.ascontiguousarray(anchor_a_cm, dtype=np.float64)
+        self.anchor_b = np.ascontiguousarray(anchor_b_cm, dtype=np.float64)
+        self.params = np.ascontiguousarray(params, dtype=np.float64)
+        self.state = np.ascontiguousarray(state, dtype=np.float64)
+        self.points = np.zeros((2 * n_bodies, 3))
+        self.forces = np.zeros((2 * n_bodies, 3))
+        self.tension = np.zeros(n)
+        self.work = np.zeros(1)
+        self.wa = np.zeros((n, 3))
+        self.wb = np.zeros((n, 3))
+        self.string_force = np.zeros((n, 3))
+
+    def step(self, poses: np.ndarray, cpg_out: np.ndarray, dt: float, motor_mode: int) -> int:
+        return string_step(poses, self.body_a, self.body_b, self.anchor_a, self.anchor_b, self.params,
+                           self.state, cpg_out, dt, motor_mode, self.points, self.forces, self.tension,
+                           self.work, self.wa, self.wb, self.string_force)

@@ -1,0 +1,115 @@
+"""`spinefarm trial` (and the shared helpers for simulation commands)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from protocol.errors import ParameterError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("trial", help="run one trial and print its metrics",
+                       description="Run one trial of a morphology under CPG + impedance control.")
+    p.add_argument("morphology", help="built-in name (e.g. tetraspine) or a .yaml spec file")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--random-seed", type=int, default=None,
+                     help="draw the parameters uniformly from the unit cube with this seed")
+    src.add_argument("--params", type=Path, default=None,
+                     help="JSON file of named physical parameter values ({name: value} or "
+                          "{\"controller\": ..., \"params\": {name: value}})")
+    p.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the morphology's)")
+    p.add_argument("--dt", type=float, default=None, help="physics step in seconds (default 0.001)")
+    p.add_argument("--controller", default=None, help="controller space (e.g. ntrt, sidewinding)")
+    p.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
+    p.add_argument("--seed", type=int, default=None, help="trial seed (default: the random seed or 0)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--record", type=Path, default=None, help="save the trajectory to FILE.npz")
+    p.add_argument("--record-every", type=float, default=0.01, help="recording interval in seconds")
+    p.set_defaults(func=cmd_trial)
+
+
+def load_params_file(path: Path) -> tuple[dict[str, float], str | None]:
+    """Named physical values (and an optional controller name) from a JSON file."""
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise ParameterError("parameter file not found", received=str(path), expected="an existing JSON file") from exc
+    except json.JSONDecodeError as exc:
+        raise ParameterError(f"parameter file is not JSON (line {exc.lineno})", received=str(path),
+                             expected="a JSON object of name: value") from exc
+    if not isinstance(data, dict):
+        raise ParameterError("parameter file is not a JSON object", received=type(data).__name__,
+                             expected="{name: value} or {\"controller\": ..., \"params\": {...}}")
+    controller = None
+    if "params" in data and isinstance(data["params"], dict):
+        controller = data.get("controller")
+        data = data["params"]
+    bad = {k: v for k, v in data.items() if isinstance(v, bool) or not isinstance(v, int | float)}
+    if bad:
+        raise ParameterError("parameter values must be numbers", received=bad, expected="name: number")
+    return {k: float(v) for k, v in data.items()}, controller
+
+
+def result_summary(result: Any, morph_name: str, controller: str | None) -> dict[str, Any]:
+    d = result.to_dict()
+    d["morphology"] = morph_name
+    d["controller"] = controller
+    d["distance_cm"] = result.distance_m * 100.0
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+
+
+def cmd_trial(args: argparse.Namespace) -> int:
+    from worker.morphology.registry import load_morphology
+    from worker.trial import TrialConfig, random_unit_params, simulate
+
+    morph = load_morphology(args.morphology)
+    controller = args.controller
+    if args.params is not None:
+        params, file_controller = load_params_file(args.params)
+        controller = controller or file_controller
+    else:
+        rseed = 0 if args.random_seed is None else args.random_seed
+        params = random_unit_params(morph, rseed, controller)
+    seed = args.seed if args.seed is not None else (args.random_seed or 0)
+    overrides: dict[str, Any] = {"duration_s": args.duration, "controller": controller}
+    if args.dt is not None:
+        overrides["dt_s"] = args.dt
+    if args.motor_model is not None:
+        overrides["motor_model"] = args.motor_model
+    if args.record is not None:
+        overrides["record_every_s"] = args.record_every
+    cfg = TrialConfig(**overrides)
+    outcome = simulate(morph, params, cfg, seed)
+    r = outcome.result
+    if args.record is not None and outcome.trajectory is not None:
+        space = morph.param_space(controller)
+        np.savez_compressed(args.record, **outcome.trajectory.arrays(), morphology=morph.name,
+                            morphology_json=json.dumps(morph.to_dict()), params_json=json.dumps(
+                                space.to_named(_physical(morph, params, controller))),
+                            trial_config_json=json.dumps(cfg.to_dict()))
+    summary = result_summary(r, morph.name, controller or morph.controllers[0])
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"{morph.name}: {r.status}{' (' + r.reason + ')' if r.reason else ''}")
+        print(f"  distance      {r.distance_m * 100:9.2f} cm  (robot centre of mass, ground plane)")
+        print(f"  NTRT distance {r.ntrt_distance_cm:9.2f} cm  (segment {morph.scored_segment})")
+        print(f"  speed         {r.speed_cm_s:9.3f} cm/s")
+        print(f"  work          {r.work_j:9.3f} J")
+        print(f"  COT           {r.cot:9.3f}")
+        print(f"  simulated     {r.sim_time_s:9.3f} s in {r.wall_time_s:.2f} s wall")
+        if args.record is not None:
+            print(f"  trajectory -> {args.record}")
+    return 0 if r.ok else 1
+
+
+def _physical(morph, params, controller) -> np.ndarray:
+    from worker.trial import resolve_params
+
+    return resolve_params(morph, params, controller)
