@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
@@ -214,6 +213,8 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
         start_poses = poses.copy()
         last_check = poses[:, :3].copy()
         com_path = [scoring.robot_com_cm(poses, masses)]
+        # partial metrics of a diverged trial come from the last sane check
+        last_good, last_good_step, last_good_work = poses.copy(), 0, 0.0
         read, apply, step, advance = scene.read_poses, scene.apply_force_pairs, scene.step, cpg.advance
         strings_step, points, forces, tension = bank.step, bank.points, bank.forces, bank.tension
         steps_done = 0
@@ -234,10 +235,11 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
                 poses = read()
                 reason = _check(poses, last_check, masses, sstate, geom.start_length_cm, check_every * dt, cfg)
                 last_check = poses[:, :3].copy()
-                com_path.append(scoring.robot_com_cm(poses, masses))
                 if reason:
                     reason = f"{reason} at t={steps_done * dt:.3f} s"
                     break
+                com_path.append(scoring.robot_com_cm(poses, masses))
+                last_good, last_good_step, last_good_work = poses.copy(), steps_done, float(bank.work[0])
         end_poses = scene.read_poses()
         if not reason and not np.all(np.isfinite(end_poses)):
             reason = "diverged: non-finite pose"
@@ -246,9 +248,10 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     finally:
         scene.close()
 
+    if reason:  # never score an exploded state: report what was measured up to the last sane check
+        end_poses, steps_done = last_good, last_good_step
+        bank.work[0] = last_good_work
     sim_time = steps_done * dt
-    if not np.all(np.isfinite(end_poses)):
-        end_poses = poses if np.all(np.isfinite(poses)) else start_poses
     start_com = scoring.robot_com_cm(start_poses if offsets is None else _build_poses(bodies), masses)
     distance_cm = scoring.planar_distance_cm(start_com, scoring.robot_com_cm(end_poses, masses))
     seg = morph.scored_segment
@@ -317,4 +320,3 @@ def random_unit_params(morph: Morphology, seed: int, controller: str | None = No
     return np.random.default_rng(seed).random(len(morph.param_space(controller)))
 
 
-__all__ = ["TrialConfig", "TrialOutcome", "Trajectory", "math", "random_unit_params", "run_trial", "simulate"]

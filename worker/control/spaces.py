@@ -196,9 +196,9 @@ class SidewindingSpace(BaseControllerSpace):
 
         def link(a: tuple[int, int], b: tuple[int, int], psi: float) -> None:
             if a in index and b in index:
-                # node b locks to phi_a + psi: b takes psi from a, a takes -psi from b
-                edges.append((index[b], index[a], psi))
-                edges.append((index[a], index[b], -psi))
+                # lock phi_b = phi_a + psi: a node taking psi from t settles at phi_t - psi
+                edges.append((index[b], index[a], -psi))
+                edges.append((index[a], index[b], psi))
 
         n_joints = max(j for j, _ in self.node_key) + 1
         for j in range(n_joints):

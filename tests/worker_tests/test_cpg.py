@@ -1,0 +1,51 @@
+"""CPG: phase locking, amplitude dynamics, integrator accuracy."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from worker.control.cpg import CpgIntegrator, CpgNetwork
+
+
+def pair(psi: float, weight: float = 2.0, omega: float = 2 * math.pi, amp: float = 10.0) -> CpgNetwork:
+    # locks phi_1 = phi_0 + psi: node m taking psi_mt from t settles at phi_m = phi_t - psi_mt
+    return CpgNetwork(node_string=np.array([0, 1]), omega_rad_s=np.array([omega, omega]),
+                      amplitude_cm_s=np.array([amp, amp]), indptr=np.array([0, 1, 2]),
+                      source=np.array([1, 0]), weight=np.array([weight, weight]), phase_rad=np.array([psi, -psi]))
+
+
+def test_two_coupled_oscillators_lock_to_the_prescribed_phase():
+    for psi in (0.7, -2.0, 2.5):
+        cpg = CpgIntegrator(pair(psi))
+        cpg.state[1, 0] = 1.3  # start out of phase
+        for _ in range(3000):
+            cpg.advance(1e-3)
+        diff = (cpg.state[1, 0] - cpg.state[0, 0] - psi + math.pi) % (2 * math.pi) - math.pi
+        assert abs(diff) < 1e-6
+
+
+def test_amplitude_is_critically_damped_with_time_constant_2_over_a():
+    a, amp = 20.0, 10.0
+    cpg = CpgIntegrator(pair(0.0, amp=amp))
+    for step in range(1, 1001):
+        cpg.advance(1e-3)
+        t = step * 1e-3
+        expected = amp - amp * (1 + a * t / 2) * math.exp(-a * t / 2)
+        assert abs(cpg.state[0, 1] - expected) < 1e-6 * amp
+    assert abs(cpg.state[0, 1] - amp) < 1e-3 * amp
+
+
+def test_rk4_at_physics_rate_agrees_with_a_fine_reference():
+    rng = np.random.default_rng(1)
+    n = 12
+    src = np.array([j for i in range(n) for j in range(n) if j != i])
+    indptr = np.arange(0, n * (n - 1) + 1, n - 1)
+    net = CpgNetwork(np.arange(n), np.full(n, 2 * math.pi * 3.0), np.full(n, 60.0), indptr, src,
+                     rng.random(len(src)), rng.uniform(-math.pi, math.pi, len(src)))
+    coarse, fine = CpgIntegrator(net, 1e-3), CpgIntegrator(net, 1e-3 / 16)
+    for _ in range(2000):
+        coarse.advance(1e-3)
+        fine.advance(1e-3)
+    assert np.max(np.abs(coarse.output_cm_s - fine.output_cm_s)) < 1e-3 * 60.0

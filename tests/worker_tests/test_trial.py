@@ -1,0 +1,131 @@
+"""Whole trials: settling, moving, failing cleanly, determinism, bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from protocol.errors import ParameterError
+from protocol.messages import TrialStatus
+from worker.morphology.registry import load_morphology
+from worker.morphology.structure import StringMaterial
+from worker.trial import TrialConfig, random_unit_params, run_trial, simulate
+
+
+def test_passive_tetraspine_settles_and_holds_its_shape():
+    morph = load_morphology("tetraspine")
+    u = random_unit_params(morph, 3)
+    u[1] = 0.0  # amplitude coefficient 0: every CPG output is zero
+    out = simulate(morph, u, TrialConfig(duration_s=5.0, record_every_s=0.5), seed=3)
+    assert out.result.status == TrialStatus.COMPLETE
+    poses = out.trajectory.arrays()["poses"]
+    gaps = np.linalg.norm(np.diff(poses[:, :, :3], axis=1), axis=2)  # (frames, n_segments - 1)
+    assert gaps.min() > 0.5 * gaps[0].min()  # contracts to its control lengths but does not collapse
+    assert np.abs(gaps[-1] - gaps[-5]).max() < 0.5  # shape held over the last 2 s (cm)
+    assert poses[-1, :, 1].min() > 5.0  # segments stand, COMs well above the ground
+    creep_cm_s = np.linalg.norm(poses[-1, :, :3] - poses[-2, :, :3], axis=1).max() / 0.5
+    assert creep_cm_s < 2.0
+    assert np.all(out.trajectory.arrays()["cpg_output_cm_s"] == 0.0)
+
+
+def test_controlled_trial_runs_and_moves():
+    morph = load_morphology("tetraspine")
+    r = run_trial(morph, random_unit_params(morph, 7), TrialConfig(duration_s=2.0), seed=7)
+    assert r.status == TrialStatus.COMPLETE, r.reason
+    assert r.distance_m > 0.005 and r.sim_time_s == pytest.approx(2.0)
+    assert r.work_j > 0 and math.isfinite(r.cot) and r.cot > 0
+    assert r.speed_cm_s == pytest.approx(r.distance_m * 100 / 2.0)
+
+
+def test_sidewinding_space_runs():
+    morph = load_morphology("tetraspine")
+    r = run_trial(morph, random_unit_params(morph, 2, "sidewinding"), TrialConfig(duration_s=0.5), 2,
+                  controller="sidewinding")
+    assert r.status == TrialStatus.COMPLETE and r.distance_m > 0
+
+
+def _stiff(morph, stiffness_n_per_m: float):
+    mats = tuple((t, dataclasses.replace(m, stiffness_n_per_m=stiffness_n_per_m))
+                 for t, m in morph.structure.string_materials)
+    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, string_materials=mats))
+
+
+def test_absurd_stiffness_fails_as_diverged_not_an_exception():
+    morph = _stiff(load_morphology("tetraspine-ntrt"), 1e8)
+    r = run_trial(morph, random_unit_params(morph, 1), TrialConfig(duration_s=1.0), seed=1)
+    assert r.status == TrialStatus.FAILED
+    assert r.reason.startswith("diverged")
+    assert r.sim_time_s < 1.0  # stopped early, partial metrics kept
+    assert math.isfinite(r.distance_m) and r.distance_m < 100.0
+
+
+def test_bad_parameters_raise_named_errors():
+    morph = load_morphology("tetraspine-ntrt")
+    with pytest.raises(ParameterError, match="wrong length"):
+        run_trial(morph, np.zeros(5), TrialConfig(duration_s=0.01))
+    bad = random_unit_params(morph, 1)
+    bad[3] = np.nan
+    with pytest.raises(ParameterError, match="non-finite"):
+        run_trial(morph, bad, TrialConfig(duration_s=0.01))
+    named = morph.param_space().to_named(morph.param_space().from_unit(random_unit_params(morph, 1)))
+    named["cpg_frequency_coef_hz"] = 99.0
+    with pytest.raises(ParameterError, match="outside its bounds"):
+        run_trial(morph, named, TrialConfig(duration_s=0.01))
+
+
+TRIAL_SNIPPET = """
+import json
+from worker.morphology.registry import load_morphology
+from worker.trial import TrialConfig, random_unit_params, run_trial
+m = load_morphology("tetraspine")
+r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11)
+d = r.to_dict(); d.pop("wall_time_s")
+print(json.dumps(d))
+"""
+
+
+def test_deterministic_across_processes():
+    outs = [subprocess.run([sys.executable, "-c", TRIAL_SNIPPET], capture_output=True, text=True, check=True)
+            for _ in range(2)]
+    a, b = (json.loads(o.stdout.strip().splitlines()[-1]) for o in outs)
+    assert a == b
+    m = load_morphology("tetraspine")
+    here = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11)
+    assert here.distance_m == a["distance_m"] and here.work_j == a["work_j"]  # same bits
+    other_seed = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=12)
+    assert other_seed.distance_m != a["distance_m"]
+
+
+def test_config_rejects_bad_values_with_the_field_name():
+    from protocol.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="dt_s"):
+        TrialConfig(dt_s=0.5)
+    with pytest.raises(ConfigError, match="motor_model"):
+        TrialConfig(motor_model="magic")
+    assert TrialConfig.from_dict(TrialConfig(dt_s=5e-4).to_dict()) == TrialConfig(dt_s=5e-4)
+
+
+def test_ntrt_motor_mode_runs():
+    morph = load_morphology("tetraspine-ntrt")
+    r = run_trial(morph, random_unit_params(morph, 4), TrialConfig(duration_s=0.5, motor_model="ntrt2014"), 4)
+    assert r.status == TrialStatus.COMPLETE and r.distance_m > 0
+
+
+def test_cpg_integration_error_is_small_against_substepping():
+    morph = load_morphology("tetraspine-ntrt")
+    u = random_unit_params(morph, 5)
+    base = run_trial(morph, u, TrialConfig(duration_s=1.0), 5)
+    fine = run_trial(morph, u, TrialConfig(duration_s=1.0, cpg_max_step_s=1e-3 / 8), 5)
+    assert abs(base.distance_m - fine.distance_m) <= 0.02 * max(fine.distance_m, 0.01)
+
+
+def test_stiff_string_string_material_validation():
+    with pytest.raises(Exception, match="stiffness_n_per_m"):
+        StringMaterial(stiffness_n_per_m=-1.0)
