@@ -61,6 +61,42 @@ def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
 
 # pybullet cylinders run along Z; our rods along their frame's Y.
 _Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+# createCollisionShapeArray silently keeps only the first 16 shapes (MAX_COMPOUND_COLLISION_SHAPES);
+# larger segments (the ribbed spine's 33 rods) are loaded as a one-link URDF, whose compound has no cap.
+MAX_SHAPE_ARRAY = 16
+
+
+def _rpy(r: np.ndarray) -> tuple[float, float, float]:
+    """URDF roll, pitch, yaw of a rotation matrix r = Rz(yaw) Ry(pitch) Rx(roll)."""
+    pitch = float(np.arcsin(np.clip(-r[2, 0], -1.0, 1.0)))
+    if abs(r[2, 0]) < 1.0 - 1e-12:
+        return float(np.arctan2(r[2, 1], r[2, 2])), pitch, float(np.arctan2(r[1, 0], r[0, 0]))
+    return float(np.arctan2(-r[1, 2], r[1, 1])), pitch, 0.0  # gimbal lock: put it all in roll
+
+
+def _load_compound_urdf(body: BodyModel, pos: np.ndarray, client: int) -> int:
+    import os
+    import tempfile
+
+    parts = []
+    for rod in body.rods:
+        x, y, z = (f"{v:.17g}" for v in rod.centre_cm)
+        roll, pitch, yaw = (f"{v:.17g}" for v in _rpy(rod.rotation @ _Z_TO_Y))
+        parts.append(f'<collision><origin xyz="{x} {y} {z}" rpy="{roll} {pitch} {yaw}"/><geometry>'
+                     f'<cylinder radius="{rod.radius_cm:.17g}" length="{rod.length_cm:.17g}"/></geometry></collision>')
+    ixx, iyy, izz = (f"{v:.17g}" for v in body.inertia_kg_cm2)
+    urdf = (f'<robot name="segment{body.index}"><link name="base"><inertial><origin xyz="0 0 0"/>'
+            f'<mass value="{body.mass_kg:.17g}"/><inertia ixx="{ixx}" iyy="{iyy}" izz="{izz}" ixy="0" ixz="0" '
+            f'iyz="0"/></inertial>{"".join(parts)}</link></robot>')
+    fd, path = tempfile.mkstemp(suffix=".urdf")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(urdf)
+        return pb.loadURDF(path, list(map(float, pos)), [0, 0, 0, 1], useMaximalCoordinates=True,
+                           flags=pb.URDF_USE_IMPLICIT_CYLINDER | pb.URDF_USE_INERTIA_FROM_FILE,
+                           physicsClientId=client)
+    finally:
+        os.unlink(path)
 
 
 class PhysicsScene:
@@ -102,16 +138,19 @@ class PhysicsScene:
     def _add_body(self, body: BodyModel, offset: np.ndarray | None) -> int:
         c = self.client
         n = len(body.rods)
-        shape = pb.createCollisionShapeArray(
-            shapeTypes=[pb.GEOM_CYLINDER] * n,
-            radii=[r.radius_cm for r in body.rods],
-            lengths=[r.length_cm for r in body.rods],
-            collisionFramePositions=[list(map(float, r.centre_cm)) for r in body.rods],
-            collisionFrameOrientations=[_quat_from_matrix(r.rotation @ _Z_TO_Y) for r in body.rods],
-            physicsClientId=c)
         pos = body.com_cm if offset is None else body.com_cm + offset
-        bid = pb.createMultiBody(body.mass_kg, shape, -1, list(map(float, pos)), [0, 0, 0, 1],
-                                 useMaximalCoordinates=True, physicsClientId=c)
+        if n > MAX_SHAPE_ARRAY:
+            bid = _load_compound_urdf(body, pos, c)
+        else:
+            shape = pb.createCollisionShapeArray(
+                shapeTypes=[pb.GEOM_CYLINDER] * n,
+                radii=[r.radius_cm for r in body.rods],
+                lengths=[r.length_cm for r in body.rods],
+                collisionFramePositions=[list(map(float, r.centre_cm)) for r in body.rods],
+                collisionFrameOrientations=[_quat_from_matrix(r.rotation @ _Z_TO_Y) for r in body.rods],
+                physicsClientId=c)
+            bid = pb.createMultiBody(body.mass_kg, shape, -1, list(map(float, pos)), [0, 0, 0, 1],
+                                     useMaximalCoordinates=True, physicsClientId=c)
         # mass in the same call as the inertia, or pybullet zeroes the mass
         pb.changeDynamics(bid, -1, mass=body.mass_kg, localInertiaDiagonal=list(map(float, body.inertia_kg_cm2)),
                           lateralFriction=body.friction, rollingFriction=body.rolling_friction,
