@@ -244,7 +244,8 @@ def _transform(spec: _Spec, steps: Any, field: str, line: int | None, index: int
         if len(kinds) != 1:
             raise spec.fail(tline, tfield, "needs exactly one of translate or rotate", received=sorted(m),
                             expected="translate or rotate (and optionally when)")
-        if index is not None and not _applies(spec, m.get("when", "all"), index, f"{tfield}.when", tline):
+        if index is not None and not _applies(spec, m.get("when", "all"), index, f"{tfield}.when",
+                                              _line(m, "when")):
             continue
         if index is None and "when" in m:
             raise spec.fail(tline, f"{tfield}.when", "placement applies to every node", received=m["when"],
@@ -359,7 +360,7 @@ def _control(spec: _Spec, section: Any, line: int | None, string_tags: dict) -> 
         if str(t) not in string_tags:
             raise spec.fail(_line(c, "cpg_tags"), "control.cpg_tags", "no string config for this tag",
                             received=t, expected=f"a tag of string_materials: {sorted(string_tags)}")
-    imp = _mapping(spec, c.get("impedance", LineDict()), "control.impedance", _line(c, "impedance"))
+    imp = _mapping(spec, c.get("impedance") or LineDict(), "control.impedance", _line(c, "impedance"))
     gains = _materials(spec, imp, "control.impedance", ImpedanceGains, _line(c, "impedance")) if imp else {}
     for t in cpg_tags:
         if str(t) not in gains:
