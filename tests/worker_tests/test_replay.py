@@ -1,0 +1,163 @@
+"""Replaying NTRT's published gaits: reading .nnw files, the reversed slot order, the command."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cli.main import main
+from protocol.errors import ConfigError
+from worker.morphology.registry import load_morphology
+from worker.replay import (
+    REFERENCES,
+    detect_morphology,
+    read_nnw,
+    read_parameter_set,
+    replay,
+    unit_params,
+)
+
+REF = Path("/work/shared/ntrt-reference")
+FOLDERS = {"tetraspine-ntrt": "TetraSpine", "tetrahedral-complex": "TetrahedralComplex",
+           "octahedral-complex": "OctahedralComplex", "ribbed": "Ribbed"}
+needs_data = pytest.mark.skipif(not REF.is_dir(), reason="NTRT reference data not present")
+
+
+def _folder(name: str) -> Path:
+    return REF / FOLDERS[name] / "paper-2014-06-07"
+
+
+def test_read_nnw_keeps_both_values_without_a_trailing_newline(tmp_path: Path):
+    f = tmp_path / "x.nnw"
+    f.write_text("0.25,0.875")
+    assert read_nnw(f) == (0.25, 0.875)
+    f.write_text("0.5,1.5")
+    with pytest.raises(ConfigError, match=r"x.nnw does not hold two values in \[0, 1\]"):
+        read_nnw(f)
+    f.write_text("0.5")
+    with pytest.raises(ConfigError, match="two values"):
+        read_nnw(f)
+    f.write_text("a,b")
+    with pytest.raises(ConfigError, match="not two comma-separated numbers"):
+        read_nnw(f)
+
+
+def _write_set(folder: Path, n_edges: int, missing: int | None = None) -> list[tuple[float, float]]:
+    logs = folder / "logs"
+    logs.mkdir(parents=True)
+    (logs / "bestParameters-default_node-0.nnw").write_text("0.1,0.2")
+    edges = [(round(i / 100, 2), round(1 - i / 100, 2)) for i in range(n_edges)]
+    for i, (w, p) in enumerate(edges):
+        if i != missing:
+            (logs / f"bestParameters-default_edge-{i}.nnw").write_text(f"{w},{p}")
+    return edges
+
+
+def test_edge_file_i_fills_slot_ne_minus_1_minus_i(tmp_path: Path):
+    morph = load_morphology("octahedral-complex")
+    edges = _write_set(tmp_path / "OctahedralComplex", 26)
+    params = read_parameter_set(tmp_path / "OctahedralComplex")
+    assert params.node == (0.1, 0.2) and list(params.edges) == edges
+    u = unit_params(morph, params)
+    assert u.shape == (54,)
+    assert tuple(u[:2]) == (0.1, 0.2)
+    for slot in range(26):
+        assert tuple(u[2 + 2 * slot: 4 + 2 * slot]) == edges[25 - slot]
+    names = morph.param_space().names
+    assert names[2] == "coupling_r0_0_0_weight" and u[2] == edges[-1][0]  # slot (0,0,0) <- the last file
+    physical = morph.param_space().from_unit(u)
+    assert physical[3] == pytest.approx(-math.pi + 2 * math.pi * edges[-1][1])
+
+
+def test_missing_or_wrong_count_of_edge_files_is_an_error(tmp_path: Path):
+    _write_set(tmp_path / "a", 26, missing=7)
+    with pytest.raises(ConfigError, match=r"missing \[7\]"):
+        read_parameter_set(tmp_path / "a")
+    _write_set(tmp_path / "b", 25)
+    with pytest.raises(ConfigError, match=r"wrong number of NTRT edge files.*expected 26"):
+        unit_params(load_morphology("octahedral-complex"), read_parameter_set(tmp_path / "b"))
+    with pytest.raises(ConfigError, match="not found"):
+        read_parameter_set(tmp_path / "nowhere")
+
+
+def test_robot_is_detected_from_the_path(tmp_path: Path):
+    for name, folder in FOLDERS.items():
+        assert detect_morphology(tmp_path / folder / "paper-2014-06-07") == name
+    with pytest.raises(ConfigError, match="--morphology"):
+        detect_morphology(tmp_path / "Elsewhere")
+
+
+@needs_data
+@pytest.mark.parametrize(("name", "n_edges", "f", "amp"), [
+    ("tetraspine-ntrt", 57, 5.5764, 29.779), ("tetrahedral-complex", 100, 3.78642, 16.3102),
+    ("octahedral-complex", 26, 20.8169, 9.458), ("ribbed", 77, 1.98021, 23.9918)])
+def test_published_sets_map_to_the_spec_values(name: str, n_edges: int, f: float, amp: float):
+    """Spec 8: both node values are read and scaled by the robot's node range."""
+    morph = load_morphology(name)
+    params = read_parameter_set(_folder(name))
+    assert len(params.edges) == n_edges
+    physical = morph.param_space().from_unit(unit_params(morph, params))
+    assert physical[0] == pytest.approx(f, abs=1e-3)
+    assert physical[1] == pytest.approx(amp, abs=1e-3)
+    weights = physical[2::2]
+    assert 0.4 < weights.mean() < 0.56  # spec 8: edge weights average about 0.45-0.53
+    # the phase (second value) of every edge file is used, not only the weight
+    phases = physical[3::2]
+    files = np.array([p for _, p in params.edges][::-1])
+    np.testing.assert_allclose(phases, -math.pi + 2 * math.pi * files)
+
+
+@needs_data
+def test_replay_command_json_short(capsys):
+    code = main(["replay", str(_folder("octahedral-complex")), "--duration", "0.3", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert out["morphology"] == "octahedral-complex" and out["status"] == "complete"
+    assert out["n_edge_files"] == 26 and out["node_values"] == [0.693896, 0.315267]
+    assert out["ntrt_reference_cm"] == REFERENCES["octahedral-complex"].distance_cm
+    assert out["ntrt_distance_cm"] > 0 and out["sim_time_s"] == pytest.approx(0.3)
+    assert out["ratio"] == pytest.approx(out["speed_cm_s"] / (98.5485 / 30.0))
+
+
+@needs_data
+def test_replay_text_says_when_it_diverges(monkeypatch, capsys):
+    from dataclasses import replace as dc_replace
+
+    import worker.replay as rp
+
+    real = rp.replay(_folder("octahedral-complex"), duration_s=0.05)
+    failed = dc_replace(real, result=dc_replace(real.result, status=type(real.result.status)("failed"),
+                                                reason="diverged: non-finite pose at t=0.040 s"))
+    monkeypatch.setattr(rp, "replay", lambda *a, **k: failed)
+    assert main(["replay", str(_folder("octahedral-complex"))]) == 1
+    text = capsys.readouterr().out
+    assert "DIVERGED: diverged: non-finite pose" in text and "n/a (diverged)" in text
+    assert main(["replay", str(_folder("octahedral-complex")), "--json"]) == 1
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "diverged" and out["ratio"] is None
+
+
+@needs_data
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "low", "high"), [("octahedral-complex", 0.8, 1.3),
+                                                   ("tetrahedral-complex", 0.4, 2.0)])
+def test_full_replay_lands_near_ntrt(name: str, low: float, high: float):
+    """30 s at 1 ms with the 2014 motor. Octahedral: measured 1.15 x NTRT; the tetrahedral complex is
+    chaotic (spec 0a.5), so only the order of magnitude is asserted."""
+    report = replay(_folder(name))
+    assert report.result.ok, report.result.reason
+    assert low < report.ratio < high, report.ratio
+
+
+@needs_data
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["ribbed", "tetraspine-ntrt"])
+def test_full_replay_without_a_reference_completes(name: str):
+    report = replay(_folder(name))
+    assert report.reference is None and report.ratio is None
+    assert report.result.ok, report.result.reason
+    assert report.result.ntrt_distance_cm > 5.0
