@@ -15,8 +15,6 @@ import argparse
 import json
 import time
 
-import numpy as np
-
 from worker.control.cpg import CpgIntegrator
 from worker.morphology.registry import load_morphology
 from worker.sim import strings as sk
@@ -71,7 +69,7 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
             "step_to_bare_ratio": whole / per_step_us["bare_step"],
             # stricter: against this scene's own engine step (the bare scene has other contacts)
             "step_to_engine_ratio": whole / per_step_us["step"],
-            "wall_s_per_sim_s": whole * 1e-6 / dt, "n_bodies": nb, "n_strings": int(len(bank.params)),
+            "wall_s_per_sim_s": whole * 1e-6 / dt, "n_bodies": nb, "n_strings": len(bank.params),
             "n_cpg_nodes": net.n_nodes, "n_couplings": net.n_couplings, "dt_s": dt}
 
 

@@ -222,7 +222,7 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
             if n:
                 poses = read()
             if (n + 1) % cpg_every == 0:
-                advance(period)
+                advance(cpg_every * dt)  # the time that really elapsed, also when dt > the period
             if strings_step(poses, cpg_out, dt, motor) != sk.STATUS_OK:
                 reason = f"diverged: non-finite string state at t={n * dt:.3f} s"
                 break
