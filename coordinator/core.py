@@ -1,0 +1,179 @@
+"""CoordinatorCore: the run's state machine behind the transport (bytes in, bytes out).
+
+Every handler decodes and validates its message, so a malformed or foreign message is logged and
+answered with an error, never raised into the transport and never touching what is stored. One
+lock serialises the handlers, which the transport may call from several threads.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+from coordinator.scheduler import Scheduler
+from coordinator.study import Study
+from protocol.errors import MessageError
+from protocol.messages import (
+    ResultAck,
+    ResultSubmission,
+    RunConfig,
+    RunInfo,
+    TrialAssignment,
+    Verdict,
+    WorkGrant,
+    WorkRequest,
+    decode_message,
+    encode,
+    encode_message,
+)
+
+log = logging.getLogger("spinefarm.coordinator")
+_RATE_WINDOW_S = 30.0
+
+
+class CoordinatorCore:
+    def __init__(self, study: Study, scheduler: Scheduler, run_config: RunConfig,
+                 clock: Callable[[], float] = time.monotonic, idle_retry_s: float = 0.5) -> None:
+        self.study = study
+        self.scheduler = scheduler
+        self.run_config = run_config
+        self.config_hash = run_config.config_hash()
+        self.clock = clock
+        self.idle_retry_s = idle_retry_s
+        self.lock = threading.RLock()
+        self.rejected_messages = 0
+        self.dropped_results: dict[str, int] = {v.value: 0 for v in Verdict if v != Verdict.STORED}
+        self._finish_times: deque[float] = deque()
+        self.started_s = clock()
+        self._config_payload = encode_message(run_config)
+        # Trials sampled but never finished before a restart are issued again first.
+        scheduler.enqueue(study.storage.waiting_ids())
+
+    @property
+    def run_id(self) -> str:
+        return self.run_config.run_id
+
+    @property
+    def done(self) -> bool:
+        return self.study.done
+
+    # --- handlers (transport calls these) ---------------------------------------------------------
+    def _error(self, what: str, exc: MessageError) -> bytes:
+        self.rejected_messages += 1
+        log.warning("ignored malformed %s: %s", what, exc)
+        return encode("error", exc.to_detail())
+
+    def handle_work(self, payload: bytes) -> bytes:
+        try:
+            req = decode_message(payload, WorkRequest)
+        except MessageError as exc:
+            return self._error("work request", exc)
+        with self.lock:
+            if self.study.done:
+                return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True))
+            leases = self.scheduler.grant(req.worker_id, req.capacity, self.study.ask)
+            cols = self.study.storage.columns()
+            assignments = tuple(
+                TrialAssignment(ls.trial_id, ls.lease_id, tuple(cols["params_unit"][ls.trial_id].tolist()),
+                                int(cols["seed"][ls.trial_id]), ls.deadline_s - self.clock())
+                for ls in leases)
+        retry = 0.0 if assignments else self.idle_retry_s
+        return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False))
+
+    def handle_results(self, payload: bytes) -> bytes:
+        try:
+            sub = decode_message(payload, ResultSubmission)
+        except MessageError as exc:
+            return self._error("result submission", exc)
+        verdicts = []
+        with self.lock:
+            self.scheduler.contact(sub.worker_id)
+            for item in sub.items:
+                v = self._settle(sub.worker_id, item.lease_id, item.result)
+                verdicts.append((item.result.trial_id, v))
+                if v == Verdict.STORED:
+                    self._finish_times.append(self.clock())
+                else:
+                    self.dropped_results[v.value] += 1
+        return encode_message(ResultAck(tuple(verdicts)))
+
+    def _settle(self, worker_id: str, lease_id: int, result: Any) -> Verdict:
+        storage = self.study.storage
+        tid = result.trial_id
+        if not 0 <= tid < storage.n_trials():
+            return Verdict.UNKNOWN
+        if storage.columns()["status"][tid] != b"waiting":
+            return Verdict.DUPLICATE
+        if not self.scheduler.is_current(tid, lease_id, worker_id):
+            return Verdict.STALE
+        if result.seed != int(storage.columns()["seed"][tid]):
+            log.warning("result for trial %d has seed %d, expected %d: dropped", tid, result.seed,
+                        int(storage.columns()["seed"][tid]))
+            return Verdict.INVALID
+        if result.worker_id != worker_id:
+            result = type(result)(**{**result.__dict__, "worker_id": worker_id})
+        self.study.tell(result)
+        self.scheduler.release(tid)
+        return Verdict.STORED
+
+    def handle_config(self, config_hash: str) -> bytes:
+        if config_hash != self.config_hash:
+            return self._error("config request", MessageError(
+                "unknown run config hash", received=config_hash, expected=self.config_hash))
+        return self._config_payload
+
+    def run_info(self) -> bytes:
+        return encode_message(RunInfo(self.run_id, self.config_hash, self.study.budget, self.study.done))
+
+    # --- liveness and time ------------------------------------------------------------------------
+    def worker_seen(self, worker_id: str) -> None:
+        with self.lock:
+            self.scheduler.contact(worker_id)
+
+    def worker_lost(self, worker_id: str) -> list[int]:
+        with self.lock:
+            lost = self.scheduler.worker_lost(worker_id)
+        if lost:
+            log.info("worker %s lost; re-issuing trials %s", worker_id, lost[:10])
+        return lost
+
+    def tick(self) -> list[int]:
+        """Expire overdue leases (called periodically by the transport)."""
+        with self.lock:
+            return self.scheduler.expire()
+
+    # --- status -----------------------------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        """JSON-able live status: counts, rate, ETA, workers (the API reads it from the status file)."""
+        with self.lock:
+            now = self.clock()
+            while self._finish_times and self._finish_times[0] < now - _RATE_WINDOW_S:
+                self._finish_times.popleft()
+            window = min(_RATE_WINDOW_S, max(now - self.started_s, 1e-9))
+            rate = len(self._finish_times) / window
+            remaining = self.study.budget - self.study.n_finished
+            counts = self.study.storage.counts()
+            wall = time.time()
+            return {
+                "run_id": self.run_id,
+                "state": "done" if self.study.done else "running",
+                "trials_budget": self.study.budget,
+                "trials_sampled": self.study.n_asked,
+                "trials_complete": counts["complete"],
+                "trials_failed": counts["failed"],
+                "trials_leased": self.scheduler.n_leased,
+                "trials_queued": self.scheduler.n_queued + max(0, self.study.budget - self.study.n_asked),
+                "trials_reissued": self.scheduler.reissued,
+                "rate_trials_s": rate,
+                "eta_s": (remaining / rate) if rate > 0 else None,
+                "rejected_messages": self.rejected_messages,
+                "dropped_results": dict(self.dropped_results),
+                "workers": [{"worker_id": w.worker_id, "alive": w.alive, "leases": len(w.leases),
+                             "last_contact_unix_s": wall - (now - w.last_contact_s)}
+                            for w in self.scheduler.workers.values()],
+                "updated_at_unix_s": wall,
+            }

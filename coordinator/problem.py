@@ -1,0 +1,57 @@
+"""What a run optimises: a morphology (or the built-in test objective) turned into a RunConfig.
+
+The test objective "sphere" (or "sphere:N" for N parameters) needs no physics: it scores a vector
+in microseconds, so the transport and the coordinator can be tested and benchmarked on their own.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+from protocol.errors import ConfigError
+from protocol.keys import check_run_id
+from protocol.messages import RunConfig
+from protocol.params import ParamSpace, ParamSpec
+
+SPHERE = re.compile(r"^sphere(?::(\d{1,3}))?$")
+
+
+def is_test_objective(morphology: str) -> bool:
+    return bool(SPHERE.match(morphology))
+
+
+def sphere_space(morphology: str) -> ParamSpace:
+    m = SPHERE.match(morphology)
+    if m is None:
+        raise ConfigError("not a test objective", received=morphology, expected="sphere or sphere:N")
+    n = int(m.group(1) or 8)
+    if not 1 <= n <= 256:
+        raise ConfigError("test objective dimension out of range", received=n, expected="1 <= N <= 256")
+    return ParamSpace(morphology, tuple(ParamSpec(f"x{i}", -1.0, 1.0, "1") for i in range(n)))
+
+
+def build_run_config(run_id: str, morphology: str, *, objective: str = "distance", seed: int = 0,
+                     controller: str | None = None, duration_s: float | None = None,
+                     trial_overrides: dict[str, Any] | None = None) -> RunConfig:
+    """Resolve `morphology` (a registered name, or sphere[:N]) into the config workers fetch."""
+    check_run_id(run_id)
+    if is_test_objective(morphology):
+        space = sphere_space(morphology)
+        return RunConfig(run_id, morphology, {}, None, tuple(space.describe()),
+                         {"duration_s": duration_s}, objective, seed)
+    try:  # the simulation core is only needed when real physics runs
+        from worker.morphology.registry import load_morphology
+        from worker.trial import TrialConfig
+    except ImportError as exc:
+        raise ConfigError("the simulation core is not available", received=str(exc),
+                          expected="worker.trial and worker.morphology.registry") from exc
+    morph = load_morphology(morphology)
+    space = morph.param_space(controller)
+    tc_dict = TrialConfig().to_dict()
+    tc_dict.update(trial_overrides or {})
+    if duration_s is not None:
+        tc_dict["duration_s"] = duration_s
+    trial_config = TrialConfig.from_dict(tc_dict)  # validates the overrides
+    return RunConfig(run_id, morph.name, morph.to_dict(), controller, tuple(space.describe()),
+                     trial_config.to_dict(), objective, seed)

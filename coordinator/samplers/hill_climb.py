@@ -1,0 +1,44 @@
+"""GaussianHillClimbSampler: uniform for the first trials, then Gaussian steps around the best.
+
+After `startup_trials` trials (the Monte Carlo phase) each trial is drawn around a centre chosen
+among the `top_k` best complete trials stored so far: x = clip(centre + sigma * N(0, I), 0, 1).
+The centre is read from storage, so it moves as soon as a better result is stored (hill climbing)
+and a restarted coordinator continues from the same centre.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from coordinator.samplers.base import GAUSSIAN, MONTE_CARLO, BaseSampler, Proposal, trial_rng
+from protocol.errors import check_range
+from storage.base import BaseStorage
+
+
+class GaussianHillClimbSampler(BaseSampler):
+    def __init__(self, n_params: int, seed: int, *, sigma: float = 0.005, top_k: int = 1,
+                 startup_trials: int = 0) -> None:
+        super().__init__(n_params, seed)
+        check_range("sigma", sigma, 0.0, 1.0, low_inclusive=False)
+        check_range("top_k", top_k, 1)
+        check_range("startup_trials", startup_trials, 0)
+        self.sigma = float(sigma)
+        self.top_k = int(top_k)
+        self.startup_trials = int(startup_trials)
+
+    def propose(self, trial_id: int, storage: BaseStorage) -> Proposal:
+        rng = trial_rng(self.seed, trial_id)
+        uniform = rng.random(self.n_params)  # drawn first so both phases share one stream layout
+        centres = storage.best_ids(self.top_k) if trial_id >= self.startup_trials else []
+        if not centres:
+            return Proposal(uniform, MONTE_CARLO, -1)
+        parent = centres[int(rng.integers(len(centres)))]
+        centre = storage.columns()["params_unit"][parent]
+        step = self.sigma * rng.standard_normal(self.n_params)
+        return Proposal(np.clip(centre + step, 0.0, 1.0), GAUSSIAN, parent)
+
+    def describe(self) -> dict[str, Any]:
+        return {**super().describe(), "sigma": self.sigma, "top_k": self.top_k,
+                "startup_trials": self.startup_trials}

@@ -1,0 +1,11 @@
+"""RandomSampler: the Monte Carlo phase, uniform in the unit cube."""
+
+from __future__ import annotations
+
+from coordinator.samplers.base import MONTE_CARLO, BaseSampler, Proposal, trial_rng
+from storage.base import BaseStorage
+
+
+class RandomSampler(BaseSampler):
+    def propose(self, trial_id: int, storage: BaseStorage) -> Proposal:
+        return Proposal(trial_rng(self.seed, trial_id).random(self.n_params), MONTE_CARLO, -1)

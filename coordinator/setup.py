@@ -1,0 +1,93 @@
+"""Wiring of one run: storage, sampler, study, scheduler and core, new or resumed."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from coordinator.core import CoordinatorCore
+from coordinator.objectives import objective_fn
+from coordinator.samplers import GaussianHillClimbSampler, sampler_from_dict
+from coordinator.scheduler import Scheduler
+from coordinator.study import Study
+from protocol.errors import ConfigError, check_range
+from protocol.messages import RunConfig
+from storage.base import BaseStorage
+from storage.memory import InMemoryStorage
+from storage.schema import RunMeta
+
+
+def software_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("spinefarm")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """How to search: budget, sampler settings, leases."""
+
+    trials: int
+    sigma: float = 0.005
+    top_k: int = 1
+    startup_trials: int | None = None   # None: half the budget is Monte Carlo
+    lease_s: float = 60.0
+
+    def __post_init__(self) -> None:
+        check_range("trials", self.trials, 1)
+        check_range("lease_s", self.lease_s, 0.0, low_inclusive=False)
+
+
+def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
+    space = config.space()
+    startup = settings.startup_trials if settings.startup_trials is not None else settings.trials // 2
+    sampler = GaussianHillClimbSampler(len(space), config.seed, sigma=settings.sigma, top_k=settings.top_k,
+                                       startup_trials=startup)
+    return RunMeta(run_id=config.run_id, morphology=config.morphology, morphology_spec=config.morphology_spec,
+                   controller=config.controller, param_names=tuple(space.names),
+                   param_lows=tuple(space.lows.tolist()), param_highs=tuple(space.highs.tolist()),
+                   param_units=tuple(space.units), trial_config=config.trial_config,
+                   objective=config.objective, seed=config.seed, trials_budget=settings.trials,
+                   sampler=sampler.describe(), software_version=software_version(),
+                   created_at_unix_s=time.time(), config_hash=config.config_hash(),
+                   extra={"run_config": config.to_dict(), "lease_s": settings.lease_s})
+
+
+def build_core(storage: BaseStorage, clock=time.monotonic) -> CoordinatorCore:
+    """A core over a storage that already holds its run (new or resumed)."""
+    meta = storage.run_meta()
+    config = RunConfig.from_dict(meta.extra["run_config"])
+    space = config.space()
+    sampler = sampler_from_dict(meta.sampler, len(space))
+    study = Study(storage, sampler, space, meta.trials_budget, objective_fn(meta.objective), meta.seed)
+    scheduler = Scheduler(clock, float(meta.extra.get("lease_s", 60.0)))
+    return CoordinatorCore(study, scheduler, config, clock)
+
+
+def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,
+            clock=time.monotonic) -> tuple[CoordinatorCore, BaseStorage]:
+    """Create the run's storage (an HDF5 file, or memory when `out` is None) and its core."""
+    objective_fn(config.objective)  # fail before creating a file
+    meta = make_meta(config, settings)
+    if out is None:
+        storage: BaseStorage = InMemoryStorage()
+        storage.create_run(meta)
+    else:
+        from storage.hdf5 import Hdf5Storage
+
+        storage = Hdf5Storage.create(out, meta)
+    return build_core(storage, clock), storage
+
+
+def resume_run(path: str | Path, clock=time.monotonic) -> tuple[CoordinatorCore, BaseStorage]:
+    from storage.hdf5 import Hdf5Storage
+
+    if not Path(path).is_file():
+        raise ConfigError("cannot resume: run file does not exist", received=str(path),
+                          expected="the .h5 file of an earlier run")
+    storage = Hdf5Storage.resume(path)
+    return build_core(storage, clock), storage

@@ -1,0 +1,226 @@
+"""Hdf5Storage: one self-describing HDF5 file per run, single writer, SWMR readers.
+
+Layout: root attributes hold the run metadata (JSON strings for nested values); group /trials holds
+one chunked, resizable dataset per column (see storage.schema), row i = trial i, with `unit` and
+`description` attributes. The writer keeps the table in memory, writes changed rows at `flush()`
+and runs in SWMR mode, so readers (the API, a notebook) see every flushed row while the run goes on.
+
+A file whose SWMR writer was killed keeps its consistency flags set and then opens only for SWMR
+reading; `resume()` therefore reads it that way and rewrites it to a fresh file (atomic replace)
+instead of relying on external tools to clear the flags.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, fields
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from protocol.errors import StorageError
+from protocol.messages import SCHEMA_VERSION
+from storage.memory import InMemoryStorage
+from storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
+from storage.table import TrialTable, empty_value
+
+CHUNK_ROWS = 1024
+_JSON_FIELDS = ("morphology_spec", "trial_config", "sampler", "extra")
+_TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
+
+
+def _write_meta(f: h5py.File, meta: RunMeta) -> None:
+    f.attrs["title"] = f"spinefarm run {meta.run_id}"
+    f.attrs["description"] = (
+        "Gait search for a tensegrity robot. Group /trials holds one dataset per column, one row per "
+        "trial (row i = trial i); status 'waiting' rows were sampled but have no result yet. Parameter "
+        "columns are named by param_names with bounds param_lows/param_highs in param_units.")
+    f.attrs["file_schema_version"] = FILE_SCHEMA_VERSION
+    f.attrs["message_schema_version"] = SCHEMA_VERSION
+    for fld in fields(RunMeta):
+        value = getattr(meta, fld.name)
+        if fld.name in _JSON_FIELDS:
+            f.attrs[fld.name] = json.dumps(value, sort_keys=True)
+        elif fld.name in _TUPLE_FIELDS:
+            f.attrs[fld.name] = np.array(value, dtype=h5py.string_dtype() if "names" in fld.name
+                                         or "units" in fld.name else float)
+        elif value is None:
+            f.attrs[fld.name] = ""
+        else:
+            f.attrs[fld.name] = value
+
+
+def _read_meta(f: h5py.File, path: Path) -> RunMeta:
+    if f.attrs.get("file_schema_version") != FILE_SCHEMA_VERSION:
+        raise StorageError(f"{path} is not a spinefarm run file of this version",
+                           received=f.attrs.get("file_schema_version"), expected=FILE_SCHEMA_VERSION)
+    kw: dict[str, Any] = {}
+    for fld in fields(RunMeta):
+        raw = f.attrs[fld.name]
+        if fld.name in _JSON_FIELDS:
+            kw[fld.name] = json.loads(raw)
+        elif fld.name in ("param_names", "param_units"):
+            kw[fld.name] = tuple(x.decode() if isinstance(x, bytes) else str(x) for x in raw)
+        elif fld.name in ("param_lows", "param_highs"):
+            kw[fld.name] = tuple(float(x) for x in raw)
+        elif fld.name == "controller":
+            kw[fld.name] = str(raw) or None
+        elif fld.name in ("seed", "trials_budget"):
+            kw[fld.name] = int(raw)
+        elif fld.name == "created_at_unix_s":
+            kw[fld.name] = float(raw)
+        else:
+            kw[fld.name] = raw.decode() if isinstance(raw, bytes) else str(raw)
+    return RunMeta(**kw)
+
+
+def _create_datasets(f: h5py.File, n_params: int, n_rows: int) -> dict[str, h5py.Dataset]:
+    g = f.create_group("trials")
+    out = {}
+    for c in COLUMNS:
+        vec = c.name in VECTOR_COLUMNS
+        ds = g.create_dataset(
+            c.name, shape=(n_rows, n_params) if vec else (n_rows,), dtype=c.dtype,
+            maxshape=(None, n_params) if vec else (None,),
+            chunks=(CHUNK_ROWS, max(n_params, 1)) if vec else (CHUNK_ROWS,),
+            fillvalue=empty_value(c.name))
+        ds.attrs["unit"] = c.unit
+        ds.attrs["description"] = c.description
+        out[c.name] = ds
+    return out
+
+
+def read_run(path: str | Path) -> tuple[RunMeta, dict[str, np.ndarray]]:
+    """Metadata and every complete row of a run file, also while (or after) a writer had it open."""
+    path = Path(path)
+    if not path.is_file():
+        raise StorageError("run file does not exist", received=str(path), expected="an existing .h5 file")
+    try:
+        f = h5py.File(path, "r", libver="latest", swmr=True)
+    except OSError as exc:
+        raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
+    with f:
+        meta = _read_meta(f, path)
+        if "trials" not in f:
+            raise StorageError(f"{path} has no /trials group", expected="a spinefarm run file")
+        g = f["trials"]
+        n = min(g[c.name].shape[0] for c in COLUMNS)
+        cols = {c.name: g[c.name][:n] for c in COLUMNS}
+    # A row the writer extended but had not filled yet has an empty status: cut the table there.
+    empty = np.flatnonzero(cols["status"] == b"")
+    if empty.size:
+        cols = {k: v[: int(empty[0])] for k, v in cols.items()}
+    return meta, cols
+
+
+def write_run(path: str | Path, meta: RunMeta, cols: dict[str, np.ndarray]) -> None:
+    """Write a complete, closed (non-SWMR) run file: used for snapshots and for resume."""
+    n = len(cols["trial_id"])
+    with h5py.File(path, "w", libver="latest") as f:
+        _write_meta(f, meta)
+        for name, ds in _create_datasets(f, meta.n_params, n).items():
+            if n:
+                ds[:] = cols[name]
+
+
+def snapshot(src: str | Path, dst: str | Path) -> int:
+    """Consistent copy of a (possibly live) run file; returns the number of rows copied."""
+    meta, cols = read_run(src)
+    write_run(dst, meta, cols)
+    return len(cols["trial_id"])
+
+
+class Hdf5Storage(InMemoryStorage):
+    """The single writer of one run file. Use `create`, `resume` or `open_read`."""
+
+    def __init__(self, path: Path, file: h5py.File | None, meta: RunMeta, table: TrialTable) -> None:
+        super().__init__()
+        self.path = path
+        self._file = file
+        self._meta = meta
+        self._table = table
+        self.read_only = file is None
+        self._datasets = {c.name: file["trials"][c.name] for c in COLUMNS} if file is not None else {}
+
+    @classmethod
+    def create(cls, path: str | Path, meta: RunMeta) -> Hdf5Storage:
+        path = Path(path)
+        if path.exists():
+            raise StorageError("run file already exists", received=str(path),
+                               expected="a new path (or --resume to continue it)")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_run(path, meta, TrialTable(meta.n_params).columns())
+        return cls._open_writer(path, meta, TrialTable(meta.n_params))
+
+    @classmethod
+    def resume(cls, path: str | Path) -> Hdf5Storage:
+        """Reopen a run for writing, whether it was closed cleanly or its writer was killed."""
+        path = Path(path)
+        meta, cols = read_run(path)
+        tmp = path.with_name(path.name + ".resume-tmp")
+        write_run(tmp, meta, cols)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)  # atomic: the old file stays intact until the new one is complete
+        table = TrialTable(meta.n_params, capacity=max(1024, len(cols["trial_id"])))
+        table.load(cols)
+        return cls._open_writer(path, meta, table)
+
+    @classmethod
+    def _open_writer(cls, path: Path, meta: RunMeta, table: TrialTable) -> Hdf5Storage:
+        f = h5py.File(path, "r+", libver="latest")
+        f.swmr_mode = True  # from here on no new objects or attributes; readers may attach
+        return cls(path, f, meta, table)
+
+    @classmethod
+    def open_read(cls, path: str | Path) -> Hdf5Storage:
+        """A read-only in-memory snapshot of the file as it is now."""
+        meta, cols = read_run(path)
+        table = TrialTable(meta.n_params, capacity=max(1, len(cols["trial_id"])))
+        table.load(cols)
+        return cls(Path(path), None, meta, table)
+
+    def create_run(self, meta: RunMeta) -> None:
+        raise StorageError("an Hdf5Storage holds its run already", expected="Hdf5Storage.create(path, meta)")
+
+    def flush(self) -> None:
+        if self._file is None:
+            return
+        if not self.table.dirty and self._datasets["trial_id"].shape[0] == self.table.n:
+            return
+        n = self.table.n
+        cols = self.table.columns()
+        rows = np.array(sorted(self.table.dirty), dtype=np.int64)
+        self.table.dirty.clear()
+        # Fill rows before extending the status column, so a reader never sees a half-written row.
+        for c in COLUMNS:
+            ds = self._datasets[c.name]
+            if c.name != "status" and ds.shape[0] < n:
+                ds.resize(n, axis=0)
+        runs = np.split(rows, np.flatnonzero(np.diff(rows) != 1) + 1) if rows.size else []
+        for c in COLUMNS:
+            if c.name == "status":
+                continue
+            for run in runs:
+                a, b = int(run[0]), int(run[-1]) + 1
+                self._datasets[c.name][a:b] = cols[c.name][a:b]
+        status = self._datasets["status"]
+        if status.shape[0] < n:
+            status.resize(n, axis=0)
+        for run in runs:
+            a, b = int(run[0]), int(run[-1]) + 1
+            status[a:b] = cols["status"][a:b]
+        self._file.flush()
+
+    def close(self) -> None:
+        if self._file is not None:
+            self.flush()
+            self._file.close()
+            self._file = None
+            self.read_only = True
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self.run_meta())

@@ -1,0 +1,123 @@
+"""The per-trial table every storage holds, its columns, units and the file schema version.
+
+One row per trial, indexed by trial id (row i is trial i). A row is written when the trial is
+sampled (status "waiting") and filled once when its result arrives (complete | failed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+FILE_SCHEMA_VERSION = 1
+
+PHASES = ("monte_carlo", "gaussian")
+STATUSES = ("waiting", "complete", "failed")
+
+
+@dataclass(frozen=True)
+class Column:
+    name: str
+    dtype: str          # numpy dtype in memory; strings are fixed-width bytes in files
+    unit: str
+    description: str
+
+
+# Vector columns (params_unit, params) are (n_trials, n_params); all others are (n_trials,).
+COLUMNS: tuple[Column, ...] = (
+    Column("trial_id", "i8", "", "trial number; equals the row index"),
+    Column("params_unit", "f8", "1", "parameter vector in the unit cube; columns named by param_names"),
+    Column("params", "f8", "see param_units", "physical parameter values, low + u * (high - low)"),
+    Column("phase", "S16", "", "sampler phase: monte_carlo (uniform) or gaussian (hill climbing)"),
+    Column("parent", "i8", "", "trial id of the centre a gaussian sample was drawn around; -1 for none"),
+    Column("seed", "i8", "", "simulation seed of the trial"),
+    Column("status", "S16", "", "waiting (sampled, no result yet), complete or failed"),
+    Column("reason", "S160", "", "why a trial failed (diverged: ..., error: ...); empty when complete"),
+    Column("objective", "f8", "see attribute objective", "the score the search maximised"),
+    Column("distance_m", "f8", "m", "displacement of the robot's centre of mass in the ground plane"),
+    Column("ntrt_distance_cm", "f8", "cm", "displacement of the segment NTRT scores"),
+    Column("speed_cm_s", "f8", "cm/s", "mean ground speed"),
+    Column("work_j", "f8", "J", "actuator work shortening strings under tension"),
+    Column("cot", "f8", "1", "cost of transport, work / (m g d)"),
+    Column("mass_kg", "f8", "kg", "robot mass"),
+    Column("sim_time_s", "f8", "s", "simulated time"),
+    Column("wall_time_s", "f8", "s", "wall-clock time the worker spent on the trial"),
+    Column("worker_id", "S64", "", "worker that ran the trial"),
+    Column("finished_at_unix_s", "f8", "s since 1970-01-01 UTC", "when the coordinator stored the result"),
+)
+COLUMN_BY_NAME = {c.name: c for c in COLUMNS}
+VECTOR_COLUMNS = ("params_unit", "params")
+SCORE_COLUMNS = ("distance_m", "ntrt_distance_cm", "speed_cm_s", "work_j", "cot", "mass_kg",
+                 "sim_time_s", "wall_time_s")
+
+
+@dataclass(frozen=True)
+class RunMeta:
+    """Run-level metadata, stored as file attributes. JSON-able dicts stay dicts here."""
+
+    run_id: str
+    morphology: str
+    morphology_spec: dict[str, Any]
+    controller: str | None
+    param_names: tuple[str, ...]
+    param_lows: tuple[float, ...]
+    param_highs: tuple[float, ...]
+    param_units: tuple[str, ...]
+    trial_config: dict[str, Any]
+    objective: str
+    seed: int
+    trials_budget: int
+    sampler: dict[str, Any]
+    software_version: str
+    created_at_unix_s: float
+    config_hash: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_params(self) -> int:
+        return len(self.param_names)
+
+
+@dataclass(frozen=True)
+class TrialRecord:
+    """One row of the table, decoded."""
+
+    trial_id: int
+    params_unit: tuple[float, ...]
+    params: tuple[float, ...]
+    phase: str
+    parent: int
+    seed: int
+    status: str
+    reason: str
+    objective: float
+    distance_m: float
+    ntrt_distance_cm: float
+    speed_cm_s: float
+    work_j: float
+    cot: float
+    mass_kg: float
+    sim_time_s: float
+    wall_time_s: float
+    worker_id: str
+    finished_at_unix_s: float
+
+    @classmethod
+    def from_columns(cls, cols: dict[str, np.ndarray], i: int) -> TrialRecord:
+        kw: dict[str, Any] = {}
+        for c in COLUMNS:
+            v = cols[c.name][i]
+            if c.name in VECTOR_COLUMNS:
+                kw[c.name] = tuple(float(x) for x in v)
+            elif c.dtype.startswith("S"):
+                kw[c.name] = v.decode() if isinstance(v, bytes) else str(v)
+            elif c.dtype.startswith("i"):
+                kw[c.name] = int(v)
+            else:
+                kw[c.name] = float(v)
+        return cls(**kw)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {c.name: getattr(self, c.name) for c in COLUMNS}

@@ -1,0 +1,250 @@
+"""The worker's Zenoh loop: stateless, pulls leased trials, returns results until acknowledged.
+
+A worker declares a liveliness token (the coordinator re-issues its leases the moment it vanishes),
+finds a run (given, or discovered on the network), asks its work queryable for a batch, fetches the
+run's config by hash once (cached, so one worker can serve any run), runs each trial and resends
+results until the coordinator acknowledges every one. An absent coordinator means back off and
+retry, never exit. The only worker module that imports zenoh.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import socket
+import threading
+import time
+import uuid
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import zenoh
+
+from protocol import keys
+from protocol.errors import ConfigError, MessageError, SpinefarmError
+from protocol.messages import (
+    ResultAck,
+    ResultSubmission,
+    RunConfig,
+    RunInfo,
+    SubmittedResult,
+    TrialAssignment,
+    TrialResult,
+    TrialStatus,
+    WorkGrant,
+    WorkRequest,
+    decode_message,
+    encode_message,
+)
+from protocol.params import ParamSpace
+
+log = logging.getLogger("spinefarm.worker")
+Evaluator = Callable[[TrialAssignment], TrialResult]
+# A 2 s transport lease lets the coordinator notice a frozen (SIGSTOPped) worker in ~2 s, not 10 s.
+WORKER_LEASE_MS = 2000
+
+
+def default_worker_id() -> str:
+    host = "".join(ch if ch.isalnum() or ch in "-_." else "-" for ch in socket.gethostname())[:32]
+    return f"{host or 'worker'}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
+
+
+def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
+                 config_file: str | Path | None = None) -> zenoh.Config:
+    """Client of the coordinator/router at `connect`; multicast scouting off; short transport lease."""
+    try:
+        conf = zenoh.Config.from_file(str(config_file)) if config_file else zenoh.Config()
+    except Exception as exc:
+        raise ConfigError(f"cannot read Zenoh config {config_file}: {exc}", expected="a JSON5 file") from exc
+    conf.insert_json5("mode", json.dumps("peer" if listen else "client"))
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if listen:
+        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("transport/link/tx/lease", str(WORKER_LEASE_MS))
+    return conf
+
+
+# --- evaluators ------------------------------------------------------------------------------------
+def sphere_result(space: ParamSpace, a: TrialAssignment) -> TrialResult:
+    """The built-in test objective: no physics, a smooth bowl with its top at x_i = 0.3."""
+    t0 = time.perf_counter()
+    x = space.from_unit(np.asarray(a.params_unit))
+    distance_m = float(len(x) - np.sum((x - 0.3) ** 2))
+    work_j = float(np.sum(x**2))
+    return TrialResult(TrialStatus.COMPLETE, "", distance_m, 100.0 * distance_m, 10.0 * distance_m, work_j,
+                       work_j / (9.81 * distance_m) if distance_m > 0 else float("inf"), 10.0,
+                       time.perf_counter() - t0, 1.0, a.seed)
+
+
+def build_evaluator(config: RunConfig) -> Evaluator:
+    """Turn a run config into a function of one assignment (morphology loaded once)."""
+    space = config.space()
+    if re.fullmatch(r"sphere(:\d+)?", config.morphology):  # the test objective, see coordinator.problem
+        return lambda a: sphere_result(space, a)
+    from worker.morphology.registry import load_morphology
+    from worker.trial import TrialConfig, run_trial
+
+    morphology = load_morphology(config.morphology)
+    trial_config = TrialConfig.from_dict(config.trial_config)
+
+    def evaluate(a: TrialAssignment) -> TrialResult:
+        return run_trial(morphology, np.asarray(a.params_unit, dtype=float), trial_config, a.seed,
+                         controller=config.controller)
+
+    return evaluate
+
+
+def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:
+    nan = float("nan")
+    return TrialResult(TrialStatus.FAILED, reason[:150], nan, nan, nan, nan, nan, 0.0, wall_time_s, nan,
+                       a.seed)
+
+
+class Backoff:
+    """Exponential wait between retries while the coordinator is absent."""
+
+    def __init__(self, first_s: float = 0.05, max_s: float = 2.0) -> None:
+        self.first_s, self.max_s, self._next = first_s, max_s, first_s
+
+    def next(self) -> float:
+        wait, self._next = self._next, min(self._next * 2, self.max_s)
+        return wait
+
+    def reset(self) -> None:
+        self._next = self.first_s
+
+
+class WorkerService:
+    def __init__(self, *, connect: Sequence[str], run_id: str | None = None, worker_id: str | None = None,
+                 batch: int = 1, listen: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
+                 exit_when_done: bool = False, query_timeout_s: float = 5.0,
+                 submit_interval_s: float = 1.0) -> None:
+        self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
+        self.run_id = keys.check_run_id(run_id) if run_id else None
+        self.batch = batch
+        self.exit_when_done = exit_when_done
+        self.query_timeout_s = query_timeout_s
+        self.submit_interval_s = submit_interval_s
+        self._conf = zenoh_config(connect, listen, zenoh_config_file)
+        self._evaluators: dict[str, Evaluator] = {}
+        self._pending: dict[str, dict[int, SubmittedResult]] = {}   # run id -> trial id -> result
+        self._done_runs: set[str] = set()
+        self.trials_run = 0
+        self.stop = threading.Event()
+
+    # --- requests ---------------------------------------------------------------------------------
+    def _ask(self, session: zenoh.Session, key: str, payload: bytes | None, cls: type) -> list:
+        """Replies to a query decoded as `cls`; malformed or error replies are logged and skipped."""
+        out = []
+        for reply in session.get(key, payload=payload, timeout=self.query_timeout_s):
+            if reply.ok is None:
+                log.warning("error reply on %s", key)
+                continue
+            try:
+                out.append(decode_message(reply.ok.payload.to_bytes(), cls))
+            except MessageError as exc:
+                log.warning("ignored reply on %s: %s", key, exc)
+        return out
+
+    def _discover(self, session: zenoh.Session) -> str | None:
+        """The run to work for: the given one, else the first open run announced on the network."""
+        if self.run_id is not None:
+            return self.run_id
+        infos = self._ask(session, keys.all_run_infos(), None, RunInfo)
+        self._done_runs.update(i.run_id for i in infos if i.run_done)
+        open_runs = sorted(i.run_id for i in infos if i.run_id not in self._done_runs)
+        return open_runs[0] if open_runs else None
+
+    def _evaluator(self, session: zenoh.Session, run_id: str, config_hash: str) -> Evaluator | None:
+        if config_hash not in self._evaluators:
+            configs = self._ask(session, keys.config(run_id, config_hash), None, RunConfig)
+            configs = [c for c in configs if c.config_hash() == config_hash]
+            if not configs:
+                return None
+            self._evaluators[config_hash] = build_evaluator(configs[0])
+        return self._evaluators[config_hash]
+
+    def _submit(self, session: zenoh.Session) -> bool:
+        """Send every unacknowledged result; True if nothing is left pending."""
+        for run_id, pending in list(self._pending.items()):
+            if not pending:
+                continue
+            sub = ResultSubmission(self.worker_id, tuple(pending.values()))
+            for ack in self._ask(session, keys.results(run_id), encode_message(sub), ResultAck):
+                for trial_id, verdict in ack.verdicts:
+                    if pending.pop(trial_id, None) is not None and verdict.value != "stored":
+                        log.info("trial %d of run %s not stored: %s", trial_id, run_id, verdict.value)
+        return not any(self._pending.values())
+
+    def _run_one(self, evaluate: Evaluator, a: TrialAssignment) -> TrialResult:
+        t0 = time.perf_counter()
+        try:
+            result = evaluate(a)
+        except SpinefarmError as exc:
+            result = failed_result(a, f"error: {exc}", time.perf_counter() - t0)
+        except Exception as exc:  # a bug in one trial must not take the worker down
+            log.exception("trial %d raised", a.trial_id)
+            result = failed_result(a, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
+        return replace(result, trial_id=a.trial_id, worker_id=self.worker_id, seed=a.seed)
+
+    # --- main loop --------------------------------------------------------------------------------
+    def run(self) -> int:
+        session = zenoh.open(self._conf)
+        token = session.liveliness().declare_token(keys.worker_token(self.worker_id))
+        try:
+            self._loop(session)
+        finally:
+            self._submit(session)
+            token.undeclare()
+            session.close()
+        return 0
+
+    def _loop(self, session: zenoh.Session) -> None:
+        backoff = Backoff()
+        while not self.stop.is_set():
+            if not self._submit(session):
+                self.stop.wait(backoff.next())
+                continue
+            run_id = self._discover(session)
+            if run_id is None:
+                if self.exit_when_done and self._done_runs:
+                    return
+                self.stop.wait(backoff.next())
+                continue
+            req = encode_message(WorkRequest(self.worker_id, self.batch))
+            grants = self._ask(session, keys.work(run_id), req, WorkGrant)
+            if not grants:
+                self.stop.wait(backoff.next())
+                continue
+            grant = grants[0]
+            if grant.run_done:
+                self._done_runs.add(run_id)
+                if self.exit_when_done:
+                    return
+                self.stop.wait(grant.retry_after_s)
+                continue
+            if not grant.assignments:
+                self.stop.wait(grant.retry_after_s)
+                continue
+            evaluate = self._evaluator(session, run_id, grant.config_hash)
+            if evaluate is None:
+                # Leases expire on the coordinator; nothing is lost by not running them.
+                self.stop.wait(backoff.next())
+                continue
+            backoff.reset()
+            pending = self._pending.setdefault(run_id, {})
+            last_submit = time.monotonic()
+            for a in grant.assignments:
+                if self.stop.is_set():
+                    break
+                pending[a.trial_id] = SubmittedResult(a.lease_id, self._run_one(evaluate, a))
+                self.trials_run += 1
+                if time.monotonic() - last_submit >= self.submit_interval_s:
+                    self._submit(session)
+                    last_submit = time.monotonic()
