@@ -1,1 +1,1 @@
-"""spinefarm api."""
+"""Read-only HTTP status API: `from api.app import create_app`."""

@@ -116,6 +116,17 @@ def read_run(path: str | Path) -> tuple[RunMeta, dict[str, np.ndarray]]:
     return meta, cols
 
 
+def read_meta(path: str | Path) -> RunMeta:
+    """Only the run metadata (cheap: attributes, no table)."""
+    path = Path(path)
+    try:
+        f = h5py.File(path, "r", libver="latest", swmr=True)
+    except (OSError, FileNotFoundError) as exc:
+        raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
+    with f:
+        return _read_meta(f, path)
+
+
 def write_run(path: str | Path, meta: RunMeta, cols: dict[str, np.ndarray]) -> None:
     """Write a complete, closed (non-SWMR) run file: used for snapshots and for resume."""
     n = len(cols["trial_id"])

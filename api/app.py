@@ -1,0 +1,41 @@
+"""create_app(): the read-only HTTP status API over run files."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator, Sequence
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+from fastapi import FastAPI
+
+from api import errors
+from api.registry import RunRegistry
+from api.routers import files, runs, trials
+from api.schemas import ErrorResponse
+from protocol.errors import ConfigError
+
+
+def create_app(run_files: Sequence[str | Path] = (), runs_dir: str | Path | None = None) -> FastAPI:
+    """Serve the given run files and/or every *.h5 in `runs_dir`. Storage is only ever read."""
+    if not run_files and runs_dir is None:
+        raise ConfigError("the API needs run files or a runs directory", expected="run_files or runs_dir")
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        app.state.registry = RunRegistry([Path(f) for f in run_files],
+                                         Path(runs_dir) if runs_dir is not None else None)
+        yield
+
+    responses = {404: {"model": ErrorResponse}, 409: {"model": ErrorResponse}, 422: {"model": ErrorResponse}}
+    app = FastAPI(title="spinefarm", summary="Status and results of gait searches (read-only)",
+                  lifespan=lifespan, responses=responses)
+    errors.install(app)
+    app.include_router(runs.router)
+    app.include_router(trials.router)
+    app.include_router(files.router)
+
+    @app.get("/health", tags=["health"])
+    def health() -> dict[str, str]:
+        return {"status": "ok"}
+
+    return app

@@ -1,0 +1,42 @@
+"""Stable JSON error details: {"detail": {"code": ..., "message": ...}} for every 4xx."""
+
+from __future__ import annotations
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from protocol.errors import SpinefarmError, StorageError
+
+
+class NotFound(SpinefarmError):
+    code = "not_found"
+
+
+def detail(code: str, message: str, **extra: object) -> dict[str, object]:
+    return {"detail": {"code": code, "message": message, **extra}}
+
+
+def install(app: FastAPI) -> None:
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(_: Request, exc: RequestValidationError) -> JSONResponse:
+        errors = [{"where": ".".join(str(x) for x in e.get("loc", ())), "problem": e.get("msg", ""),
+                   "received": str(e.get("input"))[:80]} for e in exc.errors()]
+        first = errors[0] if errors else {"where": "?", "problem": "invalid", "received": ""}
+        message = f"{first['where']}: {first['problem']}; received {first['received']!r}"
+        return JSONResponse(status_code=422, content=detail("invalid_query", message, errors=errors))
+
+    @app.exception_handler(NotFound)
+    async def _not_found(_: Request, exc: NotFound) -> JSONResponse:
+        return JSONResponse(status_code=404, content={"detail": exc.to_detail()})
+
+    @app.exception_handler(StorageError)
+    async def _storage(_: Request, exc: StorageError) -> JSONResponse:
+        # The file exists but cannot be read now (e.g. being replaced on resume): retry later.
+        return JSONResponse(status_code=409, content={"detail": exc.to_detail()})
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+        code = "not_found" if exc.status_code == 404 else f"http_{exc.status_code}"
+        return JSONResponse(status_code=exc.status_code, content=detail(code, str(exc.detail)))

@@ -1,0 +1,55 @@
+"""Response models (they drive the OpenAPI docs)."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel
+
+
+class Trial(BaseModel):
+    trial_id: int
+    status: str
+    reason: str
+    phase: str
+    parent: int | None
+    seed: int
+    objective: float | None
+    scores: dict[str, float | None]
+    params: dict[str, float]
+    params_unit: dict[str, float]
+    worker_id: str | None
+    finished_at_unix_s: float | None
+
+
+class Worker(BaseModel):
+    worker_id: str
+    alive: bool
+    leases: int
+    last_contact_unix_s: float
+
+
+class RunStatus(BaseModel):
+    run_id: str
+    file: str
+    morphology: str
+    objective: str
+    state: str
+    trials_budget: int
+    trials_done: int
+    trials_complete: int
+    trials_failed: int
+    trials_leased: int | None
+    trials_queued: int | None
+    rate_trials_s: float | None
+    eta_s: float | None
+    best: Trial | None
+    workers: list[Worker]
+    status_age_s: float | None
+
+
+class ErrorDetail(BaseModel):
+    code: str
+    message: str
+
+
+class ErrorResponse(BaseModel):
+    detail: ErrorDetail

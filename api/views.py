@@ -1,0 +1,55 @@
+"""Storage rows and status turned into JSON-ready dicts (named parameters, every score part)."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+from storage.base import BaseStorage
+from storage.schema import SCORE_COLUMNS, TrialRecord
+from storage.status import read_status
+
+# A status file not rewritten for this long means its coordinator is gone.
+STALE_STATUS_S = 10.0
+
+
+def _num(x: float) -> float | None:
+    return x if math.isfinite(x) else None
+
+
+def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
+    names = storage.run_meta().param_names
+    return {
+        "trial_id": rec.trial_id, "status": rec.status, "reason": rec.reason, "phase": rec.phase,
+        "parent": rec.parent if rec.parent >= 0 else None, "seed": rec.seed,
+        "objective": _num(rec.objective),
+        "scores": {k: _num(getattr(rec, k)) for k in SCORE_COLUMNS},
+        "params": dict(zip(names, rec.params, strict=True)),
+        "params_unit": dict(zip(names, rec.params_unit, strict=True)),
+        "worker_id": rec.worker_id or None,
+        "finished_at_unix_s": _num(rec.finished_at_unix_s),
+    }
+
+
+def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
+    meta = storage.run_meta()
+    counts = storage.counts()
+    live = read_status(path) or {}
+    age = time.time() - live.get("updated_at_unix_s", 0.0)
+    state = live.get("state", "unknown")
+    if state == "running" and age > STALE_STATUS_S:
+        state = "stalled"
+    finished = counts["complete"] + counts["failed"]
+    best = storage.best(1)
+    return {
+        "run_id": meta.run_id, "file": path.name, "morphology": meta.morphology,
+        "objective": meta.objective, "state": state, "trials_budget": meta.trials_budget,
+        "trials_done": finished, "trials_complete": counts["complete"], "trials_failed": counts["failed"],
+        "trials_leased": live.get("trials_leased"), "trials_queued": live.get("trials_queued"),
+        "rate_trials_s": live.get("rate_trials_s"), "eta_s": live.get("eta_s"),
+        "best": trial_view(storage, best[0]) if best else None,
+        "workers": live.get("workers", []),
+        "status_age_s": age if live else None,
+    }
