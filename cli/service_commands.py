@@ -1,0 +1,307 @@
+"""Sub-commands of the distributed search: search, coordinator, worker, api, export."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import re
+import secrets
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from protocol.errors import ConfigError
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def default_run_id(morphology: str) -> str:
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "-", morphology)[:24]
+    return f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(2)}"
+
+
+# --- argument groups -------------------------------------------------------------------------------
+def _zenoh_args(p: argparse.ArgumentParser, listen_default: str | None) -> None:
+    g = p.add_argument_group("Zenoh transport")
+    g.add_argument("--listen", action="append", metavar="ENDPOINT",
+                   help=f"endpoint to listen on, e.g. tcp/0.0.0.0:7447 (default {listen_default or 'none'})")
+    g.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help="router or coordinator to connect to, e.g. tcp/HOST:7447")
+    g.add_argument("--zenoh-config", metavar="FILE.json5",
+                   help="Zenoh JSON5 config passed through (TLS, access control); endpoints above override it")
+
+
+def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
+    p.add_argument("morphology", nargs="?", help="registered morphology (e.g. tetraspine) or the test "
+                   "objective sphere[:N]; omit with --resume")
+    p.add_argument("--trials", type=int, default=2000, help="trial budget (default 2000)")
+    if local:
+        p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2) - 0),
+                       help="local worker processes (default: one per core)")
+    p.add_argument("--duration", type=float, metavar="S", help="simulated seconds per trial")
+    p.add_argument("--out", metavar="RUN.h5", help="run file (default runs/<run id>.h5)")
+    p.add_argument("--resume", metavar="RUN.h5", help="continue the run stored in this file")
+    p.add_argument("--run-id", help="run id (default <morphology>-<time>-<random>)")
+    p.add_argument("--seed", type=int, default=0, help="run seed: fixes every sampled vector by trial number")
+    p.add_argument("--objective", default="distance", help="distance (default), speed or cot_distance")
+    p.add_argument("--controller", help="controller parameter space (default: the morphology's)")
+    p.add_argument("--sigma", type=float, default=0.005, help="Gaussian step in the unit cube (default 0.005)")
+    p.add_argument("--top-k", type=int, default=1, help="climb from the k best trials (default 1)")
+    p.add_argument("--startup-trials", type=int, help="Monte Carlo trials before climbing (default half)")
+    p.add_argument("--lease", type=float, default=None, metavar="S",
+                   help="seconds a worker may hold a trial before it is re-issued (default 60, or 20x duration)")
+    p.add_argument("--batch", type=int, default=1, help="trials a local worker pulls per request")
+    p.add_argument("--api-port", type=int, default=None if local else -1,
+                   help="HTTP status API port on localhost (" + ("default 8000 or a free port; " if local
+                                                               else "default off; ") + "-1 = off)")
+    p.add_argument("--api-host", default="127.0.0.1")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    _zenoh_args(p, "tcp/127.0.0.1:<free port>" if local else "tcp/127.0.0.1:7447")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("search", help="run a whole search on this machine: coordinator, workers, API",
+                       description="Embedded Zenoh on loopback, N local worker processes, the HTTP API on "
+                                   "localhost and a progress line; Ctrl-C stops with everything stored.")
+    _search_args(p, local=True)
+    p.set_defaults(func=cmd_search)
+
+    p = sub.add_parser("coordinator", help="run only the coordinator (workers connect from elsewhere)")
+    _search_args(p, local=False)
+    p.set_defaults(func=cmd_coordinator)
+
+    p = sub.add_parser("worker", help="run a stateless worker that pulls trials from a coordinator")
+    p.add_argument("--run", dest="run_id", help="serve only this run (default: any open run found)")
+    p.add_argument("--batch", type=int, default=1, help="trials pulled per request (default 1)")
+    p.add_argument("--worker-id", help="worker id (default <host>-<pid>-<random>)")
+    p.add_argument("--exit-when-done", action="store_true", help="exit once the run's budget is met")
+    _zenoh_args(p, None)
+    p.set_defaults(func=cmd_worker)
+
+    p = sub.add_parser("api", help="serve run files over HTTP (read-only)")
+    p.add_argument("files", nargs="*", metavar="RUN.h5")
+    p.add_argument("--runs-dir", metavar="DIR", help="serve every *.h5 in DIR (rescanned)")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=8000)
+    p.set_defaults(func=cmd_api)
+
+    p = sub.add_parser("export", help="quick looks at a run file: CSV or the best trials")
+    p.add_argument("file", metavar="RUN.h5")
+    p.add_argument("--csv", nargs="?", const="-", metavar="OUT.csv", help="write every trial as CSV "
+                   "(to OUT.csv, or stdout)")
+    p.add_argument("--best", type=int, metavar="K", help="print the K best trials")
+    p.set_defaults(func=cmd_export)
+
+
+# --- coordinator side ------------------------------------------------------------------------------
+def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
+    from coordinator.problem import build_run_config
+    from coordinator.setup import SearchSettings, new_run, resume_run
+
+    if args.resume:
+        if args.morphology or args.out:
+            raise ConfigError("--resume continues a stored run", received="a morphology or --out too",
+                              expected="only --resume RUN.h5")
+        core, storage = resume_run(args.resume)
+        return core, storage, Path(args.resume)
+    if not args.morphology:
+        raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")
+    run_id = args.run_id or default_run_id(args.morphology)
+    config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
+                              controller=args.controller, duration_s=args.duration)
+    lease = args.lease
+    if lease is None:
+        duration = config.trial_config.get("duration_s") or 0.0
+        lease = max(60.0, 20.0 * float(duration)) * max(1, args.batch)
+    settings = SearchSettings(trials=args.trials, sigma=args.sigma, top_k=args.top_k,
+                              startup_trials=args.startup_trials, lease_s=lease)
+    out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
+    core, storage = new_run(config, settings, out)
+    return core, storage, out
+
+
+def _start_api(path: Path, host: str, port: int) -> tuple[Any, threading.Thread, int]:
+    import uvicorn
+
+    from api.app import create_app
+
+    server = uvicorn.Server(uvicorn.Config(create_app([path]), host=host, port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, name="api", daemon=True)
+    thread.start()
+    return server, thread, port
+
+
+def _progress(core: Any, final: bool = False) -> str:
+    st = core.status()
+    done = st["trials_complete"] + st["trials_failed"]
+    budget = st["trials_budget"]
+    width = 24
+    fill = int(width * done / max(budget, 1))
+    best = core.study.storage.best(1)
+    best_s = f"{best[0].distance_m:.3f} m" if best else "-"
+    eta = "-" if st["eta_s"] is None else f"{st['eta_s']:.0f}s"
+    return (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{budget} trials ({st['trials_failed']} failed)  "
+            f"{st['rate_trials_s']:.1f}/s  best {best_s}  ETA {eta}" + ("\n" if final else ""))
+
+
+def _describe_best(core: Any, path: Path) -> str:
+    storage = core.study.storage
+    best = storage.best(1)
+    if not best:
+        return f"no complete trial yet; file {path}"
+    b = best[0]
+    names = storage.run_meta().param_names
+    units = storage.run_meta().param_units
+    params = ", ".join(f"{n}={v:.4g}{(' ' + u) if u and u != '1' else ''}"
+                       for n, v, u in zip(names, b.params, units, strict=True))
+    return (f"best trial {b.trial_id} ({b.phase}): objective {b.objective:.4g}, distance {b.distance_m:.4g} m, "
+            f"speed {b.speed_cm_s:.4g} cm/s, work {b.work_j:.4g} J, COT {b.cot:.4g}\n"
+            f"  params: {params}\nfile: {path}")
+
+
+def _spawn_worker(endpoint: str, run_id: str, batch: int, zenoh_config: str | None) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "cli.main", "worker", "--connect", endpoint, "--run", run_id,
+           "--batch", str(batch), "--exit-when-done"]
+    if zenoh_config:
+        cmd += ["--zenoh-config", zenoh_config]
+    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
+
+
+def _stop_workers(procs: list[subprocess.Popen], timeout_s: float = 10.0) -> None:
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    end = time.monotonic() + timeout_s
+    for p in procs:
+        try:
+            p.wait(max(0.1, end - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: list[str]) -> int:
+    from coordinator.service import CoordinatorService
+
+    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    core, storage, path = _open_run(args)
+    listen = args.listen if args.listen is not None else ([] if args.connect else default_listen)
+    service = CoordinatorService(core, storage, listen=listen, connect=args.connect or (),
+                                 zenoh_config_file=args.zenoh_config, status_file_for=path)
+    try:
+        service.start()
+    except BaseException:
+        storage.close()
+        raise
+    print(f"run {core.run_id}: {core.study.budget} trials of {core.run_config.morphology}, file {path}",
+          file=sys.stderr)
+    print(f"coordinator on {', '.join(listen or args.connect or [])}", file=sys.stderr)
+    api = None
+    if args.api_port is None or args.api_port >= 0:
+        port = args.api_port if args.api_port is not None else 8000
+        try:
+            with socket.socket() as s:
+                s.bind((args.api_host, port))
+        except OSError:
+            port = free_port(args.api_host)
+        api = _start_api(path, args.api_host, port)
+        print(f"API on http://{args.api_host}:{port}/runs/{core.run_id} (docs at /docs)", file=sys.stderr)
+    endpoint = (listen or args.connect)[0]
+    endpoint = endpoint.replace("0.0.0.0", "127.0.0.1")
+    procs = [_spawn_worker(endpoint, core.run_id, args.batch, args.zenoh_config) for _ in range(n_workers)]
+    stopped = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stopped.set())
+    tty = sys.stderr.isatty()
+    last_line = 0.0
+    code = 0
+    try:
+        while not core.done and not stopped.wait(0.25):
+            for i, p in enumerate(procs):  # a local worker that crashed is replaced
+                if p.poll() is not None and p.returncode != 0 and not core.done:
+                    procs[i] = _spawn_worker(endpoint, core.run_id, args.batch, args.zenoh_config)
+            now = time.monotonic()
+            if not args.quiet and (tty or now - last_line >= 5.0):
+                print(("\r" if tty else "") + _progress(core), end="" if tty else "\n", file=sys.stderr,
+                      flush=True)
+                last_line = now
+    except KeyboardInterrupt:
+        code = 130
+    finally:
+        _stop_workers(procs)
+        service.close()
+        if api is not None:
+            api[0].should_exit = True
+            api[1].join(5)
+    if not args.quiet:
+        print(("\r" if tty else "") + _progress(core, final=True), end="", file=sys.stderr)
+    if not core.done:
+        print(f"stopped with everything stored; continue with: spinefarm search --resume {path}",
+              file=sys.stderr)
+        code = code or 130
+    print(_describe_best(core, path))
+    return code
+
+
+def cmd_search(args: argparse.Namespace) -> int:
+    if args.workers < 0:
+        raise ConfigError("--workers out of range", received=args.workers, expected="0 or more")
+    return _run_coordinator(args, args.workers, [f"tcp/127.0.0.1:{free_port()}"])
+
+
+def cmd_coordinator(args: argparse.Namespace) -> int:
+    return _run_coordinator(args, 0, ["tcp/127.0.0.1:7447"])
+
+
+# --- worker, api, export ---------------------------------------------------------------------------
+def cmd_worker(args: argparse.Namespace) -> int:
+    from worker.service import WorkerService
+
+    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if not args.connect and not args.zenoh_config:
+        args.connect = ["tcp/127.0.0.1:7447"]
+    service = WorkerService(connect=args.connect or (), run_id=args.run_id, worker_id=args.worker_id,
+                            batch=args.batch, listen=args.listen or (), zenoh_config_file=args.zenoh_config,
+                            exit_when_done=args.exit_when_done)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: service.stop.set())
+    return service.run()
+
+
+def cmd_api(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from api.app import create_app
+
+    uvicorn.run(create_app(args.files, args.runs_dir), host=args.host, port=args.port, log_level="info")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from storage.export import best_table, write_csv
+    from storage.hdf5 import Hdf5Storage
+
+    if args.csv is None and args.best is None:
+        raise ConfigError("nothing to export", expected="--csv [OUT.csv] and/or --best K")
+    storage = Hdf5Storage.open_read(args.file)
+    if args.csv is not None:
+        if args.csv == "-":
+            write_csv(storage, sys.stdout)
+        else:
+            with open(args.csv, "w", newline="") as fh:
+                write_csv(storage, fh)
+            print(f"wrote {storage.n_trials()} trials to {args.csv}", file=sys.stderr)
+    if args.best is not None:
+        if args.best < 1:
+            raise ConfigError("--best out of range", received=args.best, expected="K >= 1")
+        print(best_table(storage, args.best))
+    return 0

@@ -1,0 +1,39 @@
+"""Quick looks at a run: every trial as CSV, the best trials as a text table."""
+
+from __future__ import annotations
+
+import csv
+from typing import TextIO
+
+from storage.base import BaseStorage
+from storage.schema import COLUMNS, VECTOR_COLUMNS
+
+
+def write_csv(storage: BaseStorage, out: TextIO) -> None:
+    """One row per trial; parameters as physical values in columns named after them."""
+    names = list(storage.run_meta().param_names)
+    cols = storage.columns()
+    scalar = [c.name for c in COLUMNS if c.name not in VECTOR_COLUMNS]
+    w = csv.writer(out)
+    w.writerow(scalar + names)
+    for i in range(len(cols["trial_id"])):
+        row = [cols[n][i].decode() if isinstance(cols[n][i], bytes) else cols[n][i].item() for n in scalar]
+        w.writerow(row + cols["params"][i].tolist())
+
+
+def best_table(storage: BaseStorage, k: int) -> str:
+    meta = storage.run_meta()
+    lines = [f"{'rank':>4} {'trial':>6} {'phase':<11} {'objective':>10} {'distance_m':>10} {'speed_cm_s':>10} "
+             f"{'work_j':>9} {'cot':>8}"]
+    best = storage.best(k)
+    for rank, r in enumerate(best, 1):
+        lines.append(f"{rank:>4} {r.trial_id:>6} {r.phase:<11} {r.objective:>10.4g} {r.distance_m:>10.4g} "
+                     f"{r.speed_cm_s:>10.4g} {r.work_j:>9.4g} {r.cot:>8.4g}")
+    if best:
+        b = best[0]
+        lines.append(f"best trial {b.trial_id} parameters:")
+        lines += [f"  {n} = {v:.6g} {u}".rstrip() for n, v, u in
+                  zip(meta.param_names, b.params, meta.param_units, strict=True)]
+    else:
+        lines.append("no complete trial")
+    return "\n".join(lines)
