@@ -131,7 +131,7 @@ def render(morph: Morphology, frames: list[Frame], out: str | Path, *, tension_m
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_zlim(lo[2], hi[2])
-        ax.set_box_aspect(tuple(hi - lo), zoom=1.45)
+        ax.set_box_aspect(tuple(hi - lo), zoom=1.2)
         ax.view_init(elev=28, azim=-72)
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
             axis.set_pane_color((1.0, 1.0, 1.0, 0.0))
