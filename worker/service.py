@@ -71,10 +71,15 @@ def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
 
 
 # --- evaluators ------------------------------------------------------------------------------------
-def sphere_result(space: ParamSpace, a: TrialAssignment) -> TrialResult:
-    """The built-in test objective: no physics, a smooth bowl with its top at x_i = 0.3."""
+def sphere_result(space: ParamSpace, a: TrialAssignment, delay_s: float = 0.0) -> TrialResult:
+    """The built-in test objective: no physics, a smooth bowl with its top at x_i = 0.3.
+
+    delay_s: wall time the trial takes (sleeping), to stand in for a physics trial in fault tests.
+    """
     t0 = time.perf_counter()
     x = space.from_unit(np.asarray(a.params_unit))
+    if delay_s > 0:
+        time.sleep(delay_s)
     distance_m = float(len(x) - np.sum((x - 0.3) ** 2))
     work_j = float(np.sum(x**2))
     return TrialResult(TrialStatus.COMPLETE, "", distance_m, 100.0 * distance_m, 10.0 * distance_m, work_j,
@@ -86,7 +91,8 @@ def build_evaluator(config: RunConfig) -> Evaluator:
     """Turn a run config into a function of one assignment (morphology loaded once)."""
     space = config.space()
     if re.fullmatch(r"sphere(:\d+)?", config.morphology):  # the test objective, see coordinator.problem
-        return lambda a: sphere_result(space, a)
+        delay_s = float(config.trial_config.get("duration_s") or 0.0)
+        return lambda a: sphere_result(space, a, delay_s)
     from worker.morphology.registry import load_morphology
     from worker.trial import TrialConfig, run_trial
 

@@ -1,0 +1,150 @@
+"""The HDF5 run file: self-describing, readable while written, crash-safe, resumable."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from protocol.errors import StorageError
+from storage.export import best_table, write_csv
+from storage.hdf5 import Hdf5Storage, read_meta, read_run, snapshot
+from tests.storage_tests.conftest import make_meta, result
+
+
+def fill(storage, n: int, finished: int) -> None:
+    for i in range(n):
+        storage.add_trial(i, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, i)
+    for i in range(finished):
+        storage.finish_trial(i, result(i, float(i), seed=i), float(i))
+
+
+def test_file_is_self_describing(tmp_path):
+    path = tmp_path / "run.h5"
+    with Hdf5Storage.create(path, make_meta()) as s:
+        fill(s, 5, 3)
+    with h5py.File(path, "r") as f:
+        assert f.attrs["run_id"] == "run-a"
+        assert "one row per trial" in f.attrs["description"]
+        assert list(f.attrs["param_names"]) == ["p0", "p1", "p2"]
+        assert list(f.attrs["param_units"]) == ["cm", "cm", "cm"]
+        assert f["trials/distance_m"].attrs["unit"] == "m"
+        assert f["trials/params"].shape == (5, 3)
+        assert f["trials/status"][:].tolist() == [b"complete"] * 3 + [b"waiting"] * 2
+        assert f["trials/distance_m"][2] == 2.0
+    meta = read_meta(path)
+    assert meta.morphology_spec == {"nodes": [1, 2]} and meta.extra == {"lease_s": 3.0}
+
+
+def test_existing_file_is_not_overwritten(tmp_path):
+    path = tmp_path / "run.h5"
+    Hdf5Storage.create(path, make_meta()).close()
+    with pytest.raises(StorageError, match="already exists"):
+        Hdf5Storage.create(path, make_meta())
+
+
+def test_reader_sees_flushed_rows_while_the_writer_runs(tmp_path):
+    path = tmp_path / "run.h5"
+    s = Hdf5Storage.create(path, make_meta())
+    fill(s, 10, 4)
+    s.flush()
+    _, cols = read_run(path)
+    assert len(cols["trial_id"]) == 10
+    assert int(np.sum(cols["status"] == b"complete")) == 4
+    s.finish_trial(7, result(7, 70.0, seed=7), 70.0)
+    s.flush()
+    assert Hdf5Storage.open_read(path).best_ids(1) == [7]
+    n = snapshot(path, tmp_path / "snap.h5")  # consistent copy of a live file
+    assert n == 10
+    assert Hdf5Storage.open_read(tmp_path / "snap.h5").trial(7).distance_m == 70.0
+    s.close()
+
+
+def test_read_only_storage_refuses_writes(tmp_path):
+    path = tmp_path / "run.h5"
+    Hdf5Storage.create(path, make_meta()).close()
+    ro = Hdf5Storage.open_read(path)
+    with pytest.raises(StorageError, match="read-only"):
+        ro.add_trial(0, np.zeros(3), np.zeros(3), "monte_carlo", -1, 0)
+
+
+def test_not_a_run_file_is_a_clear_error(tmp_path):
+    (tmp_path / "x.h5").write_bytes(b"not hdf5 at all")
+    with pytest.raises(StorageError, match="cannot open"):
+        read_run(tmp_path / "x.h5")
+    with h5py.File(tmp_path / "y.h5", "w") as f:
+        f.attrs["something"] = 1
+    with pytest.raises(StorageError, match="not a spinefarm run file"):
+        read_run(tmp_path / "y.h5")
+    with pytest.raises(StorageError, match="does not exist"):
+        read_run(tmp_path / "missing.h5")
+
+
+WRITER = textwrap.dedent("""
+    import sys, time, numpy as np
+    sys.path.insert(0, {root!r})
+    from tests.storage_tests.conftest import make_meta, result
+    from storage.hdf5 import Hdf5Storage
+    s = Hdf5Storage.create({path!r}, make_meta())
+    for i in range(300):
+        s.add_trial(i, np.full(3, 0.25), np.zeros(3), "monte_carlo", -1, i)
+        if i % 2 == 0:
+            s.finish_trial(i, result(i, float(i), seed=i), float(i))
+    s.flush()
+    print("flushed", flush=True)
+    for i in range(300, 100000):  # keeps writing (unflushed) until killed
+        s.add_trial(i, np.full(3, 0.25), np.zeros(3), "monte_carlo", -1, i)
+        time.sleep(0.0001)
+""")
+
+
+def test_resume_after_sigkill_keeps_every_flushed_row(tmp_path):
+    import pathlib
+
+    root = str(pathlib.Path(__file__).resolve().parents[2])
+    path = tmp_path / "run.h5"
+    proc = subprocess.Popen([sys.executable, "-c", WRITER.format(root=root, path=str(path))],
+                            stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "flushed"
+    time.sleep(0.05)
+    proc.kill()
+    proc.wait()
+    # The killed SWMR writer left its consistency flags: a plain read-write open is refused ...
+    with pytest.raises(OSError), h5py.File(path, "r+"):
+        pass
+    # ... but readers get every flushed row, and resume clears the state by itself.
+    _, cols = read_run(path)
+    assert len(cols["trial_id"]) >= 300
+    s = Hdf5Storage.resume(path)
+    assert s.n_trials() >= 300
+    assert s.counts()["complete"] == 150
+    assert s.trial(298).distance_m == 298.0
+    n = s.n_trials()
+    s.add_trial(n, np.zeros(3), np.zeros(3), "gaussian", 298, 5)
+    s.finish_trial(n, result(n, 1e6, seed=5), 1e6)
+    s.close()
+    with h5py.File(path, "r+") as f:  # closed cleanly: opens read-write again
+        assert f["trials/distance_m"][n] == 1e6
+    assert not (tmp_path / "run.h5.resume-tmp").exists()
+
+
+def test_export_csv_and_best(tmp_path):
+    import io
+
+    path = tmp_path / "run.h5"
+    with Hdf5Storage.create(path, make_meta()) as s:
+        fill(s, 4, 3)
+    ro = Hdf5Storage.open_read(path)
+    buf = io.StringIO()
+    write_csv(ro, buf)
+    lines = buf.getvalue().splitlines()
+    assert len(lines) == 5
+    assert lines[0].split(",")[:2] == ["trial_id", "phase"] and lines[0].endswith("p0,p1,p2")
+    table = best_table(ro, 2)
+    assert table.splitlines()[1].split()[:2] == ["1", "2"]
+    assert "p2 = 0 cm" in table
