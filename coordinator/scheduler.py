@@ -93,10 +93,12 @@ class Scheduler:
         if lease is not None and lease.worker_id in self.workers:
             self.workers[lease.worker_id].leases.discard(trial_id)
 
-    def _reissue(self, trial_id: int) -> None:
-        self.release(trial_id)
-        self._queue.appendleft(trial_id)
-        self.reissued += 1
+    def _reissue(self, trial_ids: list[int]) -> None:
+        """Put trials at the head of the queue, in order: re-issues go before new trials."""
+        for tid in trial_ids:
+            self.release(tid)
+        self._queue.extendleft(reversed(trial_ids))
+        self.reissued += len(trial_ids)
 
     def expire(self) -> list[int]:
         """Re-queue every trial whose lease deadline has passed; returns their ids."""
@@ -106,8 +108,8 @@ class Scheduler:
             _, tid, lease_id = heapq.heappop(self._deadlines)
             lease = self._leases.get(tid)
             if lease is not None and lease.lease_id == lease_id:
-                self._reissue(tid)
                 out.append(tid)
+        self._reissue(out)
         return out
 
     def contact(self, worker_id: str) -> WorkerState:
@@ -127,6 +129,5 @@ class Scheduler:
             return []
         w.alive = False
         lost = sorted(w.leases)
-        for tid in lost:
-            self._reissue(tid)
+        self._reissue(lost)
         return lost

@@ -1,0 +1,200 @@
+"""The coordinator core over real messages: grants, verdicts, malformed input, budget, resume."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from coordinator.setup import build_core
+from protocol.messages import (
+    ResultAck,
+    ResultSubmission,
+    RunConfig,
+    RunInfo,
+    SubmittedResult,
+    TrialResult,
+    TrialStatus,
+    Verdict,
+    WorkGrant,
+    WorkRequest,
+    decode,
+    decode_message,
+    encode,
+    encode_message,
+)
+from tests.coordinator_tests.helpers import sphere_core
+
+
+def ask(core, worker="w1", n=1) -> WorkGrant:
+    return decode_message(core.handle_work(encode_message(WorkRequest(worker, n))), WorkGrant)
+
+
+def res(a, worker="w1", distance=1.0, seed=None) -> TrialResult:
+    return TrialResult(TrialStatus.COMPLETE, "", distance, 0.0, 0.0, 0.0, 0.0, 1.0, 0.001, 1.0,
+                       a.seed if seed is None else seed, trial_id=a.trial_id, worker_id=worker)
+
+
+def submit(core, items, worker="w1") -> dict[int, Verdict]:
+    sub = ResultSubmission(worker, tuple(SubmittedResult(lease, r) for lease, r in items))
+    return dict(decode_message(core.handle_results(encode_message(sub)), ResultAck).verdicts)
+
+
+def snapshot(storage):
+    return {k: v.copy() for k, v in storage.columns().items()}
+
+
+def assert_unchanged(before, storage):
+    after = storage.columns()
+    assert before.keys() == after.keys()
+    for k in before:
+        assert before[k].shape == after[k].shape
+        assert (before[k].astype(str) == after[k].astype(str)).all(), k
+
+
+def test_grant_carries_unit_vectors_seeds_and_the_config_hash():
+    core, storage, _ = sphere_core()
+    grant = ask(core, n=3)
+    assert [a.trial_id for a in grant.assignments] == [0, 1, 2]
+    assert grant.config_hash == core.config_hash and not grant.run_done
+    a = grant.assignments[1]
+    assert len(a.params_unit) == 4 and all(0 <= u <= 1 for u in a.params_unit)
+    assert a.seed == storage.trial(1).seed
+    assert a.lease_s == pytest.approx(20.0)  # second of the batch: 2 x lease_s
+    config = decode_message(core.handle_config(core.config_hash), RunConfig)
+    assert config.config_hash() == core.config_hash and len(config.space()) == 4
+
+
+def test_results_are_stored_once_and_a_resend_is_a_duplicate():
+    core, storage, _ = sphere_core()
+    (a,) = ask(core).assignments
+    assert submit(core, [(a.lease_id, res(a, distance=2.5))]) == {0: Verdict.STORED}
+    assert submit(core, [(a.lease_id, res(a, distance=9.0))]) == {0: Verdict.DUPLICATE}
+    rec = storage.trial(0)
+    assert (rec.status, rec.distance_m, rec.objective, rec.worker_id) == ("complete", 2.5, 2.5, "w1")
+
+
+def test_result_for_an_expired_lease_is_dropped_and_the_reissue_is_stored():
+    core, storage, clock = sphere_core(lease_s=10.0)
+    (a,) = ask(core, "w1").assignments
+    clock.advance(10.0)
+    assert core.tick() == [0]
+    (b,) = ask(core, "w2").assignments
+    assert b.trial_id == 0 and b.lease_id != a.lease_id
+    assert submit(core, [(a.lease_id, res(a, "w1", 5.0))], "w1") == {0: Verdict.STALE}
+    assert storage.trial(0).status == "waiting"
+    assert submit(core, [(b.lease_id, res(b, "w2", 1.0))], "w2") == {0: Verdict.STORED}
+    assert storage.trial(0).distance_m == 1.0 and storage.trial(0).worker_id == "w2"
+    assert core.status()["dropped_results"]["stale"] == 1
+
+
+def test_lost_worker_trials_go_to_the_next_worker_and_its_late_results_are_dropped():
+    core, storage, _ = sphere_core()
+    grant = ask(core, "w1", 2)
+    assert core.worker_lost("w1") == [0, 1]
+    again = ask(core, "w2", 3)
+    assert [a.trial_id for a in again.assignments] == [0, 1, 2]
+    late = submit(core, [(a.lease_id, res(a, "w1")) for a in grant.assignments], "w1")
+    assert late == {0: Verdict.STALE, 1: Verdict.STALE}
+    assert storage.counts()["complete"] == 0
+
+
+def test_unknown_trial_wrong_seed_and_foreign_lease_are_dropped():
+    core, storage, _ = sphere_core()
+    (a,) = ask(core).assignments
+    ghost = TrialResult(TrialStatus.COMPLETE, "", 1.0, 0, 0, 0, 0, 1, 0, 1, 0, trial_id=999)
+    assert submit(core, [(a.lease_id, ghost)]) == {999: Verdict.UNKNOWN}
+    assert submit(core, [(a.lease_id, res(a, seed=a.seed + 1))]) == {0: Verdict.INVALID}
+    assert submit(core, [(a.lease_id + 77, res(a))]) == {0: Verdict.STALE}
+    assert submit(core, [(a.lease_id, res(a, "intruder"))], "intruder") == {0: Verdict.STALE}
+    assert storage.counts() == {"waiting": 1, "complete": 0, "failed": 0}
+
+
+@pytest.mark.parametrize("payload", [
+    b"", b"\xff\xfe garbage", b"[1, 2]", b'{"schema": 1}',
+    json.dumps({"schema": 999, "kind": "work_request", "body": {}}).encode(),
+    encode("result_submission", {"worker_id": "w1", "items": []}),
+    encode("work_request", {"worker_id": "w1", "capacity": 0}),
+    encode("work_request", {"worker_id": "w1", "capacity": True}),
+    encode("work_request", {"worker_id": "w1", "capacity": 10**9}),
+    encode("work_request", {"worker": "w1"}),
+])
+def test_malformed_work_requests_get_an_error_and_change_nothing(payload):
+    core, storage, _ = sphere_core()
+    ask(core, n=2)
+    before = snapshot(storage)
+    kind, body = decode(core.handle_work(payload))
+    assert kind == "error" and body["code"] == "malformed_message"
+    assert "received" in body["message"] and "expected" in body["message"]
+    assert_unchanged(before, storage)
+    assert core.rejected_messages == 1
+
+
+@pytest.mark.parametrize("items", [
+    "not a list",
+    [{"lease_id": 1}],
+    [{"lease_id": 1, "result": {"status": "complete"}}],
+    [{"lease_id": 1, "result": {"status": "exploded", "reason": "", "distance_m": 1, "ntrt_distance_cm": 0,
+                                "speed_cm_s": 0, "work_j": 0, "cot": 0, "sim_time_s": 0, "wall_time_s": 0,
+                                "mass_kg": 1, "seed": 0, "trial_id": 0}}],
+    [{"lease_id": 1, "result": {"status": "complete", "reason": "", "distance_m": "far", "ntrt_distance_cm": 0,
+                                "speed_cm_s": 0, "work_j": 0, "cot": 0, "sim_time_s": 0, "wall_time_s": 0,
+                                "mass_kg": 1, "seed": 0, "trial_id": 0}}],
+    [{"lease_id": 1, "result": {"status": "complete", "reason": "", "distance_m": 1.0, "ntrt_distance_cm": 0,
+                                "speed_cm_s": 0, "work_j": 0, "cot": 0, "sim_time_s": 0, "wall_time_s": 0,
+                                "mass_kg": 1, "seed": 0}}],
+])
+def test_malformed_result_submissions_get_an_error_and_change_nothing(items):
+    core, storage, _ = sphere_core()
+    ask(core, n=2)
+    before = snapshot(storage)
+    kind, body = decode(core.handle_results(encode("result_submission", {"worker_id": "w1", "items": items})))
+    assert kind == "error" and body["code"] == "malformed_message"
+    assert_unchanged(before, storage)
+
+
+def test_nan_scores_are_stored_but_never_best():
+    core, storage, _ = sphere_core()
+    a, b = ask(core, n=2).assignments
+    assert submit(core, [(a.lease_id, res(a, distance=float("nan"))), (b.lease_id, res(b, distance=0.5))]) == {
+        0: Verdict.STORED, 1: Verdict.STORED}
+    assert storage.best_ids(2) == [1]
+
+
+def test_budget_is_met_exactly_then_the_run_says_done():
+    core, storage, _ = sphere_core(trials=5)
+    grant = ask(core, n=10)
+    assert len(grant.assignments) == 5
+    assert ask(core, "w2", 3).assignments == () and ask(core, "w2").retry_after_s > 0
+    submit(core, [(a.lease_id, res(a)) for a in grant.assignments])
+    assert core.done and ask(core).run_done
+    assert decode_message(core.run_info(), RunInfo).run_done
+    assert storage.n_trials() == 5 and storage.counts()["complete"] == 5
+
+
+def test_unknown_config_hash_is_an_error():
+    core, _, _ = sphere_core()
+    kind, body = decode(core.handle_config("0" * 16))
+    assert kind == "error" and core.config_hash in body["message"]
+
+
+def test_rebuilt_core_reissues_waiting_trials_first_and_continues_numbering():
+    core, storage, clock = sphere_core(trials=10)
+    grant = ask(core, n=4)
+    submit(core, [(a.lease_id, res(a)) for a in grant.assignments[:2]])
+    again = build_core(storage, clock)  # what resume does after reading the file back
+    ids = [a.trial_id for a in ask(again, "w9", 4).assignments]
+    assert ids == [2, 3, 4, 5]
+    assert again.study.n_finished == 2
+
+
+def test_status_reports_counts_rate_and_workers():
+    core, _, clock = sphere_core(trials=10)
+    grant = ask(core, n=4)
+    clock.advance(2.0)
+    submit(core, [(a.lease_id, res(a)) for a in grant.assignments[:2]])
+    st = core.status()
+    assert (st["trials_complete"], st["trials_leased"], st["trials_queued"]) == (2, 2, 6)
+    assert st["rate_trials_s"] == pytest.approx(1.0)
+    assert st["eta_s"] == pytest.approx(8.0)
+    assert [w["worker_id"] for w in st["workers"]] == ["w1"]

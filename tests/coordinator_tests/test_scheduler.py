@@ -1,0 +1,86 @@
+"""Leases with deadlines on an injected clock: expiry and worker loss re-issue, stale leases refused."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from coordinator.scheduler import Scheduler
+from protocol.errors import ConfigError
+from tests.coordinator_tests.helpers import FakeClock
+
+
+def new_ids(limit: int = 1000):
+    counter = itertools.count()
+    return lambda: (n if (n := next(counter)) < limit else None)
+
+
+def test_grant_leases_new_trials_with_staggered_deadlines():
+    clock = FakeClock(0.0)
+    s = Scheduler(clock, lease_s=5.0)
+    leases = s.grant("w1", 3, new_ids())
+    assert [ls.trial_id for ls in leases] == [0, 1, 2]
+    assert [ls.deadline_s for ls in leases] == [5.0, 10.0, 15.0]
+    assert len({ls.lease_id for ls in leases}) == 3
+    assert s.n_leased == 3 and s.workers["w1"].leases == {0, 1, 2}
+
+
+def test_grant_stops_when_no_trial_is_left():
+    s = Scheduler(FakeClock(), lease_s=5.0)
+    assert len(s.grant("w1", 10, new_ids(limit=4))) == 4
+    assert s.grant("w2", 10, new_ids(limit=0)) == []
+
+
+def test_expired_lease_is_reissued_with_a_new_lease_id():
+    clock = FakeClock(0.0)
+    s = Scheduler(clock, lease_s=5.0)
+    ids = new_ids()
+    first = s.grant("w1", 2, ids)
+    clock.advance(5.0)
+    assert s.expire() == [0]
+    assert s.n_queued == 1 and s.lease_of(0) is None
+    again = s.grant("w2", 1, ids)
+    assert again[0].trial_id == 0 and again[0].lease_id != first[0].lease_id
+    assert not s.is_current(0, first[0].lease_id, "w1")
+    assert s.is_current(0, again[0].lease_id, "w2")
+    clock.advance(4.9)
+    assert s.expire() == []
+    clock.advance(0.1)  # trial 1's first deadline and trial 0's second one
+    assert s.expire() == [0, 1]
+
+
+def test_release_forgets_the_lease_so_it_never_expires():
+    clock = FakeClock(0.0)
+    s = Scheduler(clock, lease_s=1.0)
+    (lease,) = s.grant("w1", 1, new_ids())
+    s.release(lease.trial_id)
+    clock.advance(100.0)
+    assert s.expire() == [] and s.n_queued == 0
+
+
+def test_lost_worker_leases_are_reissued_at_once_before_new_trials():
+    clock = FakeClock(0.0)
+    s = Scheduler(clock, lease_s=60.0)
+    ids = new_ids()
+    s.grant("w1", 3, ids)
+    s.grant("w2", 1, ids)
+    assert s.worker_lost("w1") == [0, 1, 2]
+    assert not s.workers["w1"].alive and s.workers["w2"].alive
+    assert [ls.trial_id for ls in s.grant("w2", 4, ids)] == [0, 1, 2, 4]
+    assert s.worker_lost("never-seen") == []
+    assert s.reissued == 3
+
+
+def test_contact_tracks_last_contact_on_the_clock():
+    clock = FakeClock(10.0)
+    s = Scheduler(clock)
+    s.contact("w1")
+    clock.advance(2.5)
+    s.contact("w1")
+    assert s.workers["w1"].last_contact_s == 12.5
+
+
+def test_lease_must_be_positive():
+    with pytest.raises(ConfigError, match="lease_s"):
+        Scheduler(FakeClock(), lease_s=0.0)
