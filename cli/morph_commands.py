@@ -147,10 +147,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     if simulate_now:
         params, controller = _params(morph, args.params, args.random_seed)
         duration = args.duration or min(morph.duration_s, 5.0)
-        from worker.replay import stretch_guard
-
         overrides: dict[str, Any] = {"duration_s": duration, "record_every_s": max(0.01, duration / 200),
-                                     "controller": controller, "max_stretch_ratio": stretch_guard(morph)}
+                                     "controller": controller}
         if args.motor_model:
             overrides["motor_model"] = args.motor_model
         outcome = simulate(morph, params, TrialConfig(**overrides), args.random_seed)

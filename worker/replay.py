@@ -136,15 +136,6 @@ def unit_params(morph: Morphology, params: NtrtParameterSet) -> np.ndarray:
     return space.unit_from_ntrt_files(params.node, list(params.edges))
 
 
-def stretch_guard(morph: Morphology, ratio: float = 4.0, floor_cm: float = 4.0) -> float:
-    """The trial's stretch guard is a ratio to the start length; the ribbed spine's 0.3 cm muscles
-    (anchor to anchor; 1.2 cm node to node) legitimately pass 4x. Allow every string `floor_cm`."""
-    from worker.sim.bodies import build_bodies, build_strings
-
-    start = build_strings(morph.structure, build_bodies(morph.structure)).start_length_cm
-    return max(ratio, floor_cm / float(start.min()))
-
-
 def replay(folder: str | Path, morphology: str | Morphology | None = None, *, duration_s: float | None = None,
            suffix: str = "default", seed: int = 0, pose_jitter_cm: float = 0.0) -> ReplayReport:
     """Run NTRT's published parameters on the NTRT-era morphology (2014 motor, 1 ms, one sub-step)."""
@@ -156,7 +147,7 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     u = unit_params(morph, params)
     duration = duration_s or morph.duration_s
     cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model="ntrt2014", controller="ntrt",
-                      pose_jitter_cm=pose_jitter_cm, max_stretch_ratio=stretch_guard(morph))
+                      pose_jitter_cm=pose_jitter_cm)
     result = simulate(morph, u, cfg, seed).result
     return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result,
                         REFERENCES.get(morph.name))
