@@ -23,6 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="morphology to run (default: from the robot folder name in PATH)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds (default: NTRT's trial length)")
     p.add_argument("--suffix", default="default", help="parameter set name (NTRT's argv[1]; default 'default')")
+    p.add_argument("--seeds", type=int, default=0,
+                   help="also run N replays with the start pose jittered by 1e-6 cm (spec 0a.5) and report "
+                        "their spread")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_replay)
 
@@ -77,10 +80,23 @@ def replay_summary(report: Any) -> dict[str, Any]:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from worker.replay import replay
+    from worker.replay import JITTER_CM, replay, replay_spread
 
+    if not 0 <= args.seeds <= 100:
+        raise ConfigError("--seeds out of range", received=args.seeds, expected="0 to 100 jittered replays")
     report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix)
     s = replay_summary(report)
+    if args.seeds:
+        spread = replay_spread(args.path, args.morphology, args.seeds, duration_s=args.duration,
+                               suffix=args.suffix)
+        d = np.array([r.result.ntrt_distance_cm for r in spread if not r.diverged])
+        ratios = [r.ratio for r in spread if r.ratio is not None]
+        s["spread"] = {"jitter_cm": JITTER_CM, "n": len(spread),
+                       "diverged": sum(r.diverged for r in spread),
+                       "ntrt_distance_cm": [r.result.ntrt_distance_cm for r in spread],
+                       "median_cm": float(np.median(d)) if d.size else None,
+                       "min_cm": float(d.min()) if d.size else None, "max_cm": float(d.max()) if d.size else None,
+                       "median_ratio": float(np.median(ratios)) if ratios else None}
     if args.json:
         print(json.dumps(s))
         return 1 if report.diverged else 0
@@ -100,6 +116,14 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"  ratio         {ratio}  (our speed / NTRT's)")
     else:
         print("  NTRT recorded no usable figure for this robot")
+    if "spread" in s:
+        sp = s["spread"]
+        if sp["median_cm"] is None:
+            print(f"  jittered      all {sp['n']} replays diverged")
+        else:
+            med = "" if sp["median_ratio"] is None else f", median ratio {sp['median_ratio']:.3f}"
+            print(f"  jittered      {sp['n']} replays (start pose +- 1e-6 cm): median {sp['median_cm']:.2f} cm, "
+                  f"range {sp['min_cm']:.2f} - {sp['max_cm']:.2f} cm{med}; {sp['diverged']} diverged")
     return 1 if report.diverged else 0
 
 

@@ -151,3 +151,14 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     result = simulate(morph, u, cfg, seed).result
     return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result,
                         REFERENCES.get(morph.name))
+
+
+JITTER_CM = 1e-6  # spec 0a.5: perturbations this small already spread the tetrahedral complex's distance
+
+
+def replay_spread(folder: str | Path, morphology: str | Morphology | None, seeds: int, *,
+                  duration_s: float | None = None, suffix: str = "default") -> list[ReplayReport]:
+    """Replays with the start pose jittered by JITTER_CM (seeds 1..seeds): a distribution, not one sample."""
+    return [replay(folder, morphology, duration_s=duration_s, suffix=suffix, seed=s, pose_jitter_cm=JITTER_CM)
+            for s in range(1, seeds + 1)]
+

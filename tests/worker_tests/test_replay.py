@@ -161,3 +161,13 @@ def test_full_replay_without_a_reference_completes(name: str):
     assert report.reference is None and report.ratio is None
     assert report.result.ok, report.result.reason
     assert report.result.ntrt_distance_cm > 5.0
+
+
+@needs_data
+def test_replay_spread_over_jittered_start_poses(capsys):
+    assert main(["replay", str(_folder("tetrahedral-complex")), "--duration", "0.2", "--seeds", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    spread = out["spread"]
+    assert spread["n"] == 2 and len(spread["ntrt_distance_cm"]) == 2 and spread["jitter_cm"] == 1e-6
+    assert spread["min_cm"] <= spread["median_cm"] <= spread["max_cm"]
+    assert main(["replay", str(_folder("tetrahedral-complex")), "--seeds", "-1"]) == 2
