@@ -38,6 +38,7 @@ class TrialConfig:
     duration_s: float | None = None
     dt_s: float = 1e-3
     solver_iterations: int = 10
+    friction_anchor: bool = True
     motor_model: str = "physical"
     controller: str | None = None
     cpg_update_period_s: float | None = None
@@ -198,7 +199,7 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     record_every = None if cfg.record_every_s is None else max(1, int(round(cfg.record_every_s / dt)))
     motor = MOTOR_MODELS[cfg.motor_model]
 
-    engine = EngineSettings(dt_s=dt, solver_iterations=cfg.solver_iterations)
+    engine = EngineSettings(dt_s=dt, solver_iterations=cfg.solver_iterations, friction_anchor=cfg.friction_anchor)
     ground = GroundSpec(friction=cfg.ground_friction if cfg.ground_friction is not None
                         else morph.ground_friction)
     scene = (scene_factory or PhysicsScene)(bodies, engine, ground, offsets)

