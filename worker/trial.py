@@ -7,6 +7,7 @@ import hashlib
 import json
 import time
 from collections.abc import Mapping
+from functools import lru_cache
 from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
@@ -33,10 +34,15 @@ class TrialConfig:
     per-step caps, only faithful at dt = 1 ms, for replaying published gaits).
     cpg_update_period_s: NTRT's controlTime (CPG output held in between).
     pose_jitter_cm: seeded Gaussian offset of every segment's start position (0: the seed is unused).
+    auto_dt: use min(dt_s, dt_safety_factor * the string network's stable-step estimate).
+    refuse_unstable_dt: raise ConfigError for a dt_s above that estimate (known to be unstable).
     """
 
     duration_s: float | None = None
     dt_s: float = 1e-3
+    auto_dt: bool = False
+    dt_safety_factor: float = 0.5
+    refuse_unstable_dt: bool = True
     solver_iterations: int = 10
     friction_anchor: bool = True
     motor_model: str = "physical"
@@ -59,6 +65,7 @@ class TrialConfig:
         if self.duration_s is not None:
             check_range("duration_s", self.duration_s, 0.0, 3600.0, low_inclusive=False)
         check_range("dt_s", self.dt_s, 1e-6, 0.02)
+        check_range("dt_safety_factor", self.dt_safety_factor, 0.0, 1.0, low_inclusive=False)
         if not isinstance(self.solver_iterations, int) or not 1 <= self.solver_iterations <= 1000:
             raise ConfigError("solver_iterations out of range", received=self.solver_iterations,
                               expected="an integer in [1, 1000]")
@@ -190,7 +197,7 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     rng = np.random.default_rng(seed)
     offsets = rng.normal(0.0, cfg.pose_jitter_cm, (len(bodies), 3)) if cfg.pose_jitter_cm > 0 else None
 
-    dt = cfg.dt_s
+    dt = choose_step(morph, cfg)
     duration = cfg.duration_s or morph.duration_s
     n_steps = int(round(duration / dt))
     period = cfg.cpg_update_period_s or morph.control.cpg_update_period_s
@@ -267,8 +274,30 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
         speed_cm_s=distance_cm / sim_time if sim_time > 0 else 0.0,
         work_j=work_j, cot=scoring.cost_of_transport(work_j, total_mass, distance_m),
         sim_time_s=sim_time, wall_time_s=time.perf_counter() - t_wall, mass_kg=total_mass, seed=int(seed),
+        extras={"dt_s": dt},
     )
     return TrialOutcome(result, traj, np.array(com_path))
+
+
+@lru_cache(maxsize=64)
+def _stable_step(morph: Morphology, relocate: bool):
+    from worker.sim.stability import estimate_stable_step
+
+    return estimate_stable_step(morph, relocate)
+
+
+def choose_step(morph: Morphology, cfg: TrialConfig) -> float:
+    """The physics step: dt_s, or the automatic choice; refuses a step known to be unstable."""
+    est = _stable_step(morph, cfg.relocate_anchors)
+    if cfg.auto_dt:
+        return min(cfg.dt_s, cfg.dt_safety_factor * est.dt_limit_s)
+    if cfg.refuse_unstable_dt and cfg.dt_s > est.dt_limit_s:
+        raise ConfigError(
+            f"dt_s is unstable for {morph.name}: its string network has omega_max = {est.omega_max_rad_s:.4g} rad/s "
+            f"and gamma_max = {est.gamma_max_per_s:.4g} 1/s, so explicit string forces diverge above "
+            f"dt = {est.dt_limit_s:.3g} s; set auto_dt (--dt auto) or a smaller step",
+            received=cfg.dt_s, expected=f"dt_s <= {est.dt_limit_s:.3g} s")
+    return cfg.dt_s
 
 
 def _build_poses(bodies) -> np.ndarray:

@@ -1,0 +1,67 @@
+"""The stable-step estimate of the explicit string network, and what the trial does with it."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from protocol.errors import ConfigError
+from protocol.messages import TrialStatus
+from tests.worker_tests.helpers import mass_between_anchors
+from worker.morphology.model import ControlSpec, Morphology
+from worker.morphology.registry import load_morphology
+from worker.sim.stability import estimate_stable_step
+from worker.trial import TrialConfig, random_unit_params, run_trial
+
+
+def with_stiffness(morph: Morphology, k: float) -> Morphology:
+    mats = tuple((t, dataclasses.replace(m, stiffness_n_per_m=k)) for t, m in morph.structure.string_materials)
+    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, string_materials=mats))
+
+
+def test_estimate_matches_the_analytic_two_spring_oscillator():
+    spec = mass_between_anchors(10.0, anchor_density=0.014 * 1e9, stiffness=1000.0)
+    morph = Morphology("triple", spec, ControlSpec(cpg_tags=(), impedance=()), scored_segment=1)
+    est = estimate_stable_step(morph)
+    m = 0.014 * math.pi * 0.25 * 10.0
+    assert est.omega_max_rad_s == pytest.approx(math.sqrt(2 * 1000.0 / m), rel=1e-3)
+    assert est.dt_damping_limit_s == math.inf  # these strings have no damping
+
+
+def test_limit_scales_with_stiffness():
+    base = load_morphology("tetraspine-ntrt")
+    soft, stiff = estimate_stable_step(base), estimate_stable_step(with_stiffness(base, 600_000.0))
+    assert stiff.omega_max_rad_s == pytest.approx(soft.omega_max_rad_s * math.sqrt(600.0), rel=1e-6)
+    assert stiff.dt_limit_s < 1e-3 < soft.dt_limit_s
+
+
+def test_unstable_step_is_refused_with_the_estimate_in_the_message():
+    morph = with_stiffness(load_morphology("tetraspine-ntrt"), 600_000.0)
+    with pytest.raises(ConfigError) as exc:
+        run_trial(morph, random_unit_params(morph, 1), TrialConfig(duration_s=0.1, dt_s=2e-3), 1)
+    text = str(exc.value)
+    assert "omega_max" in text and "expected dt_s <=" in text and "received 0.002" in text
+
+
+def test_auto_step_runs_the_stiff_case_stably():
+    morph = with_stiffness(load_morphology("tetraspine-ntrt"), 600_000.0)
+    u = random_unit_params(morph, 1)
+    est = estimate_stable_step(morph)
+    r = run_trial(morph, u, TrialConfig(duration_s=0.3, auto_dt=True), 1)
+    assert r.status == TrialStatus.COMPLETE, r.reason
+    assert r.extras["dt_s"] == pytest.approx(0.5 * est.dt_limit_s)
+    # and forcing a step twice the estimate past the refusal does diverge
+    forced = run_trial(morph, u, TrialConfig(duration_s=0.3, dt_s=2e-3, refuse_unstable_dt=False), 1)
+    assert forced.status == TrialStatus.FAILED and forced.reason.startswith("diverged")
+
+
+def test_every_builtin_is_stable_at_its_default_step():
+    from worker.morphology.registry import builtin_names
+
+    for name in builtin_names():
+        est = estimate_stable_step(load_morphology(name))
+        assert est.dt_limit_s > TrialConfig().dt_s, name
+        assert np.isfinite(est.omega_max_rad_s)
