@@ -7,8 +7,8 @@ import hashlib
 import json
 import time
 from collections.abc import Mapping
-from functools import lru_cache
 from dataclasses import asdict, dataclass, field, fields
+from functools import lru_cache
 
 import numpy as np
 

@@ -65,8 +65,6 @@ def estimate_stable_step(morph: Morphology, relocate_anchors: bool = True) -> St
     gamma = _largest_generalised_eig(jac.T @ (c[:, None] * jac), inv_sqrt_m)
     dt_spring = 2.0 / omega if omega > 0 else math.inf
     dt_damp = 2.0 / gamma if gamma > 0 else math.inf
-    if omega > 0:
-        dt_limit = (-gamma + math.sqrt(gamma * gamma + 4.0 * omega * omega)) / (omega * omega)
-    else:
-        dt_limit = dt_damp
+    # the positive root of omega^2 dt^2 + 2 gamma dt = 4
+    dt_limit = (-gamma + math.sqrt(gamma**2 + 4.0 * omega**2)) / omega**2 if omega > 0 else dt_damp
     return StabilityEstimate(omega, gamma, dt_spring, dt_damp, dt_limit)
