@@ -24,7 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                      help="JSON file of named physical parameter values ({name: value} or "
                           "{\"controller\": ..., \"params\": {name: value}})")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the morphology's)")
-    p.add_argument("--dt", type=float, default=None, help="physics step in seconds (default 0.001)")
+    p.add_argument("--dt", default=None,
+                   help="physics step in seconds (default 0.001), or 'auto' for half the string network's "
+                        "stable-step estimate")
     p.add_argument("--controller", default=None, help="controller space (e.g. ntrt, sidewinding)")
     p.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
     p.add_argument("--seed", type=int, default=None, help="trial seed (default: the random seed or 0)")
@@ -78,8 +80,13 @@ def cmd_trial(args: argparse.Namespace) -> int:
         params = random_unit_params(morph, rseed, controller)
     seed = args.seed if args.seed is not None else (args.random_seed or 0)
     overrides: dict[str, Any] = {"duration_s": args.duration, "controller": controller}
-    if args.dt is not None:
-        overrides["dt_s"] = args.dt
+    if args.dt == "auto":
+        overrides["auto_dt"] = True
+    elif args.dt is not None:
+        try:
+            overrides["dt_s"] = float(args.dt)
+        except ValueError as exc:
+            raise ParameterError("--dt is not a number", received=args.dt, expected="seconds or 'auto'") from exc
     if args.motor_model is not None:
         overrides["motor_model"] = args.motor_model
     if args.record is not None:

@@ -11,11 +11,12 @@ from worker.morphology.model import Morphology
 from worker.morphology.octahedral import octahedral_complex
 from worker.morphology.ribbed import ribbed
 from worker.morphology.tetrahedral import tetrahedral_complex
-from worker.morphology.tetraspine import tetraspine
+from worker.morphology.tetraspine import tetraspine, tetraspine_hardware
 
 BUILTINS: dict[str, Callable[[], Morphology]] = {
     "tetraspine": lambda: tetraspine(12, name="tetraspine"),
     "tetraspine-ntrt": lambda: tetraspine(3, name="tetraspine-ntrt"),
+    "tetraspine-hardware": tetraspine_hardware,
     "tetrahedral-complex": tetrahedral_complex,
     "octahedral-complex": octahedral_complex,
     "ribbed": ribbed,

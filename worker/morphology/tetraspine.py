@@ -66,3 +66,26 @@ def tetraspine(n_segments: int = 12, *, name: str = "tetraspine", duration_s: fl
         controllers=("ntrt", "sidewinding"),
         description=f"Tetraspine, {n_segments} tetrahedral segments, 6 actuated strings per joint",
     )
+
+
+HARDWARE_SEGMENT_KG = 0.73
+HARDWARE_ROD_RADIUS_CM = 0.32
+HARDWARE_STIFFNESS_N_PER_M = 600_000.0
+
+
+def tetraspine_hardware() -> Morphology:
+    """The 3-segment hardware prototype of paper section V: 38.1 cm carbon rods of 0.64 cm diameter,
+    0.73 kg segments (boards included, spread over the rods), and vectran cables without in-line
+    springs, about 600 times stiffer than the simulated strings. Needs a step well below 1 ms."""
+    rod_length_cm = 5 * EDGE_CM + HEIGHT_CM
+    density = HARDWARE_SEGMENT_KG / (3.141592653589793 * HARDWARE_ROD_RADIUS_CM**2 * rod_length_cm)
+    base = tetraspine(3, name="tetraspine-hardware")
+    structure = tetraspine_structure(
+        3, name="tetraspine-hardware",
+        rod=RodMaterial(radius_cm=HARDWARE_ROD_RADIUS_CM, density_kg_per_cm3=density, friction=1.0),
+        string=StringMaterial(stiffness_n_per_m=HARDWARE_STIFFNESS_N_PER_M))
+    return Morphology(
+        name="tetraspine-hardware", structure=structure, control=base.control, scored_segment=1,
+        duration_s=30.0, ground_friction=0.5, controllers=base.controllers,
+        description="3-segment hardware Tetraspine (paper section V): 0.73 kg segments, ~600,000 N/m cables",
+    )
