@@ -64,7 +64,7 @@ class CoordinatorCore:
     # --- handlers (transport calls these) ---------------------------------------------------------
     def _error(self, what: str, exc: MessageError) -> bytes:
         self.rejected_messages += 1
-        log.warning("ignored malformed %s: %s", what, exc)
+        log.warning("ignored malformed %s: %s", what, str(exc))  # a string: keep no traceback alive
         return encode("error", exc.to_detail())
 
     def handle_work(self, payload: bytes) -> bytes:

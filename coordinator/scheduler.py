@@ -8,6 +8,7 @@ result quoting an old lease is recognised as stale.
 from __future__ import annotations
 
 import heapq
+import secrets
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -41,7 +42,8 @@ class Scheduler:
         self._queue: deque[int] = deque()          # trials waiting to be (re-)issued
         self._leases: dict[int, Lease] = {}        # trial id -> its current lease
         self._deadlines: list[tuple[float, int, int]] = []  # heap (deadline, trial, lease); lazy deletion
-        self._next_lease_id = 1
+        # Random start: lease ids of a restarted coordinator do not collide with its predecessor's.
+        self._next_lease_id = secrets.randbits(40)
         self.workers: dict[str, WorkerState] = {}
         self.reissued = 0
 

@@ -88,24 +88,29 @@ class CoordinatorService:
     # --- callbacks (zenoh threads) ----------------------------------------------------------------
     def _guard(self, handler):
         def on_query(query: zenoh.Query) -> None:
-            try:
-                query.reply(query.key_expr, handler(_payload(query)))
-            except Exception:  # a transport callback must never die: log and keep serving
-                log.exception("query on %s failed", query.key_expr)
+            # `with` finalises the query at once; a reference kept elsewhere (a logged traceback)
+            # would otherwise hold the requester until its timeout.
+            with query:
+                try:
+                    query.reply(query.key_expr, handler(_payload(query)))
+                except Exception:  # a transport callback must never die: log and keep serving
+                    log.exception("query on %s failed", query.key_expr)
         return on_query
 
     def _on_info(self, query: zenoh.Query) -> None:
-        try:
-            query.reply(keys.run_info(self.core.run_id), self.core.run_info())
-        except Exception:
-            log.exception("run info query failed")
+        with query:
+            try:
+                query.reply(keys.run_info(self.core.run_id), self.core.run_info())
+            except Exception:
+                log.exception("run info query failed")
 
     def _on_config(self, query: zenoh.Query) -> None:
-        try:
-            config_hash = str(query.key_expr).rsplit("/", 1)[-1]
-            query.reply(query.key_expr, self.core.handle_config(config_hash))
-        except Exception:
-            log.exception("config query failed")
+        with query:
+            try:
+                config_hash = str(query.key_expr).rsplit("/", 1)[-1]
+                query.reply(query.key_expr, self.core.handle_config(config_hash))
+            except Exception:
+                log.exception("config query failed")
 
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         try:

@@ -137,7 +137,8 @@ class WorkerService:
         self.exit_when_done = exit_when_done
         self.query_timeout_s = query_timeout_s
         self.submit_interval_s = submit_interval_s
-        self._conf = zenoh_config(connect, listen, zenoh_config_file)
+        self._conf_args = (tuple(connect), tuple(listen), zenoh_config_file)
+        zenoh_config(*self._conf_args)  # fail fast on a bad config file
         self._evaluators: dict[str, Evaluator] = {}
         self._pending: dict[str, dict[int, SubmittedResult]] = {}   # run id -> trial id -> result
         self._done_runs: set[str] = set()
@@ -200,8 +201,21 @@ class WorkerService:
         return replace(result, trial_id=a.trial_id, worker_id=self.worker_id, seed=a.seed)
 
     # --- main loop --------------------------------------------------------------------------------
+    def _open(self) -> zenoh.Session | None:
+        """A client session opens only once its router is reachable: retry with back-off until stopped."""
+        backoff = Backoff(0.1, 2.0)
+        while not self.stop.is_set():
+            try:
+                return zenoh.open(zenoh_config(*self._conf_args))  # a config is used up by open
+            except zenoh.ZError as exc:
+                log.info("coordinator not reachable yet (%s); retrying", exc)
+                self.stop.wait(backoff.next())
+        return None
+
     def run(self) -> int:
-        session = zenoh.open(self._conf)
+        session = self._open()
+        if session is None:
+            return 0
         token = session.liveliness().declare_token(keys.worker_token(self.worker_id))
         try:
             self._loop(session)

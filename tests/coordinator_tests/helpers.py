@@ -24,3 +24,24 @@ def sphere_core(trials: int = 20, *, lease_s: float = 10.0, clock=None, out=None
     core, storage = new_run(config, SearchSettings(trials=trials, lease_s=lease_s,
                                                    startup_trials=startup_trials), out, clock)
     return core, storage, clock
+
+
+def free_endpoint() -> str:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def wait_for(predicate, timeout_s: float = 20.0, poll_s: float = 0.01, what: str = "condition"):
+    """Poll until predicate() is truthy (events, not deadlines: time is never what is tested)."""
+    import time
+
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(poll_s)
+    raise AssertionError(f"timed out waiting for {what}")
