@@ -18,9 +18,11 @@ class FakeClock:
 
 
 def sphere_core(trials: int = 20, *, lease_s: float = 10.0, clock=None, out=None, seed: int = 3,
-                startup_trials: int | None = None, morphology: str = "sphere:4", run_id: str = "test-run"):
+                startup_trials: int | None = None, morphology: str = "sphere:4", run_id: str = "test-run",
+                duration_s: float | None = None):
+    """duration_s: wall time each test-objective trial takes on the worker."""
     clock = clock or FakeClock()
-    config = build_run_config(run_id, morphology, seed=seed)
+    config = build_run_config(run_id, morphology, seed=seed, duration_s=duration_s)
     core, storage = new_run(config, SearchSettings(trials=trials, lease_s=lease_s,
                                                    startup_trials=startup_trials), out, clock)
     return core, storage, clock

@@ -1,0 +1,95 @@
+"""The worker loop against a real coordinator over Zenoh on loopback."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from coordinator.service import CoordinatorService
+from protocol.messages import RunConfig, TrialAssignment, TrialStatus
+from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
+from worker.service import Backoff, WorkerService, build_evaluator, default_worker_id, sphere_result
+
+pytestmark = pytest.mark.integration
+
+
+def sphere_config(n: int = 3, delay_s: float | None = None) -> RunConfig:
+    from coordinator.problem import build_run_config
+
+    return build_run_config("r", f"sphere:{n}", duration_s=delay_s)
+
+
+def test_sphere_scores_peak_at_the_optimum():
+    space = sphere_config().space()
+    best = sphere_result(space, TrialAssignment(0, 1, tuple(space.to_unit(np.full(3, 0.3))), 5, 1.0))
+    off = sphere_result(space, TrialAssignment(1, 1, (0.0, 0.0, 0.0), 5, 1.0))
+    assert best.status == TrialStatus.COMPLETE and best.distance_m == pytest.approx(3.0)
+    assert off.distance_m < best.distance_m and best.seed == 5
+
+
+def test_bad_vector_becomes_a_failed_result_naming_the_problem():
+    w = WorkerService(connect=["tcp/127.0.0.1:9"], worker_id="w-bad")
+    evaluate = build_evaluator(sphere_config())
+    r = w._run_one(evaluate, TrialAssignment(4, 9, (0.5, 0.5), 11, 1.0))
+    assert r.status == TrialStatus.FAILED and r.trial_id == 4 and r.worker_id == "w-bad" and r.seed == 11
+    assert "wrong length" in r.reason and "3 values" in r.reason
+    r = w._run_one(evaluate, TrialAssignment(5, 9, (0.5, float("nan"), 0.5), 11, 1.0))
+    assert r.status == TrialStatus.FAILED and "non-finite" in r.reason
+
+
+def test_backoff_doubles_up_to_a_cap_and_resets():
+    b = Backoff(0.1, 0.5)
+    assert [b.next() for _ in range(5)] == [0.1, 0.2, 0.4, 0.5, 0.5]
+    b.reset()
+    assert b.next() == 0.1
+
+
+def test_default_worker_ids_are_valid_and_distinct():
+    from protocol.keys import check_worker_id
+
+    a, b = default_worker_id(), default_worker_id()
+    assert a != b and check_worker_id(a) == a
+
+
+def test_worker_waits_for_an_absent_coordinator_then_serves_it():
+    endpoint = free_endpoint()
+    core, storage, _ = sphere_core(trials=40, clock=time.monotonic)
+    w = WorkerService(connect=[endpoint], run_id=core.run_id, batch=8, exit_when_done=True)
+    t = threading.Thread(target=w.run, daemon=True)
+    t.start()
+    t.join(0.3)
+    assert t.is_alive() and w.trials_run == 0  # nothing to reach yet: it keeps retrying
+    service = CoordinatorService(core, storage, listen=[endpoint]).start()
+    try:
+        assert service.wait_done(30)
+        t.join(10)
+        assert not t.is_alive() and w.trials_run == 40
+    finally:
+        service.close()
+
+
+def test_results_are_resent_until_the_coordinator_acknowledges_them():
+    endpoint = free_endpoint()
+    # Trials take a while (stand-in for physics) so the coordinator can vanish mid-batch.
+    core, storage, _ = sphere_core(trials=3, clock=time.monotonic, morphology="sphere:2", duration_s=0.3)
+    first = CoordinatorService(core, storage, listen=[endpoint]).start()
+    w = WorkerService(connect=[endpoint], run_id=core.run_id, batch=3, exit_when_done=True,
+                      query_timeout_s=1.0)
+    t = threading.Thread(target=w.run, daemon=True)
+    t.start()
+    wait_for(lambda: core.scheduler.n_leased == 3, what="the batch to be leased")
+    first.close()  # gone before any result could be returned
+    wait_for(lambda: w.trials_run == 3, what="the worker to finish its batch")
+    assert storage.counts()["complete"] == 0
+    second = CoordinatorService(core, storage, listen=[endpoint]).start()
+    try:
+        assert second.wait_done(30)
+        t.join(10)
+        assert not t.is_alive()
+        assert storage.counts() == {"waiting": 0, "complete": 3, "failed": 0}
+        assert w.trials_run == 3  # nothing was run twice: the results were resent
+    finally:
+        second.close()
