@@ -138,7 +138,8 @@ def unit_params(morph: Morphology, params: NtrtParameterSet) -> np.ndarray:
 
 def replay(folder: str | Path, morphology: str | Morphology | None = None, *, duration_s: float | None = None,
            suffix: str = "default", seed: int = 0, pose_jitter_cm: float = 0.0) -> ReplayReport:
-    """Run NTRT's published parameters on the NTRT-era morphology (2014 motor, 1 ms, one sub-step)."""
+    """Run NTRT's published parameters on the NTRT-era morphology (2014 motor, 1 ms, one sub-step,
+    no friction anchors)."""
     from worker.morphology.registry import load_morphology
     from worker.trial import TrialConfig, simulate
 
@@ -146,8 +147,9 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     params = read_parameter_set(folder, suffix)
     u = unit_params(morph, params)
     duration = duration_s or morph.duration_s
+    # NTRT's Bullet 2.81 had no friction anchors; its motor caps are per 1 ms step (spec 0a.3)
     cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model="ntrt2014", controller="ntrt",
-                      pose_jitter_cm=pose_jitter_cm)
+                      friction_anchor=False, pose_jitter_cm=pose_jitter_cm)
     result = simulate(morph, u, cfg, seed).result
     return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result,
                         REFERENCES.get(morph.name))
