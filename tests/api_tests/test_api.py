@@ -1,0 +1,158 @@
+"""The HTTP status API over real run files; one test runs a real server process."""
+
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+import time
+
+import h5py
+import httpx
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from api.app import create_app
+from protocol.errors import ConfigError
+from storage.hdf5 import Hdf5Storage
+from storage.status import write_status
+from tests.coordinator_tests.helpers import wait_for
+from tests.storage_tests.conftest import make_meta, result
+
+
+def write_run(path, run_id="run-a", n=6, finished=4, keep_open=False):
+    s = Hdf5Storage.create(path, make_meta(run_id))
+    for i in range(n):
+        u = np.full(3, i / 10)
+        s.add_trial(i, u, 2 * u - 1, "monte_carlo" if i < 3 else "gaussian", -1 if i < 3 else 2, 100 + i)
+    for i in range(finished):
+        s.finish_trial(i, result(i, float(i % 3), seed=100 + i), float(i % 3))
+    s.flush()
+    if not keep_open:
+        s.close()
+    return s
+
+
+@pytest.fixture
+def client(tmp_path):
+    write_run(tmp_path / "a.h5")
+    write_status(tmp_path / "a.h5", {"state": "running", "trials_leased": 2, "trials_queued": 94,
+                                      "rate_trials_s": 3.5, "eta_s": 27.0, "updated_at_unix_s": time.time(),
+                                      "workers": [{"worker_id": "w-1", "alive": True, "leases": 2,
+                                                   "last_contact_unix_s": time.time()}]})
+    with TestClient(create_app(runs_dir=tmp_path)) as c:
+        yield c
+
+
+def test_runs_list_and_status(client):
+    runs = client.get("/runs").json()
+    assert [r["run_id"] for r in runs] == ["run-a"]
+    st = client.get("/runs/run-a").json()
+    assert (st["trials_done"], st["trials_complete"], st["trials_leased"], st["trials_queued"]) == (4, 4, 2, 94)
+    assert st["state"] == "running" and st["rate_trials_s"] == 3.5 and st["eta_s"] == 27.0
+    assert st["best"]["trial_id"] == 2 and st["workers"][0]["worker_id"] == "w-1"
+
+
+def test_best_trials_have_named_parameters_and_every_score_part(client):
+    best = client.get("/runs/run-a/best", params={"k": 3}).json()
+    assert [b["trial_id"] for b in best] == [2, 1, 0]  # objective 2 > 1 > 0 (trial 3 ties 0, later id)
+    b = best[0]
+    assert b["params"] == pytest.approx({"p0": -0.6, "p1": -0.6, "p2": -0.6})
+    assert b["params_unit"] == pytest.approx({"p0": 0.2, "p1": 0.2, "p2": 0.2})
+    assert set(b["scores"]) >= {"distance_m", "speed_cm_s", "work_j", "cot", "ntrt_distance_cm", "wall_time_s"}
+    assert b["scores"]["distance_m"] == 2.0 and b["phase"] == "monte_carlo" and b["parent"] is None
+
+
+def test_one_trial_including_a_waiting_one(client):
+    t = client.get("/runs/run-a/trials/5").json()
+    assert (t["status"], t["phase"], t["parent"], t["seed"]) == ("waiting", "gaussian", 2, 105)
+    assert t["scores"]["distance_m"] is None  # no result yet: null, not NaN
+
+
+@pytest.mark.parametrize(("url", "status", "code"), [
+    ("/runs/nope", 404, "not_found"),
+    ("/runs/run-a/trials/6", 404, "not_found"),
+    ("/runs/run-a/trials/-1", 422, "invalid_query"),
+    ("/runs/run-a/trials/abc", 422, "invalid_query"),
+    ("/runs/run-a/trials/99999999999999999999999", 422, "invalid_query"),
+    ("/runs/run-a/best?k=0", 422, "invalid_query"),
+    ("/runs/run-a/best?k=1001", 422, "invalid_query"),
+    ("/runs/run-a/best?k=NaN", 422, "invalid_query"),
+    ("/runs/run-a/best?k=", 422, "invalid_query"),
+    ("/runs/bad*id", 422, "invalid_query"),
+    ("/runs/nope/best", 404, "not_found"),
+    ("/runs/nope/file", 404, "not_found"),
+    ("/nothing/here", 404, "not_found"),
+])
+def test_bad_queries_get_4xx_with_stable_details(client, url, status, code):
+    r = client.get(url)
+    assert r.status_code == status
+    detail = r.json()["detail"]
+    assert detail["code"] == code and isinstance(detail["message"], str) and detail["message"]
+
+
+def test_error_detail_names_what_was_received(client):
+    detail = client.get("/runs/run-a/best?k=0").json()["detail"]
+    assert detail["message"] == "query.k: Input should be greater than or equal to 1; received '0'"
+    detail = client.get("/runs/run-a/trials/6").json()["detail"]
+    assert detail["message"] == "no such trial; received 6; expected 0 <= trial_id < 6"
+
+
+def test_download_is_a_readable_snapshot(client):
+    r = client.get("/runs/run-a/file")
+    assert r.status_code == 200 and r.headers["content-type"] == "application/x-hdf5"
+    with h5py.File(io.BytesIO(r.content), "r") as f:
+        assert f.attrs["run_id"] == "run-a" and f["trials/distance_m"].shape == (6,)
+
+
+def test_openapi_documents_every_endpoint(client):
+    paths = client.get("/openapi.json").json()["paths"]
+    assert {"/runs", "/runs/{run_id}", "/runs/{run_id}/best", "/runs/{run_id}/trials/{trial_id}",
+            "/runs/{run_id}/file"} <= set(paths)
+
+
+def test_stale_status_file_reads_as_stalled(tmp_path):
+    write_run(tmp_path / "a.h5")
+    write_status(tmp_path / "a.h5", {"state": "running", "updated_at_unix_s": time.time() - 3600})
+    with TestClient(create_app([tmp_path / "a.h5"])) as c:
+        assert c.get("/runs/run-a").json()["state"] == "stalled"
+
+
+def test_app_needs_something_to_serve():
+    with pytest.raises(ConfigError, match="run files or a runs directory"):
+        create_app()
+
+
+@pytest.mark.integration
+def test_real_server_reads_a_live_run_and_serves_snapshots(tmp_path):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    writer = write_run(tmp_path / "live.h5", run_id="live", n=10, finished=2, keep_open=True)
+    proc = subprocess.Popen([sys.executable, "-m", "cli.main", "api", "--runs-dir", str(tmp_path),
+                             "--port", str(port)], stderr=subprocess.DEVNULL)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        def up():
+            try:
+                return httpx.get(f"{base}/health", timeout=1.0).status_code == 200
+            except httpx.TransportError:
+                return False
+        wait_for(up, timeout_s=30, poll_s=0.1, what="the API server")
+        assert httpx.get(f"{base}/runs/live").json()["trials_done"] == 2
+        writer.finish_trial(7, result(7, 42.0, seed=107), 42.0)  # the run goes on while served
+        writer.flush()
+        st = httpx.get(f"{base}/runs/live").json()
+        assert st["trials_done"] == 3 and st["best"]["trial_id"] == 7
+        r = httpx.get(f"{base}/runs/live/file")
+        with h5py.File(io.BytesIO(r.content), "r") as f:
+            assert f["trials/distance_m"][7] == 42.0
+        for bad in ("/runs/live/best?k=-5", "/runs/live/trials/10", "/runs/x%00y", "/runs/live/best?k=1e9"):
+            assert 400 <= httpx.get(base + bad).status_code < 500, bad
+    finally:
+        proc.terminate()
+        proc.wait(10)
+        writer.close()
