@@ -234,6 +234,9 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
                 print(("\r" if tty else "") + _progress(core), end="" if tty else "\n", file=sys.stderr,
                       flush=True)
                 last_line = now
+        end = time.monotonic() + 5.0
+        while core.done and not core.workers_released() and time.monotonic() < end:
+            time.sleep(0.05)  # let remote workers hear "done" before the coordinator goes away
     except KeyboardInterrupt:
         code = 130
     finally:

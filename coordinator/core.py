@@ -48,6 +48,7 @@ class CoordinatorCore:
         self.rejected_messages = 0
         self.dropped_results: dict[str, int] = {v.value: 0 for v in Verdict if v != Verdict.STORED}
         self._finish_times: deque[float] = deque()
+        self.told_done: set[str] = set()  # workers that have been told the budget is met
         self.started_s = clock()
         self._config_payload = encode_message(run_config)
         # Trials sampled but never finished before a restart are issued again first.
@@ -74,6 +75,7 @@ class CoordinatorCore:
             return self._error("work request", exc)
         with self.lock:
             if self.study.done:
+                self.told_done.add(req.worker_id)
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True))
             leases = self.scheduler.grant(req.worker_id, req.capacity, self.study.ask)
             cols = self.study.storage.columns()
@@ -119,6 +121,11 @@ class CoordinatorCore:
         self.study.tell(result)
         self.scheduler.release(tid)
         return Verdict.STORED
+
+    def workers_released(self) -> bool:
+        """Every live worker has heard that the run is done (so it can exit before we do)."""
+        with self.lock:
+            return all(w.worker_id in self.told_done for w in self.scheduler.workers.values() if w.alive)
 
     def handle_config(self, config_hash: str) -> bytes:
         if config_hash != self.config_hash:

@@ -1,0 +1,44 @@
+"""Real `spinefarm` processes for the end-to-end and fault tests."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from storage.status import read_status
+from tests.coordinator_tests.helpers import wait_for
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def spinefarm(*args: str, quiet: bool = True) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "cli.main", *args], cwd=ROOT,
+                            stdout=subprocess.PIPE if quiet else None,
+                            stderr=subprocess.DEVNULL if quiet else None, text=True)
+
+
+def coordinator(endpoint: str, out: Path, *extra: str) -> subprocess.Popen:
+    return spinefarm("coordinator", *extra, "--out" if "--resume" not in extra else "--quiet", *(
+        [str(out)] if "--resume" not in extra else []), "--listen", endpoint, "--api-port", "-1", "--quiet")
+
+
+def worker(endpoint: str, run_id: str, worker_id: str, batch: int = 1) -> subprocess.Popen:
+    return spinefarm("worker", "--connect", endpoint, "--run", run_id, "--worker-id", worker_id,
+                     "--batch", str(batch), "--exit-when-done")
+
+
+def status(path: Path) -> dict:
+    return read_status(path) or {}
+
+
+def wait_status(path: Path, predicate, what: str, timeout_s: float = 60.0) -> dict:
+    return wait_for(lambda: (st := status(path)) and predicate(st) and st, timeout_s=timeout_s, poll_s=0.05,
+                    what=what)
+
+
+def stop(*procs: subprocess.Popen) -> None:
+    for p in procs:
+        if p.poll() is None:
+            p.kill()
+        p.wait(10)

@@ -1,0 +1,135 @@
+"""End-to-end and fault tests with real processes, real Zenoh over TCP on loopback and real files."""
+
+from __future__ import annotations
+
+import signal
+
+import httpx
+import numpy as np
+import pytest
+
+from storage.hdf5 import Hdf5Storage, read_run
+from tests.coordinator_tests.helpers import free_endpoint, wait_for
+from tests.coordinator_tests.procs import coordinator, spinefarm, status, stop, wait_status, worker
+
+pytestmark = pytest.mark.integration
+
+
+def assert_every_trial_once(path, budget: int) -> Hdf5Storage:
+    s = Hdf5Storage.open_read(path)
+    cols = s.columns()
+    assert cols["trial_id"].tolist() == list(range(budget))
+    assert set(cols["status"].tolist()) == {b"complete"}, s.counts()
+    assert np.isfinite(cols["distance_m"]).all()
+    return s
+
+
+def test_coordinator_two_workers_and_api_run_a_search(tmp_path):
+    ep, out = free_endpoint(), tmp_path / "run.h5"
+    coord = coordinator(ep, out, "sphere:4", "--trials", "60", "--duration", "0.02", "--run-id", "e2e",
+                        "--batch", "1")
+    workers = [worker(ep, "e2e", f"w{i}", batch=4) for i in range(2)]
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    api = spinefarm("api", str(out), "--port", str(port))
+    try:
+        assert coord.wait(60) == 0
+        for w in workers:
+            assert w.wait(20) == 0
+        s = assert_every_trial_once(out, 60)
+        assert set(s.columns()["worker_id"].tolist()) == {b"w0", b"w1"}
+
+        def api_state():
+            try:
+                return httpx.get(f"http://127.0.0.1:{port}/runs/e2e", timeout=2).json()
+            except httpx.TransportError:
+                return None
+        st = wait_for(api_state, timeout_s=30, poll_s=0.1, what="the API")
+        assert st["state"] == "done" and st["trials_done"] == 60 and st["best"] is not None
+    finally:
+        stop(coord, api, *workers)
+
+
+def test_sigkilled_worker_trial_is_reissued_and_completed_once(tmp_path):
+    ep, out = free_endpoint(), tmp_path / "run.h5"
+    coord = coordinator(ep, out, "sphere:4", "--trials", "8", "--duration", "0.6", "--run-id", "kw")
+    victim = worker(ep, "kw", "victim")
+    survivor = worker(ep, "kw", "survivor")
+    try:
+        wait_status(out, lambda st: any(w["worker_id"] == "victim" and w["leases"] > 0 for w in st["workers"]),
+                    "the victim to hold a trial")
+        victim.send_signal(signal.SIGKILL)
+        victim.wait(10)
+        assert coord.wait(60) == 0
+        assert survivor.wait(20) == 0
+        final = status(out)
+        assert final["trials_reissued"] >= 1 and final["state"] == "done"
+        s = assert_every_trial_once(out, 8)
+        assert b"survivor" in s.columns()["worker_id"].tolist()
+    finally:
+        stop(coord, victim, survivor)
+
+
+def test_sigkilled_coordinator_resumes_and_completes_the_budget(tmp_path):
+    ep, out = free_endpoint(), tmp_path / "run.h5"
+    budget = 150
+    coord = coordinator(ep, out, "sphere:4", "--trials", str(budget), "--duration", "0.04", "--run-id", "kc")
+    workers = [worker(ep, "kc", f"w{i}", batch=2) for i in range(2)]
+    resumed = None
+    try:
+        wait_status(out, lambda st: st["trials_complete"] >= 40, "40 trials flushed")
+        coord.send_signal(signal.SIGKILL)
+        coord.wait(10)
+        _, before = read_run(out)  # the killed writer's file opens, with every flushed row
+        done_before = np.flatnonzero(before["status"] == b"complete")
+        assert done_before.size >= 40
+        resumed = coordinator(ep, out, "--resume", str(out))
+        assert resumed.wait(60) == 0
+        for w in workers:
+            assert w.wait(20) == 0
+        s = assert_every_trial_once(out, budget)
+        after = s.columns()
+        for name in ("params_unit", "distance_m", "worker_id", "seed", "phase", "parent"):
+            assert (after[name][done_before] == before[name][done_before]).all(), name
+        assert s.run_meta().run_id == "kc"
+    finally:
+        stop(coord, *workers, *([resumed] if resumed else []))
+
+
+def test_late_joiner_and_a_leaver(tmp_path):
+    ep, out = free_endpoint(), tmp_path / "run.h5"
+    coord = coordinator(ep, out, "sphere:4", "--trials", "40", "--duration", "0.1", "--run-id", "jl")
+    early = worker(ep, "jl", "early")
+    late = None
+    try:
+        wait_status(out, lambda st: st["trials_complete"] >= 3, "the early worker's first trials")
+        late = worker(ep, "jl", "late")
+        wait_for(lambda: b"late" in read_run(out)[1]["worker_id"].tolist(), timeout_s=30, poll_s=0.1,
+                 what="the late worker's first stored result")
+        early.send_signal(signal.SIGTERM)  # leaves cleanly: returns what it ran, then exits
+        assert early.wait(20) == 0
+        assert coord.wait(60) == 0
+        assert late.wait(20) == 0
+        s = assert_every_trial_once(out, 40)
+        ids = s.columns()["worker_id"].tolist()
+        assert ids.count(b"early") >= 3 and ids.count(b"late") >= 1
+    finally:
+        stop(coord, early, *([late] if late else []))
+
+
+def test_physics_search_with_two_worker_processes(tmp_path):
+    pytest.importorskip("worker.trial")
+    out = tmp_path / "tetra.h5"
+    proc = spinefarm("search", "tetraspine", "--trials", "4", "--workers", "2", "--duration", "0.5",
+                     "--out", str(out), "--api-port", "-1", "--quiet")
+    stdout, _ = proc.communicate(timeout=180)
+    assert proc.returncode == 0
+    assert "best trial" in stdout and str(out) in stdout
+    s = assert_every_trial_once(out, 4)
+    cols = s.columns()
+    assert len(set(cols["worker_id"].tolist())) == 2
+    assert (cols["sim_time_s"] == pytest.approx(0.5, abs=0.01))
+    assert s.run_meta().morphology == "tetraspine" and s.run_meta().n_params == cols["params"].shape[1]
