@@ -1,0 +1,128 @@
+"""How many trials per second one coordinator sustains end to end, and physics scaling 1 vs 2 workers.
+
+Real transport and storage: an in-process coordinator (Zenoh router on loopback, HDF5 file with SWMR)
+and `spinefarm worker` processes on the built-in test objective "sphere" (microseconds per trial), so
+the coordinator, not the objective, is what is measured. The rate counts only the steady state:
+from the moment every worker has been seen until the budget is met.
+
+Prints one JSON object per measurement; the last line is one JSON object with everything.
+usage: python bench/coordinator_throughput.py [--workers 2 8 32] [--batch 1 16] [--trials 20000]
+       [--physics-trials 8 --physics-duration 1.0 | --no-physics]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from cli.service_commands import free_port  # noqa: E402
+from coordinator.problem import build_run_config  # noqa: E402
+from coordinator.service import CoordinatorService  # noqa: E402
+from coordinator.setup import SearchSettings, new_run  # noqa: E402
+
+
+def spawn_workers(endpoint: str, run_id: str, n: int, batch: int) -> list[subprocess.Popen]:
+    return [subprocess.Popen([sys.executable, "-m", "cli.main", "worker", "--connect", endpoint, "--run", run_id,
+                              "--batch", str(batch), "--exit-when-done", "--worker-id", f"bench-{i}"],
+                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(n)]
+
+
+def measure(morphology: str, n_workers: int, batch: int, trials: int, duration_s: float | None,
+            tmp: Path) -> dict:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    run_id = f"bench-{n_workers}-{batch}-{os.getpid()}"
+    config = build_run_config(run_id, morphology, duration_s=duration_s)
+    core, storage = new_run(config, SearchSettings(trials=trials, lease_s=600.0), tmp / f"{run_id}.h5")
+    service = CoordinatorService(core, storage, listen=[endpoint]).start()
+    procs = spawn_workers(endpoint, run_id, n_workers, batch)
+    try:
+        t_spawn = time.monotonic()
+        while True:  # steady state starts when every worker has asked for work
+            with core.lock:
+                seen = sum(1 for w in core.scheduler.workers.values() if w.leases or w.worker_id in core.told_done)
+                n0 = core.study.n_finished
+            if seen >= n_workers or core.done or time.monotonic() - t_spawn > 120:
+                break
+            time.sleep(0.005)
+        t0 = time.monotonic()
+        service.wait_done(timeout_s=1800)
+        t1 = time.monotonic()
+        n1 = core.study.n_finished
+        counts = storage.counts()
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            p.wait(30)
+        service.close()
+    rate = (n1 - n0) / (t1 - t0) if t1 > t0 else float("nan")
+    return {"morphology": morphology, "workers": n_workers, "batch": batch, "trials": trials,
+            "duration_s": duration_s, "measured_trials": n1 - n0, "measured_wall_s": round(t1 - t0, 3),
+            "trials_per_s": round(rate, 1), "complete": counts["complete"], "failed": counts["failed"],
+            "startup_s": round(t0 - t_spawn, 2)}
+
+
+def resume_cost(tmp: Path, rows: int) -> dict:
+    """Time to reopen a killed SWMR writer's file for writing (read via SWMR, rewrite, replace)."""
+    import numpy as np
+
+    from protocol.messages import TrialResult, TrialStatus
+    from storage.hdf5 import Hdf5Storage
+
+    config = build_run_config("resume-bench", "sphere:116")
+    _, s = new_run(config, SearchSettings(trials=rows), tmp / "resume.h5")
+    u = np.full(116, 0.5)
+    for i in range(rows):
+        s.add_trial(i, u, u, "monte_carlo", -1, i)
+        s.finish_trial(i, TrialResult(TrialStatus.COMPLETE, "", 1.0, 1, 1, 1, 1, 1, 1, 1, i, trial_id=i), 1.0)
+    s.flush()  # left open in SWMR mode, as after a kill -9
+    t = time.perf_counter()
+    r = Hdf5Storage.resume(tmp / "resume.h5")
+    dt = time.perf_counter() - t
+    r.close()
+    s._file = None  # the "killed" writer's handle: never closed cleanly
+    return {"resume_rows": rows, "resume_params": 116, "resume_s": round(dt, 3),
+            "file_mb": round((tmp / "resume.h5").stat().st_size / 1e6, 1)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, nargs="+", default=[2, 8, 32])
+    ap.add_argument("--batch", type=int, nargs="+", default=[1, 16])
+    ap.add_argument("--trials", type=int, default=20000)
+    ap.add_argument("--physics-trials", type=int, default=8)
+    ap.add_argument("--physics-duration", type=float, default=1.0)
+    ap.add_argument("--no-physics", action="store_true")
+    args = ap.parse_args()
+    out: dict = {"cpus": os.cpu_count(), "sphere": [], "physics": None}
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        for batch in args.batch:
+            for n in args.workers:
+                r = measure("sphere:8", n, batch, args.trials, None, tmp)
+                print(json.dumps(r), flush=True)
+                out["sphere"].append(r)
+        if not args.no_physics:
+            one = measure("tetraspine", 1, 1, args.physics_trials, args.physics_duration, tmp)
+            print(json.dumps(one), flush=True)
+            two = measure("tetraspine", 2, 1, args.physics_trials, args.physics_duration, tmp)
+            print(json.dumps(two), flush=True)
+            out["physics"] = {"one_worker": one, "two_workers": two,
+                              "speedup": round(two["trials_per_s"] / one["trials_per_s"], 3),
+                              "efficiency": round(two["trials_per_s"] / (2 * one["trials_per_s"]), 3)}
+        out["resume"] = resume_cost(tmp, 20000)
+        print(json.dumps(out["resume"]), flush=True)
+    print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    main()
