@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
@@ -21,6 +22,7 @@ from worker.morphology.registry import load_morphology
 from worker.morphology.structure import NEWTON
 from worker.sim import strings as sk
 from worker.sim.bodies import build_bodies, build_strings
+from worker.sim.scene import SceneConfig, build_terrain, surface_height_cm
 
 STRETCH_BASE_MIN_CM = 2.0
 MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014}
@@ -59,6 +61,7 @@ class TrialConfig:
     max_stretch_ratio: float = 4.0
     max_kinetic_energy_j: float = 200.0
     record_every_s: float | None = None
+    scene: SceneConfig = field(default_factory=SceneConfig)
     extras: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -83,6 +86,11 @@ class TrialConfig:
         check_range("max_kinetic_energy_j", self.max_kinetic_energy_j, 0.0, None, low_inclusive=False)
         if self.record_every_s is not None:
             check_range("record_every_s", self.record_every_s, 1e-6, 10.0)
+        if isinstance(self.scene, Mapping):
+            object.__setattr__(self, "scene", SceneConfig.from_dict(dict(self.scene)))
+        if not isinstance(self.scene, SceneConfig):
+            raise ConfigError("scene is not a scene config", received=type(self.scene).__name__,
+                              expected="a SceneConfig or its dict")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -186,7 +194,7 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     if not isinstance(seed, int | np.integer):
         raise ParameterError("seed is not an integer", received=seed, expected="an integer")
 
-    from worker.sim.physics import EngineSettings, GroundSpec, PhysicsScene
+    from worker.sim.physics import EngineSettings, PhysicsScene
 
     bodies = build_bodies(morph.structure)
     geom = build_strings(morph.structure, bodies, cfg.relocate_anchors)
@@ -207,9 +215,15 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     motor = MOTOR_MODELS[cfg.motor_model]
 
     engine = EngineSettings(dt_s=dt, solver_iterations=cfg.solver_iterations, friction_anchor=cfg.friction_anchor)
-    ground = GroundSpec(friction=cfg.ground_friction if cfg.ground_friction is not None
-                        else morph.ground_friction)
-    scene = (scene_factory or PhysicsScene)(bodies, engine, ground, offsets)
+    nodes = morph.structure.node_array()
+    terrain = build_terrain(cfg.scene, cfg.ground_friction if cfg.ground_friction is not None
+                            else morph.ground_friction, (float(nodes[:, 2].min()), float(nodes[:, 2].max())))
+    rotation = start_rotation(cfg.scene)
+    lift = start_lift_cm(terrain, morph, rotation)
+    if lift > 0:
+        offsets = np.zeros((len(bodies), 3)) if offsets is None else offsets
+        offsets[:, 1] += lift
+    scene = (scene_factory or PhysicsScene)(bodies, engine, terrain, offsets, rotation)
     cpg = CpgIntegrator(network, cfg.cpg_max_step_s)
     cpg_out = cpg.output_cm_s
     bank = sk.StringBank(len(bodies), geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm,
@@ -219,7 +233,6 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     reason = ""
     try:
         poses = scene.read_poses()
-        start_poses = poses.copy()
         last_check = poses[:, :3].copy()
         com_path = [scoring.robot_com_cm(poses, masses)]
         # partial metrics of a diverged trial come from the last sane check
@@ -261,10 +274,11 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
         end_poses, steps_done = last_good, last_good_step
         bank.work[0] = last_good_work
     sim_time = steps_done * dt
-    start_com = scoring.robot_com_cm(start_poses if offsets is None else _build_poses(bodies), masses)
+    build = _build_poses(bodies, lift, rotation)  # the start pose without jitter: distances count from it
+    start_com = scoring.robot_com_cm(build, masses)
     distance_cm = scoring.planar_distance_cm(start_com, scoring.robot_com_cm(end_poses, masses))
     seg = morph.scored_segment
-    seg_start = bodies[seg].com_cm
+    seg_start = build[seg, :3]
     ntrt_cm = scoring.planar_distance_cm(seg_start, end_poses[seg, :3])
     work_j = float(bank.work[0]) * scoring.WORK_J_PER_INTERNAL
     distance_m = distance_cm * scoring.CM
@@ -300,8 +314,41 @@ def choose_step(morph: Morphology, cfg: TrialConfig) -> float:
     return cfg.dt_s
 
 
-def _build_poses(bodies) -> np.ndarray:
-    return np.array([[*b.com_cm, 0.0, 0.0, 0.0, 1.0] for b in bodies])
+def _rotation_matrix(rotation: tuple[float, float, float, float] | None) -> np.ndarray:
+    if rotation is None:
+        return np.eye(3)
+    x, y, z, w = rotation
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def start_rotation(scene: SceneConfig) -> tuple[float, float, float, float] | None:
+    """On a slope the robot starts lying on it: its build pose tilted like the plane."""
+    if scene.kind != "slope" or scene.slope_deg == 0.0:
+        return None
+    a = math.radians(scene.slope_deg)
+    return (math.sin(a / 2), 0.0, 0.0, math.cos(a / 2))
+
+
+def _build_poses(bodies, lift_cm: float = 0.0, rotation=None) -> np.ndarray:
+    """Start poses without jitter (tilted on a slope, lifted clear of the terrain)."""
+    rot = _rotation_matrix(rotation)
+    q = (0.0, 0.0, 0.0, 1.0) if rotation is None else rotation
+    return np.array([[*(rot @ b.com_cm + np.array([0.0, lift_cm, 0.0])), *q] for b in bodies])
+
+
+def start_lift_cm(terrain, morph: Morphology, rotation=None) -> float:
+    """How far to raise the robot so that no point along its rods starts lower above the terrain
+    than it would above flat ground (0 on flat ground)."""
+    from worker.sim.scene import GROUND_TOP_CM
+
+    nodes = morph.structure.node_array() @ _rotation_matrix(rotation).T
+    ends = np.array([(r.a, r.b) for r in morph.structure.rods])
+    t = np.linspace(0.0, 1.0, 9)[:, None, None]
+    pts = (nodes[ends[:, 0]][None] * (1 - t) + nodes[ends[:, 1]][None] * t).reshape(-1, 3)
+    surface = surface_height_cm(terrain, pts[:, 0], pts[:, 2])
+    return float(max(0.0, (surface - GROUND_TOP_CM).max()))
 
 
 def _record(traj: Trajectory, t: float, poses, tension, cpg_out, sstate) -> None:

@@ -7,6 +7,7 @@ two applyExternalForce calls per body (its net wrench as a force pair) and one s
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from itertools import chain
 
@@ -14,6 +15,7 @@ import numpy as np
 import pybullet as pb
 
 from worker.sim.bodies import BodyModel
+from worker.sim.scene import GROUND_TOP_CM, Box, Terrain, pairs_off
 
 GRAVITY_CM_S2 = 981.0
 
@@ -43,6 +45,11 @@ class GroundSpec:
     half_extent_cm: float = 500.0
     half_height_cm: float = 0.5
     friction: float = 0.5
+
+    def to_terrain(self) -> Terrain:
+        box = Box((0.0, self.top_y_cm - self.half_height_cm, 0.0),
+                  (self.half_extent_cm, self.half_height_cm, self.half_extent_cm))
+        return Terrain(self.friction, (box,))
 
 
 def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
@@ -77,7 +84,7 @@ def _rpy(r: np.ndarray) -> tuple[float, float, float]:
     return float(np.arctan2(-r[1, 2], r[1, 1])), pitch, 0.0  # gimbal lock: put it all in roll
 
 
-def _load_compound_urdf(body: BodyModel, pos: np.ndarray, client: int) -> int:
+def _load_compound_urdf(body: BodyModel, pos: np.ndarray, quat: tuple[float, ...], client: int) -> int:
     import os
     import tempfile
 
@@ -95,7 +102,7 @@ def _load_compound_urdf(body: BodyModel, pos: np.ndarray, client: int) -> int:
     try:
         with os.fdopen(fd, "w") as f:
             f.write(urdf)
-        return pb.loadURDF(path, list(map(float, pos)), [0, 0, 0, 1], useMaximalCoordinates=True,
+        return pb.loadURDF(path, list(map(float, pos)), list(quat), useMaximalCoordinates=True,
                            flags=pb.URDF_USE_IMPLICIT_CYLINDER | pb.URDF_USE_INERTIA_FROM_FILE,
                            physicsClientId=client)
     finally:
@@ -105,8 +112,9 @@ def _load_compound_urdf(body: BodyModel, pos: np.ndarray, client: int) -> int:
 class PhysicsScene:
     """A pybullet DIRECT world holding the segments and the ground."""
 
-    def __init__(self, bodies: list[BodyModel], engine: EngineSettings, ground: GroundSpec,
+    def __init__(self, bodies: list[BodyModel], engine: EngineSettings, ground: GroundSpec | Terrain,
                  start_offsets_cm: np.ndarray | None = None,
+                 start_rotation: tuple[float, float, float, float] | None = None,
                  collision_pairs_off: list[tuple[int, int]] | None = None) -> None:
         self.client = pb.connect(pb.DIRECT)
         c = self.client
@@ -122,29 +130,56 @@ class PhysicsScene:
         pb.setPhysicsEngineParameter(warmStartingFactor=engine.warm_starting_factor, physicsClientId=c)
         self.dt_s = engine.dt_s
         self.friction_anchor = engine.friction_anchor
-        gshape = pb.createCollisionShape(
-            pb.GEOM_BOX, halfExtents=[ground.half_extent_cm, ground.half_height_cm, ground.half_extent_cm],
-            physicsClientId=c)
-        self.ground_id = pb.createMultiBody(0.0, gshape, -1, [0.0, ground.top_y_cm - ground.half_height_cm, 0.0],
-                                            useMaximalCoordinates=True, physicsClientId=c)
-        pb.changeDynamics(self.ground_id, -1, lateralFriction=ground.friction, restitution=0.0,
-                          rollingFriction=0.0, spinningFriction=0.0, physicsClientId=c)
+        terrain = ground.to_terrain() if isinstance(ground, GroundSpec) else ground
+        self.terrain_ids = self._add_terrain(terrain)
+        self.ground_id = self.terrain_ids[0]
         self.body_ids: list[int] = []
         for i, body in enumerate(bodies):
-            self.body_ids.append(self._add_body(body, None if start_offsets_cm is None else start_offsets_cm[i]))
-        for a, b in collision_pairs_off or []:
+            self.body_ids.append(self._add_body(body, None if start_offsets_cm is None else start_offsets_cm[i],
+                                                start_rotation))
+        for a, b in collision_pairs_off if collision_pairs_off is not None else pairs_off(terrain, len(bodies)):
             pb.setCollisionFilterPair(self.body_ids[a], self.body_ids[b], -1, -1, 0, physicsClientId=c)
         self._get_pose = pb.getBasePositionAndOrientation
         self._apply = pb.applyExternalForce
         self._step = pb.stepSimulation
         self._world = pb.WORLD_FRAME
 
-    def _add_body(self, body: BodyModel, offset: np.ndarray | None) -> int:
+    def _add_terrain(self, terrain: Terrain) -> list[int]:
+        c = self.client
+        ids = []
+        for box in terrain.boxes:
+            shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=list(box.half_extents_cm), physicsClientId=c)
+            ids.append(pb.createMultiBody(0.0, shape, -1, list(box.centre_cm), list(box.quaternion),
+                                          useMaximalCoordinates=True, physicsClientId=c))
+        if terrain.heightfield is not None:
+            hf = terrain.heightfield
+            rows, cols = hf.heights_cm.shape
+            shape = pb.createCollisionShape(
+                pb.GEOM_HEIGHTFIELD, meshScale=[hf.spacing_cm, hf.spacing_cm, 1.0],
+                heightfieldData=np.flipud(hf.heights_cm).ravel().tolist(), numHeightfieldRows=cols,
+                numHeightfieldColumns=rows, physicsClientId=c)
+            # Bullet centres a heightfield between its lowest and highest points, and its up axis is z:
+            # rotate by -90 degrees about x so that local z is world y; local y is then world -z, hence the flip
+            mid = 0.5 * (hf.heights_cm.min() + hf.heights_cm.max())
+            s2 = math.sqrt(0.5)
+            ids.append(pb.createMultiBody(0.0, shape, -1, [0.0, GROUND_TOP_CM + mid, 0.0], [-s2, 0.0, 0.0, s2],
+                                          useMaximalCoordinates=True, physicsClientId=c))
+        for tid in ids:
+            pb.changeDynamics(tid, -1, lateralFriction=terrain.friction, restitution=0.0, rollingFriction=0.0,
+                              spinningFriction=0.0, physicsClientId=c)
+        return ids
+
+    def _add_body(self, body: BodyModel, offset: np.ndarray | None,
+                  rotation: tuple[float, float, float, float] | None = None) -> int:
+        """A segment at its build pose, rotated about the world origin by `rotation` (x, y, z, w) and
+        then shifted by `offset` (cm)."""
         c = self.client
         n = len(body.rods)
-        pos = body.com_cm if offset is None else body.com_cm + offset
+        quat = (0.0, 0.0, 0.0, 1.0) if rotation is None else tuple(map(float, rotation))
+        pos = np.array(pb.getMatrixFromQuaternion(quat)).reshape(3, 3) @ body.com_cm
+        pos = pos if offset is None else pos + offset
         if n > MAX_SHAPE_ARRAY:
-            bid = _load_compound_urdf(body, pos, c)
+            bid = _load_compound_urdf(body, pos, quat, c)
         else:
             shape = pb.createCollisionShapeArray(
                 shapeTypes=[pb.GEOM_CYLINDER] * n,
@@ -153,7 +188,7 @@ class PhysicsScene:
                 collisionFramePositions=[list(map(float, r.centre_cm)) for r in body.rods],
                 collisionFrameOrientations=[_quat_from_matrix(r.rotation @ _Z_TO_Y) for r in body.rods],
                 physicsClientId=c)
-            bid = pb.createMultiBody(body.mass_kg, shape, -1, list(map(float, pos)), [0, 0, 0, 1],
+            bid = pb.createMultiBody(body.mass_kg, shape, -1, list(map(float, pos)), list(quat),
                                      useMaximalCoordinates=True, physicsClientId=c)
         # mass in the same call as the inertia, or pybullet zeroes the mass
         pb.changeDynamics(bid, -1, mass=body.mass_kg, localInertiaDiagonal=list(map(float, body.inertia_kg_cm2)),

@@ -1,0 +1,179 @@
+"""Scenes as data: flat ground, slope, rough ground, obstacles; and which contacts they need.
+
+Pure geometry (no engine): physics.py turns a Terrain into bodies. Y is up; the flat ground's top
+is at y = 0.5 cm (NTRT 2014).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from protocol.errors import ConfigError, check_range
+
+GROUND_TOP_CM = 0.5
+GROUND_HALF_EXTENT_CM = 500.0
+GROUND_HALF_HEIGHT_CM = 0.5
+SCENE_KINDS = ("flat", "slope", "rough", "obstacles")
+FILTERS = ("auto", "all", "neighbours")
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """What the robot stands on.
+
+    kind: flat | slope (plane tilted by slope_deg about +X, rising toward -z) | rough (seeded
+    heightfield of rough_amplitude_cm with rough_wavelength_cm) | obstacles (flat ground with bars
+    across z of obstacle_height_cm x obstacle_depth_cm every obstacle_spacing_cm).
+    collision_filter: "all" (every segment pair may collide, as NTRT), "neighbours" (each segment
+    touches only the terrain and its neighbours in the chain), "auto" (neighbours on flat ground
+    and slopes, all pairs on rough ground and obstacles).
+    """
+
+    kind: str = "flat"
+    friction: float | None = None
+    slope_deg: float = 0.0
+    rough_amplitude_cm: float = 2.0
+    rough_wavelength_cm: float = 40.0
+    rough_seed: int = 0
+    obstacle_height_cm: float = 3.0
+    obstacle_depth_cm: float = 5.0
+    obstacle_spacing_cm: float = 60.0
+    collision_filter: str = "all"
+
+    def __post_init__(self) -> None:
+        if self.kind not in SCENE_KINDS:
+            raise ConfigError("unknown scene kind", received=self.kind, expected=list(SCENE_KINDS))
+        if self.collision_filter not in FILTERS:
+            raise ConfigError("unknown collision_filter", received=self.collision_filter, expected=list(FILTERS))
+        if self.friction is not None:
+            check_range("scene.friction", self.friction, 0.0, 10.0)
+        check_range("scene.slope_deg", self.slope_deg, -45.0, 45.0)
+        check_range("scene.rough_amplitude_cm", self.rough_amplitude_cm, 0.0, 50.0)
+        check_range("scene.rough_wavelength_cm", self.rough_wavelength_cm, 2.0, 1000.0)
+        check_range("scene.obstacle_height_cm", self.obstacle_height_cm, 0.0, 100.0, low_inclusive=False)
+        check_range("scene.obstacle_depth_cm", self.obstacle_depth_cm, 0.0, 200.0, low_inclusive=False)
+        check_range("scene.obstacle_spacing_cm", self.obstacle_spacing_cm, 1.0, 1000.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> SceneConfig:
+        unknown = sorted(set(d) - set(cls.__dataclass_fields__))
+        if unknown:
+            raise ConfigError("unknown scene fields", received=unknown, expected=sorted(cls.__dataclass_fields__))
+        return cls(**d)
+
+
+@dataclass(frozen=True)
+class Box:
+    centre_cm: tuple[float, float, float]
+    half_extents_cm: tuple[float, float, float]
+    quaternion: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Heightfield:
+    """heights_cm (n_rows, n_cols) on a grid of spacing_cm centred at the origin; row index runs
+    along z, column index along x; surface y = GROUND_TOP_CM + height."""
+
+    heights_cm: np.ndarray
+    spacing_cm: float
+
+
+@dataclass(frozen=True)
+class Terrain:
+    friction: float
+    boxes: tuple[Box, ...] = ()
+    heightfield: Heightfield | None = None
+    pairs: str = "all"  # resolved collision filter: "all" or "neighbours"
+    notes: dict[str, float] = field(default_factory=dict)
+
+
+def _rough_heights(cfg: SceneConfig) -> Heightfield:
+    spacing = cfg.rough_wavelength_cm / 8.0
+    n = int(2 * GROUND_HALF_EXTENT_CM / spacing) + 1
+    coords = (np.arange(n) - (n - 1) / 2) * spacing
+    x, z = np.meshgrid(coords, coords)  # rows along z, columns along x
+    rng = np.random.default_rng(cfg.rough_seed)
+    h = np.zeros_like(x)
+    waves = 6
+    for _ in range(waves):  # a sum of plane waves of one wavelength in random directions and phases
+        angle = rng.uniform(0, math.pi)
+        phase = rng.uniform(0, 2 * math.pi)
+        h += np.sin(2 * math.pi / cfg.rough_wavelength_cm * (x * math.cos(angle) + z * math.sin(angle)) + phase)
+    h *= cfg.rough_amplitude_cm / max(np.abs(h).max(), 1e-12)
+    return Heightfield(h, spacing)
+
+
+def build_terrain(cfg: SceneConfig, default_friction: float, robot_extent_z_cm: tuple[float, float]) -> Terrain:
+    """Boxes and heightfield of a scene; robot_extent_z_cm keeps obstacles clear of the start pose."""
+    friction = default_friction if cfg.friction is None else cfg.friction
+    pairs = cfg.collision_filter
+    if pairs == "auto":
+        pairs = "neighbours" if cfg.kind in ("flat", "slope") else "all"
+    half = (GROUND_HALF_EXTENT_CM, GROUND_HALF_HEIGHT_CM, GROUND_HALF_EXTENT_CM)
+    flat = Box((0.0, GROUND_TOP_CM - GROUND_HALF_HEIGHT_CM, 0.0), half)
+    if cfg.kind == "flat":
+        return Terrain(friction, (flat,), pairs=pairs)
+    if cfg.kind == "slope":
+        a = math.radians(cfg.slope_deg)
+        # rotation about +X by a: the plane rises toward -z for a > 0 and passes through (0, 0.5, 0)
+        quat = (math.sin(a / 2), 0.0, 0.0, math.cos(a / 2))
+        centre = (0.0, GROUND_TOP_CM - GROUND_HALF_HEIGHT_CM * math.cos(a), -GROUND_HALF_HEIGHT_CM * math.sin(a))
+        return Terrain(friction, (Box(centre, half, quat),), pairs=pairs)
+    if cfg.kind == "rough":
+        return Terrain(friction, (), heightfield=_rough_heights(cfg), pairs=pairs)
+    # obstacles: bars across the whole width, placed outside the robot's start extent
+    z_lo, z_hi = robot_extent_z_cm
+    bars = []
+    hy, hz = cfg.obstacle_height_cm / 2, cfg.obstacle_depth_cm / 2
+    z = z_hi + cfg.obstacle_spacing_cm / 2
+    while z < GROUND_HALF_EXTENT_CM:
+        bars.append(Box((0.0, GROUND_TOP_CM + hy, z), (GROUND_HALF_EXTENT_CM, hy, hz)))
+        z += cfg.obstacle_spacing_cm
+    z = z_lo - cfg.obstacle_spacing_cm / 2
+    while z > -GROUND_HALF_EXTENT_CM:
+        bars.append(Box((0.0, GROUND_TOP_CM + hy, z), (GROUND_HALF_EXTENT_CM, hy, hz)))
+        z -= cfg.obstacle_spacing_cm
+    return Terrain(friction, (flat, *bars), pairs=pairs)
+
+
+def surface_height_cm(terrain: Terrain, x_cm: np.ndarray, z_cm: np.ndarray) -> np.ndarray:
+    """Top of the terrain (y, cm) under points (x, z): used to lift the start pose clear of it."""
+    x = np.asarray(x_cm, dtype=float)
+    z = np.asarray(z_cm, dtype=float)
+    y = np.full(np.broadcast(x, z).shape, -np.inf)
+    if terrain.heightfield is not None:
+        hf = terrain.heightfield
+        n_rows, n_cols = hf.heights_cm.shape
+        c = np.clip(np.rint(x / hf.spacing_cm + (n_cols - 1) / 2).astype(int), 0, n_cols - 1)
+        r = np.clip(np.rint(z / hf.spacing_cm + (n_rows - 1) / 2).astype(int), 0, n_rows - 1)
+        # the max over the neighbouring grid points bounds the interpolated surface
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                rr = np.clip(r + dr, 0, n_rows - 1)
+                cc = np.clip(c + dc, 0, n_cols - 1)
+                y = np.maximum(y, GROUND_TOP_CM + hf.heights_cm[rr, cc])
+    for box in terrain.boxes:
+        qx, _, _, qw = box.quaternion
+        a = 2 * math.atan2(qx, qw)
+        if abs(a) > 1e-12:  # the tilted plane (slope)
+            y = np.maximum(y, GROUND_TOP_CM - z * math.tan(a))
+            continue
+        cx, cy, cz = box.centre_cm
+        hx, hy, hz = box.half_extents_cm
+        inside = (np.abs(x - cx) <= hx) & (np.abs(z - cz) <= hz)
+        y = np.where(inside, np.maximum(y, cy + hy), y)
+    return y
+
+
+def pairs_off(terrain: Terrain, n_segments: int) -> list[tuple[int, int]]:
+    """Segment pairs whose collisions are switched off."""
+    if terrain.pairs != "neighbours":
+        return []
+    return [(i, j) for i in range(n_segments) for j in range(i + 2, n_segments)]
