@@ -196,3 +196,14 @@ def test_octahedral_vertebrae_rest_on_one_rod_each():
     touching = (clearance < 1.0).sum(axis=1)
     assert np.all(touching[1:-1] == 1), touching  # the end vertebrae lack a neighbour on one side
     assert np.all(touching >= 1)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_trial_command_runs_each_builtin(name: str, capsys):
+    import json
+
+    from cli.main import main
+
+    assert main(["trial", name, "--random-seed", "5", "--duration", "0.2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["morphology"] == name and out["status"] == "complete"
