@@ -22,7 +22,7 @@ from worker.morphology.registry import load_morphology
 from worker.morphology.structure import NEWTON
 from worker.sim import strings as sk
 from worker.sim.bodies import build_bodies, build_strings
-from worker.sim.scene import SceneConfig, build_terrain, surface_height_cm
+from worker.sim.scene import GROUND_TOP_CM, SceneConfig, build_terrain, surface_height_cm
 
 STRETCH_BASE_MIN_CM = 2.0
 MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014}
@@ -255,7 +255,8 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
             steps_done = n + 1
             if steps_done % check_every == 0:
                 poses = read()
-                reason = _check(poses, last_check, masses, sstate, geom.start_length_cm, check_every * dt, cfg)
+                reason = _check(poses, last_check, masses, sstate, geom.start_length_cm, check_every * dt, cfg,
+                                terrain)
                 last_check = poses[:, :3].copy()
                 if reason:
                     reason = f"{reason} at t={steps_done * dt:.3f} s"
@@ -341,8 +342,6 @@ def _build_poses(bodies, lift_cm: float = 0.0, rotation=None) -> np.ndarray:
 def start_lift_cm(terrain, morph: Morphology, rotation=None) -> float:
     """How far to raise the robot so that no point along its rods starts lower above the terrain
     than it would above flat ground (0 on flat ground)."""
-    from worker.sim.scene import GROUND_TOP_CM
-
     nodes = morph.structure.node_array() @ _rotation_matrix(rotation).T
     ends = np.array([(r.a, r.b) for r in morph.structure.rods])
     t = np.linspace(0.0, 1.0, 9)[:, None, None]
@@ -360,7 +359,7 @@ def _record(traj: Trajectory, t: float, poses, tension, cpg_out, sstate) -> None
 
 
 def _check(poses: np.ndarray, last: np.ndarray, masses: np.ndarray, sstate: np.ndarray,
-           start_length: np.ndarray, interval_s: float, cfg: TrialConfig) -> str:
+           start_length: np.ndarray, interval_s: float, cfg: TrialConfig, terrain) -> str:
     """A divergence reason, or "" while the state is physically sane."""
     if not np.all(np.isfinite(poses)):
         return "diverged: non-finite pose"
@@ -372,7 +371,10 @@ def _check(poses: np.ndarray, last: np.ndarray, masses: np.ndarray, sstate: np.n
     kinetic = 0.5 * float((masses * speed**2).sum())
     if kinetic > cfg.max_kinetic_energy_j:
         return f"diverged: kinetic energy {kinetic:.3g} J exceeds {cfg.max_kinetic_energy_j:g} J"
-    y_m = poses[:, 1] * scoring.CM
+    # heights count from the terrain under each segment (a slope or rough ground is not a divergence)
+    surface = surface_height_cm(terrain, poses[:, 0], poses[:, 2])
+    surface = np.where(np.isfinite(surface), surface, GROUND_TOP_CM)  # off the terrain's edge: ground level
+    y_m = (poses[:, 1] - surface) * scoring.CM
     if y_m.min() < cfg.min_height_m or y_m.max() > cfg.max_height_m:
         b = int(np.argmax(np.maximum(cfg.min_height_m - y_m, y_m - cfg.max_height_m)))
         return (f"diverged: segment {b} height {y_m[b]:.3g} m outside "
