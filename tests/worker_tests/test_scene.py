@@ -106,7 +106,7 @@ def test_every_scene_runs_and_is_recorded_in_the_config():
 def test_bad_scene_values_are_named():
     with pytest.raises(ConfigError, match="scene kind"):
         SceneConfig(kind="lava")
-    with pytest.raises(ConfigError, match="scene.slope_deg"):
+    with pytest.raises(ConfigError, match=r"scene\.slope_deg"):
         SceneConfig(kind="slope", slope_deg=80)
     with pytest.raises(ConfigError, match="unknown scene fields"):
         TrialConfig.from_dict({"scene": {"kind": "flat", "gravity": 1}})
