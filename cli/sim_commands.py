@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +35,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--record", type=Path, default=None, help="save the trajectory to FILE.npz")
     p.add_argument("--record-every", type=float, default=0.01, help="recording interval in seconds")
     p.set_defaults(func=cmd_trial)
+
+    a = sub.add_parser("accuracy", help="speed against error over steps, solver, CPG, contacts and scenes",
+                       description="Run the same seeded trials over a sweep of settings against a converged "
+                                   "reference; print a table, write JSON and a PNG plot.")
+    a.add_argument("morphology", help="built-in name or a .yaml spec file")
+    a.add_argument("--quick", action="store_true", help="reduced sweep (5 s trials, 3 steps) in a few minutes")
+    a.add_argument("--seeds", type=int, default=None, help="random parameter sets (default 3 quick, 5 full)")
+    a.add_argument("--duration", type=float, default=None, help="simulated seconds per trial")
+    a.add_argument("--run", type=Path, default=None, help="also test the best trial of this HDF5 run file")
+    a.add_argument("--controller", default=None)
+    a.add_argument("--jobs", type=int, default=2, help="worker processes")
+    a.add_argument("--out", type=Path, default=Path("accuracy"), help="output prefix for .json and .png")
+    a.add_argument("--json", action="store_true", help="end with one JSON object")
+    a.set_defaults(func=cmd_accuracy)
 
 
 def load_params_file(path: Path) -> tuple[dict[str, float], str | None]:
@@ -120,3 +135,54 @@ def _physical(morph, params, controller) -> np.ndarray:
     from worker.trial import resolve_params
 
     return resolve_params(morph, params, controller)
+
+
+def _best_of_run(path: Path):
+    from storage.hdf5 import Hdf5Storage
+    from worker.accuracy import ParamSet
+
+    store = Hdf5Storage.open_read(path)
+    try:
+        best = store.best(1)
+        meta = store.run_meta()
+    finally:
+        store.close()
+    if not best:
+        raise ParameterError("run file has no finished trial", received=str(path), expected="a run with results")
+    rec = best[0]
+    return ParamSet(f"best of {path.name} (trial {rec.trial_id})", tuple(rec.params_unit), rec.seed), meta
+
+
+def cmd_accuracy(args: argparse.Namespace) -> int:
+    from worker.accuracy import format_table, plot, run_accuracy
+
+    best, controller, base = None, args.controller, None
+    if args.run is not None:
+        best, meta = _best_of_run(args.run)
+        controller = controller or meta.controller
+        base = {k: v for k, v in meta.trial_config.items() if k not in ("duration_s", "dt_s", "record_every_s")}
+    seeds = args.seeds if args.seeds is not None else (3 if args.quick else 5)
+    report = run_accuracy(args.morphology, quick=args.quick, seeds=seeds, duration_s=args.duration, jobs=args.jobs,
+                          best=best, controller=controller, base=base,
+                          progress=lambda m: print(m, file=sys.stderr, flush=True))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    json_path = args.out.with_suffix(".json")
+    png_path = args.out.with_suffix(".png")
+    slim = {**report, "table": [{k: v for k, v in r.items()} for r in report["table"]]}
+    json_path.write_text(json.dumps(_finite(slim), indent=1))
+    plot(report, str(png_path))
+    print(format_table(report))
+    print(f"wrote {json_path} and {png_path}")
+    if args.json:
+        print(json.dumps(_finite(report)))
+    return 0
+
+
+def _finite(x):
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_finite(v) for v in x]
+    return x

@@ -30,9 +30,16 @@ def cost_of_transport(work_j: float, mass_kg: float, distance_m: float) -> float
     return work_j / (mass_kg * G_M_S2 * distance_m)
 
 
-def rms_path_error_cm(path_cm: np.ndarray, reference_cm: np.ndarray) -> float:
-    """RMS distance between two (n, 3) centre-of-mass paths sampled at the same times."""
+def rms_path_error_cm(path_cm: np.ndarray, time_s: np.ndarray, reference_cm: np.ndarray,
+                      reference_time_s: np.ndarray) -> float:
+    """RMS distance between two (n, 3) centre-of-mass paths, the first interpolated onto the
+    reference's times (over the time both cover)."""
     a = np.asarray(path_cm, dtype=float)
     b = np.asarray(reference_cm, dtype=float)
-    n = min(len(a), len(b))
-    return float(np.sqrt(np.mean(np.sum((a[:n] - b[:n]) ** 2, axis=1)))) if n else math.nan
+    t_end = min(float(time_s[-1]), float(reference_time_s[-1]))
+    keep = np.asarray(reference_time_s) <= t_end + 1e-12
+    if len(a) < 2 or not keep.any():
+        return math.nan
+    t = np.asarray(reference_time_s)[keep]
+    interp = np.column_stack([np.interp(t, time_s, a[:, c]) for c in range(3)])
+    return float(np.sqrt(np.mean(np.sum((interp - b[keep]) ** 2, axis=1))))

@@ -130,6 +130,7 @@ class TrialOutcome:
     result: TrialResult
     trajectory: Trajectory | None
     com_path_cm: np.ndarray  # (n_checks, 3) robot COM at every guard check, for path comparisons
+    com_path_time_s: np.ndarray  # (n_checks,) the times of those checks
 
 
 def resolve_params(morph: Morphology, params: np.ndarray | Mapping[str, float] | list,
@@ -291,7 +292,8 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
         sim_time_s=sim_time, wall_time_s=time.perf_counter() - t_wall, mass_kg=total_mass, seed=int(seed),
         extras={"dt_s": dt},
     )
-    return TrialOutcome(result, traj, np.array(com_path))
+    path = np.array(com_path)
+    return TrialOutcome(result, traj, path, np.arange(len(path)) * check_every * dt)
 
 
 @lru_cache(maxsize=64)
