@@ -153,6 +153,7 @@ class Hdf5Storage(InMemoryStorage):
         self._file = file
         self._meta = meta
         self._table = table
+        self._rebuild_ranking()
         self.read_only = file is None
         self._datasets = {c.name: file["trials"][c.name] for c in COLUMNS} if file is not None else {}
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import bisect
+import math
 from typing import Any
 
 import numpy as np
@@ -16,6 +18,9 @@ class InMemoryStorage(BaseStorage):
     def __init__(self) -> None:
         self._meta: RunMeta | None = None
         self._table: TrialTable | None = None
+        # Complete trials as (-objective, id), kept sorted as results arrive: best_ids is O(k),
+        # not a scan of the table per proposal.
+        self._ranking: list[tuple[float, int]] = []
 
     def create_run(self, meta: RunMeta) -> None:
         if self._meta is not None:
@@ -39,6 +44,19 @@ class InMemoryStorage(BaseStorage):
 
     def _update(self, trial_id: int, values: dict[str, Any]) -> None:
         self.table.set_row(trial_id, values)
+        if values.get("status") == b"complete" and math.isfinite(values.get("objective", math.nan)):
+            bisect.insort(self._ranking, (-float(values["objective"]), trial_id))
+
+    def _rebuild_ranking(self) -> None:
+        """Rank a table loaded in one go (resume, read-only open) with the scanning helper."""
+        objective = self.table.columns()["objective"]
+        self._ranking = [(-float(objective[i]), i) for i in BaseStorage.best_ids(self, self.table.n)]
+
+    def best_ids(self, k: int) -> list[int]:
+        return [i for _, i in self._ranking[: max(k, 0)]]
+
+    def n_trials(self) -> int:
+        return self.table.n
 
     def columns(self) -> dict[str, np.ndarray]:
         return self.table.columns()
