@@ -133,3 +133,37 @@ def test_physics_search_with_two_worker_processes(tmp_path):
     assert len(set(cols["worker_id"].tolist())) == 2
     assert (cols["sim_time_s"] == pytest.approx(0.5, abs=0.01))
     assert s.run_meta().morphology == "tetraspine" and s.run_meta().n_params == cols["params"].shape[1]
+
+
+ROUTER = """
+import json, sys, time, zenoh
+conf = zenoh.Config()
+conf.insert_json5("mode", '"router"')
+conf.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
+conf.insert_json5("scouting/multicast/enabled", "false")
+session = zenoh.open(conf)
+print("up", flush=True)
+time.sleep(3600)
+"""
+
+
+def test_everything_through_a_separate_zenoh_router(tmp_path):
+    import subprocess
+    import sys
+
+    ep, out = free_endpoint(), tmp_path / "run.h5"
+    router = subprocess.Popen([sys.executable, "-c", ROUTER, ep], stdout=subprocess.PIPE, text=True)
+    coord = workers = None
+    try:
+        assert router.stdout.readline().strip() == "up"
+        coord = spinefarm("coordinator", "sphere:3", "--trials", "40", "--run-id", "via-router", "--out",
+                          str(out), "--connect", ep, "--api-port", "-1", "--quiet")
+        # Workers are not told the run: they discover it through the router.
+        workers = [spinefarm("worker", "--connect", ep, "--worker-id", f"r{i}", "--batch", "4",
+                             "--exit-when-done") for i in range(2)]
+        assert coord.wait(60) == 0
+        for w in workers:
+            assert w.wait(20) == 0
+        assert_every_trial_once(out, 40)
+    finally:
+        stop(router, *([coord] if coord else []), *(workers or []))
