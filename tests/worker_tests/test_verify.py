@@ -1,0 +1,43 @@
+"""A gait that rides on a numerical artefact is caught; an honest one holds."""
+
+from __future__ import annotations
+
+from worker.morphology.registry import load_morphology
+from worker.trial import TrialConfig, random_unit_params, run_trial
+from worker.verify import VerifySettings, verify_trial
+
+
+def test_creep_artefact_is_not_reproduced_at_a_finer_step():
+    # Without friction anchors a resting spine creeps at a speed proportional to dt: "locomotion" that
+    # a finer step does not reproduce.
+    morph = load_morphology("tetraspine-ntrt")
+    u = random_unit_params(morph, 1)
+    u[1] = 0.0  # no CPG output at all
+    cfg = TrialConfig(duration_s=4.0, friction_anchor=False)
+    r = run_trial(morph, u, cfg, 1)
+    v = verify_trial(morph, u, cfg, 1, r.distance_m)
+    assert not v.holds and v.verdict.startswith("not reproduced")
+    assert v.fine_dt_s == cfg.dt_s / 4 and v.relative_change > 0.05
+
+
+def test_diverging_parameters_are_not_reproduced():
+    import dataclasses
+
+    morph = load_morphology("tetraspine-ntrt")
+    mats = tuple((t, dataclasses.replace(m, stiffness_n_per_m=600_000.0)) for t, m in morph.structure.string_materials)
+    stiff = dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, string_materials=mats))
+    u = random_unit_params(stiff, 1)
+    cfg = TrialConfig(duration_s=0.5, dt_s=2e-3, refuse_unstable_dt=False)
+    r = run_trial(stiff, u, cfg, 1)
+    v = verify_trial(stiff, u, cfg, 1, max(r.distance_m, 1.0))  # pretend it reported a great distance
+    assert not v.holds
+
+
+def test_an_honest_gait_holds_with_perturbations():
+    morph = load_morphology("tetraspine-ntrt")
+    u = random_unit_params(morph, 7)
+    cfg = TrialConfig(duration_s=3.0)
+    r = run_trial(morph, u, cfg, 7)
+    v = verify_trial(morph, u, cfg, 7, r.distance_m, VerifySettings(perturb=True, tolerance=0.1))
+    assert v.holds, v.verdict
+    assert v.perturbed_distance_m is not None and v.fine_status == "complete"
