@@ -1,0 +1,29 @@
+"""Heavy imports stay at the edges: each module is imported in a clean interpreter."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("pybullet", "zenoh", "h5py", "fastapi", "numba")
+ALLOWED = {
+    "protocol.params": set(),
+    "protocol.messages": set(),
+    "protocol.errors": set(),
+    "worker.morphology.registry": set(),
+    "worker.trial": {"numba"},
+    "worker.sim.physics": {"pybullet", "numba"},
+    "storage.hdf5": {"h5py"},
+}
+
+
+@pytest.mark.parametrize("module", sorted(ALLOWED))
+def test_module_imports_only_what_it_may(module):
+    code = (f"import sys, json; import {module}; "
+            f"print(json.dumps([m for m in {list(HEAVY)!r} if m in sys.modules]))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    loaded = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert loaded <= ALLOWED[module], f"{module} pulled in {sorted(loaded - ALLOWED[module])}"
