@@ -167,3 +167,29 @@ def test_everything_through_a_separate_zenoh_router(tmp_path):
         assert_every_trial_once(out, 40)
     finally:
         stop(router, *([coord] if coord else []), *(workers or []))
+
+
+def test_frozen_worker_is_dropped_and_its_late_result_is_not_stored(tmp_path):
+    ep, out = free_endpoint(), tmp_path / "run.h5"
+    coord = coordinator(ep, out, "sphere:4", "--trials", "12", "--duration", "0.5", "--run-id", "fz")
+    frozen = worker(ep, "fz", "frozen")
+    other = worker(ep, "fz", "other")
+    try:
+        wait_status(out, lambda st: any(w["worker_id"] == "frozen" and w["leases"] > 0 for w in st["workers"]),
+                    "the frozen worker to hold a trial")
+        frozen.send_signal(signal.SIGSTOP)
+        # Its token survives until its 2 s transport lease expires; then its trial is re-issued.
+        wait_status(out, lambda st: any(w["worker_id"] == "frozen" and not w["alive"] for w in st["workers"]),
+                    "the coordinator to drop the frozen worker")
+        frozen.send_signal(signal.SIGCONT)  # wakes, finishes its trial and returns it: stale
+        assert coord.wait(60) == 0
+        final = status(out)
+        assert final["trials_reissued"] >= 1
+        # Dropped as stale, or as a duplicate when the re-issued copy was stored first: never twice.
+        assert final["dropped_results"]["stale"] + final["dropped_results"]["duplicate"] >= 1, final
+        assert_every_trial_once(out, 12)
+    finally:
+        for p in (frozen,):
+            if p.poll() is None:
+                p.send_signal(signal.SIGCONT)
+        stop(coord, frozen, other)

@@ -1,0 +1,45 @@
+"""Heavy imports stay at the edges: zenoh only in */service.py, h5py only in storage/, no pybullet here."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+OWN = ["protocol/keys.py", "protocol/messages.py", "coordinator", "storage", "api", "cli/service_commands.py",
+       "worker/service.py", "bench/coordinator_throughput.py"]
+
+
+def loaded_after(statement: str) -> set[str]:
+    code = f"import sys; {statement}; print(' '.join(sorted(m.split('.')[0] for m in sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    return set(out.stdout.split())
+
+
+@pytest.mark.parametrize(("statement", "forbidden"), [
+    ("import protocol.keys, protocol.messages", {"zenoh", "h5py", "pybullet", "fastapi"}),
+    ("import coordinator.core, coordinator.setup, coordinator.samplers, coordinator.problem",
+     {"zenoh", "h5py", "pybullet", "fastapi"}),
+    ("import storage", {"h5py", "zenoh", "pybullet"}),
+    ("import api.app", {"zenoh", "pybullet"}),
+    ("import cli.service_commands", {"zenoh", "h5py", "pybullet", "fastapi"}),
+])
+def test_clean_interpreter_imports_stay_light(statement, forbidden):
+    assert not loaded_after(statement) & forbidden
+
+
+def test_heavy_import_statements_live_only_at_the_edges():
+    files = [p for own in OWN for p in ((ROOT / own).rglob("*.py") if (ROOT / own).is_dir() else [ROOT / own])]
+    assert len(files) > 20
+    for path in files:
+        rel = path.relative_to(ROOT).as_posix()
+        text = path.read_text()
+        if re.search(r"^\s*(import|from) zenoh\b", text, re.M):
+            assert rel.endswith("service.py"), rel
+        if re.search(r"^\s*(import|from) h5py\b", text, re.M):
+            assert rel.startswith("storage/"), rel
+        assert not re.search(r"^\s*(import|from) pybullet\b", text, re.M), rel
