@@ -65,18 +65,12 @@ def _rhs(state, omega, amp, indptr, source, wc, a, out, cs, sn, zr, zi):
 
 
 @njit(cache=True)
-def rk4_advance(state, omega, amp, indptr, source, wc, a, h, n_steps):
-    """Advance state (n, 3) = (phi, r, dr/dt) in place by n_steps RK4 steps of h seconds."""
+def rk4_advance(state, omega, amp, indptr, source, wc, a, h, n_steps, work, out):
+    """Advance state (n, 3) = (phi, r, dr/dt) in place by n_steps RK4 steps of h seconds, then write
+    the outputs r cos(phi) to out (n,). work (9, n, 3) is scratch space."""
     n = state.shape[0]
-    k1 = np.empty((n, 3))
-    k2 = np.empty((n, 3))
-    k3 = np.empty((n, 3))
-    k4 = np.empty((n, 3))
-    tmp = np.empty((n, 3))
-    cs = np.empty(n)
-    sn = np.empty(n)
-    zr = np.empty(n)
-    zi = np.empty(n)
+    k1, k2, k3, k4, tmp = work[0], work[1], work[2], work[3], work[4]
+    cs, sn, zr, zi = work[5, :, 0], work[6, :, 0], work[7, :, 0], work[8, :, 0]
     for _ in range(n_steps):
         _rhs(state, omega, amp, indptr, source, wc, a, k1, cs, sn, zr, zi)
         for i in range(n):
@@ -94,6 +88,8 @@ def rk4_advance(state, omega, amp, indptr, source, wc, a, h, n_steps):
         for i in range(n):
             for c in range(3):
                 state[i, c] += h / 6.0 * (k1[i, c] + 2.0 * k2[i, c] + 2.0 * k3[i, c] + k4[i, c])
+    for i in range(n):
+        out[i] = state[i, 1] * np.cos(state[i, 0])
 
 
 @njit(cache=True)
@@ -119,9 +115,13 @@ class CpgIntegrator:
         self._source = network.source.astype(np.int64)
         self._omega = network.omega_rad_s.astype(np.float64)
         self._amp = network.amplitude_cm_s.astype(np.float64)
+        self._work = np.zeros((9, network.n_nodes, 3))
+        self._steps: dict[float, tuple[float, int]] = {}
 
     def advance(self, period_s: float) -> None:
-        n_steps = max(1, int(np.ceil(period_s / self.max_step_s - 1e-9)))
+        plan = self._steps.get(period_s)
+        if plan is None:  # the same period recurs every update: plan its sub-steps once
+            n_steps = max(1, int(np.ceil(period_s / self.max_step_s - 1e-9)))
+            plan = self._steps[period_s] = (period_s / n_steps, n_steps)
         rk4_advance(self.state, self._omega, self._amp, self._indptr, self._source, self._wc,
-                    self.network.amplitude_rate_per_s, period_s / n_steps, n_steps)
-        outputs(self.state, self.output_cm_s)
+                    self.network.amplitude_rate_per_s, plan[0], plan[1], self._work, self.output_cm_s)
