@@ -92,13 +92,6 @@ def rk4_advance(state, omega, amp, indptr, source, wc, a, h, n_steps, work, out)
         out[i] = state[i, 1] * np.cos(state[i, 0])
 
 
-@njit(cache=True)
-def outputs(state, out):
-    """x_i = r_i cos(phi_i) into out (n,)."""
-    for i in range(state.shape[0]):
-        out[i] = state[i, 1] * np.cos(state[i, 0])
-
-
 class CpgIntegrator:
     """Holds the CPG state and advances it by an update period with RK4 sub-steps of at most max_step_s.
 
