@@ -220,14 +220,15 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     endpoint = endpoint.replace("0.0.0.0", "127.0.0.1")
     procs = [_spawn_worker(endpoint, core.run_id, args.batch, args.zenoh_config) for _ in range(n_workers)]
     stopped = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stopped.set())
+    for sig in (signal.SIGINT, signal.SIGTERM):  # Ctrl-C or a service manager: stop cleanly, store all
+        signal.signal(sig, lambda *_: stopped.set())
     tty = sys.stderr.isatty()
     last_line = 0.0
     code = 0
     try:
         while not core.done and not stopped.wait(0.25):
-            for i, p in enumerate(procs):  # a local worker that crashed is replaced
-                if p.poll() is not None and p.returncode != 0 and not core.done:
+            for i, p in enumerate(procs):  # a local worker that exited before the end is replaced
+                if p.poll() is not None and not core.done and not stopped.is_set():
                     procs[i] = _spawn_worker(endpoint, core.run_id, args.batch, args.zenoh_config)
             now = time.monotonic()
             if not args.quiet and (tty or now - last_line >= 5.0):
@@ -250,7 +251,7 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     if not core.done:
         print(f"stopped with everything stored; continue with: spinefarm search --resume {path}",
               file=sys.stderr)
-        code = code or 130
+        code = 130
     print(_describe_best(core, path))
     return code
 

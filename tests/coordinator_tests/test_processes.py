@@ -193,3 +193,31 @@ def test_frozen_worker_is_dropped_and_its_late_result_is_not_stored(tmp_path):
             if p.poll() is None:
                 p.send_signal(signal.SIGCONT)
         stop(coord, frozen, other)
+
+
+def test_ctrl_c_stops_a_local_search_with_everything_stored_and_resume_finishes_it(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    from tests.coordinator_tests.procs import ROOT
+
+    out = tmp_path / "run.h5"
+    cmd = [sys.executable, "-m", "cli.main", "search", "sphere:4", "--trials", "120", "--workers", "2",
+           "--duration", "0.05", "--out", str(out), "--api-port", "-1", "--quiet"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        seen = wait_status(out, lambda st: st["trials_complete"] >= 20, "20 trials")["trials_complete"]
+        os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole group
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        stop(proc)
+    assert proc.returncode == 130
+    assert f"spinefarm search --resume {out}" in stderr and "best trial" in stdout
+    s = Hdf5Storage.open_read(out)
+    assert seen <= s.counts()["complete"] < 120
+    assert status(out)["state"] == "stopped"
+    resumed = spinefarm("search", "--resume", str(out), "--workers", "2", "--api-port", "-1", "--quiet")
+    assert resumed.wait(60) == 0
+    assert_every_trial_once(out, 120)
