@@ -64,7 +64,7 @@ class StartGate:
 def measure(morphology: str, n_workers: int, batch: int, trials: int, duration_s: float | None,
             tmp: Path) -> dict:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    run_id = f"bench-{n_workers}-{batch}-{os.getpid()}"
+    run_id = f"bench-{morphology.replace(':', '')}-{n_workers}-{batch}-{os.getpid()}"
     config = build_run_config(run_id, morphology, duration_s=duration_s)
     core, storage = new_run(config, SearchSettings(trials=trials, lease_s=600.0), tmp / f"{run_id}.h5")
     gate = StartGate(core, n_workers)
@@ -114,10 +114,10 @@ def resume_cost(tmp: Path, rows: int) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--workers", type=int, nargs="+", default=[2, 8, 32])
+    ap.add_argument("--workers", type=int, nargs="*", default=[2, 8, 32], help="none: physics only")
     ap.add_argument("--batch", type=int, nargs="+", default=[1, 16])
     ap.add_argument("--trials", type=int, default=20000)
-    ap.add_argument("--physics-trials", type=int, default=8)
+    ap.add_argument("--physics-trials", type=int, default=16)
     ap.add_argument("--physics-duration", type=float, default=1.0)
     ap.add_argument("--no-physics", action="store_true")
     args = ap.parse_args()
