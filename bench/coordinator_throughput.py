@@ -6,7 +6,7 @@ the coordinator, not the objective, is what is measured. The rate counts only th
 from the moment every worker has asked for work until the budget is met.
 
 Prints one JSON object per measurement; the last line is one JSON object with everything.
-usage: python bench/coordinator_throughput.py [--workers 2 8 32] [--batch 1 16] [--trials 20000]
+usage: python bench/coordinator_throughput.py [--workers 2 8 32] [--batch 1 16 0] [--trials 20000]
        [--physics-trials 8 --physics-duration 1.0 | --no-physics]
 """
 
@@ -33,8 +33,9 @@ from protocol.messages import WorkGrant, WorkRequest, decode_message, encode_mes
 
 
 def spawn_workers(endpoint: str, run_id: str, n: int, batch: int) -> list[subprocess.Popen]:
+    batch_args = ["--batch", str(batch)] if batch > 0 else []  # 0: the worker sizes its batches itself
     return [subprocess.Popen([sys.executable, "-m", "cli.main", "worker", "--connect", endpoint, "--run", run_id,
-                              "--batch", str(batch), "--exit-when-done", "--worker-id", f"bench-{i}"],
+                              *batch_args, "--exit-when-done", "--worker-id", f"bench-{i}"],
                              cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(n)]
 
 
@@ -115,7 +116,7 @@ def resume_cost(tmp: Path, rows: int) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, nargs="*", default=[2, 8, 32], help="none: physics only")
-    ap.add_argument("--batch", type=int, nargs="+", default=[1, 16])
+    ap.add_argument("--batch", type=int, nargs="+", default=[1, 16, 0], help="0: auto")
     ap.add_argument("--trials", type=int, default=20000)
     ap.add_argument("--physics-trials", type=int, default=16)
     ap.add_argument("--physics-duration", type=float, default=1.0)

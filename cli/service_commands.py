@@ -60,7 +60,8 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
     p.add_argument("--startup-trials", type=int, help="Monte Carlo trials before climbing (default half)")
     p.add_argument("--lease", type=float, default=None, metavar="S",
                    help="seconds a worker may hold a trial before it is re-issued (default 60, or 20x duration)")
-    p.add_argument("--batch", type=int, default=1, help="trials a local worker pulls per request")
+    p.add_argument("--batch", type=int, default=None,
+                   help="trials a local worker pulls per request (default auto)")
     p.add_argument("--api-port", type=int, default=None if local else -1,
                    help="HTTP status API port on localhost (" + ("default 8000 or a free port; " if local
                                                                else "default off; ") + "-1 = off)")
@@ -82,7 +83,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("worker", help="run a stateless worker that pulls trials from a coordinator")
     p.add_argument("--run", dest="run_id", help="serve only this run (default: any open run found)")
-    p.add_argument("--batch", type=int, default=1, help="trials pulled per request (default 1)")
+    p.add_argument("--batch", type=int, default=None,
+                   help="trials pulled per request (default auto: about 0.5 s of work, 1 for physics)")
     p.add_argument("--worker-id", help="worker id (default <host>-<pid>-<random>)")
     p.add_argument("--exit-when-done", action="store_true", help="exit once the run's budget is met")
     _zenoh_args(p, None)
@@ -122,7 +124,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     lease = args.lease
     if lease is None:
         duration = config.trial_config.get("duration_s") or 0.0
-        lease = max(60.0, 20.0 * float(duration)) * max(1, args.batch)
+        lease = max(60.0, 20.0 * float(duration))
     settings = SearchSettings(trials=args.trials, sigma=args.sigma, top_k=args.top_k,
                               startup_trials=args.startup_trials, lease_s=lease)
     out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
@@ -169,9 +171,9 @@ def _describe_best(core: Any, path: Path) -> str:
             f"  params: {params}\nfile: {path}")
 
 
-def _spawn_worker(endpoint: str, run_id: str, batch: int, zenoh_config: str | None) -> subprocess.Popen:
+def _spawn_worker(endpoint: str, run_id: str, batch: int | None, zenoh_config: str | None) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "cli.main", "worker", "--connect", endpoint, "--run", run_id,
-           "--batch", str(batch), "--exit-when-done"]
+           "--exit-when-done"] + (["--batch", str(batch)] if batch else [])
     if zenoh_config:
         cmd += ["--zenoh-config", zenoh_config]
     return subprocess.Popen(cmd, stdout=subprocess.DEVNULL)

@@ -126,14 +126,38 @@ class Backoff:
         self._next = self.first_s
 
 
+class BatchSizer:
+    """Trials to ask for: a fixed number, or (auto) about `target_s` of work by the mean trial time.
+
+    Slow physics trials go one at a time (a lost worker strands little work); microsecond test trials
+    go in large batches, so round trips do not dominate.
+    """
+
+    def __init__(self, fixed: int | None, target_s: float = 0.5, max_batch: int = 64) -> None:
+        self.fixed, self.target_s, self.max_batch = fixed, target_s, max_batch
+        self._mean_s: float | None = None
+
+    def observe(self, wall_time_s: float) -> None:
+        self._mean_s = wall_time_s if self._mean_s is None else 0.8 * self._mean_s + 0.2 * wall_time_s
+
+    def size(self) -> int:
+        if self.fixed is not None:
+            return self.fixed
+        if self._mean_s is None:
+            return 1
+        return max(1, min(self.max_batch, int(self.target_s / max(self._mean_s, 1e-6))))
+
+
 class WorkerService:
     def __init__(self, *, connect: Sequence[str], run_id: str | None = None, worker_id: str | None = None,
-                 batch: int = 1, listen: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
+                 batch: int | None = None, listen: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
                  exit_when_done: bool = False, query_timeout_s: float = 5.0,
                  submit_interval_s: float = 1.0) -> None:
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
         self.run_id = keys.check_run_id(run_id) if run_id else None
-        self.batch = batch
+        if batch is not None and not 1 <= batch <= 4096:
+            raise ConfigError("batch out of range", received=batch, expected="1 <= batch <= 4096, or auto")
+        self.batch = BatchSizer(batch)
         self.exit_when_done = exit_when_done
         self.query_timeout_s = query_timeout_s
         self.submit_interval_s = submit_interval_s
@@ -237,7 +261,7 @@ class WorkerService:
                     return
                 self.stop.wait(backoff.next())
                 continue
-            req = encode_message(WorkRequest(self.worker_id, self.batch))
+            req = encode_message(WorkRequest(self.worker_id, self.batch.size()))
             grants = self._ask(session, keys.work(run_id), req, WorkGrant)
             if not grants:
                 self.stop.wait(backoff.next())
@@ -263,7 +287,9 @@ class WorkerService:
             for a in grant.assignments:
                 if self.stop.is_set():
                     break
+                t0 = time.perf_counter()
                 pending[a.trial_id] = SubmittedResult(a.lease_id, self._run_one(evaluate, a))
+                self.batch.observe(time.perf_counter() - t0)
                 self.trials_run += 1
                 if time.monotonic() - last_submit >= self.submit_interval_s:
                     self._submit(session)

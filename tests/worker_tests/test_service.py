@@ -93,3 +93,18 @@ def test_results_are_resent_until_the_coordinator_acknowledges_them():
         assert w.trials_run == 3  # nothing was run twice: the results were resent
     finally:
         second.close()
+
+
+def test_auto_batch_follows_the_mean_trial_time():
+    from worker.service import BatchSizer
+
+    auto = BatchSizer(None, target_s=0.5, max_batch=64)
+    assert auto.size() == 1  # nothing measured yet: one trial
+    auto.observe(2.0)
+    assert auto.size() == 1  # physics-like trials: one at a time
+    for _ in range(60):
+        auto.observe(1e-5)
+    assert auto.size() == 64  # microsecond trials: capped large batches
+    assert BatchSizer(7).size() == 7
+    with pytest.raises(Exception, match="batch out of range"):
+        WorkerService(connect=["tcp/127.0.0.1:9"], batch=0)
