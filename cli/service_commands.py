@@ -44,7 +44,8 @@ def _zenoh_args(p: argparse.ArgumentParser, listen_default: str | None) -> None:
 def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
     p.add_argument("morphology", nargs="?", help="registered morphology (e.g. tetraspine) or the test "
                    "objective sphere[:N]; omit with --resume")
-    p.add_argument("--trials", type=int, default=2000, help="trial budget (default 2000)")
+    p.add_argument("--trials", type=int, default=None,
+                   help="trial budget (default 2000; with --resume: a new, larger budget)")
     if local:
         p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2) - 0),
                        help="local worker processes (default: one per core)")
@@ -114,7 +115,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
         if args.morphology or args.out:
             raise ConfigError("--resume continues a stored run", received="a morphology or --out too",
                               expected="only --resume RUN.h5")
-        core, storage = resume_run(args.resume)
+        core, storage = resume_run(args.resume, trials_budget=args.trials)
         return core, storage, Path(args.resume)
     if not args.morphology:
         raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")
@@ -125,7 +126,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     if lease is None:
         duration = config.trial_config.get("duration_s") or 0.0
         lease = max(60.0, 20.0 * float(duration))
-    settings = SearchSettings(trials=args.trials, sigma=args.sigma, top_k=args.top_k,
+    settings = SearchSettings(trials=2000 if args.trials is None else args.trials, sigma=args.sigma, top_k=args.top_k,
                               startup_trials=args.startup_trials, lease_s=lease)
     out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
     core, storage = new_run(config, settings, out)

@@ -83,11 +83,13 @@ def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,
     return build_core(storage, clock), storage
 
 
-def resume_run(path: str | Path, clock=time.monotonic) -> tuple[CoordinatorCore, BaseStorage]:
+def resume_run(path: str | Path, clock=time.monotonic,
+               trials_budget: int | None = None) -> tuple[CoordinatorCore, BaseStorage]:
+    """Continue a stored run (optionally to a new budget): same numbering, same sampler state."""
     from storage.hdf5 import Hdf5Storage
 
     if not Path(path).is_file():
         raise ConfigError("cannot resume: run file does not exist", received=str(path),
                           expected="the .h5 file of an earlier run")
-    storage = Hdf5Storage.resume(path)
+    storage = Hdf5Storage.resume(path, trials_budget)
     return build_core(storage, clock), storage

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import asdict, fields
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -168,10 +168,19 @@ class Hdf5Storage(InMemoryStorage):
         return cls._open_writer(path, meta, TrialTable(meta.n_params))
 
     @classmethod
-    def resume(cls, path: str | Path) -> Hdf5Storage:
-        """Reopen a run for writing, whether it was closed cleanly or its writer was killed."""
+    def resume(cls, path: str | Path, trials_budget: int | None = None) -> Hdf5Storage:
+        """Reopen a run for writing, whether it was closed cleanly or its writer was killed.
+
+        trials_budget: a new budget (not below the trials already sampled), else the stored one.
+        """
         path = Path(path)
         meta, cols = read_run(path)
+        if trials_budget is not None:
+            n = len(cols["trial_id"])
+            if trials_budget < max(n, 1):
+                raise StorageError("new trial budget is below the trials already sampled",
+                                   received=trials_budget, expected=f"at least {max(n, 1)}")
+            meta = replace(meta, trials_budget=trials_budget)
         tmp = path.with_name(path.name + ".resume-tmp")
         write_run(tmp, meta, cols)
         with open(tmp, "rb") as fh:
@@ -233,6 +242,3 @@ class Hdf5Storage(InMemoryStorage):
             self._file.close()
             self._file = None
             self.read_only = True
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self.run_meta())

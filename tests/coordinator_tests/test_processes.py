@@ -195,7 +195,7 @@ def test_frozen_worker_is_dropped_and_its_late_result_is_not_stored(tmp_path):
         stop(coord, frozen, other)
 
 
-def test_ctrl_c_stops_a_local_search_with_everything_stored_and_resume_finishes_it(tmp_path):
+def test_ctrl_c_stops_a_local_search_with_everything_stored_and_resume_extends_it(tmp_path):
     import os
     import subprocess
     import sys
@@ -218,6 +218,8 @@ def test_ctrl_c_stops_a_local_search_with_everything_stored_and_resume_finishes_
     s = Hdf5Storage.open_read(out)
     assert seen <= s.counts()["complete"] < 120
     assert status(out)["state"] == "stopped"
-    resumed = spinefarm("search", "--resume", str(out), "--workers", "2", "--api-port", "-1", "--quiet")
+    # Resume to a larger budget: numbering continues, the run completes to the new budget.
+    resumed = spinefarm("search", "--resume", str(out), "--trials", "150", "--workers", "2", "--api-port", "-1",
+                        "--quiet")
     assert resumed.wait(60) == 0
-    assert_every_trial_once(out, 120)
+    assert_every_trial_once(out, 150)

@@ -148,3 +148,14 @@ def test_export_csv_and_best(tmp_path):
     table = best_table(ro, 2)
     assert table.splitlines()[1].split()[:2] == ["1", "2"]
     assert "p2 = 0 cm" in table
+
+
+def test_resume_can_raise_the_budget_but_not_below_what_was_sampled(tmp_path):
+    path = tmp_path / "run.h5"
+    with Hdf5Storage.create(path, make_meta(budget=10)) as s:
+        fill(s, 6, 6)
+    with pytest.raises(StorageError, match="below the trials already sampled"):
+        Hdf5Storage.resume(path, trials_budget=5)
+    with Hdf5Storage.resume(path, trials_budget=50) as s:
+        assert s.run_meta().trials_budget == 50 and s.n_trials() == 6
+    assert read_meta(path).trials_budget == 50
