@@ -12,6 +12,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from coordinator.scheduler import Scheduler
@@ -117,7 +118,7 @@ class CoordinatorCore:
                         int(storage.columns()["seed"][tid]))
             return Verdict.INVALID
         if result.worker_id != worker_id:
-            result = type(result)(**{**result.__dict__, "worker_id": worker_id})
+            result = replace(result, worker_id=worker_id)
         self.study.tell(result)
         self.scheduler.release(tid)
         return Verdict.STORED

@@ -172,16 +172,22 @@ class WorkerService:
     # --- requests ---------------------------------------------------------------------------------
     def _ask(self, session: zenoh.Session, key: str, payload: bytes | None, cls: type) -> list:
         """Replies to a query decoded as `cls`; malformed or error replies are logged and skipped."""
-        out = []
+        return self._query(session, key, payload, cls)[0]
+
+    def _query(self, session: zenoh.Session, key: str, payload: bytes | None, cls: type) -> tuple[list, int]:
+        """(replies decoded as `cls`, number of replies that refused the request or were malformed)."""
+        out, refused = [], 0
         for reply in session.get(key, payload=payload, timeout=self.query_timeout_s):
             if reply.ok is None:
                 log.warning("error reply on %s", key)
+                refused += 1
                 continue
             try:
                 out.append(decode_message(reply.ok.payload.to_bytes(), cls))
             except MessageError as exc:
                 log.warning("ignored reply on %s: %s", key, exc)
-        return out
+                refused += 1
+        return out, refused
 
     def _discover(self, session: zenoh.Session) -> str | None:
         """The run to work for: the given one, else the first open run announced on the network."""
@@ -198,7 +204,11 @@ class WorkerService:
             configs = [c for c in configs if c.config_hash() == config_hash]
             if not configs:
                 return None
-            self._evaluators[config_hash] = build_evaluator(configs[0])
+            try:
+                self._evaluators[config_hash] = build_evaluator(configs[0])
+            except Exception as exc:  # e.g. a morphology this worker does not know: serve nothing
+                log.error("cannot run trials of run %s: %s", run_id, exc)
+                return None
         return self._evaluators[config_hash]
 
     def _submit(self, session: zenoh.Session) -> bool:
@@ -207,10 +217,16 @@ class WorkerService:
             if not pending:
                 continue
             sub = ResultSubmission(self.worker_id, tuple(pending.values()))
-            for ack in self._ask(session, keys.results(run_id), encode_message(sub), ResultAck):
+            acks, refused = self._query(session, keys.results(run_id), encode_message(sub), ResultAck)
+            for ack in acks:
                 for trial_id, verdict in ack.verdicts:
                     if pending.pop(trial_id, None) is not None and verdict.value != "stored":
                         log.info("trial %d of run %s not stored: %s", trial_id, run_id, verdict.value)
+            if refused and not acks:
+                # The coordinator answered but refused the batch: resending it would loop forever.
+                log.error("run %s refused %d results; dropping them (their leases will expire)",
+                          run_id, len(pending))
+                pending.clear()
         return not any(self._pending.values())
 
     def _run_one(self, evaluate: Evaluator, a: TrialAssignment) -> TrialResult:

@@ -108,3 +108,75 @@ def test_auto_batch_follows_the_mean_trial_time():
     assert BatchSizer(7).size() == 7
     with pytest.raises(Exception, match="batch out of range"):
         WorkerService(connect=["tcp/127.0.0.1:9"], batch=0)
+
+
+class HandRolledCoordinator:
+    """A minimal peer speaking the protocol over real Zenoh: grants one trial, then says done."""
+
+    def __init__(self, endpoint: str, config: RunConfig, refuse_results: bool) -> None:
+        import zenoh
+
+        from coordinator.service import zenoh_config
+        from protocol import keys
+        from protocol.messages import RunInfo, TrialAssignment, WorkGrant, encode, encode_message
+
+        self.config, self.granted, self.submissions = config, False, 0
+        h = config.config_hash()
+        run = config.run_id
+
+        def work(q):
+            with q:
+                done = self.granted
+                a = () if done else (TrialAssignment(0, 1, (0.5,) * len(config.param_space), 3, 60.0),)
+                self.granted = True
+                q.reply(q.key_expr, encode_message(WorkGrant(run, h, a, 0.05, done)))
+
+        def results(q):
+            with q:
+                self.submissions += 1
+                q.reply(q.key_expr, encode("error", {"code": "malformed_message", "message": "no"})
+                        if refuse_results else b"")
+
+        def cfg(q):
+            with q:
+                q.reply(q.key_expr, encode_message(config))
+
+        def info(q):
+            with q:
+                q.reply(q.key_expr, encode_message(RunInfo(run, h, 1, False)))
+
+        self.session = zenoh.open(zenoh_config("router", [endpoint]))
+        self.entities = [self.session.declare_queryable(keys.work(run), work),
+                         self.session.declare_queryable(keys.results(run), results),
+                         self.session.declare_queryable(keys.config(run, h), cfg),
+                         self.session.declare_queryable(keys.run_info(run), info)]
+
+    def close(self) -> None:
+        self.session.close()
+
+
+def run_worker_against(peer_config: RunConfig, refuse_results: bool):
+    endpoint = free_endpoint()
+    peer = HandRolledCoordinator(endpoint, peer_config, refuse_results)
+    w = WorkerService(connect=[endpoint], run_id=peer_config.run_id, exit_when_done=True, query_timeout_s=1.0)
+    t = threading.Thread(target=w.run, daemon=True)
+    try:
+        t.start()
+        t.join(20)
+        assert not t.is_alive(), "the worker got stuck"
+    finally:
+        peer.close()
+    return w, peer
+
+
+def test_refused_results_are_dropped_not_resent_forever():
+    w, peer = run_worker_against(sphere_config(), refuse_results=True)
+    assert w.trials_run == 1 and peer.submissions == 1
+
+
+def test_a_run_this_worker_cannot_serve_does_not_crash_it():
+    from dataclasses import replace
+
+    config = replace(sphere_config(), morphology="no-such-robot")
+    w, _ = run_worker_against(config, refuse_results=False)
+    assert w.trials_run == 0
