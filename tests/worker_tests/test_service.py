@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 
@@ -180,3 +181,32 @@ def test_a_run_this_worker_cannot_serve_does_not_crash_it():
     config = replace(sphere_config(), morphology="no-such-robot")
     w, _ = run_worker_against(config, refuse_results=False)
     assert w.trials_run == 0
+
+
+def test_zenoh_json5_config_file_is_passed_through(tmp_path):
+    endpoint = free_endpoint()
+    conf = tmp_path / "zenoh.json5"
+    quoted = json.dumps([endpoint])
+    conf.write_text(f"{{\n  // endpoints come from this file only\n  connect: {{ endpoints: {quoted} }},\n}}\n")
+    core, storage, _ = sphere_core(trials=10, clock=time.monotonic)
+    service = CoordinatorService(core, storage, listen=[endpoint]).start()
+    try:
+        w = WorkerService(connect=(), zenoh_config_file=conf, run_id=core.run_id, exit_when_done=True)
+        t = threading.Thread(target=w.run, daemon=True)
+        t.start()
+        assert service.wait_done(20)
+        t.join(10)
+        assert w.trials_run == 10
+    finally:
+        service.close()
+
+
+def test_unreadable_zenoh_config_is_a_clear_error(tmp_path):
+    from protocol.errors import ConfigError
+
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{ this is not json5 ")
+    with pytest.raises(ConfigError, match="cannot read Zenoh config"):
+        WorkerService(connect=(), zenoh_config_file=bad)
+    with pytest.raises(ConfigError, match="cannot read Zenoh config"):
+        WorkerService(connect=(), zenoh_config_file=tmp_path / "missing.json5")
