@@ -185,3 +185,15 @@ def test_cli_reports_a_bad_file_as_an_error(tmp_path: Path, capsys):
     assert main(["trial", str(path), "--duration", "0.1"]) == 2
     err = capsys.readouterr().err
     assert "unknown node" in err and f"line {_line_of(path.read_text(), '[a, top, bar]')}" in err
+
+
+def test_builders_take_a_segment_count():
+    from worker.morphology.octahedral import octahedral_complex
+    from worker.morphology.ribbed import ribbed
+    from worker.morphology.tetrahedral import tetrahedral_complex
+
+    assert tetrahedral_complex(4).scored_segment == 2 and tetrahedral_complex(4).structure.n_segments == 4
+    assert len(octahedral_complex(5).structure.strings) == 4 * 8
+    assert ribbed(3, name="ribbed-3").name == "ribbed-3"
+    with pytest.raises(MorphologySpecError, match=r"segments\.count"):
+        tetrahedral_complex(1)
