@@ -163,7 +163,7 @@ def _zero_amplitude(morph, seed: int) -> np.ndarray:
 
 def test_passive_settle_holds_its_shape(any_builtin):
     """5 s with zero CPG output: no divergence; segments stay apart, above ground and in a steady shape."""
-    _, morph, bodies, _ = any_builtin
+    name, morph, bodies, _ = any_builtin
     out = simulate(morph, _zero_amplitude(morph, 1), _config(morph, duration_s=5.0, record_every_s=0.25), 0)
     assert out.result.ok, out.result.reason
     a = out.trajectory.arrays()
@@ -182,6 +182,10 @@ def test_passive_settle_holds_its_shape(any_builtin):
     speed = np.linalg.norm(robot[-1] - robot[-5]) / (a["time_s"][-1] - a["time_s"][-5])
     # far below any gait (without Bullet's friction anchors the Tetraspines creep at ~0.7 cm/s)
     assert speed < 1.5, f"robot still moving at {speed:.3f} cm/s"
+    if name == "tetrahedral-complex":
+        # paper IV-B: its COM over the line of support holds the shape with ~0.2 N (Tetraspine: 10 N)
+        cpg = np.array([s.tag in morph.control.cpg_tags for s in morph.structure.strings])
+        assert 0.05 < np.median(a["tension_n"][-1][cpg]) < 1.0
 
 
 def test_octahedral_ligaments_are_driven_to_start_minus_half_a_centimetre():
