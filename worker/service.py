@@ -152,7 +152,7 @@ class WorkerService:
     def __init__(self, *, connect: Sequence[str], run_id: str | None = None, worker_id: str | None = None,
                  batch: int | None = None, listen: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
                  exit_when_done: bool = False, query_timeout_s: float = 5.0,
-                 submit_interval_s: float = 1.0) -> None:
+                 submit_interval_s: float = 1.0, idle_exit_s: float = 2.0) -> None:
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
         self.run_id = keys.check_run_id(run_id) if run_id else None
         if batch is not None and not 1 <= batch <= 4096:
@@ -161,6 +161,7 @@ class WorkerService:
         self.exit_when_done = exit_when_done
         self.query_timeout_s = query_timeout_s
         self.submit_interval_s = submit_interval_s
+        self.idle_exit_s = idle_exit_s
         self._conf_args = (tuple(connect), tuple(listen), zenoh_config_file)
         zenoh_config(*self._conf_args)  # fail fast on a bad config file
         self._evaluators: dict[str, Evaluator] = {}
@@ -267,16 +268,20 @@ class WorkerService:
 
     def _loop(self, session: zenoh.Session) -> None:
         backoff = Backoff()
+        idle_since: float | None = None
         while not self.stop.is_set():
             if not self._submit(session):
                 self.stop.wait(backoff.next())
                 continue
             run_id = self._discover(session)
             if run_id is None:
-                if self.exit_when_done and self._done_runs:
+                # Without a given run, "done" means no open run seen for a while, not one empty answer.
+                idle_since = idle_since if idle_since is not None else time.monotonic()
+                if self.exit_when_done and self._done_runs and time.monotonic() - idle_since >= self.idle_exit_s:
                     return
                 self.stop.wait(backoff.next())
                 continue
+            idle_since = None
             req = encode_message(WorkRequest(self.worker_id, self.batch.size()))
             grants = self._ask(session, keys.work(run_id), req, WorkGrant)
             if not grants:

@@ -147,26 +147,29 @@ time.sleep(3600)
 """
 
 
-def test_everything_through_a_separate_zenoh_router(tmp_path):
+def test_two_runs_share_one_router_and_one_pool_of_workers(tmp_path):
     import subprocess
     import sys
 
-    ep, out = free_endpoint(), tmp_path / "run.h5"
+    ep = free_endpoint()
     router = subprocess.Popen([sys.executable, "-c", ROUTER, ep], stdout=subprocess.PIPE, text=True)
-    coord = workers = None
+    coords, workers = [], []
     try:
         assert router.stdout.readline().strip() == "up"
-        coord = spinefarm("coordinator", "sphere:3", "--trials", "40", "--run-id", "via-router", "--out",
-                          str(out), "--connect", ep, "--api-port", "-1", "--quiet")
-        # Workers are not told the run: they discover it through the router.
-        workers = [spinefarm("worker", "--connect", ep, "--worker-id", f"r{i}", "--batch", "4",
-                             "--exit-when-done") for i in range(2)]
-        assert coord.wait(60) == 0
+        for run_id, n in (("run-a", 40), ("run-b", 30)):
+            coords.append(spinefarm("coordinator", "sphere:3", "--trials", str(n), "--run-id", run_id, "--out",
+                                    str(tmp_path / f"{run_id}.h5"), "--connect", ep, "--api-port", "-1", "--quiet"))
+        # Workers are not told a run: they discover both through the router and serve them in turn.
+        workers = [spinefarm("worker", "--connect", ep, "--worker-id", f"r{i}", "--exit-when-done")
+                   for i in range(2)]
+        for c in coords:
+            assert c.wait(60) == 0
         for w in workers:
             assert w.wait(20) == 0
-        assert_every_trial_once(out, 40)
+        assert_every_trial_once(tmp_path / "run-a.h5", 40)
+        assert_every_trial_once(tmp_path / "run-b.h5", 30)
     finally:
-        stop(router, *([coord] if coord else []), *(workers or []))
+        stop(router, *coords, *workers)
 
 
 def test_frozen_worker_is_dropped_and_its_late_result_is_not_stored(tmp_path):
