@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated
 
@@ -9,7 +10,7 @@ from fastapi import Depends, Request
 from fastapi import Path as PathParam
 
 from api.registry import RunRegistry
-from storage.hdf5 import Hdf5Storage
+from storage.hdf5_reader import Hdf5Reader
 
 RunId = Annotated[str, PathParam(pattern=r"^[A-Za-z0-9_.\-]{1,64}$", description="run id")]
 
@@ -22,6 +23,10 @@ def run_path(run_id: RunId, reg: Annotated[RunRegistry, Depends(registry)]) -> P
     return reg.path_of(run_id)
 
 
-def run_storage(path: Annotated[Path, Depends(run_path)]) -> Hdf5Storage:
-    """The run as it is on disk now (every flushed row), read-only."""
-    return Hdf5Storage.open_read(path)
+def run_storage(path: Annotated[Path, Depends(run_path)]) -> Iterator[Hdf5Reader]:
+    """The run as it is on disk now (every flushed row), read-only, released after the request."""
+    reader = Hdf5Reader(path)
+    try:
+        yield reader
+    finally:
+        reader.close()

@@ -242,3 +242,4 @@ class Hdf5Storage(InMemoryStorage):
             self._file.close()
             self._file = None
             self.read_only = True
+

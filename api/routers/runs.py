@@ -12,7 +12,7 @@ from api.registry import RunRegistry
 from api.schemas import RunStatus
 from api.views import run_view
 from protocol.errors import StorageError
-from storage.hdf5 import Hdf5Storage
+from storage.hdf5_reader import Hdf5Reader
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 
@@ -22,13 +22,14 @@ def list_runs(reg: Annotated[RunRegistry, Depends(registry)]) -> list[dict[str, 
     out = []
     for path in reg.runs().values():
         try:
-            out.append(run_view(Hdf5Storage.open_read(path), path))
+            with Hdf5Reader(path) as reader:
+                out.append(run_view(reader, path))
         except StorageError:
             continue  # a file being replaced (resume) shows up again on the next call
     return out
 
 
 @router.get("/{run_id}", response_model=RunStatus, summary="Status of one run")
-def get_run(storage: Annotated[Hdf5Storage, Depends(run_storage)],
+def get_run(storage: Annotated[Hdf5Reader, Depends(run_storage)],
             path: Annotated[Path, Depends(run_path)]) -> dict[str, Any]:
     return run_view(storage, path)

@@ -10,19 +10,19 @@ from api.deps import run_storage
 from api.errors import NotFound
 from api.schemas import Trial
 from api.views import trial_view
-from storage.hdf5 import Hdf5Storage
+from storage.hdf5_reader import Hdf5Reader
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["trials"])
 
 
 @router.get("/best", response_model=list[Trial], summary="The k best complete trials, best first")
-def best(storage: Annotated[Hdf5Storage, Depends(run_storage)],
+def best(storage: Annotated[Hdf5Reader, Depends(run_storage)],
          k: Annotated[int, Query(ge=1, le=1000, description="how many trials")] = 10) -> list[dict[str, Any]]:
     return [trial_view(storage, rec) for rec in storage.best(k)]
 
 
 @router.get("/trials/{trial_id}", response_model=Trial, summary="One trial")
-def trial(storage: Annotated[Hdf5Storage, Depends(run_storage)],
+def trial(storage: Annotated[Hdf5Reader, Depends(run_storage)],
           trial_id: Annotated[int, Path(ge=0, le=2**62, description="trial number")]) -> dict[str, Any]:
     n = storage.n_trials()
     if trial_id >= n:

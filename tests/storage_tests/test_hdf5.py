@@ -159,3 +159,25 @@ def test_resume_can_raise_the_budget_but_not_below_what_was_sampled(tmp_path):
     with Hdf5Storage.resume(path, trials_budget=50) as s:
         assert s.run_meta().trials_budget == 50 and s.n_trials() == 6
     assert read_meta(path).trials_budget == 50
+
+
+def test_lazy_reader_agrees_with_the_writer_on_a_live_file(tmp_path):
+    from storage.hdf5_reader import Hdf5Reader
+
+    path = tmp_path / "run.h5"
+    s = Hdf5Storage.create(path, make_meta())
+    fill(s, 12, 9)
+    s.finish_trial(10, result(10, 4.5, seed=10), 4.5)
+    s.flush()
+    with Hdf5Reader(path) as r:
+        assert r.n_trials() == 12 and r.counts() == s.counts()
+        assert r.best_ids(4) == s.best_ids(4)
+        assert r.trial(10) == s.trial(10) and r.best(2) == s.best(2)
+        assert r.run_meta() == s.run_meta()
+        with pytest.raises(StorageError, match="no such trial"):
+            r.trial(12)
+        with pytest.raises(StorageError, match="read-only"):
+            r.add_trial(12, np.zeros(3), np.zeros(3), "monte_carlo", -1, 0)
+    s.close()
+    with pytest.raises(StorageError, match="does not exist"):
+        Hdf5Reader(tmp_path / "nope.h5")
