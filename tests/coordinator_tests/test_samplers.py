@@ -93,3 +93,22 @@ def test_sampler_settings_round_trip_and_validate():
         GaussianHillClimbSampler(3, seed=0, sigma=0.0)
     with pytest.raises(ConfigError, match="unknown sampler"):
         sampler_from_dict({"kind": "Nope"}, 3)
+
+
+@pytest.mark.parametrize("make", [
+    lambda: RandomSampler(3, seed=21),
+    lambda: GaussianHillClimbSampler(3, seed=21, startup_trials=5),
+    lambda: GaussianHillClimbSampler(3, seed=21, sigma=0.2, top_k=3, startup_trials=0),
+], ids=["random", "hill-climb", "hill-climb-top3"])
+def test_sampler_contract(storage, make):
+    """Every sampler: vectors in the unit cube, known phases, valid parents, reproducible from storage."""
+    sampler = make()
+    props = [record(storage, sampler, score=float(i % 7)) for i in range(40)]
+    for i, p in enumerate(props):
+        assert p.params_unit.shape == (3,) and 0 <= p.params_unit.min() and p.params_unit.max() <= 1
+        assert p.phase in ("monte_carlo", "gaussian")
+        assert (p.parent == -1) == (p.phase == "monte_carlo") and p.parent < i
+    # A fresh sampler over the same storage (a restarted coordinator) proposes the same next trial.
+    again = sampler_from_dict(sampler.describe(), 3)
+    a, b = sampler.propose(40, storage), again.propose(40, storage)
+    assert np.array_equal(a.params_unit, b.params_unit) and (a.phase, a.parent) == (b.phase, b.parent)
