@@ -105,7 +105,7 @@ def test_sampler_contract(storage, make):
     sampler = make()
     props = [record(storage, sampler, score=float(i % 7)) for i in range(40)]
     for i, p in enumerate(props):
-        assert p.params_unit.shape == (3,) and 0 <= p.params_unit.min() and p.params_unit.max() <= 1
+        assert p.params_unit.shape == (3,) and p.params_unit.min() >= 0 and p.params_unit.max() <= 1
         assert p.phase in ("monte_carlo", "gaussian")
         assert (p.parent == -1) == (p.phase == "monte_carlo") and p.parent < i
     # A fresh sampler over the same storage (a restarted coordinator) proposes the same next trial.
