@@ -145,12 +145,13 @@ def _start_api(path: Path, host: str, port: int) -> tuple[Any, threading.Thread,
 
 
 def _progress(core: Any, final: bool = False) -> str:
-    st = core.status()
+    with core.lock:  # the transport threads write the table concurrently
+        st = core.status()
+        best = core.study.storage.best(1)
     done = st["trials_complete"] + st["trials_failed"]
     budget = st["trials_budget"]
     width = 24
     fill = int(width * done / max(budget, 1))
-    best = core.study.storage.best(1)
     best_s = f"{best[0].distance_m:.3f} m" if best else "-"
     eta = "-" if st["eta_s"] is None else f"{st['eta_s']:.0f}s"
     return (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{budget} trials ({st['trials_failed']} failed)  "
