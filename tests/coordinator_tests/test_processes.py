@@ -226,3 +226,39 @@ def test_ctrl_c_stops_a_local_search_with_everything_stored_and_resume_extends_i
                         "--quiet")
     assert resumed.wait(60) == 0
     assert_every_trial_once(out, 150)
+
+
+@pytest.mark.slow
+def test_repeated_sigkills_of_the_coordinator_at_random_moments(tmp_path):
+    """kill -9 at any moment: every time the file opens with its flushed rows and the run resumes."""
+    import random
+    import time
+
+    ep, out = free_endpoint(), tmp_path / "run.h5"
+    budget = 3000
+    rng = random.Random(4)
+    coord = coordinator(ep, out, "sphere:6", "--trials", str(budget), "--duration", "0.002", "--run-id", "rk")
+    workers = [worker(ep, "rk", f"w{i}") for i in range(2)]
+    kept = {}
+    try:
+        for _ in range(6):
+            wait_for(lambda: out.exists() and status(out).get("trials_complete", 0) > len(kept), timeout_s=60,
+                     poll_s=0.05, what="progress since the last resume")
+            time.sleep(rng.uniform(0.0, 1.5))  # a random moment, not a deadline
+            if coord.poll() is not None:
+                break
+            coord.send_signal(signal.SIGKILL)
+            coord.wait(10)
+            _, cols = read_run(out)
+            done = np.flatnonzero(cols["status"] == b"complete")
+            for i in np.flatnonzero(cols["status"] != b"waiting"):
+                if int(i) in kept:  # a finished trial never changes across kills
+                    assert kept[int(i)] == float(cols["distance_m"][i])
+            kept.update({int(i): float(cols["distance_m"][i]) for i in done})
+            coord = coordinator(ep, out, "--resume", str(out))
+        assert coord.wait(120) == 0
+        s = assert_every_trial_once(out, budget)
+        dist = s.columns()["distance_m"]
+        assert all(dist[i] == d for i, d in kept.items())
+    finally:
+        stop(coord, *workers)
