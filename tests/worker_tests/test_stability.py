@@ -68,3 +68,20 @@ def test_every_builtin_is_stable_at_its_default_step():
             assert est.dt_limit_s < TrialConfig().dt_s
         else:
             assert est.dt_limit_s > TrialConfig().dt_s, name
+
+
+def light_segments(morph: Morphology, factor: float) -> Morphology:
+    mats = tuple((t, dataclasses.replace(m, density_kg_per_cm3=m.density_kg_per_cm3 * factor))
+                 for t, m in morph.structure.rod_materials)
+    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, rod_materials=mats))
+
+
+def test_light_segments_are_limited_by_damping_and_run_at_the_auto_step():
+    light = light_segments(load_morphology("tetraspine-ntrt"), 0.02)  # 49 g segments, 38 cm levers
+    est = estimate_stable_step(light)
+    assert est.dt_damping_limit_s < est.dt_spring_limit_s  # damping rates, not stiffness, set the limit
+    u = random_unit_params(light, 1)
+    ok = run_trial(light, u, TrialConfig(duration_s=0.5, auto_dt=True), 1)
+    assert ok.status == TrialStatus.COMPLETE, ok.reason
+    forced = run_trial(light, u, TrialConfig(duration_s=0.5, dt_s=10 * est.dt_limit_s, refuse_unstable_dt=False), 1)
+    assert forced.status == TrialStatus.FAILED and forced.reason.startswith("diverged")
