@@ -105,10 +105,19 @@ def _reference(args: tuple) -> dict[str, Any]:
     return {**row, "converged": converged, "history": history, "twin_distance_m": twin.get("distance_m")}
 
 
-def rel(a: float | None, b: float | None) -> float:
+DISTANCE_FLOOR_M = 0.01  # errors of gaits that barely move are taken relative to 1 cm
+
+
+def rel(a: float | None, b: float | None, floor: float = 1e-9) -> float:
     if a is None or b is None or not (math.isfinite(a) and math.isfinite(b)):
         return math.inf
-    return abs(a - b) / max(abs(b), 1e-9)
+    return abs(a - b) / max(abs(b), floor)
+
+
+def abs_cm(a: float | None, b: float | None) -> float:
+    if a is None or b is None or not (math.isfinite(a) and math.isfinite(b)):
+        return math.inf
+    return abs(a - b) * 100.0
 
 
 def pareto(rows: list[dict[str, Any]]) -> list[str]:
@@ -147,7 +156,9 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
     table = []
     for i, s in enumerate(settings):
         mine = runs[i * len(sets):(i + 1) * len(sets)]
-        d_err = [rel(r.get("distance_m"), ref.get("distance_m")) for r, ref in zip(mine, refs, strict=True)]
+        pairs = list(zip(mine, refs, strict=True))
+        d_err = [rel(r.get("distance_m"), ref.get("distance_m"), DISTANCE_FLOOR_M) for r, ref in pairs]
+        d_cm = [abs_cm(r.get("distance_m"), ref.get("distance_m")) for r, ref in pairs]
         c_err = [rel(r.get("cot"), ref.get("cot")) for r, ref in zip(mine, refs, strict=True)]
         rms = [scoring.rms_path_error_cm(np.array(r["path"]), np.array(r["path_t"]), np.array(ref["path"]),
                                          np.array(ref["path_t"])) if "path" in r and "path" in ref else math.inf
@@ -156,11 +167,12 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
             "label": s.label, "group": s.group, "numerical": s.numerical, "overrides": s.overrides,
             "wall_s_per_sim_s": median(r["wall_s_per_sim_s"] for r in mine),
             "median_distance_error": median(d_err), "max_distance_error": max(d_err),
+            "median_distance_error_cm": median(d_cm),
             "median_cot_error": median(c_err), "median_rms_path_error_cm": median(rms),
             "statuses": [r["status"] for r in mine], "reasons": [r["reason"] for r in mine if r["reason"]],
             "distance_errors": d_err,
         })
-    chaos = [rel(ref.get("twin_distance_m"), ref.get("distance_m")) for ref in refs]
+    chaos = [rel(ref.get("twin_distance_m"), ref.get("distance_m"), DISTANCE_FLOOR_M) for ref in refs]
     floor = median(chaos)
     front = pareto(table)
     threshold = max(0.01, floor)
@@ -221,15 +233,18 @@ def plot(report: dict[str, Any], path: str) -> None:
 
 
 def format_table(report: dict[str, Any]) -> str:
-    lines = [f"{'setting':36s} {'wall/sim':>9s} {'dist err':>9s} {'max':>9s} {'COT err':>9s} {'RMS path':>9s}  status",
-             "-" * 100]
+    lines = [f"{'setting':36s} {'wall/sim':>9s} {'dist err':>9s} {'(cm)':>8s} {'max':>9s} {'COT err':>9s} "
+             f"{'RMS path':>9s}  status", "-" * 110]
     front = set(report["pareto_front"])
     for r in report["table"]:
         mark = "*" if r["label"] in front else " "
         bad = sum(s != "complete" for s in r["statuses"])
         lines.append(f"{mark}{r['label']:35s} {r['wall_s_per_sim_s']:9.3f} {r['median_distance_error']:9.2%} "
+                     f"{r['median_distance_error_cm']:8.2f} "
                      f"{r['max_distance_error']:9.2%} {r['median_cot_error']:9.2%} "
                      f"{r['median_rms_path_error_cm']:8.2f}cm  {'ok' if not bad else f'{bad} not complete'}")
+    refs = ", ".join(f"{r['distance_m'] * 100:.2f}" for r in report["reference"] if r["distance_m"] is not None)
+    lines.append(f"reference distances (cm): {refs}; errors relative to max(reference, 1 cm)")
     lines.append(f"chaos floor {report['chaos_floor']:.2%}; * Pareto front; recommended: {report['recommended']} "
                  f"({report['recommendation_reason']})")
     return "\n".join(lines)
