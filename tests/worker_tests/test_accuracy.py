@@ -1,0 +1,32 @@
+"""`spinefarm accuracy`: a tiny sweep end to end through the command line."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+from worker.accuracy import pareto
+
+
+def test_accuracy_command_writes_table_json_and_plot(tmp_path):
+    out = tmp_path / "acc"
+    proc = subprocess.run(
+        [sys.executable, "-m", "cli.main", "accuracy", "tetraspine-ntrt", "--quick", "--seeds", "1",
+         "--duration", "0.2", "--jobs", "2", "--out", str(out), "--json"],
+        capture_output=True, text=True, check=True)
+    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert 0.0 <= report["default_distance_error"] < math.inf
+    labels = [r["label"] for r in report["table"]]
+    assert "dt 1 ms (default)" in labels and any(lbl.startswith("scene: rough") for lbl in labels)
+    assert report["recommended"] in labels and set(report["pareto_front"]) <= set(labels)
+    assert json.loads(out.with_suffix(".json").read_text())["morphology"] == "tetraspine-ntrt"
+    assert out.with_suffix(".png").stat().st_size > 10_000
+    assert "Pareto front" in proc.stdout
+
+
+def test_pareto_front_keeps_only_undominated_settings():
+    rows = [{"label": lbl, "numerical": True, "wall_s_per_sim_s": w, "median_distance_error": e}
+            for lbl, w, e in (("a", 1.0, 0.3), ("b", 2.0, 0.1), ("c", 3.0, 0.2), ("d", 4.0, 0.05))]
+    assert pareto(rows) == ["a", "b", "d"]
