@@ -75,9 +75,11 @@ class CoordinatorCore:
         except MessageError as exc:
             return self._error("work request", exc)
         with self.lock:
+            verdicts = self._settle_all(req.worker_id, req.results)  # before "done": they may finish it
             if self.study.done:
                 self.told_done.add(req.worker_id)
-                return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True))
+                return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True,
+                                                verdicts))
             leases = self.scheduler.grant(req.worker_id, req.capacity, self.study.ask)
             cols = self.study.storage.columns()
             assignments = tuple(
@@ -85,24 +87,29 @@ class CoordinatorCore:
                                 int(cols["seed"][ls.trial_id]), ls.deadline_s - self.clock())
                 for ls in leases)
         retry = 0.0 if assignments else self.idle_retry_s
-        return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False))
+        return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False, verdicts))
 
     def handle_results(self, payload: bytes) -> bytes:
         try:
             sub = decode_message(payload, ResultSubmission)
         except MessageError as exc:
             return self._error("result submission", exc)
-        verdicts = []
         with self.lock:
-            self.scheduler.contact(sub.worker_id)
-            for item in sub.items:
-                v = self._settle(sub.worker_id, item.lease_id, item.result)
-                verdicts.append((item.result.trial_id, v))
-                if v == Verdict.STORED:
-                    self._finish_times.append(self.clock())
-                else:
-                    self.dropped_results[v.value] += 1
-        return encode_message(ResultAck(tuple(verdicts)))
+            verdicts = self._settle_all(sub.worker_id, sub.items)
+        return encode_message(ResultAck(verdicts))
+
+    def _settle_all(self, worker_id: str, items: tuple) -> tuple[tuple[int, Verdict], ...]:
+        """Verdicts for submitted results (caller holds the lock)."""
+        self.scheduler.contact(worker_id)
+        verdicts = []
+        for item in items:
+            v = self._settle(worker_id, item.lease_id, item.result)
+            verdicts.append((item.result.trial_id, v))
+            if v == Verdict.STORED:
+                self._finish_times.append(self.clock())
+            else:
+                self.dropped_results[v.value] += 1
+        return tuple(verdicts)
 
     def _settle(self, worker_id: str, lease_id: int, result: Any) -> Verdict:
         storage = self.study.storage

@@ -186,14 +186,20 @@ def _finite(value: float, name: str, what: str) -> float:
 
 @dataclass(frozen=True)
 class WorkRequest:
-    """A worker asks a run for up to `capacity` trials."""
+    """A worker asks a run for up to `capacity` trials, returning finished ones on the way.
+
+    results: finished trials carried with the request (saves a round trip per batch); the grant's
+    verdicts acknowledge them exactly as a ResultAck would.
+    """
 
     KIND = "work_request"
     worker_id: str
     capacity: int
+    results: tuple[SubmittedResult, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        return {"worker_id": self.worker_id, "capacity": self.capacity}
+        return {"worker_id": self.worker_id, "capacity": self.capacity,
+                "results": [r.to_dict() for r in self.results]}
 
     @classmethod
     def from_dict(cls, data: Any) -> WorkRequest:
@@ -202,7 +208,11 @@ class WorkRequest:
         if not worker_id or not 1 <= capacity <= _MAX_BATCH:
             raise MessageError("work request is out of range", received=(worker_id, capacity),
                                expected=f"a non-empty worker id and 1 <= capacity <= {_MAX_BATCH}")
-        return cls(worker_id, capacity)
+        items = _field(data, "results", list, "work request") if "results" in data else []
+        if len(items) > _MAX_BATCH:
+            raise MessageError("work request carries too many results", received=len(items),
+                               expected=f"at most {_MAX_BATCH}")
+        return cls(worker_id, capacity, tuple(SubmittedResult.from_dict(i) for i in items))
 
 
 @dataclass(frozen=True)
@@ -248,20 +258,23 @@ class WorkGrant:
     assignments: tuple[TrialAssignment, ...]
     retry_after_s: float = 0.0
     run_done: bool = False
+    verdicts: tuple[tuple[int, Verdict], ...] = ()   # for the results the request carried
 
     def to_dict(self) -> dict[str, Any]:
         return {"run_id": self.run_id, "config_hash": self.config_hash,
                 "assignments": [a.to_dict() for a in self.assignments],
-                "retry_after_s": self.retry_after_s, "run_done": self.run_done}
+                "retry_after_s": self.retry_after_s, "run_done": self.run_done,
+                "verdicts": ResultAck(self.verdicts).to_dict()["verdicts"]}
 
     @classmethod
     def from_dict(cls, data: Any) -> WorkGrant:
         what = "work grant"
         items = _field(data, "assignments", list, what)
+        verdicts = ResultAck.from_dict({"verdicts": data.get("verdicts", [])}).verdicts
         return cls(_field(data, "run_id", str, what), _field(data, "config_hash", str, what),
                    tuple(TrialAssignment.from_dict(a) for a in items),
                    _finite(_field(data, "retry_after_s", (int, float), what), "retry_after_s", what),
-                   _field(data, "run_done", bool, what))
+                   _field(data, "run_done", bool, what), verdicts)
 
 
 @dataclass(frozen=True)

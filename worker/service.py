@@ -167,6 +167,7 @@ class WorkerService:
         self._evaluators: dict[str, Evaluator] = {}
         self._pending: dict[str, dict[int, SubmittedResult]] = {}   # run id -> trial id -> result
         self._done_runs: set[str] = set()
+        self._current: str | None = None   # the run a roaming worker serves now
         self.trials_run = 0
         self.stop = threading.Event()
 
@@ -194,10 +195,13 @@ class WorkerService:
         """The run to work for: the given one, else the first open run announced on the network."""
         if self.run_id is not None:
             return self.run_id
+        if self._current is not None and self._current not in self._done_runs:
+            return self._current  # stay with a run until it says done: no discovery per batch
         infos = self._ask(session, keys.all_run_infos(), None, RunInfo)
         self._done_runs.update(i.run_id for i in infos if i.run_done)
         open_runs = sorted(i.run_id for i in infos if i.run_id not in self._done_runs)
-        return open_runs[0] if open_runs else None
+        self._current = open_runs[0] if open_runs else None
+        return self._current
 
     def _evaluator(self, session: zenoh.Session, run_id: str, config_hash: str) -> Evaluator | None:
         if config_hash not in self._evaluators:
@@ -212,23 +216,27 @@ class WorkerService:
                 return None
         return self._evaluators[config_hash]
 
-    def _submit(self, session: zenoh.Session) -> bool:
-        """Send every unacknowledged result; True if nothing is left pending."""
+    def _apply(self, run_id: str, verdicts: tuple) -> None:
+        pending = self._pending.get(run_id, {})
+        for trial_id, verdict in verdicts:
+            if pending.pop(trial_id, None) is not None and verdict.value != "stored":
+                log.info("trial %d of run %s not stored: %s", trial_id, run_id, verdict.value)
+
+    def _submit(self, session: zenoh.Session, skip: str | None = None) -> bool:
+        """Send every unacknowledged result (but those of run `skip`); True if nothing is left pending."""
         for run_id, pending in list(self._pending.items()):
-            if not pending:
+            if not pending or run_id == skip:
                 continue
             sub = ResultSubmission(self.worker_id, tuple(pending.values()))
             acks, refused = self._query(session, keys.results(run_id), encode_message(sub), ResultAck)
             for ack in acks:
-                for trial_id, verdict in ack.verdicts:
-                    if pending.pop(trial_id, None) is not None and verdict.value != "stored":
-                        log.info("trial %d of run %s not stored: %s", trial_id, run_id, verdict.value)
+                self._apply(run_id, ack.verdicts)
             if refused and not acks:
                 # The coordinator answered but refused the batch: resending it would loop forever.
                 log.error("run %s refused %d results; dropping them (their leases will expire)",
                           run_id, len(pending))
                 pending.clear()
-        return not any(self._pending.values())
+        return not any(pending for run_id, pending in self._pending.items() if run_id != skip)
 
     def _run_one(self, evaluate: Evaluator, a: TrialAssignment) -> TrialResult:
         t0 = time.perf_counter()
@@ -270,10 +278,11 @@ class WorkerService:
         backoff = Backoff()
         idle_since: float | None = None
         while not self.stop.is_set():
-            if not self._submit(session):
+            run_id = self._discover(session)
+            # Results of other runs go on their own; this run's ride along with the next work request.
+            if not self._submit(session, skip=run_id):
                 self.stop.wait(backoff.next())
                 continue
-            run_id = self._discover(session)
             if run_id is None:
                 # Without a given run, "done" means no open run seen for a while, not one empty answer.
                 idle_since = idle_since if idle_since is not None else time.monotonic()
@@ -282,17 +291,20 @@ class WorkerService:
                 self.stop.wait(backoff.next())
                 continue
             idle_since = None
-            req = encode_message(WorkRequest(self.worker_id, self.batch.size()))
-            grants = self._ask(session, keys.work(run_id), req, WorkGrant)
+            carried = tuple(self._pending.get(run_id, {}).values())
+            req = encode_message(WorkRequest(self.worker_id, self.batch.size(), carried))
+            grants, refused = self._query(session, keys.work(run_id), req, WorkGrant)
             if not grants:
+                if refused and carried:
+                    self._submit(session)  # let the result path decide what to do with them
                 self.stop.wait(backoff.next())
                 continue
             grant = grants[0]
+            self._apply(run_id, grant.verdicts)
             if grant.run_done:
                 self._done_runs.add(run_id)
-                if self.exit_when_done:
-                    return
-                self.stop.wait(grant.retry_after_s)
+                if self.exit_when_done and self.run_id is not None:
+                    return  # a roaming worker looks for another open run first
                 continue
             if not grant.assignments:
                 self.stop.wait(grant.retry_after_s)

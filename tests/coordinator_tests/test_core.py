@@ -198,3 +198,27 @@ def test_status_reports_counts_rate_and_workers():
     assert st["rate_trials_s"] == pytest.approx(1.0)
     assert st["eta_s"] == pytest.approx(8.0)
     assert [w["worker_id"] for w in st["workers"]] == ["w1"]
+
+
+def test_results_can_ride_along_with_the_next_work_request():
+    core, storage, _ = sphere_core(trials=3)
+    first = ask(core, n=2).assignments
+    carried = tuple(SubmittedResult(a.lease_id, res(a, distance=1.5)) for a in first)
+    grant = decode_message(core.handle_work(encode_message(WorkRequest("w1", 2, carried))), WorkGrant)
+    assert dict(grant.verdicts) == {0: Verdict.STORED, 1: Verdict.STORED}
+    assert [a.trial_id for a in grant.assignments] == [2]
+    (last,) = grant.assignments
+    final = WorkRequest("w1", 1, (SubmittedResult(last.lease_id, res(last)),))
+    done = decode_message(core.handle_work(encode_message(final)), WorkGrant)
+    assert done.run_done and dict(done.verdicts) == {2: Verdict.STORED}  # settled before "done"
+    assert storage.counts()["complete"] == 3
+
+
+def test_malformed_carried_results_refuse_the_whole_request():
+    core, storage, _ = sphere_core()
+    ask(core, n=1)
+    before = snapshot(storage)
+    bad = encode("work_request", {"worker_id": "w1", "capacity": 1, "results": [{"lease_id": 1}]})
+    kind, body = decode(core.handle_work(bad))
+    assert kind == "error" and "result" in body["message"]
+    assert_unchanged(before, storage)
