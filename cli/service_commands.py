@@ -52,6 +52,7 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
     p.add_argument("--duration", type=float, metavar="S", help="simulated seconds per trial")
     p.add_argument("--out", metavar="RUN.h5", help="run file (default runs/<run id>.h5)")
     p.add_argument("--resume", metavar="RUN.h5", help="continue the run stored in this file")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     p.add_argument("--run-id", help="run id (default <morphology>-<time>-<random>)")
     p.add_argument("--seed", type=int, default=0, help="run seed: fixes every sampled vector by trial number")
     p.add_argument("--objective", default="distance", help="distance (default), speed or cot_distance")
@@ -129,6 +130,11 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     settings = SearchSettings(trials=2000 if args.trials is None else args.trials, sigma=args.sigma, top_k=args.top_k,
                               startup_trials=args.startup_trials, lease_s=lease)
     out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
+    if args.overwrite:
+        from storage.status import status_path
+
+        out.unlink(missing_ok=True)
+        status_path(out).unlink(missing_ok=True)
     core, storage = new_run(config, settings, out)
     return core, storage, out
 

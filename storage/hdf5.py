@@ -162,7 +162,7 @@ class Hdf5Storage(InMemoryStorage):
         path = Path(path)
         if path.exists():
             raise StorageError("run file already exists", received=str(path),
-                               expected="a new path (or --resume to continue it)")
+                               expected="a new path (or --resume to continue it, --overwrite to replace it)")
         path.parent.mkdir(parents=True, exist_ok=True)
         write_run(path, meta, TrialTable(meta.n_params).columns())
         return cls._open_writer(path, meta, TrialTable(meta.n_params))
