@@ -30,6 +30,9 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
         "params_unit": dict(zip(names, rec.params_unit, strict=True)),
         "worker_id": rec.worker_id or None,
         "finished_at_unix_s": _num(rec.finished_at_unix_s),
+        "verification": {"verdict": rec.verification or "not_checked",
+                         "fine_step_distance_m": _num(rec.verify_distance_m),
+                         "reason": rec.verify_reason or None},
     }
 
 

@@ -69,6 +69,12 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
                                                                else "default off; ") + "-1 = off)")
     p.add_argument("--api-host", default="127.0.0.1")
     p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.add_argument("--no-verify", action="store_true",
+                   help="do not re-simulate new bests at a finer step before they count")
+    p.add_argument("--verify-tolerance", type=float, default=0.05,
+                   help="relative distance change a re-simulated best may show (default 0.05)")
+    p.add_argument("--verify-perturb", action="store_true",
+                   help="also re-simulate with a jittered start pose and 10 %% more friction")
     _zenoh_args(p, "tcp/127.0.0.1:<free port>" if local else "tcp/127.0.0.1:7447")
 
 
@@ -127,8 +133,11 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     if lease is None:
         duration = config.trial_config.get("duration_s") or 0.0
         lease = max(60.0, 20.0 * float(duration))
+    from coordinator.verifier import VerifyPolicy
+
+    verify = VerifyPolicy(enabled=not args.no_verify, tolerance=args.verify_tolerance, perturb=args.verify_perturb)
     settings = SearchSettings(trials=2000 if args.trials is None else args.trials, sigma=args.sigma, top_k=args.top_k,
-                              startup_trials=args.startup_trials, lease_s=lease)
+                              startup_trials=args.startup_trials, lease_s=lease, verify=verify)
     out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
     if args.overwrite:
         from storage.status import status_path
@@ -174,8 +183,10 @@ def _describe_best(core: Any, path: Path) -> str:
     units = storage.run_meta().param_units
     params = ", ".join(f"{n}={v:.4g}{(' ' + u) if u and u != '1' else ''}"
                        for n, v, u in zip(names, b.params, units, strict=True))
+    check = {"holds": f"holds at a finer step ({b.verify_distance_m:.4g} m)",
+             "pending": "verification pending", "": "not verified"}.get(b.verification, b.verification)
     return (f"best trial {b.trial_id} ({b.phase}): objective {b.objective:.4g}, distance {b.distance_m:.4g} m, "
-            f"speed {b.speed_cm_s:.4g} cm/s, work {b.work_j:.4g} J, COT {b.cot:.4g}\n"
+            f"speed {b.speed_cm_s:.4g} cm/s, work {b.work_j:.4g} J, COT {b.cot:.4g}; {check}\n"
             f"  params: {params}\nfile: {path}")
 
 
@@ -248,11 +259,17 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
         end = time.monotonic() + 5.0
         while core.done and not core.workers_released() and time.monotonic() < end:
             time.sleep(0.05)  # let remote workers hear "done" before the coordinator goes away
+        if core.done and core.verifier is not None and core.verifier.pending:
+            print("\nre-simulating the best at a finer step before reporting it ...", file=sys.stderr)
+            if not core.finish_verifications(timeout_s=600.0):
+                print("verification still running; the best is reported unverified", file=sys.stderr)
     except KeyboardInterrupt:
         code = 130
     finally:
         _stop_workers(procs)
         service.close()
+        if core.verifier is not None:
+            core.verifier.close()
         if api is not None:
             api[0].should_exit = True
             api[1].join(5)

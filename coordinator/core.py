@@ -17,6 +17,7 @@ from typing import Any
 
 from coordinator.scheduler import Scheduler
 from coordinator.study import Study
+from coordinator.verifier import Verifier
 from protocol.errors import MessageError
 from protocol.messages import (
     ResultAck,
@@ -38,7 +39,8 @@ _RATE_WINDOW_S = 30.0
 
 class CoordinatorCore:
     def __init__(self, study: Study, scheduler: Scheduler, run_config: RunConfig,
-                 clock: Callable[[], float] = time.monotonic, idle_retry_s: float = 0.5) -> None:
+                 clock: Callable[[], float] = time.monotonic, idle_retry_s: float = 0.5,
+                 verifier: Verifier | None = None) -> None:
         self.study = study
         self.scheduler = scheduler
         self.run_config = run_config
@@ -54,6 +56,9 @@ class CoordinatorCore:
         self._config_payload = encode_message(run_config)
         # Trials sampled but never finished before a restart are issued again first.
         scheduler.enqueue(study.storage.waiting_ids())
+        self.verifier = verifier
+        if verifier is not None:  # a verification cut short by a restart is started again
+            self._verify_best()
 
     @property
     def run_id(self) -> str:
@@ -128,7 +133,49 @@ class CoordinatorCore:
             result = replace(result, worker_id=worker_id)
         self.study.tell(result)
         self.scheduler.release(tid)
+        if self.verifier is not None and result.ok:
+            self._verify_best()
         return Verdict.STORED
+
+    # --- verification of new bests ----------------------------------------------------------------
+    def _verify_best(self) -> None:
+        """Start re-simulating the current best unless it is checked or being checked (caller holds the lock)."""
+        storage = self.study.storage
+        best = storage.best_ids(1)
+        if not best:
+            return
+        tid = best[0]
+        cols = storage.columns()
+        if cols["verification"][tid] in (b"holds", b"not_reproduced") or tid in self.verifier.pending:
+            return
+        storage.set_verification(tid, "pending")
+        self.verifier.submit(tid, cols["params_unit"][tid].tolist(), int(cols["seed"][tid]),
+                             float(cols["distance_m"][tid]))
+
+    def collect_verifications(self, wait_s: float = 0.0) -> int:
+        """Store finished verdicts; a best that did not hold hands the check to the next best."""
+        if self.verifier is None:
+            return 0
+        done = self.verifier.collect(wait_s)
+        with self.lock:
+            for tid, v in done:
+                verdict = "holds" if v["holds"] else "not_reproduced"
+                self.study.storage.set_verification(tid, verdict, v.get("fine_distance_m", float("nan")),
+                                                    "" if v["holds"] else v["verdict"])
+                if not v["holds"]:
+                    log.warning("best trial %d not reproduced: %s", tid, v["verdict"])
+            if done:
+                self._verify_best()
+        return len(done)
+
+    def finish_verifications(self, timeout_s: float) -> bool:
+        """Wait (up to timeout_s) until the best is verified; True if nothing is left pending."""
+        if self.verifier is None:
+            return True
+        end = time.monotonic() + timeout_s
+        while self.verifier.pending and time.monotonic() < end:
+            self.collect_verifications(wait_s=min(1.0, max(0.0, end - time.monotonic())))
+        return not self.verifier.pending
 
     def workers_released(self) -> bool:
         """Every live worker has heard that the run is done (so it can exit before we do)."""
@@ -157,7 +204,8 @@ class CoordinatorCore:
         return lost
 
     def tick(self) -> list[int]:
-        """Expire overdue leases (called periodically by the transport)."""
+        """Expire overdue leases and store finished verifications (called periodically by the transport)."""
+        self.collect_verifications()
         with self.lock:
             return self.scheduler.expire()
 

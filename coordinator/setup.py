@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from coordinator.core import CoordinatorCore
@@ -11,6 +11,7 @@ from coordinator.objectives import objective_fn
 from coordinator.samplers import GaussianHillClimbSampler, sampler_from_dict
 from coordinator.scheduler import Scheduler
 from coordinator.study import Study
+from coordinator.verifier import Verifier, VerifyPolicy
 from protocol.errors import ConfigError, check_range
 from protocol.messages import RunConfig
 from storage.base import BaseStorage
@@ -36,6 +37,7 @@ class SearchSettings:
     top_k: int = 1
     startup_trials: int | None = None   # None: half the budget is Monte Carlo
     lease_s: float = 60.0
+    verify: VerifyPolicy = field(default_factory=VerifyPolicy)
 
     def __post_init__(self) -> None:
         check_range("trials", self.trials, 1)
@@ -54,7 +56,8 @@ def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
                    objective=config.objective, seed=config.seed, trials_budget=settings.trials,
                    sampler=sampler.describe(), software_version=software_version(),
                    created_at_unix_s=time.time(), config_hash=config.config_hash(),
-                   extra={"run_config": config.to_dict(), "lease_s": settings.lease_s})
+                   extra={"run_config": config.to_dict(), "lease_s": settings.lease_s,
+                          "verify": settings.verify.to_dict()})
 
 
 def build_core(storage: BaseStorage, clock=time.monotonic) -> CoordinatorCore:
@@ -65,7 +68,9 @@ def build_core(storage: BaseStorage, clock=time.monotonic) -> CoordinatorCore:
     sampler = sampler_from_dict(meta.sampler, len(space))
     study = Study(storage, sampler, space, meta.trials_budget, objective_fn(meta.objective), meta.seed)
     scheduler = Scheduler(clock, float(meta.extra.get("lease_s", 60.0)))
-    return CoordinatorCore(study, scheduler, config, clock)
+    policy = VerifyPolicy.from_dict(meta.extra.get("verify"))
+    verifier = Verifier(config, policy) if policy.enabled and Verifier.applies_to(config) else None
+    return CoordinatorCore(study, scheduler, config, clock, verifier=verifier)
 
 
 def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,

@@ -84,6 +84,17 @@ class BaseStorage:
             "finished_at_unix_s": time.time() if finished_at_unix_s is None else finished_at_unix_s})
         return True
 
+    def set_verification(self, trial_id: int, verdict: str, distance_m: float = math.nan, reason: str = "") -> None:
+        """Record the re-simulation verdict of a trial (pending, holds, not_reproduced)."""
+        self._writable()
+        if not 0 <= trial_id < self.n_trials():
+            raise StorageError("no such trial", received=trial_id, expected=f"0 <= id < {self.n_trials()}")
+        if verdict not in ("pending", "holds", "not_reproduced"):
+            raise StorageError("unknown verification verdict", received=verdict,
+                               expected="pending, holds or not_reproduced")
+        self._update(trial_id, {"verification": verdict.encode(), "verify_distance_m": distance_m,
+                                "verify_reason": reason.encode("utf-8", "replace")[:160]})
+
     def trial(self, trial_id: int) -> TrialRecord:
         cols = self.columns()
         n = len(cols["trial_id"])
@@ -99,7 +110,9 @@ class BaseStorage:
         """Ids of the k complete trials with the highest objective, best first (ties: lower id)."""
         cols = self.columns()
         obj = cols["objective"]
-        score = np.where((cols["status"] == b"complete") & np.isfinite(obj), obj, -np.inf)
+        # a result a finer re-simulation did not reproduce never counts as best
+        valid = (cols["status"] == b"complete") & (cols["verification"] != b"not_reproduced")
+        score = np.where(valid & np.isfinite(obj), obj, -np.inf)
         k = min(k, int(np.count_nonzero(np.isfinite(score))))
         if k <= 0:
             return []

@@ -53,7 +53,16 @@ class InMemoryStorage(BaseStorage):
         self._ranking = [(-float(objective[i]), i) for i in BaseStorage.best_ids(self, self.table.n)]
 
     def best_ids(self, k: int) -> list[int]:
-        return [i for _, i in self._ranking[: max(k, 0)]]
+        if k <= 0:
+            return []
+        verification = self.table.columns()["verification"]
+        out = []
+        for _, i in self._ranking:
+            if verification[i] != b"not_reproduced":
+                out.append(i)
+                if len(out) == k:
+                    break
+        return out
 
     def n_trials(self) -> int:
         return self.table.n

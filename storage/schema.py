@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-FILE_SCHEMA_VERSION = 1
+FILE_SCHEMA_VERSION = 2
 
 PHASES = ("monte_carlo", "gaussian")
 STATUSES = ("waiting", "complete", "failed")
@@ -46,7 +46,12 @@ COLUMNS: tuple[Column, ...] = (
     Column("wall_time_s", "f8", "s", "wall-clock time the worker spent on the trial"),
     Column("worker_id", "S64", "", "worker that ran the trial"),
     Column("finished_at_unix_s", "f8", "s since 1970-01-01 UTC", "when the coordinator stored the result"),
+    Column("verification", "S16", "", "re-simulation of a trial that became best: empty (not checked), "
+           "pending, holds or not_reproduced (then it never counts as best)"),
+    Column("verify_distance_m", "f8", "m", "distance of that re-simulation at a finer step"),
+    Column("verify_reason", "S160", "", "what the re-simulation found when the distance did not hold"),
 )
+VERIFICATIONS = ("", "pending", "holds", "not_reproduced")
 COLUMN_BY_NAME = {c.name: c for c in COLUMNS}
 VECTOR_COLUMNS = ("params_unit", "params")
 SCORE_COLUMNS = ("distance_m", "ntrt_distance_cm", "speed_cm_s", "work_j", "cot", "mass_kg",
@@ -103,6 +108,9 @@ class TrialRecord:
     wall_time_s: float
     worker_id: str
     finished_at_unix_s: float
+    verification: str = ""
+    verify_distance_m: float = float("nan")
+    verify_reason: str = ""
 
     @classmethod
     def from_columns(cls, cols: dict[str, np.ndarray], i: int) -> TrialRecord:
@@ -121,3 +129,12 @@ class TrialRecord:
 
     def to_dict(self) -> dict[str, Any]:
         return {c.name: getattr(self, c.name) for c in COLUMNS}
+
+    def __eq__(self, other: object) -> bool:
+        # rows are data: a missing value (NaN) equals a missing value
+        if not isinstance(other, TrialRecord):
+            return NotImplemented
+        return all(a == b or (isinstance(a, float) and isinstance(b, float) and a != a and b != b)
+                   for a, b in zip(self.to_dict().values(), other.to_dict().values(), strict=True))
+
+    __hash__ = None  # type: ignore[assignment]

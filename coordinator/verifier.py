@@ -1,0 +1,110 @@
+"""Re-simulation of every new best before it counts ("no exploited physics").
+
+When a stored result becomes the run's best, the coordinator marks it pending and re-simulates it in
+a separate process (spawned, so the coordinator never imports the physics engine) at a finer step,
+optionally with a perturbed start pose and friction. The verdict is stored beside the result; a best
+that does not hold is excluded from "best" everywhere (samplers, API, the final report), and the next
+best is checked in turn.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from protocol.errors import check_range
+from protocol.messages import RunConfig
+
+log = logging.getLogger("spinefarm.verifier")
+
+
+@dataclass(frozen=True)
+class VerifyPolicy:
+    """refine: step divisor; tolerance: allowed relative change of the distance; perturb: also jitter
+    the start pose (0.01 cm) and raise friction by 10 %."""
+
+    enabled: bool = True
+    refine: int = 4
+    tolerance: float = 0.05
+    perturb: bool = False
+
+    def __post_init__(self) -> None:
+        check_range("verify refine", self.refine, 1, 64)
+        check_range("verify tolerance", self.tolerance, 0.0, 10.0, low_inclusive=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any] | None) -> VerifyPolicy:
+        return cls(**(d or {}))
+
+
+def _verify_job(morphology: Any, controller: str | None, trial_config: dict[str, Any], params_unit: list[float],
+                seed: int, distance_m: float, policy: dict[str, Any]) -> dict[str, Any]:
+    """Runs in the verifier process."""
+    import numpy as np
+
+    from worker.trial import TrialConfig
+    from worker.verify import VerifySettings, verify_trial
+
+    settings = VerifySettings(refine=policy["refine"], tolerance=policy["tolerance"], perturb=policy["perturb"])
+    v = verify_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed, distance_m,
+                     settings, controller=controller)
+    return v.to_dict()
+
+
+class Verifier:
+    """One background process re-simulating new bests; `collect` hands back finished verdicts."""
+
+    def __init__(self, config: RunConfig, policy: VerifyPolicy) -> None:
+        self.config = config
+        self.policy = policy
+        self._pool: ProcessPoolExecutor | None = None
+        self._futures: dict[int, Future] = {}
+
+    @staticmethod
+    def applies_to(config: RunConfig) -> bool:
+        return bool(config.morphology_spec)  # test objectives have no physics to re-check
+
+    @property
+    def pending(self) -> list[int]:
+        return list(self._futures)
+
+    def submit(self, trial_id: int, params_unit: list[float], seed: int, distance_m: float) -> None:
+        if trial_id in self._futures:
+            return
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        morphology = self.config.morphology_spec or self.config.morphology
+        self._futures[trial_id] = self._pool.submit(
+            _verify_job, morphology, self.config.controller, self.config.trial_config, params_unit, seed,
+            distance_m, self.policy.to_dict())
+
+    def collect(self, wait_s: float = 0.0) -> list[tuple[int, dict[str, Any]]]:
+        """(trial id, verification dict) of every finished job; an error becomes a not-reproduced verdict."""
+        from concurrent.futures import FIRST_COMPLETED
+        from concurrent.futures import wait as wait_futures
+
+        if wait_s > 0 and self._futures:
+            wait_futures(list(self._futures.values()), timeout=wait_s, return_when=FIRST_COMPLETED)
+        done = []
+        for tid, fut in list(self._futures.items()):
+            if not fut.done():
+                continue
+            del self._futures[tid]
+            try:
+                done.append((tid, fut.result()))
+            except Exception as exc:  # the verifier itself failed: say so, never crash the coordinator
+                log.error("verification of trial %d failed: %s", tid, exc)
+                done.append((tid, {"holds": False, "verdict": f"not reproduced: verification error: {exc}",
+                                   "fine_distance_m": float("nan")}))
+        return done
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None

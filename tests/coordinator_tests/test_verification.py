@@ -1,0 +1,56 @@
+"""No exploited physics: a new best is re-simulated at a finer step before it counts."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from coordinator.problem import build_run_config
+from coordinator.setup import SearchSettings, new_run
+from coordinator.verifier import VerifyPolicy
+from protocol.messages import ResultAck, ResultSubmission, SubmittedResult, WorkGrant, WorkRequest, decode_message
+from protocol.messages import encode_message as enc
+from storage.hdf5 import Hdf5Storage
+from tests.coordinator_tests.helpers import FakeClock
+from worker.trial import TrialConfig, run_trial
+
+
+def test_a_bogus_best_is_not_reproduced_and_the_next_best_is_checked(tmp_path):
+    config = build_run_config("verify-run", "tetraspine-ntrt", seed=1, duration_s=1.0)
+    settings = SearchSettings(trials=2, startup_trials=2, verify=VerifyPolicy(tolerance=0.2))
+    core, storage = new_run(config, settings, tmp_path / "run.h5", FakeClock())
+    try:
+        grant = decode_message(core.handle_work(enc(WorkRequest("w1", 2))), WorkGrant)
+        results = []
+        for a in grant.assignments:
+            r = run_trial(config.morphology, np.array(a.params_unit), TrialConfig.from_dict(config.trial_config),
+                          a.seed)
+            results.append(dataclasses.replace(r, trial_id=a.trial_id, worker_id="w1"))
+        # trial 0 claims 5 m, as an exploded simulation would; trial 1 reports what it really did
+        bogus = dataclasses.replace(results[0], distance_m=5.0, ntrt_distance_cm=500.0)
+        items = (SubmittedResult(grant.assignments[0].lease_id, bogus),
+                 SubmittedResult(grant.assignments[1].lease_id, results[1]))
+        decode_message(core.handle_results(enc(ResultSubmission("w1", items))), ResultAck)
+        assert storage.columns()["verification"][0] == b"pending"
+        assert core.finish_verifications(timeout_s=120.0)
+        cols = storage.columns()
+        assert cols["verification"][0] == b"not_reproduced"
+        assert 0.0 < cols["verify_distance_m"][0] < 1.0 and b"finer step" in cols["verify_reason"][0]
+        assert cols["verification"][1] == b"holds"  # checked in turn once trial 0 fell out
+        assert storage.best_ids(2) == [1]  # the bogus trial never counts as best again
+        assert cols["distance_m"][0] == 5.0  # both figures are stored
+    finally:
+        core.verifier.close()
+        storage.close()
+    reread = Hdf5Storage.open_read(tmp_path / "run.h5")
+    assert [t.trial_id for t in reread.best(2)] == [1] and reread.trial(0).verification == "not_reproduced"
+
+
+def test_test_objectives_and_disabled_policies_have_no_verifier(tmp_path):
+    sphere = build_run_config("s", "sphere:3")
+    core, _ = new_run(sphere, SearchSettings(trials=2), None, FakeClock())
+    assert core.verifier is None
+    config = build_run_config("v", "tetraspine-ntrt", duration_s=0.1)
+    core, _storage = new_run(config, SearchSettings(trials=2, verify=VerifyPolicy(enabled=False)), None, FakeClock())
+    assert core.verifier is None
