@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/spinefarm search tetraspine --trials 200 --workers 2 --duration 5 --out runs/tetraspine-demo.h5
+	$(VENV)/bin/spinefarm search tetraspine --trials 100 --workers 2 --duration 5 --out runs/tetraspine-demo.h5 --overwrite
 
 test: $(STAMP)
 	$(PY) -m ruff check .
