@@ -57,6 +57,9 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
     p.add_argument("--seed", type=int, default=0, help="run seed: fixes every sampled vector by trial number")
     p.add_argument("--objective", default="distance", help="distance (default), speed or cot_distance")
     p.add_argument("--controller", help="controller parameter space (default: the morphology's)")
+    p.add_argument("--scene", default=None,
+                   help="flat (default), slope, rough or obstacles with optional ,field=value pairs, e.g. "
+                        "'rough,rough_amplitude_cm=3'; stored with the run")
     p.add_argument("--sigma", type=float, default=0.005, help="Gaussian step in the unit cube (default 0.005)")
     p.add_argument("--top-k", type=int, default=1, help="climb from the k best trials (default 1)")
     p.add_argument("--startup-trials", type=int, help="Monte Carlo trials before climbing (default half)")
@@ -127,8 +130,13 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     if not args.morphology:
         raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")
     run_id = args.run_id or default_run_id(args.morphology)
+    overrides = None
+    if args.scene is not None:
+        from worker.sim.scene import parse_scene
+
+        overrides = {"scene": parse_scene(args.scene)}
     config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
-                              controller=args.controller, duration_s=args.duration)
+                              controller=args.controller, duration_s=args.duration, trial_overrides=overrides)
     lease = args.lease
     if lease is None:
         duration = config.trial_config.get("duration_s") or 0.0

@@ -31,6 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--controller", default=None, help="controller space (e.g. ntrt, sidewinding)")
     p.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
     p.add_argument("--seed", type=int, default=None, help="trial seed (default: the random seed or 0)")
+    p.add_argument("--scene", default=None,
+                   help="flat (default), slope, rough or obstacles, optionally with ,field=value pairs, e.g. "
+                        "'rough,rough_amplitude_cm=3' or 'flat,collision_filter=neighbours' (see docs/model.md)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--record", type=Path, default=None, help="save the trajectory to FILE.npz")
     p.add_argument("--record-every", type=float, default=0.01, help="recording interval in seconds")
@@ -106,7 +109,11 @@ def cmd_trial(args: argparse.Namespace) -> int:
         overrides["motor_model"] = args.motor_model
     if args.record is not None:
         overrides["record_every_s"] = args.record_every
-    cfg = TrialConfig(**overrides)
+    if args.scene is not None:
+        from worker.sim.scene import parse_scene
+
+        overrides["scene"] = parse_scene(args.scene)
+    cfg = TrialConfig.from_dict(overrides)
     outcome = simulate(morph, params, cfg, seed)
     r = outcome.result
     if args.record is not None and outcome.trajectory is not None:

@@ -110,3 +110,24 @@ def test_bad_scene_values_are_named():
         SceneConfig(kind="slope", slope_deg=80)
     with pytest.raises(ConfigError, match="unknown scene fields"):
         TrialConfig.from_dict({"scene": {"kind": "flat", "gravity": 1}})
+
+
+def test_scene_from_the_command_line_and_into_the_run_file(tmp_path):
+    from coordinator.problem import build_run_config
+    from coordinator.setup import SearchSettings, new_run
+    from coordinator.verifier import VerifyPolicy
+    from storage.hdf5 import read_meta
+    from worker.sim.scene import parse_scene
+
+    scene = parse_scene("rough, rough_amplitude_cm=3, rough_seed=7, collision_filter=auto")
+    assert scene["kind"] == "rough" and scene["rough_amplitude_cm"] == 3.0 and scene["rough_seed"] == 7
+    with pytest.raises(ConfigError, match="bad scene field"):
+        parse_scene("slope,angle=3")
+    with pytest.raises(ConfigError, match="not a number"):
+        parse_scene("slope,slope_deg=steep")
+    config = build_run_config("scene-run", "tetraspine-ntrt", duration_s=0.2, trial_overrides={"scene": scene})
+    _, storage = new_run(config, SearchSettings(trials=1, verify=VerifyPolicy(enabled=False)), tmp_path / "run.h5")
+    storage.close()
+    stored = read_meta(tmp_path / "run.h5").trial_config["scene"]
+    assert stored == scene  # the HDF5 file records the scene its trials ran on
+    assert TrialConfig.from_dict(read_meta(tmp_path / "run.h5").trial_config).scene.kind == "rough"

@@ -69,6 +69,38 @@ class SceneConfig:
         return cls(**d)
 
 
+def parse_scene(text: str) -> dict[str, Any]:
+    """A scene from the command line: "rough", "slope,slope_deg=10" or "rough,rough_amplitude_cm=3,
+    collision_filter=auto" (kind first, then field=value pairs), validated as a SceneConfig."""
+    parts = [p.strip() for p in text.split(",") if p.strip()]
+    if not parts:
+        raise ConfigError("empty scene", received=text, expected=f"a kind ({', '.join(SCENE_KINDS)}) "
+                          "optionally followed by ,field=value pairs")
+    out: dict[str, Any] = {}
+    if "=" not in parts[0]:
+        out["kind"] = parts.pop(0)
+    fields = SceneConfig.__dataclass_fields__
+    for p in parts:
+        key, sep, value = p.partition("=")
+        key = key.strip()
+        if not sep or key not in fields:
+            raise ConfigError("bad scene field", received=p, expected=f"field=value with field in {sorted(fields)}")
+        value = value.strip()
+        if key in ("kind", "collision_filter"):
+            out[key] = value
+        elif key == "rough_seed":
+            try:
+                out[key] = int(value)
+            except ValueError as exc:
+                raise ConfigError("scene.rough_seed is not an integer", received=value, expected="an integer") from exc
+        else:
+            try:
+                out[key] = float(value)
+            except ValueError as exc:
+                raise ConfigError(f"scene.{key} is not a number", received=value, expected="a number") from exc
+    return SceneConfig.from_dict(out).to_dict()
+
+
 @dataclass(frozen=True)
 class Box:
     centre_cm: tuple[float, float, float]
