@@ -5,6 +5,15 @@ from __future__ import annotations
 from pydantic import BaseModel
 
 
+class Verification(BaseModel):
+    """Re-simulation of a trial that became best, at a finer step (not_checked, pending, holds,
+    not_reproduced); a not-reproduced trial never counts as best."""
+
+    verdict: str
+    fine_step_distance_m: float | None
+    reason: str | None
+
+
 class Trial(BaseModel):
     trial_id: int
     status: str
@@ -18,6 +27,9 @@ class Trial(BaseModel):
     params_unit: dict[str, float]
     worker_id: str | None
     finished_at_unix_s: float | None
+    verification: Verification
+
+
 
 
 class Worker(BaseModel):

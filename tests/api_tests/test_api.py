@@ -156,3 +156,18 @@ def test_real_server_reads_a_live_run_and_serves_snapshots(tmp_path):
         proc.terminate()
         proc.wait(10)
         writer.close()
+
+
+def test_verification_verdicts_show_and_a_not_reproduced_best_is_skipped(tmp_path):
+    s = write_run(tmp_path / "v.h5", run_id="run-v", keep_open=True)
+    s.set_verification(2, "not_reproduced", 0.4, "not reproduced: finer step run moved 0.4 m against 2 m")
+    s.set_verification(1, "holds", 0.98)
+    s.flush()
+    s.close()
+    with TestClient(create_app(runs_dir=tmp_path)) as c:
+        best = c.get("/runs/run-v/best", params={"k": 2}).json()
+        assert [b["trial_id"] for b in best] == [1, 0]  # trial 2 had the top objective but did not hold
+        assert best[0]["verification"] == {"verdict": "holds", "fine_step_distance_m": 0.98, "reason": None}
+        t2 = c.get("/runs/run-v/trials/2").json()
+        assert t2["verification"]["verdict"] == "not_reproduced" and "finer step" in t2["verification"]["reason"]
+        assert c.get("/runs/run-v/trials/3").json()["verification"]["verdict"] == "not_checked"
