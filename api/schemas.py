@@ -30,8 +30,6 @@ class Trial(BaseModel):
     verification: Verification
 
 
-
-
 class Worker(BaseModel):
     worker_id: str
     alive: bool
