@@ -85,3 +85,33 @@ def test_light_segments_are_limited_by_damping_and_run_at_the_auto_step():
     assert ok.status == TrialStatus.COMPLETE, ok.reason
     forced = run_trial(light, u, TrialConfig(duration_s=0.5, dt_s=10 * est.dt_limit_s, refuse_unstable_dt=False), 1)
     assert forced.status == TrialStatus.FAILED and forced.reason.startswith("diverged")
+
+
+def _edge_unit(morph: Morphology) -> np.ndarray:
+    u = random_unit_params(morph, 3)
+    u[0] = u[1] = 1.0  # CPG frequency and amplitude at their upper bounds
+    return u
+
+
+def _with_strings(morph: Morphology, **changes) -> Morphology:
+    mats = tuple((t, dataclasses.replace(m, **changes)) for t, m in morph.structure.string_materials)
+    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, string_materials=mats))
+
+
+def _with_gains(morph: Morphology, **changes) -> Morphology:
+    imp = tuple((t, dataclasses.replace(g, **changes)) for t, g in morph.control.impedance)
+    return dataclasses.replace(morph, control=dataclasses.replace(morph.control, impedance=imp))
+
+
+@pytest.mark.parametrize("case", ["cpg-edge", "tension-saturation", "large-pretension", "slack-taut-chatter"])
+def test_controller_side_hard_cases_stay_sane_at_the_default_step(case):
+    base = load_morphology("tetraspine-ntrt")
+    morph = {"cpg-edge": base, "tension-saturation": _with_strings(base, max_tension_n=5.0),
+             "large-pretension": _with_strings(base, pretension_n=60.0),
+             "slack-taut-chatter": _with_gains(base, control_length_cm=None)}[case]
+    u = _edge_unit(morph) if case in ("cpg-edge", "slack-taut-chatter") else random_unit_params(morph, 3)
+    # these change the control, not the string network: the stable-step estimate is unchanged
+    assert estimate_stable_step(morph).dt_limit_s == pytest.approx(estimate_stable_step(base).dt_limit_s)
+    r = run_trial(morph, u, TrialConfig(duration_s=1.0), 3)
+    assert r.status == TrialStatus.COMPLETE, r.reason
+    assert r.distance_m < 1.0 and np.isfinite(r.work_j)  # no runaway "gait"
