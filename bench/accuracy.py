@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from concurrent.futures import ProcessPoolExecutor
 from statistics import median
 
+from worker.accuracy import rel
 from worker.morphology.registry import load_morphology
 from worker.trial import TrialConfig, random_unit_params, run_trial
 
@@ -31,12 +31,6 @@ def one(job: tuple[str, int, float, float, str | None]) -> dict:
                   TrialConfig(duration_s=duration, dt_s=dt, controller=controller), seed)
     return {"seed": seed, "dt_s": dt, "distance_m": r.distance_m, "cot": r.cot, "status": str(r.status),
             "reason": r.reason, "wall_s_per_sim_s": r.wall_time_s / max(r.sim_time_s, 1e-9)}
-
-
-def rel(a: float, b: float) -> float:
-    if not (math.isfinite(a) and math.isfinite(b)):
-        return math.inf
-    return abs(a - b) / max(abs(b), 1e-12)
 
 
 def main() -> None:

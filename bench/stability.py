@@ -11,7 +11,6 @@ The last line is one JSON object.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 from collections.abc import Callable
@@ -20,24 +19,9 @@ import numpy as np
 
 from worker.morphology.model import Morphology
 from worker.morphology.registry import load_morphology
+from worker.morphology.variants import with_density_factor, with_gains, with_strings
 from worker.sim.stability import estimate_stable_step
 from worker.trial import TrialConfig, random_unit_params, run_trial
-
-
-def _strings(morph: Morphology, **changes) -> Morphology:
-    mats = tuple((t, dataclasses.replace(m, **changes)) for t, m in morph.structure.string_materials)
-    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, string_materials=mats))
-
-
-def _rods(morph: Morphology, density_factor: float) -> Morphology:
-    mats = tuple((t, dataclasses.replace(m, density_kg_per_cm3=m.density_kg_per_cm3 * density_factor))
-                 for t, m in morph.structure.rod_materials)
-    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, rod_materials=mats))
-
-
-def _gains(morph: Morphology, **changes) -> Morphology:
-    imp = tuple((t, dataclasses.replace(g, **changes)) for t, g in morph.control.impedance)
-    return dataclasses.replace(morph, control=dataclasses.replace(morph.control, impedance=imp))
 
 
 def _edge_params(morph: Morphology, seed: int) -> np.ndarray:
@@ -50,18 +34,19 @@ BASE = "tetraspine-ntrt"
 CASES: dict[str, tuple[str, Callable[[], Morphology], Callable[[Morphology, int], np.ndarray]]] = {
     "reference": ("NTRT's 3-segment Tetraspine as published", lambda: load_morphology(BASE), random_unit_params),
     "hardware-stiffness": ("strings 600x stiffer (600,000 N/m), no in-line springs",
-                           lambda: _strings(load_morphology(BASE), stiffness_n_per_m=600_000.0), random_unit_params),
+                           lambda: with_strings(load_morphology(BASE), stiffness_n_per_m=600_000.0),
+                           random_unit_params),
     "light-long-levers": ("segments 50x lighter (49 g), same 38 cm lever arms: large damping rates",
-                          lambda: _rods(load_morphology(BASE), 0.02), random_unit_params),
+                          lambda: with_density_factor(load_morphology(BASE), 0.02), random_unit_params),
     "cpg-edge": ("CPG frequency and amplitude at the upper bounds (90 Hz, 90 cm/s)",
                  lambda: load_morphology(BASE), _edge_params),
     "tension-saturation": ("motor tension limit 5 N: strings held at the limit all trial",
-                           lambda: _strings(load_morphology(BASE), max_tension_n=5.0), random_unit_params),
+                           lambda: with_strings(load_morphology(BASE), max_tension_n=5.0), random_unit_params),
     "large-pretension": ("60 N pretension in every string (rest length 6 cm short)",
-                         lambda: _strings(load_morphology(BASE), pretension_n=60.0), random_unit_params),
+                         lambda: with_strings(load_morphology(BASE), pretension_n=60.0), random_unit_params),
     "slack-taut-chatter": ("control length = start length, no tension offset, amplitude at its bound: "
                            "strings cycle slack and taut",
-                           lambda: _gains(load_morphology(BASE), control_length_cm=None), _edge_params),
+                           lambda: with_gains(load_morphology(BASE), control_length_cm=None), _edge_params),
     "hardware-tetraspine": ("3-segment hardware prototype: 0.73 kg segments, 600,000 N/m",
                             lambda: load_morphology("tetraspine-hardware"), random_unit_params),
 }

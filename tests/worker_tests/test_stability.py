@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -13,13 +12,9 @@ from protocol.messages import TrialStatus
 from tests.worker_tests.helpers import mass_between_anchors
 from worker.morphology.model import ControlSpec, Morphology
 from worker.morphology.registry import load_morphology
+from worker.morphology.variants import with_density_factor, with_gains, with_strings
 from worker.sim.stability import estimate_stable_step
 from worker.trial import TrialConfig, random_unit_params, run_trial
-
-
-def with_stiffness(morph: Morphology, k: float) -> Morphology:
-    mats = tuple((t, dataclasses.replace(m, stiffness_n_per_m=k)) for t, m in morph.structure.string_materials)
-    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, string_materials=mats))
 
 
 def test_estimate_matches_the_analytic_two_spring_oscillator():
@@ -33,13 +28,14 @@ def test_estimate_matches_the_analytic_two_spring_oscillator():
 
 def test_limit_scales_with_stiffness():
     base = load_morphology("tetraspine-ntrt")
-    soft, stiff = estimate_stable_step(base), estimate_stable_step(with_stiffness(base, 600_000.0))
+    soft = estimate_stable_step(base)
+    stiff = estimate_stable_step(with_strings(base, stiffness_n_per_m=600_000.0))
     assert stiff.omega_max_rad_s == pytest.approx(soft.omega_max_rad_s * math.sqrt(600.0), rel=1e-6)
     assert stiff.dt_limit_s < 1e-3 < soft.dt_limit_s
 
 
 def test_unstable_step_is_refused_with_the_estimate_in_the_message():
-    morph = with_stiffness(load_morphology("tetraspine-ntrt"), 600_000.0)
+    morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=600_000.0)
     with pytest.raises(ConfigError) as exc:
         run_trial(morph, random_unit_params(morph, 1), TrialConfig(duration_s=0.1, dt_s=2e-3), 1)
     text = str(exc.value)
@@ -47,7 +43,7 @@ def test_unstable_step_is_refused_with_the_estimate_in_the_message():
 
 
 def test_auto_step_runs_the_stiff_case_stably():
-    morph = with_stiffness(load_morphology("tetraspine-ntrt"), 600_000.0)
+    morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=600_000.0)
     u = random_unit_params(morph, 1)
     est = estimate_stable_step(morph)
     r = run_trial(morph, u, TrialConfig(duration_s=0.3, auto_dt=True), 1)
@@ -70,14 +66,8 @@ def test_every_builtin_is_stable_at_its_default_step():
             assert est.dt_limit_s > TrialConfig().dt_s, name
 
 
-def light_segments(morph: Morphology, factor: float) -> Morphology:
-    mats = tuple((t, dataclasses.replace(m, density_kg_per_cm3=m.density_kg_per_cm3 * factor))
-                 for t, m in morph.structure.rod_materials)
-    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, rod_materials=mats))
-
-
 def test_light_segments_are_limited_by_damping_and_run_at_the_auto_step():
-    light = light_segments(load_morphology("tetraspine-ntrt"), 0.02)  # 49 g segments, 38 cm levers
+    light = with_density_factor(load_morphology("tetraspine-ntrt"), 0.02)  # 49 g segments, 38 cm levers
     est = estimate_stable_step(light)
     assert est.dt_damping_limit_s < est.dt_spring_limit_s  # damping rates, not stiffness, set the limit
     u = random_unit_params(light, 1)
@@ -93,22 +83,12 @@ def _edge_unit(morph: Morphology) -> np.ndarray:
     return u
 
 
-def _with_strings(morph: Morphology, **changes) -> Morphology:
-    mats = tuple((t, dataclasses.replace(m, **changes)) for t, m in morph.structure.string_materials)
-    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, string_materials=mats))
-
-
-def _with_gains(morph: Morphology, **changes) -> Morphology:
-    imp = tuple((t, dataclasses.replace(g, **changes)) for t, g in morph.control.impedance)
-    return dataclasses.replace(morph, control=dataclasses.replace(morph.control, impedance=imp))
-
-
 @pytest.mark.parametrize("case", ["cpg-edge", "tension-saturation", "large-pretension", "slack-taut-chatter"])
 def test_controller_side_hard_cases_stay_sane_at_the_default_step(case):
     base = load_morphology("tetraspine-ntrt")
-    morph = {"cpg-edge": base, "tension-saturation": _with_strings(base, max_tension_n=5.0),
-             "large-pretension": _with_strings(base, pretension_n=60.0),
-             "slack-taut-chatter": _with_gains(base, control_length_cm=None)}[case]
+    morph = {"cpg-edge": base, "tension-saturation": with_strings(base, max_tension_n=5.0),
+             "large-pretension": with_strings(base, pretension_n=60.0),
+             "slack-taut-chatter": with_gains(base, control_length_cm=None)}[case]
     u = _edge_unit(morph) if case in ("cpg-edge", "slack-taut-chatter") else random_unit_params(morph, 3)
     # these change the control, not the string network: the stable-step estimate is unchanged
     assert estimate_stable_step(morph).dt_limit_s == pytest.approx(estimate_stable_step(base).dt_limit_s)

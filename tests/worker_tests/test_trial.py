@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import subprocess
@@ -15,6 +14,7 @@ from protocol.errors import ParameterError
 from protocol.messages import TrialStatus
 from worker.morphology.registry import load_morphology
 from worker.morphology.structure import StringMaterial
+from worker.morphology.variants import with_strings
 from worker.trial import TrialConfig, random_unit_params, run_trial, simulate
 
 
@@ -50,14 +50,8 @@ def test_sidewinding_space_runs():
     assert r.status == TrialStatus.COMPLETE and r.distance_m > 0
 
 
-def _stiff(morph, stiffness_n_per_m: float):
-    mats = tuple((t, dataclasses.replace(m, stiffness_n_per_m=stiffness_n_per_m))
-                 for t, m in morph.structure.string_materials)
-    return dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, string_materials=mats))
-
-
 def test_absurd_stiffness_fails_as_diverged_not_an_exception():
-    morph = _stiff(load_morphology("tetraspine-ntrt"), 1e8)
+    morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=1e8)
     cfg = TrialConfig(duration_s=1.0, refuse_unstable_dt=False)  # run it anyway
     r = run_trial(morph, random_unit_params(morph, 1), cfg, seed=1)
     assert r.status == TrialStatus.FAILED
@@ -83,6 +77,7 @@ def test_bad_parameters_raise_named_errors():
 TRIAL_SNIPPET = """
 import json
 from worker.morphology.registry import load_morphology
+from worker.morphology.variants import with_strings
 from worker.trial import TrialConfig, random_unit_params, run_trial
 m = load_morphology("tetraspine")
 r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11)

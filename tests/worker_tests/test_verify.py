@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from worker.morphology.registry import load_morphology
+from worker.morphology.variants import with_strings
 from worker.trial import TrialConfig, random_unit_params, run_trial
 from worker.verify import VerifySettings, verify_trial
 
@@ -21,11 +22,7 @@ def test_creep_artefact_is_not_reproduced_at_a_finer_step():
 
 
 def test_diverging_parameters_are_not_reproduced():
-    import dataclasses
-
-    morph = load_morphology("tetraspine-ntrt")
-    mats = tuple((t, dataclasses.replace(m, stiffness_n_per_m=600_000.0)) for t, m in morph.structure.string_materials)
-    stiff = dataclasses.replace(morph, structure=dataclasses.replace(morph.structure, string_materials=mats))
+    stiff = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=600_000.0)
     u = random_unit_params(stiff, 1)
     cfg = TrialConfig(duration_s=0.5, dt_s=2e-3, refuse_unstable_dt=False)
     r = run_trial(stiff, u, cfg, 1)
