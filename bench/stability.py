@@ -17,9 +17,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from worker.morphology.model import Morphology
-from worker.morphology.registry import load_morphology
-from worker.morphology.variants import with_density_factor, with_gains, with_strings
+from robot.morphology.model import Morphology
+from robot.morphology.registry import load_morphology
+from robot.morphology.variants import with_density_factor, with_gains, with_strings
 from worker.sim.stability import estimate_stable_step
 from worker.trial import TrialConfig, random_unit_params, run_trial
 

@@ -15,11 +15,12 @@ import argparse
 import json
 import time
 
+from robot.bodies import build_bodies, build_strings
+from robot.morphology.registry import load_morphology
+from robot.scene import GroundSpec
 from worker.control.cpg import CpgIntegrator
-from worker.morphology.registry import load_morphology
+from worker.engines.bullet import BulletPhysics
 from worker.sim import strings as sk
-from worker.sim.bodies import build_bodies, build_strings
-from worker.sim.physics import EngineSettings, GroundSpec, PhysicsScene
 from worker.trial import TrialConfig, random_unit_params, string_tables
 
 
@@ -32,10 +33,9 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
     bodies = build_bodies(morph.structure)
     geom = build_strings(morph.structure, bodies)
     sparams, sstate = string_tables(morph, geom.start_length_cm, {int(s): n for n, s in enumerate(net.node_string)})
-    engine = EngineSettings(dt_s=dt, solver_iterations=cfg.solver_iterations)
     ground = GroundSpec(friction=morph.ground_friction)
-    scene = PhysicsScene(bodies, engine, ground)
-    bare = PhysicsScene(bodies, engine, ground)
+    scene = BulletPhysics(bodies, ground, dt)
+    bare = BulletPhysics(bodies, ground, dt)
     cpg = CpgIntegrator(net, cfg.cpg_max_step_s)
     nb = len(bodies)
     bank = sk.StringBank(nb, geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm, sparams, sstate)
@@ -52,7 +52,7 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
         t2 = clock()
         bank.step(poses, cpg.output_cm_s, dt, sk.MOTOR_PHYSICAL)
         t3 = clock()
-        scene.apply_force_pairs(bank.points, bank.forces)
+        scene.apply_wrenches(bank.force, bank.torque)
         t4 = clock()
         scene.step()
         t5 = clock()

@@ -157,9 +157,9 @@ def _params(morph: Any, path: Path | None, seed: int) -> tuple[Any, str | None]:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from worker.morphology.registry import load_morphology
+    from robot.bodies import build_bodies
+    from robot.morphology.registry import load_morphology
     from worker.render import frames_from_record, initial_frame, render
-    from worker.sim.bodies import build_bodies
     from worker.trial import TrialConfig, simulate
 
     morph = load_morphology(args.morphology)

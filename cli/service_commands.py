@@ -132,7 +132,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     run_id = args.run_id or default_run_id(args.morphology)
     overrides = None
     if args.scene is not None:
-        from worker.sim.scene import parse_scene
+        from robot.scene import parse_scene
 
         overrides = {"scene": parse_scene(args.scene)}
     config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,

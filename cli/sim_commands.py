@@ -85,7 +85,7 @@ def result_summary(result: Any, morph_name: str, controller: str | None) -> dict
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
-    from worker.morphology.registry import load_morphology
+    from robot.morphology.registry import load_morphology
     from worker.trial import TrialConfig, random_unit_params, simulate
 
     morph = load_morphology(args.morphology)
@@ -110,7 +110,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
     if args.record is not None:
         overrides["record_every_s"] = args.record_every
     if args.scene is not None:
-        from worker.sim.scene import parse_scene
+        from robot.scene import parse_scene
 
         overrides["scene"] = parse_scene(args.scene)
     cfg = TrialConfig.from_dict(overrides)

@@ -41,11 +41,11 @@ def build_run_config(run_id: str, morphology: str, *, objective: str = "distance
         return RunConfig(run_id, morphology, {}, None, tuple(space.describe()),
                          {"duration_s": duration_s}, objective, seed)
     try:  # the simulation core is only needed when real physics runs
-        from worker.morphology.registry import load_morphology
+        from robot.morphology.registry import load_morphology
         from worker.trial import TrialConfig
     except ImportError as exc:
         raise ConfigError("the simulation core is not available", received=str(exc),
-                          expected="worker.trial and worker.morphology.registry") from exc
+                          expected="worker.trial and robot.morphology.registry") from exc
     morph = load_morphology(morphology)
     space = morph.param_space(controller)
     tc_dict = TrialConfig().to_dict()

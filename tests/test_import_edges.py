@@ -13,9 +13,9 @@ ALLOWED = {
     "protocol.params": set(),
     "protocol.messages": set(),
     "protocol.errors": set(),
-    "worker.morphology.registry": set(),
+    "robot.morphology.registry": set(),
     "worker.trial": {"numba"},
-    "worker.sim.physics": {"pybullet", "numba"},
+    "worker.engines.bullet": {"pybullet", "numba"},
     "storage.hdf5": {"h5py"},
 }
 

@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from robot.morphology.registry import load_morphology
 from worker import scoring
-from worker.morphology.registry import load_morphology
 from worker.trial import TrialConfig, random_unit_params, simulate
 
 BASELINE = "dt 1 ms (default)"
@@ -43,12 +43,14 @@ def sweep(quick: bool) -> list[Setting]:
     steps = (2e-3, 1e-3, 5e-4) if quick else (4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
     out = [Setting(BASELINE if dt == 1e-3 else f"dt {dt * 1e3:g} ms", "step", {"dt_s": dt}) for dt in steps]
     iterations = (50,) if quick else (5, 20, 50)
-    out += [Setting(f"solver {n} iterations", "solver", {"solver_iterations": n}) for n in iterations]
+    out += [Setting(f"solver {n} iterations", "solver", {"engine_options": {"solver_iterations": n}})
+            for n in iterations]
     out += [Setting("CPG RK4 sub-step 0.125 ms", "cpg", {"cpg_max_step_s": 1.25e-4})]
     out += [Setting("collisions: neighbours only", "contacts", {"scene": {"collision_filter": "neighbours"}}),
-            Setting("friction anchors off", "contacts", {"friction_anchor": False})]
+            Setting("friction anchors off", "contacts", {"engine_options": {"friction_anchor": False}})]
     if not quick:
-        out += [Setting("solver 20 iterations, dt 0.5 ms", "solver", {"dt_s": 5e-4, "solver_iterations": 20})]
+        out += [Setting("solver 20 iterations, dt 0.5 ms", "solver",
+                        {"dt_s": 5e-4, "engine_options": {"solver_iterations": 20}})]
     out += [Setting("scene: rough 2 cm / 40 cm", "scene", {"scene": {"kind": "rough", "rough_amplitude_cm": 2.0}}),
             Setting("scene: obstacles 3 cm every 60 cm", "scene", {"scene": {"kind": "obstacles"}}),
             Setting("scene: slope 5 deg", "scene", {"scene": {"kind": "slope", "slope_deg": 5.0}})]
@@ -66,6 +68,8 @@ def _config(base: dict[str, Any], overrides: dict[str, Any]) -> TrialConfig:
     merged = {**base, **overrides}
     if "scene" in base or "scene" in overrides:
         merged["scene"] = {**base.get("scene", {}), **overrides.get("scene", {})}
+    if "engine_options" in base or "engine_options" in overrides:
+        merged["engine_options"] = {**base.get("engine_options", {}), **overrides.get("engine_options", {})}
     return TrialConfig.from_dict(merged)
 
 

@@ -1,7 +1,7 @@
 """Headless pictures of a structure: rods dark, strings coloured by tension (blue low, red high, as the
 paper's figures), from the build pose or from recorded poses; a strip of keyframes with their times.
 
-Pure geometry from worker.sim.bodies and the string anchors; matplotlib with the Agg backend.
+Pure geometry from robot.bodies and the string anchors; matplotlib with the Agg backend.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from protocol.errors import ConfigError
-from worker.morphology.model import Morphology
-from worker.sim.bodies import BodyModel, StringGeometry, build_bodies, build_strings
+from robot.bodies import BodyModel, StringGeometry, build_bodies, build_strings
+from robot.morphology.model import Morphology
 from worker.sim.strings import world_anchors
 
 ROD_COLOUR = "#1f1f1f"

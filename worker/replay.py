@@ -12,8 +12,8 @@ import numpy as np
 
 from protocol.errors import ConfigError, MorphologySpecError
 from protocol.messages import TrialResult
-from worker.control.spaces import NtrtTableSpace
-from worker.morphology.model import Morphology
+from robot.morphology.model import Morphology
+from robot.spaces import NtrtTableSpace
 
 # NTRT folder name -> built-in NTRT-era morphology
 ROBOT_FOLDERS = {
@@ -140,7 +140,7 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
            suffix: str = "default", seed: int = 0, pose_jitter_cm: float = 0.0) -> ReplayReport:
     """Run NTRT's published parameters on the NTRT-era morphology (2014 motor, 1 ms, one sub-step,
     no friction anchors)."""
-    from worker.morphology.registry import load_morphology
+    from robot.morphology.registry import load_morphology
     from worker.trial import TrialConfig, simulate
 
     morph = load_morphology(morphology or detect_morphology(folder))
@@ -149,7 +149,7 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     duration = duration_s or morph.duration_s
     # NTRT's Bullet 2.81 had no friction anchors; its motor caps are per 1 ms step (spec 0a.3)
     cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model="ntrt2014", controller="ntrt",
-                      friction_anchor=False, pose_jitter_cm=pose_jitter_cm)
+                      engine_options={"friction_anchor": False}, pose_jitter_cm=pose_jitter_cm)
     result = simulate(morph, u, cfg, seed).result
     return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result,
                         REFERENCES.get(morph.name))

@@ -93,7 +93,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
     if re.fullmatch(r"sphere(:\d+)?", config.morphology):  # the test objective, see coordinator.problem
         delay_s = float(config.trial_config.get("duration_s") or 0.0)
         return lambda a: sphere_result(space, a, delay_s)
-    from worker.morphology.registry import load_morphology
+    from robot.morphology.registry import load_morphology
     from worker.trial import TrialConfig, run_trial
 
     morphology = load_morphology(config.morphology)

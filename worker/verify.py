@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from worker.morphology.model import Morphology
-from worker.morphology.registry import load_morphology
+from robot.morphology.model import Morphology
+from robot.morphology.registry import load_morphology
 from worker.trial import TrialConfig, run_trial
 
 

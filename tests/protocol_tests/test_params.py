@@ -7,7 +7,7 @@ import pytest
 
 from protocol.errors import ParameterError
 from protocol.params import ParamSpace, ParamSpec
-from worker.morphology.registry import load_morphology
+from robot.morphology.registry import load_morphology
 
 
 def space() -> ParamSpace:
@@ -42,7 +42,7 @@ def test_ntrt_tetraspine_space_counts():
 
 def test_ntrt_slot_quirk():
     """rp from the index difference: a pair in adjacent joints closer than M in index uses row 1."""
-    from worker.control.spaces import table_slots
+    from robot.spaces import table_slots
 
     sp = load_morphology("tetraspine-ntrt").controller_space("ntrt")
     slots = table_slots(6)

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from worker.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec
+from robot.bodies import build_bodies, build_strings
+from robot.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec
+from robot.scene import GroundSpec
+from worker.engines.bullet import BulletPhysics, BulletSettings
 from worker.sim import strings as sk
-from worker.sim.bodies import build_bodies, build_strings
-from worker.sim.physics import EngineSettings, GroundSpec, PhysicsScene
 
 
 def two_rod_structure(gap_cm: float, *, heavy_density: float = 0.014, light_density: float = 0.014,
@@ -59,7 +60,7 @@ class PassiveRig:
         state[:, sk.S_LPREV] = geom.start_length_cm
         self.bank = sk.StringBank(len(self.bodies), geom.body_a, geom.body_b, geom.anchor_a_cm,
                                   geom.anchor_b_cm, params, state)
-        self.scene = PhysicsScene(self.bodies, EngineSettings(dt_s=dt, gravity_cm_s2=gravity), GroundSpec())
+        self.scene = BulletPhysics(self.bodies, GroundSpec(), dt, BulletSettings(gravity_cm_s2=gravity))
         self.dt = dt
         self.no_cpg = np.zeros(0)
 
@@ -67,7 +68,7 @@ class PassiveRig:
         poses = self.scene.read_poses()
         status = self.bank.step(poses, self.no_cpg, self.dt, sk.MOTOR_PHYSICAL)
         assert status == sk.STATUS_OK
-        self.scene.apply_force_pairs(self.bank.points, self.bank.forces)
+        self.scene.apply_wrenches(self.bank.force, self.bank.torque)
         self.scene.step()
         return poses
 

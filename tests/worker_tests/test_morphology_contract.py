@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from protocol.errors import ConfigError
-from worker.control.spaces import NtrtTableSpace
-from worker.morphology.registry import builtin_names, load_morphology
+from robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
+from robot.morphology.registry import builtin_names, load_morphology
+from robot.spaces import NtrtTableSpace
 from worker.sim import strings as sk
-from worker.sim.bodies import build_bodies, build_strings, lowest_rod_surface_cm
 from worker.trial import TrialConfig, choose_step, simulate, string_tables
 
 
@@ -247,11 +247,12 @@ def test_trial_command_runs_each_builtin(name: str, capsys):
 def test_ribbed_segment_keeps_all_33_rods_in_the_engine():
     """pybullet's shape arrays hold 16 shapes; a ribbed segment (33 rods) missing its other rib fell
     through the ground. Dropped alone, it must come to rest on its ribs."""
-    from worker.sim.physics import EngineSettings, GroundSpec, PhysicsScene
+    from robot.scene import GroundSpec
+    from worker.engines.bullet import BulletPhysics
 
     body = build_bodies(load_morphology("ribbed").structure)[0]
     assert len(body.rods) == 33
-    with PhysicsScene([body], EngineSettings(), GroundSpec()) as scene:
+    with BulletPhysics([body], GroundSpec()) as scene:
         for _ in range(2000):
             scene.step()
         pose = scene.read_poses()[0]

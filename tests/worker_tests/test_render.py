@@ -9,9 +9,9 @@ import pytest
 
 from cli.main import main
 from protocol.errors import ConfigError
-from worker.morphology.registry import load_morphology
+from robot.bodies import build_bodies
+from robot.morphology.registry import load_morphology
 from worker.render import Frame, frames_from_record, initial_frame, render, rod_segments
-from worker.sim.bodies import build_bodies
 from worker.trial import TrialConfig, simulate
 
 

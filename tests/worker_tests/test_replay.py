@@ -11,7 +11,7 @@ import pytest
 
 from cli.main import main
 from protocol.errors import ConfigError
-from worker.morphology.registry import load_morphology
+from robot.morphology.registry import load_morphology
 from worker.replay import (
     REFERENCES,
     detect_morphology,

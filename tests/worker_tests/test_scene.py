@@ -8,15 +8,15 @@ import pytest
 
 from protocol.errors import ConfigError
 from protocol.messages import TrialStatus
-from worker.morphology.registry import load_morphology
-from worker.sim.bodies import build_bodies
-from worker.sim.physics import EngineSettings, PhysicsScene
-from worker.sim.scene import SceneConfig, build_terrain, pairs_off, surface_height_cm
+from robot.bodies import build_bodies
+from robot.morphology.registry import load_morphology
+from robot.scene import SceneConfig, build_terrain, pairs_off, surface_height_cm
+from worker.engines.bullet import BulletPhysics
 from worker.trial import TrialConfig, random_unit_params, run_trial
 
 
 def engine_surface(terrain, xs, zs) -> np.ndarray:
-    scene = PhysicsScene([], EngineSettings(), terrain)
+    scene = BulletPhysics([], terrain)
     try:
         starts = [[x, 200.0, z] for x, z in zip(xs, zs, strict=True)]
         ends = [[x, -200.0, z] for x, z in zip(xs, zs, strict=True)]
@@ -68,7 +68,7 @@ def test_collision_filter_pairs():
 def test_filtered_pairs_pass_through_each_other_in_the_engine():
     bodies = build_bodies(load_morphology("tetraspine-ntrt").structure)
     terrain = build_terrain(SceneConfig(collision_filter="neighbours"), 0.5, (0, 0))
-    scene = PhysicsScene(bodies, EngineSettings(), terrain)
+    scene = BulletPhysics(bodies, terrain)
     try:
         ids = scene.body_ids
         pb.resetBasePositionAndOrientation(ids[2], bodies[0].com_cm.tolist(), [0, 0, 0, 1],
@@ -116,8 +116,8 @@ def test_scene_from_the_command_line_and_into_the_run_file(tmp_path):
     from coordinator.problem import build_run_config
     from coordinator.setup import SearchSettings, new_run
     from coordinator.verifier import VerifyPolicy
+    from robot.scene import parse_scene
     from storage.hdf5 import read_meta
-    from worker.sim.scene import parse_scene
 
     scene = parse_scene("rough, rough_amplitude_cm=3, rough_seed=7, collision_filter=auto")
     assert scene["kind"] == "rough" and scene["rough_amplitude_cm"] == 3.0 and scene["rough_seed"] == 7

@@ -10,9 +10,9 @@ import pytest
 
 from cli.main import main
 from protocol.errors import MorphologySpecError, UnknownMorphologyError
-from worker.morphology.registry import load_morphology
-from worker.morphology.specfile import SPEC_DIR, load_spec_file, parse_spec
-from worker.morphology.tetraspine import tetraspine
+from robot.morphology.registry import load_morphology
+from robot.morphology.specfile import SPEC_DIR, load_spec_file, parse_spec
+from robot.morphology.tetraspine import tetraspine
 
 GOOD = textwrap.dedent("""\
     name: bar-chain
@@ -188,9 +188,9 @@ def test_cli_reports_a_bad_file_as_an_error(tmp_path: Path, capsys):
 
 
 def test_builders_take_a_segment_count():
-    from worker.morphology.octahedral import octahedral_complex
-    from worker.morphology.ribbed import ribbed
-    from worker.morphology.tetrahedral import tetrahedral_complex
+    from robot.morphology.octahedral import octahedral_complex
+    from robot.morphology.ribbed import ribbed
+    from robot.morphology.tetrahedral import tetrahedral_complex
 
     assert tetrahedral_complex(4).scored_segment == 2 and tetrahedral_complex(4).structure.n_segments == 4
     assert len(octahedral_complex(5).structure.strings) == 4 * 8

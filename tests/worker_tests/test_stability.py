@@ -9,10 +9,10 @@ import pytest
 
 from protocol.errors import ConfigError
 from protocol.messages import TrialStatus
+from robot.morphology.model import ControlSpec, Morphology
+from robot.morphology.registry import load_morphology
+from robot.morphology.variants import with_density_factor, with_gains, with_strings
 from tests.worker_tests.helpers import mass_between_anchors
-from worker.morphology.model import ControlSpec, Morphology
-from worker.morphology.registry import load_morphology
-from worker.morphology.variants import with_density_factor, with_gains, with_strings
 from worker.sim.stability import estimate_stable_step
 from worker.trial import TrialConfig, random_unit_params, run_trial
 
@@ -55,7 +55,7 @@ def test_auto_step_runs_the_stiff_case_stably():
 
 
 def test_every_builtin_is_stable_at_its_default_step():
-    from worker.morphology.registry import builtin_names
+    from robot.morphology.registry import builtin_names
 
     for name in builtin_names():
         est = estimate_stable_step(load_morphology(name))

@@ -8,6 +8,7 @@ import numpy as np
 import pybullet as pb
 
 from tests.worker_tests.helpers import PassiveRig, mass_between_anchors, two_rod_structure
+from worker.engines.couple import wrench_to_force_pairs
 from worker.sim import strings as sk
 
 
@@ -81,7 +82,7 @@ def test_force_pair_matches_net_wrench():
     torque = rng.normal(size=(3, 3)) * 1000
     torque[2] = 0.0  # degenerate direction must still work
     pts, fs = np.zeros((6, 3)), np.zeros((6, 3))
-    sk.wrench_to_force_pairs(poses, force, torque, pts, fs)
+    wrench_to_force_pairs(poses, force, torque, pts, fs)
     for b in range(3):
         f = fs[2 * b] + fs[2 * b + 1]
         t = np.cross(pts[2 * b] - poses[b, :3], fs[2 * b]) + np.cross(pts[2 * b + 1] - poses[b, :3], fs[2 * b + 1])
@@ -91,9 +92,10 @@ def test_force_pair_matches_net_wrench():
 
 def test_force_pairs_match_per_anchor_application_in_pybullet():
     """The net-wrench shortcut against applying each string's force at its two anchors."""
-    from worker.morphology.registry import load_morphology
-    from worker.sim.bodies import build_bodies, build_strings
-    from worker.sim.physics import EngineSettings, GroundSpec, PhysicsScene
+    from robot.bodies import build_bodies, build_strings
+    from robot.morphology.registry import load_morphology
+    from robot.scene import GroundSpec
+    from worker.engines.bullet import BulletPhysics
     from worker.trial import string_tables
 
     morph = load_morphology("tetraspine-ntrt")
@@ -104,7 +106,7 @@ def test_force_pairs_match_per_anchor_application_in_pybullet():
         params, state = string_tables(morph, geom.start_length_cm, {})
         bank = sk.StringBank(len(bodies), geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm,
                              params, state)
-        scene = PhysicsScene(bodies, EngineSettings(), GroundSpec())
+        scene = BulletPhysics(bodies, GroundSpec())
         for _ in range(500):
             poses = scene.read_poses()
             bank.step(poses, np.zeros(0), 1e-3, sk.MOTOR_PHYSICAL)
@@ -116,7 +118,7 @@ def test_force_pairs_match_per_anchor_application_in_pybullet():
                     pb.applyExternalForce(scene.body_ids[geom.body_b[i]], -1, (-f).tolist(), bank.wb[i].tolist(),
                                           pb.WORLD_FRAME, physicsClientId=scene.client)
             else:
-                scene.apply_force_pairs(bank.points, bank.forces)
+                scene.apply_wrenches(bank.force, bank.torque)
             scene.step()
         finals.append(scene.read_poses())
         scene.close()

@@ -12,9 +12,9 @@ import pytest
 
 from protocol.errors import ParameterError
 from protocol.messages import TrialStatus
-from worker.morphology.registry import load_morphology
-from worker.morphology.structure import StringMaterial
-from worker.morphology.variants import with_strings
+from robot.morphology.registry import load_morphology
+from robot.morphology.structure import StringMaterial
+from robot.morphology.variants import with_strings
 from worker.trial import TrialConfig, random_unit_params, run_trial, simulate
 
 
@@ -76,8 +76,8 @@ def test_bad_parameters_raise_named_errors():
 
 TRIAL_SNIPPET = """
 import json
-from worker.morphology.registry import load_morphology
-from worker.morphology.variants import with_strings
+from robot.morphology.registry import load_morphology
+from robot.morphology.variants import with_strings
 from worker.trial import TrialConfig, random_unit_params, run_trial
 m = load_morphology("tetraspine")
 r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11)

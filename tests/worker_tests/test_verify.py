@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from worker.morphology.registry import load_morphology
-from worker.morphology.variants import with_strings
+from robot.morphology.registry import load_morphology
+from robot.morphology.variants import with_strings
 from worker.trial import TrialConfig, random_unit_params, run_trial
 from worker.verify import VerifySettings, verify_trial
 
@@ -14,7 +14,7 @@ def test_creep_artefact_is_not_reproduced_at_a_finer_step():
     morph = load_morphology("tetraspine-ntrt")
     u = random_unit_params(morph, 1)
     u[1] = 0.0  # no CPG output at all
-    cfg = TrialConfig(duration_s=4.0, friction_anchor=False)
+    cfg = TrialConfig(duration_s=4.0, engine_options={"friction_anchor": False})
     r = run_trial(morph, u, cfg, 1)
     v = verify_trial(morph, u, cfg, 1, r.distance_m)
     assert not v.holds and v.verdict.startswith("not reproduced")

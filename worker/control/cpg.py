@@ -10,37 +10,10 @@ z_j = r_j e^{i phi_j}: one sparse complex product per evaluation instead of a si
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from numba import njit
 
-
-@dataclass(frozen=True)
-class CpgNetwork:
-    """A CPG: node_string (n,) string driven by each node; omega_rad_s (n,); amplitude_cm_s (n,)
-    target amplitudes R; CSR coupling (indptr (n+1,), source (e,), weight (e,), phase_rad (e,))
-    where row m lists the sources t that node m takes a term from."""
-
-    node_string: np.ndarray
-    omega_rad_s: np.ndarray
-    amplitude_cm_s: np.ndarray
-    indptr: np.ndarray
-    source: np.ndarray
-    weight: np.ndarray
-    phase_rad: np.ndarray
-    amplitude_rate_per_s: float = 20.0
-
-    @property
-    def n_nodes(self) -> int:
-        return int(self.node_string.shape[0])
-
-    @property
-    def n_couplings(self) -> int:
-        return int(self.source.shape[0])
-
-    def complex_weights(self) -> np.ndarray:
-        return (self.weight * np.exp(-1j * self.phase_rad)).astype(np.complex128)
+from robot.cpg_network import CpgNetwork
 
 
 @njit(cache=True)

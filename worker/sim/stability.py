@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from worker.morphology.model import Morphology
-from worker.sim.bodies import build_bodies, build_strings
+from robot.bodies import build_bodies, build_strings
+from robot.morphology.model import Morphology
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,6 @@ N_STATE = 4
 
 MODE_FIXED, MODE_IMPEDANCE, MODE_DRIVEN = 0, 1, 2
 MOTOR_PHYSICAL, MOTOR_NTRT2014 = 0, 1
-COUPLE_LEVER_CM = 1.0
 
 STATUS_OK, STATUS_NONFINITE = 0, 1
 
@@ -116,13 +115,13 @@ def world_anchors(poses, body, anchors, out):
 
 @njit(cache=True)
 def string_step(poses, body_a, body_b, anc_a, anc_b, params, state, cpg_out, dt, motor_mode,
-                out_points, out_forces, out_tension, work, wa, wb, string_force):
+                out_force, out_torque, out_tension, work, wa, wb, string_force):
     """One control + force step for every string.
 
     poses (nb, 7) COM position (cm) and quaternion (x, y, z, w); cpg_out (n_nodes,) cm/s.
-    Writes out_points/out_forces (2 nb, 3): each body's net wrench as two forces (net force at the
-    COM plus a couple, since pybullet's applyExternalTorque misbehaves on maximal-coordinate
-    bodies); out_tension (n,) spring tension max(0, k (L - rest)); adds reel-in work to work[0];
+    Writes out_force/out_torque (nb, 3): each body's net string force at its COM and torque about
+    it (world frame), for the engine's one wrench write per body; out_tension (n,) spring tension
+    max(0, k (L - rest)); adds reel-in work to work[0];
     wa, wb (n, 3) world anchors (cm) and string_force (n, 3) the force on end a (end b gets its
     negative), kept for checks and recording.
     Returns STATUS_NONFINITE if any length or force is not finite.
@@ -131,8 +130,10 @@ def string_step(poses, body_a, body_b, anc_a, anc_b, params, state, cpg_out, dt,
     n = params.shape[0]
     world_anchors(poses, body_a, anc_a, wa)
     world_anchors(poses, body_b, anc_b, wb)
-    force = np.zeros((nb, 3))
-    torque = np.zeros((nb, 3))
+    force = out_force
+    torque = out_torque
+    force[:] = 0.0
+    torque[:] = 0.0
     status = STATUS_OK
     for i in range(n):
         dx = wb[i, 0] - wa[i, 0]
@@ -205,7 +206,6 @@ def string_step(poses, body_a, body_b, anc_a, anc_b, params, state, cpg_out, dt,
             torque[b, 0] -= rb1 * fz - rb2 * fy
             torque[b, 1] -= rb2 * fx - rb0 * fz
             torque[b, 2] -= rb0 * fy - rb1 * fx
-    wrench_to_force_pairs(poses, force, torque, out_points, out_forces)
     for b in range(nb):
         for c in range(3):
             if not (np.isfinite(force[b, c]) and np.isfinite(torque[b, c])):
@@ -213,53 +213,12 @@ def string_step(poses, body_a, body_b, anc_a, anc_b, params, state, cpg_out, dt,
     return status
 
 
-@njit(cache=True)
-def wrench_to_force_pairs(poses, force, torque, out_points, out_forces):
-    """Net force F and torque tau about the COM as two forces F/2 +- Fc at COM +- s u, u perpendicular
-    to tau and Fc = (tau x u) / (2 s): they sum to F and their moment is u x (tau x u) = tau."""
-    s = COUPLE_LEVER_CM
-    for b in range(poses.shape[0]):
-        tx, ty, tz = torque[b, 0], torque[b, 1], torque[b, 2]
-        ax, ay, az = abs(tx), abs(ty), abs(tz)
-        if ax <= ay and ax <= az:
-            ex, ey, ez = 1.0, 0.0, 0.0
-        elif ay <= az:
-            ex, ey, ez = 0.0, 1.0, 0.0
-        else:
-            ex, ey, ez = 0.0, 0.0, 1.0
-        ux = ty * ez - tz * ey
-        uy = tz * ex - tx * ez
-        uz = tx * ey - ty * ex
-        norm = np.sqrt(ux * ux + uy * uy + uz * uz)
-        if norm > 0.0:
-            ux, uy, uz = ux / norm, uy / norm, uz / norm
-        else:
-            ux, uy, uz = 1.0, 0.0, 0.0
-        cx = (ty * uz - tz * uy) / (2.0 * s)
-        cy = (tz * ux - tx * uz) / (2.0 * s)
-        cz = (tx * uy - ty * ux) / (2.0 * s)
-        i0 = 2 * b
-        i1 = 2 * b + 1
-        out_points[i0, 0] = poses[b, 0] + s * ux
-        out_points[i0, 1] = poses[b, 1] + s * uy
-        out_points[i0, 2] = poses[b, 2] + s * uz
-        out_points[i1, 0] = poses[b, 0] - s * ux
-        out_points[i1, 1] = poses[b, 1] - s * uy
-        out_points[i1, 2] = poses[b, 2] - s * uz
-        out_forces[i0, 0] = 0.5 * force[b, 0] + cx
-        out_forces[i0, 1] = 0.5 * force[b, 1] + cy
-        out_forces[i0, 2] = 0.5 * force[b, 2] + cz
-        out_forces[i1, 0] = 0.5 * force[b, 0] - cx
-        out_forces[i1, 1] = 0.5 * force[b, 1] - cy
-        out_forces[i1, 2] = 0.5 * force[b, 2] - cz
-
-
 class StringBank:
     """Every string of a scene: geometry, packed parameters, state and output buffers.
 
     body_a/body_b (n,), anchor_a_cm/anchor_b_cm (n, 3) body frame, params (n, N_PARAM),
-    state (n, N_STATE). After step(): tension (n,) internal units, points/forces (2 nb, 3) the
-    force pairs to apply, wa/wb (n, 3) world anchors, string_force (n, 3) force on end a.
+    state (n, N_STATE). After step(): tension (n,) internal units, force/torque (nb, 3) each body's
+    net wrench about its COM, wa/wb (n, 3) world anchors, string_force (n, 3) force on end a.
     """
 
     def __init__(self, n_bodies: int, body_a, body_b, anchor_a_cm, anchor_b_cm, params, state) -> None:
@@ -270,8 +229,8 @@ class StringBank:
         self.anchor_b = np.ascontiguousarray(anchor_b_cm, dtype=np.float64)
         self.params = np.ascontiguousarray(params, dtype=np.float64)
         self.state = np.ascontiguousarray(state, dtype=np.float64)
-        self.points = np.zeros((2 * n_bodies, 3))
-        self.forces = np.zeros((2 * n_bodies, 3))
+        self.force = np.zeros((n_bodies, 3))
+        self.torque = np.zeros((n_bodies, 3))
         self.tension = np.zeros(n)
         self.work = np.zeros(1)
         self.wa = np.zeros((n, 3))
@@ -280,5 +239,5 @@ class StringBank:
 
     def step(self, poses: np.ndarray, cpg_out: np.ndarray, dt: float, motor_mode: int) -> int:
         return string_step(poses, self.body_a, self.body_b, self.anchor_a, self.anchor_b, self.params,
-                           self.state, cpg_out, dt, motor_mode, self.points, self.forces, self.tension,
+                           self.state, cpg_out, dt, motor_mode, self.force, self.torque, self.tension,
                            self.work, self.wa, self.wb, self.string_force)

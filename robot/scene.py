@@ -209,3 +209,18 @@ def pairs_off(terrain: Terrain, n_segments: int) -> list[tuple[int, int]]:
     if terrain.pairs != "neighbours":
         return []
     return [(i, j) for i in range(n_segments) for j in range(i + 2, n_segments)]
+
+
+@dataclass(frozen=True)
+class GroundSpec:
+    """Flat static box whose top is at top_y_cm (NTRT [P]: half-height 0.5, top at y = 0.5)."""
+
+    top_y_cm: float = 0.5
+    half_extent_cm: float = 500.0
+    half_height_cm: float = 0.5
+    friction: float = 0.5
+
+    def to_terrain(self) -> Terrain:
+        box = Box((0.0, self.top_y_cm - self.half_height_cm, 0.0),
+                  (self.half_extent_cm, self.half_height_cm, self.half_extent_cm))
+        return Terrain(self.friction, (box,))

@@ -18,10 +18,10 @@ import numpy as np
 
 from protocol.errors import ConfigError, MorphologySpecError
 from protocol.params import ParamSpace, ParamSpec
-from worker.control.cpg import CpgNetwork
+from robot.cpg_network import CpgNetwork
 
 if TYPE_CHECKING:
-    from worker.morphology.model import Morphology
+    from robot.morphology.model import Morphology
 
 
 class BaseControllerSpace:

@@ -1,8 +1,11 @@
-"""The only module that imports pybullet: builds a scene of compound rigid segments and steps it.
+"""The Bullet backend (the only module that imports pybullet): compound rigid segments on a terrain.
 
 Gravity is -981 cm/s^2 along Y (Y up, NTRT's frame). Each segment is one maximal-coordinate
 rigid body with explicit mass, COM and inertia. Per step the loop does one pose read per body,
-two applyExternalForce calls per body (its net wrench as a force pair) and one stepSimulation.
+two applyExternalForce calls per body (its net wrench as a force pair, since pybullet's
+applyExternalTorque is wrong on maximal-coordinate bodies) and one stepSimulation.
+Friction: Bullet multiplies the two bodies' coefficients, so the spec's ground and rod values
+apply as they are.
 """
 
 from __future__ import annotations
@@ -14,17 +17,17 @@ from itertools import chain
 import numpy as np
 import pybullet as pb
 
-from worker.sim.bodies import BodyModel
-from worker.sim.scene import GROUND_TOP_CM, Box, Terrain, pairs_off
-
-GRAVITY_CM_S2 = 981.0
+from protocol.errors import ConfigError, check_range
+from robot.bodies import BodyModel
+from robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
+from worker.engines.base import GRAVITY_CM_S2, BasePhysics
+from worker.engines.couple import wrench_to_force_pairs
 
 
 @dataclass(frozen=True)
-class EngineSettings:
-    """Bullet settings; defaults are Bullet 2.8x's sequential-impulse defaults (spec 0a.7)."""
+class BulletSettings:
+    """Bullet settings; defaults are Bullet 2.8x's sequential-impulse defaults."""
 
-    dt_s: float = 1e-3
     solver_iterations: int = 10
     erp: float = 0.2
     split_impulse: bool = True
@@ -36,20 +39,13 @@ class EngineSettings:
     # creeps ~0.5 cm/s at dt = 1 ms (a drift proportional to dt). NTRT's Bullet 2.81 had none.
     friction_anchor: bool = True
 
-
-@dataclass(frozen=True)
-class GroundSpec:
-    """Flat static box whose top is at top_y_cm (NTRT [P]: half-height 0.5, top at y = 0.5)."""
-
-    top_y_cm: float = 0.5
-    half_extent_cm: float = 500.0
-    half_height_cm: float = 0.5
-    friction: float = 0.5
-
-    def to_terrain(self) -> Terrain:
-        box = Box((0.0, self.top_y_cm - self.half_height_cm, 0.0),
-                  (self.half_extent_cm, self.half_height_cm, self.half_extent_cm))
-        return Terrain(self.friction, (box,))
+    def __post_init__(self) -> None:
+        if not isinstance(self.solver_iterations, int) or not 1 <= self.solver_iterations <= 1000:
+            raise ConfigError("solver_iterations out of range", received=self.solver_iterations,
+                              expected="an integer in [1, 1000]")
+        check_range("erp", self.erp, 0.0, 1.0)
+        check_range("warm_starting_factor", self.warm_starting_factor, 0.0, 1.0)
+        check_range("gravity_cm_s2", self.gravity_cm_s2, 0.0, None)
 
 
 def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
@@ -109,26 +105,30 @@ def _load_compound_urdf(body: BodyModel, pos: np.ndarray, quat: tuple[float, ...
         os.unlink(path)
 
 
-class PhysicsScene:
-    """A pybullet DIRECT world holding the segments and the ground."""
+class BulletPhysics(BasePhysics):
+    """A pybullet DIRECT world holding the segments and the terrain."""
 
-    def __init__(self, bodies: list[BodyModel], engine: EngineSettings, ground: GroundSpec | Terrain,
-                 start_offsets_cm: np.ndarray | None = None,
+    name = "bullet"
+    settings_type = BulletSettings
+
+    def __init__(self, bodies: list[BodyModel], ground: GroundSpec | Terrain, dt_s: float = 1e-3,
+                 settings: BulletSettings | None = None, start_offsets_cm: np.ndarray | None = None,
                  start_rotation: tuple[float, float, float, float] | None = None,
                  collision_pairs_off: list[tuple[int, int]] | None = None) -> None:
+        engine = settings or BulletSettings()
         self.client = pb.connect(pb.DIRECT)
         c = self.client
         pb.resetSimulation(physicsClientId=c)
         pb.setGravity(0.0, -engine.gravity_cm_s2, 0.0, physicsClientId=c)
         pb.setPhysicsEngineParameter(
-            fixedTimeStep=engine.dt_s, numSubSteps=1, numSolverIterations=engine.solver_iterations,
+            fixedTimeStep=dt_s, numSubSteps=1, numSolverIterations=engine.solver_iterations,
             erp=engine.erp, contactERP=engine.erp, frictionERP=engine.erp,
             useSplitImpulse=int(engine.split_impulse),
             splitImpulsePenetrationThreshold=engine.split_impulse_threshold,
             enableConeFriction=int(engine.cone_friction), deterministicOverlappingPairs=1,
             restitutionVelocityThreshold=0.0, physicsClientId=c)
         pb.setPhysicsEngineParameter(warmStartingFactor=engine.warm_starting_factor, physicsClientId=c)
-        self.dt_s = engine.dt_s
+        self.dt_s = dt_s
         self.friction_anchor = engine.friction_anchor
         terrain = ground.to_terrain() if isinstance(ground, GroundSpec) else ground
         self.terrain_ids = self._add_terrain(terrain)
@@ -143,6 +143,9 @@ class PhysicsScene:
         self._apply = pb.applyExternalForce
         self._step = pb.stepSimulation
         self._world = pb.WORLD_FRAME
+        self._points = np.zeros((2 * len(bodies), 3))
+        self._forces = np.zeros((2 * len(bodies), 3))
+        self._poses = np.zeros((len(bodies), 7))
 
     def _add_terrain(self, terrain: Terrain) -> list[int]:
         c = self.client
@@ -204,7 +207,14 @@ class PhysicsScene:
         get, c = self._get_pose, self.client
         # positional client id: the keyword form costs ~0.6 us more per call
         flat = chain.from_iterable(chain.from_iterable([get(b, c) for b in self.body_ids]))
-        return np.fromiter(flat, float, 7 * len(self.body_ids)).reshape(-1, 7)
+        self._poses = np.fromiter(flat, float, 7 * len(self.body_ids)).reshape(-1, 7)
+        return self._poses
+
+    def apply_wrenches(self, force: np.ndarray, torque: np.ndarray) -> None:
+        """Net force (n_bodies, 3) at each COM and torque (n_bodies, 3) about it, as two forces per body
+        at the poses of the last read_poses()."""
+        wrench_to_force_pairs(self._poses, force, torque, self._points, self._forces)
+        self.apply_force_pairs(self._points, self._forces)
 
     def apply_force_pairs(self, points_cm: np.ndarray, forces: np.ndarray) -> None:
         """Apply forces (2 n_bodies, 3) kg*cm/s^2 at world points (2 n_bodies, 3); rows 2b, 2b+1 on body b."""
@@ -230,9 +240,3 @@ class PhysicsScene:
         if self.client is not None and pb.isConnected(self.client):
             pb.disconnect(self.client)
         self.client = None
-
-    def __enter__(self) -> PhysicsScene:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

@@ -2,7 +2,7 @@
 and controller defaults. The format is documented in docs/morphology-format.md.
 
 Every error names the file, the line and the field, what was found and what was expected. Lines come
-from PyYAML's node marks, kept by the containers of worker.morphology.specyaml.
+from PyYAML's node marks, kept by the containers of robot.morphology.specyaml.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 
 from protocol.errors import ConfigError, MorphologySpecError
-from worker.morphology.model import ControlSpec, ImpedanceGains, Morphology
-from worker.morphology.specyaml import (
+from robot.morphology.model import ControlSpec, ImpedanceGains, Morphology
+from robot.morphology.specyaml import (
     LineDict,
     SpecSource,
     applies,
@@ -26,7 +26,7 @@ from worker.morphology.specyaml import (
     number,
     vector,
 )
-from worker.morphology.structure import (
+from robot.morphology.structure import (
     Rod,
     RodMaterial,
     String,
@@ -348,5 +348,5 @@ def load_spec_file(path: str | Path, *, segments: int | None = None, name: str |
 
 
 def builtin_spec(stem: str, *, segments: int | None = None, name: str | None = None) -> Morphology:
-    """A built-in morphology from worker/morphology/specs/<stem>.yaml."""
+    """A built-in morphology from robot/morphology/specs/<stem>.yaml."""
     return load_spec_file(SPEC_DIR / f"{stem}.yaml", segments=segments, name=name)

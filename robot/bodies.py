@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from worker.morphology.structure import StructureSpec, rotation_from_y
+from robot.morphology.structure import StructureSpec, rotation_from_y
 
 
 @dataclass(frozen=True)

@@ -6,8 +6,8 @@ base tetrahedron shifted by -(i + 1) * 0.75 e along z, so segment 0 sits at the 
 
 from __future__ import annotations
 
-from worker.morphology.model import ControlSpec, ImpedanceGains, Morphology
-from worker.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec
+from robot.morphology.model import ControlSpec, ImpedanceGains, Morphology
+from robot.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec
 
 EDGE_CM = 38.1
 HEIGHT_CM = 32.99557  # round5(sqrt(3)/2 * e)

@@ -9,11 +9,11 @@ from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING
 
 from protocol.errors import ConfigError, MorphologySpecError, check_range
-from worker.morphology.structure import StructureSpec
+from robot.morphology.structure import StructureSpec
 
 if TYPE_CHECKING:
     from protocol.params import ParamSpace
-    from worker.control.spaces import BaseControllerSpace
+    from robot.spaces import BaseControllerSpace
 
 
 @dataclass(frozen=True)
@@ -93,7 +93,7 @@ class Morphology:
                                       received=unknown, expected=f"tags among {sorted(tags)}")
 
     def controller_space(self, controller: str | None = None) -> BaseControllerSpace:
-        from worker.control.spaces import make_controller_space
+        from robot.spaces import make_controller_space
 
         name = controller or self.controllers[0]
         if name not in self.controllers:

@@ -10,7 +10,7 @@ import numpy as np
 import yaml
 
 from protocol.errors import MorphologySpecError
-from worker.morphology.specexpr import ExpressionError, evaluate
+from robot.morphology.specexpr import ExpressionError, evaluate
 
 WHEN = ("all", "even", "odd")
 

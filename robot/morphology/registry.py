@@ -7,11 +7,11 @@ from functools import lru_cache
 from pathlib import Path
 
 from protocol.errors import UnknownMorphologyError
-from worker.morphology.model import Morphology
-from worker.morphology.octahedral import octahedral_complex
-from worker.morphology.ribbed import ribbed
-from worker.morphology.tetrahedral import tetrahedral_complex
-from worker.morphology.tetraspine import tetraspine, tetraspine_hardware
+from robot.morphology.model import Morphology
+from robot.morphology.octahedral import octahedral_complex
+from robot.morphology.ribbed import ribbed
+from robot.morphology.tetrahedral import tetrahedral_complex
+from robot.morphology.tetraspine import tetraspine, tetraspine_hardware
 
 BUILTINS: dict[str, Callable[[], Morphology]] = {
     "tetraspine": lambda: tetraspine(12, name="tetraspine"),
@@ -43,7 +43,7 @@ def load_morphology(source: str | Mapping | Morphology) -> Morphology:
             return _builtin(source)
         path = Path(source)
         if path.suffix.lower() in (".yaml", ".yml", ".toml") and path.exists():
-            from worker.morphology.specfile import load_spec_file
+            from robot.morphology.specfile import load_spec_file
 
             return load_spec_file(path)
     raise UnknownMorphologyError("unknown morphology", received=source,

@@ -5,8 +5,8 @@ Defined by specs/tetrahedral-complex.yaml; this module is its named entry point.
 
 from __future__ import annotations
 
-from worker.morphology.model import Morphology
-from worker.morphology.specfile import builtin_spec
+from robot.morphology.model import Morphology
+from robot.morphology.specfile import builtin_spec
 
 SPEC = "tetrahedral-complex"
 

@@ -1,0 +1,103 @@
+"""How one trial runs, as data: duration, step, engine and its options, motor model, CPG timing,
+guards, recording and scene. Engine-neutral: a coordinator builds and hashes it without a simulator."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from protocol.errors import ConfigError, check_range
+from robot.scene import SceneConfig
+
+MOTOR_MODEL_NAMES = ("physical", "ntrt2014")
+ENGINE_NAME = re.compile(r"^[a-z][a-z0-9_-]{0,31}$")
+
+
+@dataclass(frozen=True)
+class TrialConfig:
+    """How to run one trial. None means "the morphology's default".
+
+    engine: the physics backend ("bullet", "mujoco"); engine_options: that backend's own settings
+    (solver iterations, friction anchors, contact parameters), validated by the backend.
+    motor_model: "physical" (limits in cm/s and cm/s^2, independent of dt) or "ntrt2014" (NTRT's
+    per-step caps, only faithful at dt = 1 ms, for replaying published gaits).
+    cpg_update_period_s: NTRT's controlTime (CPG output held in between).
+    pose_jitter_cm: seeded Gaussian offset of every segment's start position (0: the seed is unused).
+    auto_dt: use min(dt_s, dt_safety_factor * the string network's stable-step estimate).
+    refuse_unstable_dt: raise ConfigError for a dt_s above that estimate (known to be unstable).
+    """
+
+    duration_s: float | None = None
+    dt_s: float = 1e-3
+    auto_dt: bool = False
+    dt_safety_factor: float = 0.5
+    refuse_unstable_dt: bool = True
+    engine: str = "bullet"
+    engine_options: dict[str, Any] = field(default_factory=dict)
+    motor_model: str = "physical"
+    controller: str | None = None
+    cpg_update_period_s: float | None = None
+    cpg_max_step_s: float = 1e-3
+    relocate_anchors: bool = True
+    pose_jitter_cm: float = 0.0
+    ground_friction: float | None = None
+    check_every_s: float = 0.01
+    max_body_speed_m_s: float = 5.0
+    min_height_m: float = -0.5
+    max_height_m: float = 5.0
+    max_stretch_ratio: float = 4.0
+    max_kinetic_energy_j: float = 200.0
+    record_every_s: float | None = None
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    extras: dict[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.duration_s is not None:
+            check_range("duration_s", self.duration_s, 0.0, 3600.0, low_inclusive=False)
+        check_range("dt_s", self.dt_s, 1e-6, 0.02)
+        check_range("dt_safety_factor", self.dt_safety_factor, 0.0, 1.0, low_inclusive=False)
+        if not isinstance(self.engine, str) or not ENGINE_NAME.match(self.engine):
+            raise ConfigError("engine is not an engine name", received=self.engine,
+                              expected="a registered engine such as 'bullet' or 'mujoco'")
+        if not isinstance(self.engine_options, Mapping):
+            raise ConfigError("engine_options is not a mapping", received=self.engine_options,
+                              expected="{option: value} of the engine's settings")
+        object.__setattr__(self, "engine_options", dict(self.engine_options))
+        if self.motor_model not in MOTOR_MODEL_NAMES:
+            raise ConfigError("unknown motor_model", received=self.motor_model, expected=sorted(MOTOR_MODEL_NAMES))
+        if self.cpg_update_period_s is not None:
+            check_range("cpg_update_period_s", self.cpg_update_period_s, 1e-6, 10.0)
+        check_range("cpg_max_step_s", self.cpg_max_step_s, 1e-6, 0.1)
+        check_range("pose_jitter_cm", self.pose_jitter_cm, 0.0, 10.0)
+        if self.ground_friction is not None:
+            check_range("ground_friction", self.ground_friction, 0.0, 10.0)
+        check_range("check_every_s", self.check_every_s, 1e-6, 10.0)
+        check_range("max_body_speed_m_s", self.max_body_speed_m_s, 0.0, None, low_inclusive=False)
+        check_range("max_stretch_ratio", self.max_stretch_ratio, 1.0, None, low_inclusive=False)
+        check_range("max_kinetic_energy_j", self.max_kinetic_energy_j, 0.0, None, low_inclusive=False)
+        if self.record_every_s is not None:
+            check_range("record_every_s", self.record_every_s, 1e-6, 10.0)
+        if isinstance(self.scene, Mapping):
+            object.__setattr__(self, "scene", SceneConfig.from_dict(dict(self.scene)))
+        if not isinstance(self.scene, SceneConfig):
+            raise ConfigError("scene is not a scene config", received=type(self.scene).__name__,
+                              expected="a SceneConfig or its dict")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> TrialConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError("unknown trial config fields", received=unknown, expected=sorted(known))
+        return cls(**dict(d))
+
+    def config_hash(self) -> str:
+        blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]
