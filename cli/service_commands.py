@@ -9,13 +9,13 @@ import re
 import secrets
 import signal
 import socket
-import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
+from cli.local_workers import LocalWorkers, worker_command
 from protocol.errors import ConfigError
 
 
@@ -25,9 +25,21 @@ def free_port(host: str = "127.0.0.1") -> int:
         return int(s.getsockname()[1])
 
 
-def default_run_id(morphology: str) -> str:
-    stem = re.sub(r"[^A-Za-z0-9_.-]", "-", morphology)[:24]
+def default_run_id(robot_name: str) -> str:
+    """<robot name>-<time>-<random>: valid as a command-line value, a Zenoh key chunk and a file name."""
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "-", robot_name).lstrip("-_.")[:24] or "run"
     return f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(2)}"
+
+
+def robot_name(morphology: str) -> str:
+    """The name a run is known by: the robot's own name (a spec file's `name:`), never its path."""
+    from coordinator.problem import is_test_objective
+
+    if is_test_objective(morphology):
+        return morphology.replace(":", "-")
+    from robot.morphology.registry import load_morphology
+
+    return load_morphology(morphology).name
 
 
 # --- argument groups -------------------------------------------------------------------------------
@@ -42,8 +54,8 @@ def _zenoh_args(p: argparse.ArgumentParser, listen_default: str | None) -> None:
 
 
 def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
-    p.add_argument("morphology", nargs="?", help="registered morphology (e.g. tetraspine) or the test "
-                   "objective sphere[:N]; omit with --resume")
+    p.add_argument("morphology", nargs="?", help="built-in morphology (e.g. tetraspine), a spec file "
+                   "(my_spine.yaml) or the test objective sphere[:N]; omit with --resume")
     p.add_argument("--trials", type=int, default=None,
                    help="trial budget (default 2000; with --resume: a new, larger budget)")
     if local:
@@ -57,6 +69,7 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
     p.add_argument("--seed", type=int, default=0, help="run seed: fixes every sampled vector by trial number")
     p.add_argument("--objective", default="distance", help="distance (default), speed or cot_distance")
     p.add_argument("--controller", help="controller parameter space (default: the morphology's)")
+    p.add_argument("--engine", default=None, help="physics engine of every trial: bullet (default) or mujoco")
     p.add_argument("--scene", default=None,
                    help="flat (default), slope, rough or obstacles with optional ,field=value pairs, e.g. "
                         "'rough,rough_amplitude_cm=3'; stored with the run")
@@ -129,12 +142,14 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
         return core, storage, Path(args.resume)
     if not args.morphology:
         raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")
-    run_id = args.run_id or default_run_id(args.morphology)
-    overrides = None
+    run_id = args.run_id or default_run_id(robot_name(args.morphology))
+    overrides: dict[str, Any] = {}
     if args.scene is not None:
         from robot.scene import parse_scene
 
-        overrides = {"scene": parse_scene(args.scene)}
+        overrides["scene"] = parse_scene(args.scene)
+    if args.engine is not None:
+        overrides["engine"] = args.engine
     config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
                               controller=args.controller, duration_s=args.duration, trial_overrides=overrides)
     lease = args.lease
@@ -198,27 +213,6 @@ def _describe_best(core: Any, path: Path) -> str:
             f"  params: {params}\nfile: {path}")
 
 
-def _spawn_worker(endpoint: str, run_id: str, batch: int | None, zenoh_config: str | None) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "cli.main", "worker", "--connect", endpoint, "--run", run_id,
-           "--exit-when-done"] + (["--batch", str(batch)] if batch else [])
-    if zenoh_config:
-        cmd += ["--zenoh-config", zenoh_config]
-    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
-
-
-def _stop_workers(procs: list[subprocess.Popen], timeout_s: float = 10.0) -> None:
-    for p in procs:
-        if p.poll() is None:
-            p.send_signal(signal.SIGTERM)
-    end = time.monotonic() + timeout_s
-    for p in procs:
-        try:
-            p.wait(max(0.1, end - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
-
-
 def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: list[str]) -> int:
     from coordinator.service import CoordinatorService
 
@@ -247,18 +241,19 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
         print(f"API on http://{args.api_host}:{port}/runs/{core.run_id} (docs at /docs)", file=sys.stderr)
     endpoint = (listen or args.connect)[0]
     endpoint = endpoint.replace("0.0.0.0", "127.0.0.1")
-    procs = [_spawn_worker(endpoint, core.run_id, args.batch, args.zenoh_config) for _ in range(n_workers)]
+    workers = LocalWorkers(worker_command(endpoint, core.run_id, args.batch, args.zenoh_config), n_workers)
     stopped = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):  # Ctrl-C or a service manager: stop cleanly, store all
         signal.signal(sig, lambda *_: stopped.set())
     tty = sys.stderr.isatty()
     last_line = 0.0
     code = 0
+    failure: str | None = None
     try:
         while not core.done and not stopped.wait(0.25):
-            for i, p in enumerate(procs):  # a local worker that exited before the end is replaced
-                if p.poll() is not None and not core.done and not stopped.is_set():
-                    procs[i] = _spawn_worker(endpoint, core.run_id, args.batch, args.zenoh_config)
+            failure = core.failure or (None if core.done else workers.check())
+            if failure:
+                break
             now = time.monotonic()
             if not args.quiet and (tty or now - last_line >= 5.0):
                 print(("\r" if tty else "") + _progress(core), end="" if tty else "\n", file=sys.stderr,
@@ -274,7 +269,7 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     except KeyboardInterrupt:
         code = 130
     finally:
-        _stop_workers(procs)
+        workers.stop()
         service.close()
         if core.verifier is not None:
             core.verifier.close()
@@ -283,7 +278,10 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
             api[1].join(5)
     if not args.quiet:
         print(("\r" if tty else "") + _progress(core, final=True), end="", file=sys.stderr)
-    if not core.done:
+    if failure and not core.done:
+        print(f"\nerror: {failure}", file=sys.stderr)
+        code = 1
+    elif not core.done:
         print(f"stopped with everything stored; continue with: spinefarm search --resume {path}",
               file=sys.stderr)
         code = 130

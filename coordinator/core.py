@@ -22,16 +22,18 @@ from protocol.errors import MessageError
 from protocol.messages import (
     ResultAck,
     ResultSubmission,
-    RunConfig,
     RunInfo,
     TrialAssignment,
+    TrialStatus,
     Verdict,
+    Verification,
     WorkGrant,
     WorkRequest,
     decode_message,
     encode,
     encode_message,
 )
+from protocol.run import RunConfig, WorkerProblem
 
 log = logging.getLogger("spinefarm.coordinator")
 _RATE_WINDOW_S = 30.0
@@ -57,6 +59,7 @@ class CoordinatorCore:
         # Trials sampled but never finished before a restart are issued again first.
         scheduler.enqueue(study.storage.waiting_ids())
         self.verifier = verifier
+        self.failure: str | None = None  # why the run cannot go on (a worker cannot build it)
         if verifier is not None:  # a verification cut short by a restart is started again
             self._verify_best()
 
@@ -121,7 +124,7 @@ class CoordinatorCore:
         tid = result.trial_id
         if not 0 <= tid < storage.n_trials():
             return Verdict.UNKNOWN
-        if storage.columns()["status"][tid] != b"waiting":
+        if storage.columns()["status"][tid] != TrialStatus.WAITING.stored:
             return Verdict.DUPLICATE
         if not self.scheduler.is_current(tid, lease_id, worker_id):
             return Verdict.STALE
@@ -146,9 +149,10 @@ class CoordinatorCore:
             return
         tid = best[0]
         cols = storage.columns()
-        if cols["verification"][tid] in (b"holds", b"not_reproduced") or tid in self.verifier.pending:
+        done = (Verification.HOLDS.stored, Verification.NOT_REPRODUCED.stored)
+        if cols["verification"][tid] in done or tid in self.verifier.pending:
             return
-        storage.set_verification(tid, "pending")
+        storage.set_verification(tid, Verification.PENDING)
         self.verifier.submit(tid, cols["params_unit"][tid].tolist(), int(cols["seed"][tid]),
                              float(cols["distance_m"][tid]))
 
@@ -159,7 +163,7 @@ class CoordinatorCore:
         done = self.verifier.collect(wait_s)
         with self.lock:
             for tid, v in done:
-                verdict = "holds" if v["holds"] else "not_reproduced"
+                verdict = Verification.HOLDS if v["holds"] else Verification.NOT_REPRODUCED
                 self.study.storage.set_verification(tid, verdict, v.get("fine_distance_m", float("nan")),
                                                     "" if v["holds"] else v["verdict"])
                 if not v["holds"]:
@@ -187,6 +191,18 @@ class CoordinatorCore:
             return self._error("config request", MessageError(
                 "unknown run config hash", received=config_hash, expected=self.config_hash))
         return self._config_payload
+
+    def handle_problem(self, payload: bytes) -> bytes:
+        """A worker cannot serve this run: the run stops with its reason (see `failure`)."""
+        try:
+            problem = decode_message(payload, WorkerProblem)
+        except MessageError as exc:
+            return self._error("worker problem", exc)
+        with self.lock:
+            if self.failure is None:
+                self.failure = f"worker {problem.worker_id} cannot serve run {self.run_id}: {problem.reason}"
+                log.error("%s", self.failure)
+        return encode("ack", {})
 
     def run_info(self) -> bytes:
         return encode_message(RunInfo(self.run_id, self.config_hash, self.study.budget, self.study.done))
@@ -223,7 +239,8 @@ class CoordinatorCore:
             wall = time.time()
             return {
                 "run_id": self.run_id,
-                "state": "done" if self.study.done else "running",
+                "state": "done" if self.study.done else ("failed" if self.failure else "running"),
+                "failure": self.failure,
                 "trials_budget": self.study.budget,
                 "trials_sampled": self.study.n_asked,
                 "trials_complete": counts["complete"],

@@ -7,12 +7,15 @@ in microseconds, so the transport and the coordinator can be tested and benchmar
 from __future__ import annotations
 
 import re
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from protocol.errors import ConfigError
 from protocol.keys import check_run_id
-from protocol.messages import RunConfig
 from protocol.params import ParamSpace, ParamSpec
+from protocol.run import RunConfig
+
+if TYPE_CHECKING:
+    from robot.morphology.model import Morphology
 
 SPHERE = re.compile(r"^sphere(?::(\d{1,3}))?$")
 
@@ -34,24 +37,36 @@ def sphere_space(morphology: str) -> ParamSpace:
 def build_run_config(run_id: str, morphology: str, *, objective: str = "distance", seed: int = 0,
                      controller: str | None = None, duration_s: float | None = None,
                      trial_overrides: dict[str, Any] | None = None) -> RunConfig:
-    """Resolve `morphology` (a registered name, or sphere[:N]) into the config workers fetch."""
+    """Resolve `morphology` (a built-in name, a spec file path, or sphere[:N]) into the run object
+    workers fetch. Engine-free: neither a simulator nor a compiler is imported here."""
     check_run_id(run_id)
     if is_test_objective(morphology):
         space = sphere_space(morphology)
         return RunConfig(run_id, morphology, {}, None, tuple(space.describe()),
-                         {"duration_s": duration_s}, objective, seed)
-    try:  # the simulation core is only needed when real physics runs
-        from robot.morphology.registry import load_morphology
-        from worker.trial import TrialConfig
-    except ImportError as exc:
-        raise ConfigError("the simulation core is not available", received=str(exc),
-                          expected="worker.trial and robot.morphology.registry") from exc
-    morph = load_morphology(morphology)
+                         {"duration_s": duration_s}, objective, seed, space_hash=space.space_hash())
+    from robot.morphology.registry import load_morphology
+
+    return run_config_for(run_id, load_morphology(morphology), objective=objective, seed=seed,
+                          controller=controller, duration_s=duration_s, trial_overrides=trial_overrides)
+
+
+def run_config_for(run_id: str, morphology: Morphology | dict[str, Any], *, objective: str = "distance",
+                   seed: int = 0, controller: str | None = None, duration_s: float | None = None,
+                   trial_overrides: dict[str, Any] | None = None) -> RunConfig:
+    """The run object of a morphology, or of its to_dict() (e.g. the spec stored in a run file)."""
+    from robot.morphology.model import Morphology
+    from robot.trial_config import TrialConfig
+    from worker.engines.base import engine_names
+
+    morph = morphology if isinstance(morphology, Morphology) else Morphology.from_dict(morphology)
     space = morph.param_space(controller)
     tc_dict = TrialConfig().to_dict()
     tc_dict.update(trial_overrides or {})
     if duration_s is not None:
         tc_dict["duration_s"] = duration_s
     trial_config = TrialConfig.from_dict(tc_dict)  # validates the overrides
+    if trial_config.engine not in engine_names():
+        raise ConfigError("unknown engine", received=trial_config.engine, expected=engine_names())
     return RunConfig(run_id, morph.name, morph.to_dict(), controller, tuple(space.describe()),
-                     trial_config.to_dict(), objective, seed)
+                     trial_config.to_dict(), objective, seed, spec_hash=morph.spec_hash(),
+                     space_hash=space.space_hash(), trial_config_hash=trial_config.config_hash())

@@ -78,6 +78,7 @@ class CoordinatorService:
             s.declare_queryable(keys.work(run), self._guard(self.core.handle_work)),
             s.declare_queryable(keys.results(run), self._guard(self.core.handle_results)),
             s.declare_queryable(f"{keys.run_prefix(run)}/config/*", self._on_config),
+            s.declare_queryable(keys.problem(run), self._guard(self.core.handle_problem)),
             s.liveliness().declare_subscriber(keys.all_worker_tokens(), self._on_liveliness, history=True),
         ]
         self._thread = threading.Thread(target=self._housekeeping, name="coordinator-housekeeping",
@@ -145,7 +146,7 @@ class CoordinatorService:
 
     def wait_done(self, timeout_s: float | None = None, poll_s: float = 0.05) -> bool:
         end = None if timeout_s is None else time.monotonic() + timeout_s
-        while not self.core.done:
+        while not self.core.done and self.core.failure is None:
             if end is not None and time.monotonic() >= end:
                 return False
             time.sleep(poll_s)

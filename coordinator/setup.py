@@ -13,7 +13,7 @@ from coordinator.scheduler import Scheduler
 from coordinator.study import Study
 from coordinator.verifier import Verifier, VerifyPolicy
 from protocol.errors import ConfigError, check_range
-from protocol.messages import RunConfig
+from protocol.run import RunConfig
 from storage.base import BaseStorage
 from storage.memory import InMemoryStorage
 from storage.schema import RunMeta
@@ -49,21 +49,21 @@ def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
     startup = settings.startup_trials if settings.startup_trials is not None else settings.trials // 2
     sampler = GaussianHillClimbSampler(len(space), config.seed, sigma=settings.sigma, top_k=settings.top_k,
                                        startup_trials=startup)
-    return RunMeta(run_id=config.run_id, morphology=config.morphology, morphology_spec=config.morphology_spec,
-                   controller=config.controller, param_names=tuple(space.names),
+    return RunMeta(run_id=config.run_id, morphology=config.morphology, controller=config.controller,
+                   param_names=tuple(space.names),
                    param_lows=tuple(space.lows.tolist()), param_highs=tuple(space.highs.tolist()),
-                   param_units=tuple(space.units), trial_config=config.trial_config,
+                   param_units=tuple(space.units),
                    objective=config.objective, seed=config.seed, trials_budget=settings.trials,
                    sampler=sampler.describe(), software_version=software_version(),
                    created_at_unix_s=time.time(), config_hash=config.config_hash(),
-                   extra={"run_config": config.to_dict(), "lease_s": settings.lease_s,
+                   run=config.to_dict(), extra={"lease_s": settings.lease_s,
                           "verify": settings.verify.to_dict()})
 
 
 def build_core(storage: BaseStorage, clock=time.monotonic) -> CoordinatorCore:
     """A core over a storage that already holds its run (new or resumed)."""
     meta = storage.run_meta()
-    config = RunConfig.from_dict(meta.extra["run_config"])
+    config = RunConfig.from_dict(meta.run)
     space = config.space()
     sampler = sampler_from_dict(meta.sampler, len(space))
     study = Study(storage, sampler, space, meta.trials_budget, objective_fn(meta.objective), meta.seed)

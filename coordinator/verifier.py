@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from protocol.errors import check_range
-from protocol.messages import RunConfig
+from protocol.run import RunConfig
 
 log = logging.getLogger("spinefarm.verifier")
 

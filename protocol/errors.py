@@ -82,3 +82,7 @@ def check_range(field: str, value: float, low: float | None = None, high: float 
         hi = "inf" if high is None else f"{high:g}"
         bracket = "[" if low_inclusive else "("
         raise ConfigError(f"{field} out of range", received=value, expected=f"a finite number in {bracket}{lo}, {hi}]")
+
+
+class RunMismatchError(ConfigError):
+    """A worker cannot build the run it was handed as the coordinator defined it."""

@@ -14,12 +14,14 @@ from protocol.errors import ConfigError
 ROOT = "spinefarm"
 # A run id is one key-expression chunk: no '/', wildcards or verbatim markers.
 _RUN_ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+# a run id also travels as a command-line value and a file name: it starts with a letter or digit
+_RUN_ID_START = re.compile(r"^[A-Za-z0-9]")
 
 
 def check_run_id(run_id: str) -> str:
-    if not isinstance(run_id, str) or not _RUN_ID.match(run_id):
-        raise ConfigError("run id is not a valid key chunk", received=run_id,
-                          expected="1-64 characters from A-Z a-z 0-9 _ . -")
+    if not isinstance(run_id, str) or not _RUN_ID.match(run_id) or not _RUN_ID_START.match(run_id):
+        raise ConfigError("run id is not valid", received=run_id,
+                          expected="1-64 characters from A-Z a-z 0-9 _ . -, starting with a letter or digit")
     return run_id
 
 
@@ -52,6 +54,11 @@ def work(run_id: str) -> str:
 def results(run_id: str) -> str:
     """Queryable: a ResultSubmission in, a ResultAck out (workers resend until acknowledged)."""
     return f"{run_prefix(run_id)}/results"
+
+
+def problem(run_id: str) -> str:
+    """Queryable: a worker that cannot serve the run says why (WorkerProblem)."""
+    return f"{run_prefix(run_id)}/problem"
 
 
 def config(run_id: str, config_hash: str) -> str:

@@ -6,7 +6,6 @@ the wrong kind raises MessageError naming what was received and what was expecte
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field, fields
@@ -14,7 +13,6 @@ from enum import StrEnum
 from typing import Any
 
 from protocol.errors import MessageError
-from protocol.params import ParamSpace, ParamSpec
 
 SCHEMA_VERSION = 1
 
@@ -26,6 +24,68 @@ class TrialStatus(StrEnum):
     RUNNING = "running"
     COMPLETE = "complete"
     FAILED = "failed"
+
+    @property
+    def stored(self) -> bytes:
+        """The value as the fixed-width byte string storage columns hold."""
+        return self.value.encode()
+
+
+STORED_STATUSES = (TrialStatus.WAITING, TrialStatus.COMPLETE, TrialStatus.FAILED)
+
+
+class Verification(StrEnum):
+    """Re-simulation of a trial that became best, at a finer step. A not-reproduced trial never
+    counts as best."""
+
+    NOT_CHECKED = ""
+    PENDING = "pending"
+    HOLDS = "holds"
+    NOT_REPRODUCED = "not_reproduced"
+
+    @property
+    def stored(self) -> bytes:
+        return self.value.encode()
+
+
+@dataclass(frozen=True)
+class ScorePart:
+    """One measured part of a trial's score: messages, storage columns, API schemas and exports all
+    derive from SCORE_PARTS, so a part is declared here once."""
+
+    name: str
+    unit: str
+    description: str
+
+
+SCORE_PARTS: tuple[ScorePart, ...] = (
+    ScorePart("distance_m", "m", "displacement of the robot's centre of mass in the ground plane"),
+    ScorePart("ntrt_distance_cm", "cm", "displacement of the segment NTRT scores, from the start pose"),
+    ScorePart("speed_cm_s", "cm/s", "mean ground speed"),
+    ScorePart("work_j", "J", "actuator work shortening strings under tension"),
+    ScorePart("cot", "1", "cost of transport, work / (m g d)"),
+    ScorePart("mass_kg", "kg", "robot mass"),
+    ScorePart("sim_time_s", "s", "simulated time"),
+    ScorePart("wall_time_s", "s", "wall-clock time the worker spent on the trial"),
+)
+SCORE_NAMES = tuple(p.name for p in SCORE_PARTS)
+
+
+@dataclass(frozen=True)
+class ExtraPart:
+    """A TrialResult.extras entry that storage keeps as a column: how the trial was computed."""
+
+    name: str
+    dtype: str   # numpy dtype of the column ("f8", or "S16" for a short string)
+    unit: str
+    description: str
+
+
+RECORDED_EXTRAS: tuple[ExtraPart, ...] = (
+    ExtraPart("engine", "S16", "", "physics engine that ran the trial (bullet, mujoco)"),
+    ExtraPart("dt_s", "f8", "s", "physics step the trial used (the automatic choice under --dt auto)"),
+    ExtraPart("settle_s", "f8", "s", "settle phase before locomotion was scored (0: scored from the start)"),
+)
 
 
 @dataclass(frozen=True)
@@ -81,8 +141,7 @@ class TrialResult:
         except ValueError as exc:
             raise MessageError("trial result has an unknown status", received=kwargs["status"],
                                expected=[s.value for s in TrialStatus]) from exc
-        for name in ("distance_m", "ntrt_distance_cm", "speed_cm_s", "work_j", "cot", "sim_time_s",
-                     "wall_time_s", "mass_kg"):
+        for name in SCORE_NAMES:
             v = kwargs[name]
             if isinstance(v, bool) or not isinstance(v, int | float):
                 raise MessageError(f"trial result field {name!r} is not a number", received=v,
@@ -364,58 +423,6 @@ class RunInfo:
         what = "run info"
         return cls(_field(data, "run_id", str, what), _field(data, "config_hash", str, what),
                    _field(data, "trials_budget", int, what), _field(data, "run_done", bool, what))
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    """Everything a stateless worker needs to run trials of one run; fetched by hash and cached.
-
-    morphology: a registered name (or the built-in test objective "sphere");
-    morphology_spec: the morphology's to_dict() (empty for test objectives);
-    param_space: ParamSpace.describe() of the space the unit-cube vectors map into;
-    trial_config: TrialConfig.to_dict() (empty for test objectives).
-    """
-
-    KIND = "run_config"
-    run_id: str
-    morphology: str
-    morphology_spec: dict[str, Any]
-    controller: str | None
-    param_space: tuple[dict[str, Any], ...]
-    trial_config: dict[str, Any]
-    objective: str
-    seed: int
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["param_space"] = [dict(p) for p in self.param_space]
-        return d
-
-    def config_hash(self) -> str:
-        blob = json.dumps(_finite_or_str(self.to_dict()), sort_keys=True, default=_json_default)
-        return hashlib.sha256(blob.encode()).hexdigest()[:16]
-
-    def space(self) -> ParamSpace:
-        return ParamSpace(self.morphology, tuple(
-            ParamSpec(p["name"], float(p["low"]), float(p["high"]), str(p.get("unit", "")),
-                      str(p.get("doc", "")))
-            for p in self.param_space))
-
-    @classmethod
-    def from_dict(cls, data: Any) -> RunConfig:
-        what = "run config"
-        controller = data.get("controller") if isinstance(data, dict) else None
-        if controller is not None and not isinstance(controller, str):
-            raise MessageError("run config field 'controller' has the wrong type", received=controller,
-                               expected="a string or null")
-        space = _field(data, "param_space", list, what)
-        if not all(isinstance(p, dict) and {"name", "low", "high"} <= set(p) for p in space):
-            raise MessageError("run config has a malformed parameter space", received=space[:2],
-                               expected="a list of {name, low, high, unit}")
-        return cls(_field(data, "run_id", str, what), _field(data, "morphology", str, what),
-                   _field(data, "morphology_spec", dict, what), controller, tuple(space),
-                   _field(data, "trial_config", dict, what), _field(data, "objective", str, what),
-                   _field(data, "seed", int, what))
 
 
 def encode_message(message: Any) -> bytes:

@@ -9,7 +9,14 @@ from typing import Any
 import numpy as np
 
 from protocol.errors import StorageError
-from protocol.messages import TrialResult, TrialStatus
+from protocol.messages import (
+    RECORDED_EXTRAS,
+    SCORE_NAMES,
+    STORED_STATUSES,
+    TrialResult,
+    TrialStatus,
+    Verification,
+)
 from storage.schema import RunMeta, TrialRecord
 
 
@@ -63,7 +70,8 @@ class BaseStorage:
         if trial_id != n:
             raise StorageError("trial ids must be added densely", received=trial_id, expected=n)
         self._append({"trial_id": trial_id, "params_unit": params_unit, "params": params,
-                      "phase": phase.encode(), "parent": parent, "seed": seed, "status": b"waiting"})
+                      "phase": phase.encode(), "parent": parent, "seed": seed,
+                      "status": TrialStatus.WAITING.stored})
 
     def finish_trial(self, trial_id: int, result: TrialResult, objective: float,
                      finished_at_unix_s: float | None = None) -> bool:
@@ -71,28 +79,27 @@ class BaseStorage:
         self._writable()
         if not 0 <= trial_id < self.n_trials():
             raise StorageError("no such trial", received=trial_id, expected=f"0 <= id < {self.n_trials()}")
-        if self.columns()["status"][trial_id] != b"waiting":
+        if self.columns()["status"][trial_id] != TrialStatus.WAITING.stored:
             return False
-        status = b"complete" if result.status == TrialStatus.COMPLETE else b"failed"
-        self._update(trial_id, {
+        status = (TrialStatus.COMPLETE if result.status == TrialStatus.COMPLETE else TrialStatus.FAILED).stored
+        self._update(trial_id, {**_extras_values(result.extras),
             "status": status, "reason": result.reason.encode("utf-8", "replace")[:160],
             "objective": objective if math.isfinite(objective) else np.nan,
-            "distance_m": result.distance_m, "ntrt_distance_cm": result.ntrt_distance_cm,
-            "speed_cm_s": result.speed_cm_s, "work_j": result.work_j, "cot": result.cot,
-            "mass_kg": result.mass_kg, "sim_time_s": result.sim_time_s, "wall_time_s": result.wall_time_s,
+            **{name: getattr(result, name) for name in SCORE_NAMES},
             "worker_id": result.worker_id.encode("utf-8", "replace")[:64],
             "finished_at_unix_s": time.time() if finished_at_unix_s is None else finished_at_unix_s})
         return True
 
-    def set_verification(self, trial_id: int, verdict: str, distance_m: float = math.nan, reason: str = "") -> None:
+    def set_verification(self, trial_id: int, verdict: Verification | str, distance_m: float = math.nan,
+                         reason: str = "") -> None:
         """Record the re-simulation verdict of a trial (pending, holds, not_reproduced)."""
         self._writable()
         if not 0 <= trial_id < self.n_trials():
             raise StorageError("no such trial", received=trial_id, expected=f"0 <= id < {self.n_trials()}")
-        if verdict not in ("pending", "holds", "not_reproduced"):
-            raise StorageError("unknown verification verdict", received=verdict,
-                               expected="pending, holds or not_reproduced")
-        self._update(trial_id, {"verification": verdict.encode(), "verify_distance_m": distance_m,
+        allowed = (Verification.PENDING, Verification.HOLDS, Verification.NOT_REPRODUCED)
+        if verdict not in allowed:
+            raise StorageError("unknown verification verdict", received=verdict, expected=[str(v) for v in allowed])
+        self._update(trial_id, {"verification": Verification(verdict).stored, "verify_distance_m": distance_m,
                                 "verify_reason": reason.encode("utf-8", "replace")[:160]})
 
     def trial(self, trial_id: int) -> TrialRecord:
@@ -104,14 +111,15 @@ class BaseStorage:
 
     def counts(self) -> dict[str, int]:
         status = self.columns()["status"]
-        return {s: int(np.count_nonzero(status == s.encode())) for s in ("waiting", "complete", "failed")}
+        return {s.value: int(np.count_nonzero(status == s.stored)) for s in STORED_STATUSES}
 
     def best_ids(self, k: int) -> list[int]:
         """Ids of the k complete trials with the highest objective, best first (ties: lower id)."""
         cols = self.columns()
         obj = cols["objective"]
         # a result a finer re-simulation did not reproduce never counts as best
-        valid = (cols["status"] == b"complete") & (cols["verification"] != b"not_reproduced")
+        valid = (cols["status"] == TrialStatus.COMPLETE.stored) & \
+            (cols["verification"] != Verification.NOT_REPRODUCED.stored)
         score = np.where(valid & np.isfinite(obj), obj, -np.inf)
         k = min(k, int(np.count_nonzero(np.isfinite(score))))
         if k <= 0:
@@ -128,10 +136,24 @@ class BaseStorage:
         return [TrialRecord.from_columns(cols, i) for i in self.best_ids(k)]
 
     def waiting_ids(self) -> list[int]:
-        return [int(i) for i in np.flatnonzero(self.columns()["status"] == b"waiting")]
+        return [int(i) for i in np.flatnonzero(self.columns()["status"] == TrialStatus.WAITING.stored)]
 
     def __enter__(self) -> BaseStorage:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _extras_values(extras: dict) -> dict:
+    """The recorded extras of a result as column values (missing ones stay empty)."""
+    out: dict = {}
+    for part in RECORDED_EXTRAS:
+        if part.name not in extras:
+            continue
+        value = extras[part.name]
+        if part.dtype.startswith("S"):
+            out[part.name] = str(value).encode("utf-8", "replace")[: int(part.dtype[1:])]
+        elif isinstance(value, int | float) and not isinstance(value, bool):
+            out[part.name] = float(value)
+    return out

@@ -25,10 +25,10 @@ from protocol.errors import StorageError
 from protocol.messages import SCHEMA_VERSION
 from storage.memory import InMemoryStorage
 from storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
-from storage.table import TrialTable, empty_value
+from storage.table import EMPTY_STATUS, TrialTable, empty_value
 
 CHUNK_ROWS = 1024
-_JSON_FIELDS = ("morphology_spec", "trial_config", "sampler", "extra")
+_JSON_FIELDS = ("sampler", "extra", "run")
 _TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
 
 
@@ -110,7 +110,7 @@ def read_run(path: str | Path) -> tuple[RunMeta, dict[str, np.ndarray]]:
         n = min(g[c.name].shape[0] for c in COLUMNS)
         cols = {c.name: g[c.name][:n] for c in COLUMNS}
     # A row the writer extended but had not filled yet has an empty status: cut the table there.
-    empty = np.flatnonzero(cols["status"] == b"")
+    empty = np.flatnonzero(cols["status"] == EMPTY_STATUS)
     if empty.size:
         cols = {k: v[: int(empty[0])] for k, v in cols.items()}
     return meta, cols

@@ -12,6 +12,7 @@ from protocol.errors import StorageError
 from storage.base import BaseStorage
 from storage.hdf5 import _read_meta
 from storage.schema import COLUMNS, RunMeta, TrialRecord
+from storage.table import EMPTY_STATUS
 
 
 class _LazyColumns(Mapping):
@@ -55,7 +56,7 @@ class Hdf5Reader(BaseStorage):
             group = self._file["trials"]
             n = min(group[c.name].shape[0] for c in COLUMNS)
             status = group["status"][:n]
-            empty = np.flatnonzero(status == b"")  # rows extended but not yet filled by the writer
+            empty = np.flatnonzero(status == EMPTY_STATUS)  # rows extended but not yet filled by the writer
             self._n = int(empty[0]) if empty.size else n
             self._cols = _LazyColumns(group, self._n)
             self._cols._cache["status"] = status[: self._n]

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from protocol.errors import StorageError
+from protocol.messages import TrialStatus, Verification
 from storage.base import BaseStorage
 from storage.schema import RunMeta
 from storage.table import TrialTable
@@ -44,7 +45,7 @@ class InMemoryStorage(BaseStorage):
 
     def _update(self, trial_id: int, values: dict[str, Any]) -> None:
         self.table.set_row(trial_id, values)
-        if values.get("status") == b"complete" and math.isfinite(values.get("objective", math.nan)):
+        if values.get("status") == TrialStatus.COMPLETE.stored and math.isfinite(values.get("objective", math.nan)):
             bisect.insort(self._ranking, (-float(values["objective"]), trial_id))
 
     def _rebuild_ranking(self) -> None:
@@ -58,7 +59,7 @@ class InMemoryStorage(BaseStorage):
         verification = self.table.columns()["verification"]
         out = []
         for _, i in self._ranking:
-            if verification[i] != b"not_reproduced":
+            if verification[i] != Verification.NOT_REPRODUCED.stored:
                 out.append(i)
                 if len(out) == k:
                     break

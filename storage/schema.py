@@ -11,10 +11,12 @@ from typing import Any
 
 import numpy as np
 
-FILE_SCHEMA_VERSION = 2
+from protocol.messages import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, STORED_STATUSES, Verification
+
+FILE_SCHEMA_VERSION = 3
 
 PHASES = ("monte_carlo", "gaussian")
-STATUSES = ("waiting", "complete", "failed")
+STATUSES = tuple(s.value for s in STORED_STATUSES)
 
 
 @dataclass(frozen=True)
@@ -36,26 +38,20 @@ COLUMNS: tuple[Column, ...] = (
     Column("status", "S16", "", "waiting (sampled, no result yet), complete or failed"),
     Column("reason", "S160", "", "why a trial failed (diverged: ..., error: ...); empty when complete"),
     Column("objective", "f8", "see attribute objective", "the score the search maximised"),
-    Column("distance_m", "f8", "m", "displacement of the robot's centre of mass in the ground plane"),
-    Column("ntrt_distance_cm", "f8", "cm", "displacement of the segment NTRT scores"),
-    Column("speed_cm_s", "f8", "cm/s", "mean ground speed"),
-    Column("work_j", "f8", "J", "actuator work shortening strings under tension"),
-    Column("cot", "f8", "1", "cost of transport, work / (m g d)"),
-    Column("mass_kg", "f8", "kg", "robot mass"),
-    Column("sim_time_s", "f8", "s", "simulated time"),
-    Column("wall_time_s", "f8", "s", "wall-clock time the worker spent on the trial"),
+    *(Column(p.name, "f8", p.unit, p.description) for p in SCORE_PARTS),
     Column("worker_id", "S64", "", "worker that ran the trial"),
     Column("finished_at_unix_s", "f8", "s since 1970-01-01 UTC", "when the coordinator stored the result"),
     Column("verification", "S16", "", "re-simulation of a trial that became best: empty (not checked), "
            "pending, holds or not_reproduced (then it never counts as best)"),
     Column("verify_distance_m", "f8", "m", "distance of that re-simulation at a finer step"),
     Column("verify_reason", "S160", "", "what the re-simulation found when the distance did not hold"),
+    *(Column(e.name, e.dtype, e.unit, e.description) for e in RECORDED_EXTRAS),
 )
-VERIFICATIONS = ("", "pending", "holds", "not_reproduced")
+VERIFICATIONS = tuple(v.value for v in Verification)
 COLUMN_BY_NAME = {c.name: c for c in COLUMNS}
 VECTOR_COLUMNS = ("params_unit", "params")
-SCORE_COLUMNS = ("distance_m", "ntrt_distance_cm", "speed_cm_s", "work_j", "cot", "mass_kg",
-                 "sim_time_s", "wall_time_s")
+SCORE_COLUMNS = SCORE_NAMES
+EXTRA_COLUMNS = tuple(e.name for e in RECORDED_EXTRAS)
 
 
 @dataclass(frozen=True)
@@ -64,13 +60,11 @@ class RunMeta:
 
     run_id: str
     morphology: str
-    morphology_spec: dict[str, Any]
     controller: str | None
     param_names: tuple[str, ...]
     param_lows: tuple[float, ...]
     param_highs: tuple[float, ...]
     param_units: tuple[str, ...]
-    trial_config: dict[str, Any]
     objective: str
     seed: int
     trials_budget: int
@@ -79,10 +73,19 @@ class RunMeta:
     created_at_unix_s: float
     config_hash: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    run: dict[str, Any] = field(default_factory=dict)   # the RunConfig, stored once
 
     @property
     def n_params(self) -> int:
         return len(self.param_names)
+
+    @property
+    def morphology_spec(self) -> dict[str, Any]:
+        return self.run.get("morphology_spec", {})
+
+    @property
+    def trial_config(self) -> dict[str, Any]:
+        return self.run.get("trial_config", {})
 
 
 @dataclass(frozen=True)
@@ -111,6 +114,9 @@ class TrialRecord:
     verification: str = ""
     verify_distance_m: float = float("nan")
     verify_reason: str = ""
+    engine: str = ""
+    dt_s: float = float("nan")
+    settle_s: float = float("nan")
 
     @classmethod
     def from_columns(cls, cols: dict[str, np.ndarray], i: int) -> TrialRecord:

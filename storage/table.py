@@ -6,6 +6,8 @@ import numpy as np
 
 from storage.schema import COLUMNS, VECTOR_COLUMNS
 
+EMPTY_STATUS = b""  # a row extended in a file but not yet written
+
 
 def empty_value(name: str) -> object:
     dtype = next(c.dtype for c in COLUMNS if c.name == name)

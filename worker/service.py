@@ -25,11 +25,10 @@ import numpy as np
 import zenoh
 
 from protocol import keys
-from protocol.errors import ConfigError, MessageError, SpinefarmError
+from protocol.errors import ConfigError, MessageError, RunMismatchError, SpinefarmError
 from protocol.messages import (
     ResultAck,
     ResultSubmission,
-    RunConfig,
     RunInfo,
     SubmittedResult,
     TrialAssignment,
@@ -41,6 +40,7 @@ from protocol.messages import (
     encode_message,
 )
 from protocol.params import ParamSpace
+from protocol.run import RunConfig, WorkerProblem
 
 log = logging.getLogger("spinefarm.worker")
 Evaluator = Callable[[TrialAssignment], TrialResult]
@@ -88,16 +88,31 @@ def sphere_result(space: ParamSpace, a: TrialAssignment, delay_s: float = 0.0) -
 
 
 def build_evaluator(config: RunConfig) -> Evaluator:
-    """Turn a run config into a function of one assignment (morphology loaded once)."""
+    """Turn a run object into a function of one assignment. The robot, its parameter space and the
+    trial config are built from the run's own data (never looked up by name) and must reproduce the
+    run's hashes; otherwise RunMismatchError says which part differs."""
     space = config.space()
-    if re.fullmatch(r"sphere(:\d+)?", config.morphology):  # the test objective, see coordinator.problem
+    if config.is_test_objective:  # the test objective, see coordinator.problem
+        if re.fullmatch(r"sphere(:\d+)?", config.morphology) is None:
+            raise RunMismatchError("run has no morphology spec", received=config.morphology,
+                                   expected="a morphology spec, or the test objective sphere[:N]")
         delay_s = float(config.trial_config.get("duration_s") or 0.0)
         return lambda a: sphere_result(space, a, delay_s)
-    from robot.morphology.registry import load_morphology
+    from robot.morphology.model import Morphology
     from worker.trial import TrialConfig, run_trial
 
-    morphology = load_morphology(config.morphology)
+    morphology = Morphology.from_dict(config.morphology_spec)
     trial_config = TrialConfig.from_dict(config.trial_config)
+    built = {"spec_hash": morphology.spec_hash(),
+             "space_hash": morphology.param_space(config.controller).space_hash(),
+             "trial_config_hash": trial_config.config_hash()}
+    for name, value in built.items():
+        if getattr(config, name) != value:
+            raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
+                                   "version?)", received=value, expected=getattr(config, name))
+    from worker.engines.base import engine_class
+
+    engine_class(trial_config.engine)  # a missing engine package fails here, not in every trial
 
     def evaluate(a: TrialAssignment) -> TrialResult:
         return run_trial(morphology, np.asarray(a.params_unit, dtype=float), trial_config, a.seed,
@@ -167,6 +182,8 @@ class WorkerService:
         self._evaluators: dict[str, Evaluator] = {}
         self._pending: dict[str, dict[int, SubmittedResult]] = {}   # run id -> trial id -> result
         self._done_runs: set[str] = set()
+        self.unservable: dict[str, str] = {}   # run id -> why this worker cannot serve it
+        self.exit_code = 0
         self._current: str | None = None   # the run a roaming worker serves now
         self.trials_run = 0
         self.stop = threading.Event()
@@ -211,10 +228,18 @@ class WorkerService:
                 return None
             try:
                 self._evaluators[config_hash] = build_evaluator(configs[0])
-            except Exception as exc:  # e.g. a morphology this worker does not know: serve nothing
-                log.error("cannot run trials of run %s: %s", run_id, exc)
+            except Exception as exc:  # a spec this worker cannot build: say so, serve nothing of it
+                reason = str(exc) if isinstance(exc, SpinefarmError) else f"{type(exc).__name__}: {exc}"
+                log.error("cannot run trials of run %s: %s", run_id, reason)
+                self._report_problem(session, run_id, reason)
                 return None
         return self._evaluators[config_hash]
+
+    def _report_problem(self, session: zenoh.Session, run_id: str, reason: str) -> None:
+        self.unservable[run_id] = reason
+        payload = encode_message(WorkerProblem(self.worker_id, reason))
+        for _ in session.get(keys.problem(run_id), payload=payload, timeout=self.query_timeout_s):
+            pass
 
     def _apply(self, run_id: str, verdicts: tuple) -> None:
         pending = self._pending.get(run_id, {})
@@ -272,7 +297,7 @@ class WorkerService:
             self._submit(session)
             token.undeclare()
             session.close()
-        return 0
+        return self.exit_code
 
     def _loop(self, session: zenoh.Session) -> None:
         backoff = Backoff()
@@ -312,6 +337,11 @@ class WorkerService:
             evaluate = self._evaluator(session, run_id, grant.config_hash)
             if evaluate is None:
                 # Leases expire on the coordinator; nothing is lost by not running them.
+                if run_id in self.unservable:
+                    self._done_runs.add(run_id)  # a roaming worker looks for another run
+                    if self.run_id is not None:
+                        self.exit_code = 3
+                        return
                 self.stop.wait(backoff.next())
                 continue
             backoff.reset()

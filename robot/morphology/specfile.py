@@ -36,7 +36,7 @@ from robot.morphology.structure import (
 )
 
 SPEC_DIR = Path(__file__).parent / "specs"
-TOP_KEYS = ("name", "description", "segments", "placement", "joints", "rod_materials", "string_materials",
+TOP_KEYS = ("base", "name", "description", "segments", "placement", "joints", "rod_materials", "string_materials",
             "control", "scored_segment", "duration_s", "ground_friction", "controllers", "extra")
 
 
@@ -266,12 +266,51 @@ def _control(spec: SpecSource, section: Any, line: int | None, string_tags: dict
         raise spec.fail(line, "control", str(exc), expected="a valid control section") from exc
 
 
+# -- inheritance ---------------------------------------------------------------------------------
+def _merged(base: Any, override: Any) -> Any:
+    """`override` laid over `base`: mappings merge key by key, anything else replaces."""
+    if not (isinstance(base, dict) and isinstance(override, dict)):
+        return override
+    out = LineDict({**base})
+    out.line, out.key_lines = getattr(override, "line", 0), {**getattr(base, "key_lines", {}),
+                                                              **getattr(override, "key_lines", {})}
+    for key, value in override.items():
+        out[key] = _merged(base[key], value) if key in base else value
+    return out
+
+
+def _with_base(spec: SpecSource, doc: LineDict, seen: set[str]) -> LineDict:
+    """A document with `base: NAME` (a built-in spec, or a .yaml path relative to this file) is that
+    spec with this document's keys laid over it."""
+    if "base" not in doc:
+        return doc
+    base = doc["base"]
+    line = line_of(doc, "base")
+    here = Path(spec.source).parent if spec.source != "<string>" else Path.cwd()
+    path = SPEC_DIR / f"{base}.yaml" if (SPEC_DIR / f"{base}.yaml").is_file() else here / str(base)
+    if not isinstance(base, str) or not path.is_file():
+        raise spec.fail(line, "base", "no such spec to start from", received=base,
+                        expected=f"a built-in ({', '.join(sorted(p.stem for p in SPEC_DIR.glob('*.yaml')))}) "
+                                 "or a .yaml path relative to this file")
+    key = str(path.resolve())
+    if key in seen:
+        raise spec.fail(line, "base", "specs inherit from each other in a cycle", received=base,
+                        expected="a chain of bases that ends")
+    base_spec = SpecSource(str(path))
+    base_doc = _with_base(base_spec, mapping(base_spec, compose(path.read_text(), base_spec), "(document)", 1,
+                                             allowed=TOP_KEYS), seen | {key})
+    merged = _merged(base_doc, LineDict({k: v for k, v in doc.items() if k != "base"}))
+    merged.key_lines = {**base_doc.key_lines, **doc.key_lines}
+    return merged
+
+
 # -- entry points --------------------------------------------------------------------------------
 def parse_spec(text: str, source: str = "<string>", *, segments: int | None = None,
                name: str | None = None) -> Morphology:
     """Morphology from spec-file text. `segments` and `name` override the file's values."""
     spec = SpecSource(source)
-    doc = mapping(spec, compose(text, spec), "(document)", 1, allowed=TOP_KEYS,
+    doc = _with_base(spec, mapping(spec, compose(text, spec), "(document)", 1, allowed=TOP_KEYS), set())
+    doc = mapping(spec, doc, "(document)", 1, allowed=TOP_KEYS,
                    required=("name", "segments", "joints", "rod_materials", "string_materials", "control"))
     seg = mapping(spec, doc["segments"], "segments", line_of(doc, "segments"),
                    allowed=("count", "nodes", "rods", "transforms"), required=("count", "nodes", "rods"))

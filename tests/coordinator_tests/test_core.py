@@ -10,7 +10,6 @@ from coordinator.setup import build_core
 from protocol.messages import (
     ResultAck,
     ResultSubmission,
-    RunConfig,
     RunInfo,
     SubmittedResult,
     TrialResult,
@@ -23,6 +22,7 @@ from protocol.messages import (
     encode,
     encode_message,
 )
+from protocol.run import RunConfig
 from tests.coordinator_tests.helpers import sphere_core
 
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from coordinator.service import CoordinatorService
-from protocol.messages import RunConfig, TrialAssignment, TrialStatus
+from protocol.messages import TrialAssignment, TrialStatus
+from protocol.run import RunConfig
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
 from worker.service import Backoff, WorkerService, build_evaluator, default_worker_id, sphere_result
 

@@ -10,9 +10,8 @@ import pytest
 
 from cli.main import main
 from protocol.errors import MorphologySpecError, UnknownMorphologyError
-from robot.morphology.registry import load_morphology
-from robot.morphology.specfile import SPEC_DIR, load_spec_file, parse_spec
-from robot.morphology.tetraspine import tetraspine
+from robot.morphology.registry import builtin_names, load_morphology
+from robot.morphology.specfile import SPEC_DIR, builtin_spec, load_spec_file, parse_spec
 
 GOOD = textwrap.dedent("""\
     name: bar-chain
@@ -80,19 +79,29 @@ def test_spec_file_runs_through_the_registry_and_trial_command(tmp_path: Path, c
     assert '"morphology": "bar-chain"' in capsys.readouterr().out
 
 
-@pytest.mark.parametrize(("segments", "name"), [(12, "tetraspine"), (3, "tetraspine-ntrt")])
-def test_tetraspine_yaml_equals_the_python_builder(segments: int, name: str):
-    from_yaml = load_spec_file(SPEC_DIR / "tetraspine.yaml", segments=segments, name=name)
-    assert from_yaml.spec_hash() == tetraspine(segments, name=name).spec_hash()
+def test_a_spec_starts_from_a_base_and_overrides_what_it_names(tmp_path: Path):
+    ntrt = load_morphology("tetraspine-ntrt")
+    assert ntrt.spec_hash() == builtin_spec("tetraspine", segments=3, name="tetraspine-ntrt").spec_hash()
+    stiff = tmp_path / "stiff.yaml"
+    stiff.write_text("base: tetraspine\nname: stiff\nstring_materials:\n  outer: {stiffness_n_per_m: 2000}\n")
+    morph = load_spec_file(stiff)
+    mats = dict(morph.structure.string_materials)
+    assert mats["outer"].stiffness_n_per_m == 2000 and mats["inner"].stiffness_n_per_m == 1000
+    assert morph.structure.n_segments == 12 and morph.name == "stiff"
+    (tmp_path / "loop.yaml").write_text("base: loop.yaml\nname: loop\n")
+    with pytest.raises(MorphologySpecError, match="cycle"):
+        load_spec_file(tmp_path / "loop.yaml")
+    (tmp_path / "orphan.yaml").write_text("base: no-such-robot\nname: orphan\n")
+    with pytest.raises(MorphologySpecError, match=r"line 1, field base: no such spec"):
+        load_spec_file(tmp_path / "orphan.yaml")
 
 
-@pytest.mark.parametrize("name", ["tetraspine", "tetraspine-ntrt", "tetrahedral-complex", "octahedral-complex",
-                                  "ribbed"])
-def test_every_builtin_is_expressed_by_its_yaml(name: str):
-    stem = "tetraspine" if name.startswith("tetraspine") else name
-    segments = 3 if name == "tetraspine-ntrt" else None
-    assert load_spec_file(SPEC_DIR / f"{stem}.yaml", segments=segments, name=name).spec_hash() == \
-        load_morphology(name).spec_hash()
+def test_every_builtin_is_a_spec_file():
+    assert builtin_names() == sorted(p.stem for p in SPEC_DIR.glob("*.yaml"))
+    for name in builtin_names():
+        assert load_morphology(name).name == name
+        assert load_morphology(name).spec_hash() == load_spec_file(SPEC_DIR / f"{name}.yaml").spec_hash()
+
 
 
 def test_octahedral_segments_follow_the_alternating_rotations():
@@ -188,12 +197,9 @@ def test_cli_reports_a_bad_file_as_an_error(tmp_path: Path, capsys):
 
 
 def test_builders_take_a_segment_count():
-    from robot.morphology.octahedral import octahedral_complex
-    from robot.morphology.ribbed import ribbed
-    from robot.morphology.tetrahedral import tetrahedral_complex
-
-    assert tetrahedral_complex(4).scored_segment == 2 and tetrahedral_complex(4).structure.n_segments == 4
-    assert len(octahedral_complex(5).structure.strings) == 4 * 8
-    assert ribbed(3, name="ribbed-3").name == "ribbed-3"
+    tetra4 = builtin_spec("tetrahedral-complex", segments=4)
+    assert tetra4.scored_segment == 2 and tetra4.structure.n_segments == 4
+    assert len(builtin_spec("octahedral-complex", segments=5).structure.strings) == 4 * 8
+    assert builtin_spec("ribbed", segments=3, name="ribbed-3").name == "ribbed-3"
     with pytest.raises(MorphologySpecError, match=r"segments\.count"):
-        tetrahedral_complex(1)
+        builtin_spec("tetrahedral-complex", segments=1)

@@ -1,0 +1,110 @@
+"""The run as data: one object holds everything a stateless worker needs to run trials of a run.
+
+The morphology spec (not a name) is the authority: workers build the robot and its parameter space
+from it and check the three hashes below against what they built, so a run can never mix two robots.
+It is stored once in the run file and a resumed run is rebuilt from it, even if a built-in changed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from protocol.errors import MessageError
+from protocol.params import ParamSpace, ParamSpec
+
+
+def json_hash(obj: Any) -> str:
+    """16 hex digits of the SHA-256 of obj's canonical JSON (sorted keys, no spaces)."""
+    from protocol.messages import _finite_or_str, _json_default
+
+    blob = json.dumps(_finite_or_str(obj), sort_keys=True, separators=(",", ":"), default=_json_default)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Everything a worker needs for one run; fetched by config hash and cached.
+
+    morphology: the robot's name (for people and run ids, never for building);
+    morphology_spec: the morphology's to_dict(), the robot itself (empty for test objectives);
+    controller: the controller space's name (None: the morphology's first);
+    param_space: ParamSpace.describe() of the space the unit-cube vectors map into;
+    trial_config: TrialConfig.to_dict() with the engine, its options and the scene;
+    spec_hash, space_hash, trial_config_hash: what a worker must reproduce from the above.
+    """
+
+    KIND = "run_config"
+    run_id: str
+    morphology: str
+    morphology_spec: dict[str, Any]
+    controller: str | None
+    param_space: tuple[dict[str, Any], ...]
+    trial_config: dict[str, Any]
+    objective: str
+    seed: int
+    spec_hash: str = ""
+    space_hash: str = ""
+    trial_config_hash: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["param_space"] = [dict(p) for p in self.param_space]
+        return d
+
+    def config_hash(self) -> str:
+        return json_hash(self.to_dict())
+
+    def space(self) -> ParamSpace:
+        return ParamSpace(self.morphology, tuple(
+            ParamSpec(p["name"], float(p["low"]), float(p["high"]), str(p.get("unit", "")),
+                      str(p.get("doc", "")))
+            for p in self.param_space))
+
+    @property
+    def is_test_objective(self) -> bool:
+        return not self.morphology_spec
+
+    @classmethod
+    def from_dict(cls, data: Any) -> RunConfig:
+        from protocol.messages import _field
+
+        what = "run config"
+        controller = data.get("controller") if isinstance(data, dict) else None
+        if controller is not None and not isinstance(controller, str):
+            raise MessageError("run config field 'controller' has the wrong type", received=controller,
+                               expected="a string or null")
+        space = _field(data, "param_space", list, what)
+        if not all(isinstance(p, dict) and {"name", "low", "high"} <= set(p) for p in space):
+            raise MessageError("run config has a malformed parameter space", received=space[:2],
+                               expected="a list of {name, low, high, unit}")
+        hashes = {k: data.get(k, "") for k in ("spec_hash", "space_hash", "trial_config_hash")}
+        for k, v in hashes.items():
+            if not isinstance(v, str):
+                raise MessageError(f"run config field {k!r} has the wrong type", received=v, expected="a string")
+        return cls(_field(data, "run_id", str, what), _field(data, "morphology", str, what),
+                   _field(data, "morphology_spec", dict, what), controller, tuple(space),
+                   _field(data, "trial_config", dict, what), _field(data, "objective", str, what),
+                   _field(data, "seed", int, what), **hashes)
+
+
+@dataclass(frozen=True)
+class WorkerProblem:
+    """A worker cannot serve a run (its spec does not build, a hash does not match, an engine is
+    missing): the coordinator stops the run with this reason instead of waiting for ever."""
+
+    KIND = "worker_problem"
+    worker_id: str
+    reason: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"worker_id": self.worker_id, "reason": self.reason}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> WorkerProblem:
+        from protocol.messages import _field
+
+        return cls(_field(data, "worker_id", str, "worker problem")[:200],
+                   _field(data, "reason", str, "worker problem")[:2000])
