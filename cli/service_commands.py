@@ -162,12 +162,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     settings = SearchSettings(trials=2000 if args.trials is None else args.trials, sigma=args.sigma, top_k=args.top_k,
                               startup_trials=args.startup_trials, lease_s=lease, verify=verify)
     out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
-    if args.overwrite:
-        from storage.status import status_path
-
-        out.unlink(missing_ok=True)
-        status_path(out).unlink(missing_ok=True)
-    core, storage = new_run(config, settings, out)
+    core, storage = new_run(config, settings, out, overwrite=args.overwrite)
     return core, storage, out
 
 
@@ -230,18 +225,9 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
           file=sys.stderr)
     print(f"coordinator on {', '.join(listen or args.connect or [])}", file=sys.stderr)
     api = None
-    if args.api_port is None or args.api_port >= 0:
-        port = args.api_port if args.api_port is not None else 8000
-        try:
-            with socket.socket() as s:
-                s.bind((args.api_host, port))
-        except OSError:
-            port = free_port(args.api_host)
-        api = _start_api(path, args.api_host, port)
-        print(f"API on http://{args.api_host}:{port}/runs/{core.run_id} (docs at /docs)", file=sys.stderr)
     endpoint = (listen or args.connect)[0]
     endpoint = endpoint.replace("0.0.0.0", "127.0.0.1")
-    workers = LocalWorkers(worker_command(endpoint, core.run_id, args.batch, args.zenoh_config), n_workers)
+    workers: LocalWorkers | None = None
     stopped = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):  # Ctrl-C or a service manager: stop cleanly, store all
         signal.signal(sig, lambda *_: stopped.set())
@@ -249,7 +235,17 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     last_line = 0.0
     code = 0
     failure: str | None = None
-    try:
+    try:  # from here on every exit (a startup error too) stops the workers and releases the file
+        if args.api_port is None or args.api_port >= 0:
+            port = args.api_port if args.api_port is not None else 8000
+            try:
+                with socket.socket() as s:
+                    s.bind((args.api_host, port))
+            except OSError:
+                port = free_port(args.api_host)
+            api = _start_api(path, args.api_host, port)
+            print(f"API on http://{args.api_host}:{port}/runs/{core.run_id} (docs at /docs)", file=sys.stderr)
+        workers = LocalWorkers(worker_command(endpoint, core.run_id, args.batch, args.zenoh_config), n_workers)
         while not core.done and not stopped.wait(0.25):
             failure = core.failure or (None if core.done else workers.check())
             if failure:
@@ -269,13 +265,22 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     except KeyboardInterrupt:
         code = 130
     finally:
-        workers.stop()
+        if workers is not None:
+            workers.stop()
         service.close()
         if core.verifier is not None:
             core.verifier.close()
         if api is not None:
             api[0].should_exit = True
             api[1].join(5)
+    if core.write_failure is not None:
+        # The file handle whose writes failed is never closed (HDF5 would retry them and crash);
+        # the kernel closes it. Every acknowledged result was written before the failure.
+        print(f"\nstopped: {core.write_failure}; every acknowledged result is in {path}; free space (or make "
+              f"the file system writable) and continue with: spinefarm search --resume {path}",
+              file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(1)
     if not args.quiet:
         print(("\r" if tty else "") + _progress(core, final=True), end="", file=sys.stderr)
     if failure and not core.done:

@@ -3,6 +3,11 @@
 Every handler decodes and validates its message, so a malformed or foreign message is logged and
 answered with an error, never raised into the transport and never touching what is stored. One
 lock serialises the handlers, which the transport may call from several threads.
+
+A result is acknowledged ("stored") only after the storage has written it out (`commit`), so a
+killed coordinator has every acknowledged result in its file. A failed write (disk full, read-only
+remount) sets `write_failure` (and `failure`): from then on no handler answers (workers keep their
+unacknowledged results and retry), and the process running the core stops with that reason.
 """
 
 from __future__ import annotations
@@ -54,6 +59,7 @@ class CoordinatorCore:
         self.dropped_results: dict[str, int] = {v.value: 0 for v in Verdict if v != Verdict.STORED}
         self._finish_times: deque[float] = deque()
         self.told_done: set[str] = set()  # workers that have been told the budget is met
+        self.write_failure: str | None = None  # why the run file can no longer be written
         self.started_s = clock()
         self._config_payload = encode_message(run_config)
         # Trials sampled but never finished before a restart are issued again first.
@@ -77,13 +83,32 @@ class CoordinatorCore:
         log.warning("ignored malformed %s: %s", what, str(exc))  # a string: keep no traceback alive
         return encode("error", exc.to_detail())
 
-    def handle_work(self, payload: bytes) -> bytes:
+    def commit(self) -> bool:
+        """Write out everything stored so far; False (and `write_failure` set) if the storage cannot."""
+        if self.write_failure is not None:
+            return False
+        with self.lock:
+            try:
+                self.study.storage.flush()
+            except Exception as exc:  # disk full, read-only file system, I/O error: stop taking work
+                self.write_failure = str(exc)
+                self.failure = self.failure or self.write_failure
+                log.error("stopping: %s", self.write_failure)
+                return False
+        return True
+
+    def handle_work(self, payload: bytes) -> bytes | None:
+        """A WorkGrant (or an error); None: no answer, the run file can no longer be written."""
+        if self.write_failure is not None:
+            return None
         try:
             req = decode_message(payload, WorkRequest)
         except MessageError as exc:
             return self._error("work request", exc)
         with self.lock:
             verdicts = self._settle_all(req.worker_id, req.results)  # before "done": they may finish it
+            if verdicts and not self.commit():
+                return None
             if self.study.done:
                 self.told_done.add(req.worker_id)
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True,
@@ -97,13 +122,18 @@ class CoordinatorCore:
         retry = 0.0 if assignments else self.idle_retry_s
         return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False, verdicts))
 
-    def handle_results(self, payload: bytes) -> bytes:
+    def handle_results(self, payload: bytes) -> bytes | None:
+        """A ResultAck (or an error); None: no answer, the run file can no longer be written."""
+        if self.write_failure is not None:
+            return None
         try:
             sub = decode_message(payload, ResultSubmission)
         except MessageError as exc:
             return self._error("result submission", exc)
         with self.lock:
             verdicts = self._settle_all(sub.worker_id, sub.items)
+            if verdicts and not self.commit():
+                return None
         return encode_message(ResultAck(verdicts))
 
     def _settle_all(self, worker_id: str, items: tuple) -> tuple[tuple[int, Verdict], ...]:

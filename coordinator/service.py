@@ -93,7 +93,9 @@ class CoordinatorService:
             # would otherwise hold the requester until its timeout.
             with query:
                 try:
-                    query.reply(query.key_expr, handler(_payload(query)))
+                    answer = handler(_payload(query))
+                    if answer is not None:  # None: the core stopped taking work (see CoordinatorCore.failure)
+                        query.reply(query.key_expr, answer)
                 except Exception:  # a transport callback must never die: log and keep serving
                     log.exception("query on %s failed", query.key_expr)
         return on_query
@@ -139,10 +141,13 @@ class CoordinatorService:
 
     def flush(self) -> None:
         with self.core.lock:
-            self.storage.flush()
+            self.core.commit()
             status = self.core.status()
         if self._status_for is not None:
-            write_status(self._status_for, status)
+            try:
+                write_status(self._status_for, status)
+            except OSError as exc:  # a full disk must not stop housekeeping (leases still expire)
+                log.warning("cannot write the status file: %s", exc)
 
     def wait_done(self, timeout_s: float | None = None, poll_s: float = 0.05) -> bool:
         end = None if timeout_s is None else time.monotonic() + timeout_s
@@ -165,7 +170,7 @@ class CoordinatorService:
         self._entities = []
         try:
             self.flush()
-            if self._status_for is not None:
+            if self._status_for is not None and self.core.write_failure is None:
                 status = self.core.status()
                 if status["state"] != "done":
                     status["state"] = "stopped"

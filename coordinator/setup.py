@@ -74,8 +74,10 @@ def build_core(storage: BaseStorage, clock=time.monotonic) -> CoordinatorCore:
 
 
 def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,
-            clock=time.monotonic) -> tuple[CoordinatorCore, BaseStorage]:
-    """Create the run's storage (an HDF5 file, or memory when `out` is None) and its core."""
+            clock=time.monotonic, overwrite: bool = False) -> tuple[CoordinatorCore, BaseStorage]:
+    """Create the run's storage (an HDF5 file, or memory when `out` is None) and its core.
+
+    overwrite: replace an existing file, unless another coordinator holds it (storage.runlock)."""
     objective_fn(config.objective)  # fail before creating a file
     meta = make_meta(config, settings)
     if out is None:
@@ -84,8 +86,16 @@ def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,
     else:
         from storage.hdf5 import Hdf5Storage
 
-        storage = Hdf5Storage.create(out, meta)
-    return build_core(storage, clock), storage
+        storage = Hdf5Storage.create(out, meta, overwrite=overwrite)
+    return _core_or_close(storage, clock), storage
+
+
+def _core_or_close(storage: BaseStorage, clock) -> CoordinatorCore:
+    try:
+        return build_core(storage, clock)
+    except BaseException:
+        storage.close()  # release the file and its lock: the error is the caller's to report
+        raise
 
 
 def resume_run(path: str | Path, clock=time.monotonic,
@@ -96,5 +106,7 @@ def resume_run(path: str | Path, clock=time.monotonic,
     if not Path(path).is_file():
         raise ConfigError("cannot resume: run file does not exist", received=str(path),
                           expected="the .h5 file of an earlier run")
-    storage = Hdf5Storage.resume(path, trials_budget)
-    return build_core(storage, clock), storage
+    from coordinator.study import trial_seed
+
+    storage = Hdf5Storage.resume(path, trials_budget, seed_of=trial_seed)
+    return _core_or_close(storage, clock), storage

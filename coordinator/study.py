@@ -11,6 +11,11 @@ from protocol.params import ParamSpace
 from storage.base import BaseStorage
 
 
+def trial_seed(run_seed: int, trial_id):
+    """Seed of trial `trial_id` (an int or an integer array) in a run seeded with `run_seed`."""
+    return (run_seed * 1_000_003 + trial_id) % (2**31 - 1)
+
+
 class Study:
     """`ask` samples and records the next trial; `tell` stores a result once.
 
@@ -40,7 +45,7 @@ class Study:
         return self._n_finished >= self.budget
 
     def trial_seed(self, trial_id: int) -> int:
-        return (self.seed * 1_000_003 + trial_id) % (2**31 - 1)
+        return trial_seed(self.seed, trial_id)
 
     def ask(self) -> int | None:
         """Sample and record the next trial; None once the budget is allotted."""

@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
+import stat
+from collections.abc import Callable
 from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
@@ -24,10 +27,14 @@ import numpy as np
 from protocol.errors import StorageError
 from protocol.messages import SCHEMA_VERSION
 from storage.memory import InMemoryStorage
+from storage.runlock import RunLock
 from storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
 from storage.table import EMPTY_STATUS, TrialTable, empty_value
 
 CHUNK_ROWS = 1024
+# A file handle whose writes failed: closing it makes HDF5 retry the failed writes (and crash at exit),
+# so it is kept here, never closed, and the process leaves with os._exit (see CoordinatorCore.write_failure).
+_ABANDONED: list[h5py.File] = []
 _JSON_FIELDS = ("sampler", "extra", "run")
 _TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
 
@@ -155,46 +162,76 @@ class Hdf5Storage(InMemoryStorage):
         self._table = table
         self._rebuild_ranking()
         self.read_only = file is None
+        self.write_error: str | None = None  # set once a write failed: nothing is written after it
+        self._lock: RunLock | None = None
         self._datasets = {c.name: file["trials"][c.name] for c in COLUMNS} if file is not None else {}
 
     @classmethod
-    def create(cls, path: str | Path, meta: RunMeta) -> Hdf5Storage:
+    def create(cls, path: str | Path, meta: RunMeta, overwrite: bool = False) -> Hdf5Storage:
+        """A new run file; `overwrite` replaces an existing one, but never one another coordinator writes."""
+        from storage.status import status_path
+
         path = Path(path)
-        if path.exists():
-            raise StorageError("run file already exists", received=str(path),
-                               expected="a new path (or --resume to continue it, --overwrite to replace it)")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_run(path, meta, TrialTable(meta.n_params).columns())
-        return cls._open_writer(path, meta, TrialTable(meta.n_params))
+        lock = RunLock(path).acquire()  # before looking: the file may be live
+        try:
+            if path.exists() and not overwrite:
+                raise StorageError("run file already exists", received=str(path),
+                                   expected="a new path (or --resume to continue it, --overwrite to replace it)")
+            _refuse_read_only(path)
+            path.unlink(missing_ok=True)
+            status_path(path).unlink(missing_ok=True)
+            write_run(path, meta, TrialTable(meta.n_params).columns())
+            return cls._open_writer(path, meta, TrialTable(meta.n_params), lock)
+        except BaseException:
+            lock.release()
+            raise
 
     @classmethod
-    def resume(cls, path: str | Path, trials_budget: int | None = None) -> Hdf5Storage:
+    def resume(cls, path: str | Path, trials_budget: int | None = None,
+               seed_of: Callable[[int, np.ndarray], np.ndarray] | None = None) -> Hdf5Storage:
         """Reopen a run for writing, whether it was closed cleanly or its writer was killed.
 
         trials_budget: a new budget (not below the trials already sampled), else the stored one.
+        Every stored row is validated first (storage.validate; `seed_of(run_seed, trial_ids)` gives the
+        seeds the run derives); a file that fails is left untouched.
         """
+        from storage.validate import validate_rows
+
         path = Path(path)
-        meta, cols = read_run(path)
-        if trials_budget is not None:
-            n = len(cols["trial_id"])
-            if trials_budget < max(n, 1):
-                raise StorageError("new trial budget is below the trials already sampled",
-                                   received=trials_budget, expected=f"at least {max(n, 1)}")
-            meta = replace(meta, trials_budget=trials_budget)
-        tmp = path.with_name(path.name + ".resume-tmp")
-        write_run(tmp, meta, cols)
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)  # atomic: the old file stays intact until the new one is complete
-        table = TrialTable(meta.n_params, capacity=max(1024, len(cols["trial_id"])))
-        table.load(cols)
-        return cls._open_writer(path, meta, table)
+        lock = RunLock(path).acquire()
+        try:
+            _refuse_read_only(path)
+            meta, cols = read_run(path)
+            validate_rows(path, meta, cols, seed_of)
+            if trials_budget is not None:
+                n = len(cols["trial_id"])
+                if trials_budget < max(n, 1):
+                    raise StorageError("new trial budget is below the trials already sampled",
+                                       received=trials_budget, expected=f"at least {max(n, 1)}")
+                meta = replace(meta, trials_budget=trials_budget)
+            tmp = path.with_name(path.name + ".resume-tmp")
+            write_run(tmp, meta, cols)
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)  # atomic: the old file stays intact until the new one is complete
+            table = TrialTable(meta.n_params, capacity=max(1024, len(cols["trial_id"])))
+            table.load(cols)
+            return cls._open_writer(path, meta, table, lock)
+        except BaseException:
+            lock.release()
+            raise
 
     @classmethod
-    def _open_writer(cls, path: Path, meta: RunMeta, table: TrialTable) -> Hdf5Storage:
-        f = h5py.File(path, "r+", libver="latest")
-        f.swmr_mode = True  # from here on no new objects or attributes; readers may attach
-        return cls(path, f, meta, table)
+    def _open_writer(cls, path: Path, meta: RunMeta, table: TrialTable, lock: RunLock) -> Hdf5Storage:
+        try:
+            f = h5py.File(path, "r+", libver="latest")
+            f.swmr_mode = True  # from here on no new objects or attributes; readers may attach
+        except OSError as exc:
+            raise StorageError(f"cannot open run file {path} for writing: {_reason(exc)}",
+                               expected="a writable file system") from exc
+        storage = cls(path, f, meta, table)
+        storage._lock = lock
+        return storage
 
     @classmethod
     def open_read(cls, path: str | Path) -> Hdf5Storage:
@@ -208,10 +245,24 @@ class Hdf5Storage(InMemoryStorage):
         raise StorageError("an Hdf5Storage holds its run already", expected="Hdf5Storage.create(path, meta)")
 
     def flush(self) -> None:
+        """Write changed rows and hand them to the OS (they survive a killed process).
+
+        Raises StorageError when the write fails (disk full, read-only remount); from then on every
+        flush raises the same error and nothing more is written.
+        """
+        if self.write_error is not None:
+            raise StorageError(self.write_error, expected="a writable file system with free space")
         if self._file is None:
             return
         if not self.table.dirty and self._datasets["trial_id"].shape[0] == self.table.n:
             return
+        try:
+            self._write_dirty()
+        except Exception as exc:
+            self.write_error = f"cannot write run file {self.path}: {_reason(exc)}"
+            raise StorageError(self.write_error, expected="a writable file system with free space") from exc
+
+    def _write_dirty(self) -> None:
         n = self.table.n
         cols = self.table.columns()
         rows = np.array(sorted(self.table.dirty), dtype=np.int64)
@@ -237,9 +288,38 @@ class Hdf5Storage(InMemoryStorage):
         self._file.flush()
 
     def close(self) -> None:
-        if self._file is not None:
-            self.flush()
-            self._file.close()
-            self._file = None
-            self.read_only = True
+        try:
+            if self._file is not None:
+                if self.write_error is None:
+                    self.flush()
+                    self._file.close()
+                else:
+                    _ABANDONED.append(self._file)
+                    self._datasets = {}
+                self._file = None
+                self.read_only = True
+        finally:
+            if self._lock is not None:
+                self._lock.release()
+                self._lock = None
 
+
+def _reason(exc: BaseException) -> str:
+    """The OS error behind an HDF5 failure ('No space left on device'), else the exception's first line."""
+    m = re.search(r"error message = '([^']+)'", str(exc))
+    if m:
+        return m.group(1)
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    return str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+
+
+def _refuse_read_only(path: Path) -> None:
+    """A run file without write permission stays as it is (root could replace it regardless)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return
+    if not mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH):
+        raise StorageError("run file is read-only", received=str(path),
+                           expected="a writable run file (chmod u+w to continue it, or copy it)")
