@@ -1,6 +1,8 @@
-# One image for the Python services: coordinator, worker and API (`spinefarm <sub-command>`).
+# One image recipe for the Python services (`spinefarm <sub-command>`); EXTRAS picks what a service
+# carries: worker (simulators), coordinator,worker (writer + re-simulation of bests), api (no simulator).
 # Build stage compiles what has no wheel (pybullet on some platforms); the runtime stage stays slim.
 FROM python:3.11-slim AS build
+ARG EXTRAS=all
 RUN apt-get update \
  && apt-get install -y --no-install-recommends build-essential \
  && rm -rf /var/lib/apt/lists/*
@@ -10,12 +12,13 @@ WORKDIR /src
 # Only what the package needs: the build context may hold runs and a local venv.
 COPY pyproject.toml README* ./
 COPY protocol protocol
+COPY robot robot
 COPY worker worker
 COPY coordinator coordinator
 COPY storage storage
 COPY api api
 COPY cli cli
-RUN pip install --upgrade pip && pip install .
+RUN pip install --upgrade pip && pip install ".[${EXTRAS}]"
 
 FROM python:3.11-slim
 ENV PATH=/opt/venv/bin:$PATH PYTHONUNBUFFERED=1 PYTHONDONTWRITEBYTECODE=1

@@ -9,11 +9,12 @@ import sys
 from protocol.errors import SpinefarmError
 
 # Each module exposes register(subparsers); a sub-command sets `func(args) -> int`.
-COMMAND_MODULES = ("cli.sim_commands", "cli.morph_commands", "cli.service_commands")
+COMMAND_MODULES = ("cli.sim_commands", "cli.morph_commands", "cli.robot_commands", "cli.service_commands")
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="spinefarm", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"spinefarm {software_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
         try:
@@ -24,6 +25,15 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         module.register(sub)
     return parser
+
+
+def software_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("spinefarm")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,6 +7,7 @@ is at y = 0.5 cm (NTRT 2014).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -17,7 +18,6 @@ from protocol.errors import ConfigError, check_range
 GROUND_TOP_CM = 0.5
 GROUND_HALF_EXTENT_CM = 500.0
 GROUND_HALF_HEIGHT_CM = 0.5
-SCENE_KINDS = ("flat", "slope", "rough", "obstacles")
 FILTERS = ("auto", "all", "neighbours")
 
 
@@ -45,8 +45,8 @@ class SceneConfig:
     collision_filter: str = "all"
 
     def __post_init__(self) -> None:
-        if self.kind not in SCENE_KINDS:
-            raise ConfigError("unknown scene kind", received=self.kind, expected=list(SCENE_KINDS))
+        if self.kind not in SCENE_BUILDERS:
+            raise ConfigError("unknown scene kind", received=self.kind, expected=sorted(SCENE_BUILDERS))
         if self.collision_filter not in FILTERS:
             raise ConfigError("unknown collision_filter", received=self.collision_filter, expected=list(FILTERS))
         if self.friction is not None:
@@ -74,7 +74,7 @@ def parse_scene(text: str) -> dict[str, Any]:
     collision_filter=auto" (kind first, then field=value pairs), validated as a SceneConfig."""
     parts = [p.strip() for p in text.split(",") if p.strip()]
     if not parts:
-        raise ConfigError("empty scene", received=text, expected=f"a kind ({', '.join(SCENE_KINDS)}) "
+        raise ConfigError("empty scene", received=text, expected=f"a kind ({', '.join(sorted(SCENE_BUILDERS))}) "
                           "optionally followed by ,field=value pairs")
     out: dict[str, Any] = {}
     if "=" not in parts[0]:
@@ -142,26 +142,49 @@ def _rough_heights(cfg: SceneConfig) -> Heightfield:
     return Heightfield(h, spacing)
 
 
-def build_terrain(cfg: SceneConfig, default_friction: float, robot_extent_z_cm: tuple[float, float]) -> Terrain:
-    """Boxes and heightfield of a scene; robot_extent_z_cm keeps obstacles clear of the start pose."""
-    friction = default_friction if cfg.friction is None else cfg.friction
-    pairs = cfg.collision_filter
-    if pairs == "auto":
-        pairs = "neighbours" if cfg.kind in ("flat", "slope") else "all"
-    half = (GROUND_HALF_EXTENT_CM, GROUND_HALF_HEIGHT_CM, GROUND_HALF_EXTENT_CM)
-    flat = Box((0.0, GROUND_TOP_CM - GROUND_HALF_HEIGHT_CM, 0.0), half)
-    if cfg.kind == "flat":
-        return Terrain(friction, (flat,), pairs=pairs)
-    if cfg.kind == "slope":
-        a = math.radians(cfg.slope_deg)
-        # rotation about +X by a: the plane rises toward -z for a > 0 and passes through (0, 0.5, 0)
-        quat = (math.sin(a / 2), 0.0, 0.0, math.cos(a / 2))
-        centre = (0.0, GROUND_TOP_CM - GROUND_HALF_HEIGHT_CM * math.cos(a), -GROUND_HALF_HEIGHT_CM * math.sin(a))
-        return Terrain(friction, (Box(centre, half, quat),), pairs=pairs)
-    if cfg.kind == "rough":
-        return Terrain(friction, (), heightfield=_rough_heights(cfg), pairs=pairs)
-    # obstacles: bars across the whole width, placed outside the robot's start extent
-    z_lo, z_hi = robot_extent_z_cm
+TerrainBuilder = Callable[[SceneConfig, float, str, tuple[float, float]], "Terrain"]
+# kind -> builder(config, friction, collision pairs, robot's z extent at the start): the scene kinds
+SCENE_BUILDERS: dict[str, TerrainBuilder] = {}
+
+
+def scene_kind(name: str, filter_auto: str) -> Callable[[TerrainBuilder], TerrainBuilder]:
+    """Register a terrain builder as scene kind `name`; filter_auto is what collision_filter "auto"
+    means on it ("neighbours" where segments cannot meet, "all" where the ground can fold them)."""
+    def register(fn: TerrainBuilder) -> TerrainBuilder:
+        SCENE_BUILDERS[name] = fn
+        _AUTO_FILTER[name] = filter_auto
+        return fn
+    return register
+
+
+_AUTO_FILTER: dict[str, str] = {}
+_HALF = (GROUND_HALF_EXTENT_CM, GROUND_HALF_HEIGHT_CM, GROUND_HALF_EXTENT_CM)
+_FLAT = Box((0.0, GROUND_TOP_CM - GROUND_HALF_HEIGHT_CM, 0.0), _HALF)
+
+
+@scene_kind("flat", "neighbours")
+def _flat(cfg: SceneConfig, friction: float, pairs: str, extent_z: tuple[float, float]) -> Terrain:
+    return Terrain(friction, (_FLAT,), pairs=pairs)
+
+
+@scene_kind("slope", "neighbours")
+def _slope(cfg: SceneConfig, friction: float, pairs: str, extent_z: tuple[float, float]) -> Terrain:
+    a = math.radians(cfg.slope_deg)
+    # rotation about +X by a: the plane rises toward -z for a > 0 and passes through (0, 0.5, 0)
+    quat = (math.sin(a / 2), 0.0, 0.0, math.cos(a / 2))
+    centre = (0.0, GROUND_TOP_CM - GROUND_HALF_HEIGHT_CM * math.cos(a), -GROUND_HALF_HEIGHT_CM * math.sin(a))
+    return Terrain(friction, (Box(centre, _HALF, quat),), pairs=pairs)
+
+
+@scene_kind("rough", "all")
+def _rough(cfg: SceneConfig, friction: float, pairs: str, extent_z: tuple[float, float]) -> Terrain:
+    return Terrain(friction, (), heightfield=_rough_heights(cfg), pairs=pairs)
+
+
+@scene_kind("obstacles", "all")
+def _obstacles(cfg: SceneConfig, friction: float, pairs: str, extent_z: tuple[float, float]) -> Terrain:
+    """Bars across the whole width, placed outside the robot's start extent."""
+    z_lo, z_hi = extent_z
     bars = []
     hy, hz = cfg.obstacle_height_cm / 2, cfg.obstacle_depth_cm / 2
     z = z_hi + cfg.obstacle_spacing_cm / 2
@@ -172,7 +195,14 @@ def build_terrain(cfg: SceneConfig, default_friction: float, robot_extent_z_cm: 
     while z > -GROUND_HALF_EXTENT_CM:
         bars.append(Box((0.0, GROUND_TOP_CM + hy, z), (GROUND_HALF_EXTENT_CM, hy, hz)))
         z -= cfg.obstacle_spacing_cm
-    return Terrain(friction, (flat, *bars), pairs=pairs)
+    return Terrain(friction, (_FLAT, *bars), pairs=pairs)
+
+
+def build_terrain(cfg: SceneConfig, default_friction: float, robot_extent_z_cm: tuple[float, float]) -> Terrain:
+    """Boxes and heightfield of a scene; robot_extent_z_cm keeps obstacles clear of the start pose."""
+    friction = default_friction if cfg.friction is None else cfg.friction
+    pairs = _AUTO_FILTER[cfg.kind] if cfg.collision_filter == "auto" else cfg.collision_filter
+    return SCENE_BUILDERS[cfg.kind](cfg, friction, pairs, robot_extent_z_cm)
 
 
 def surface_height_cm(terrain: Terrain, x_cm: np.ndarray, z_cm: np.ndarray) -> np.ndarray:

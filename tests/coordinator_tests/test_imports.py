@@ -43,3 +43,14 @@ def test_heavy_import_statements_live_only_at_the_edges():
         if re.search(r"^\s*(import|from) h5py\b", text, re.M):
             assert rel.startswith("storage/"), rel
         assert not re.search(r"^\s*(import|from) pybullet\b", text, re.M), rel
+
+
+def test_service_extras_keep_the_api_free_of_simulators():
+    import tomllib
+
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    names = {k: {re.split(r"[<>=\[ ]", d)[0].lower() for d in v} for k, v in extras.items()}
+    assert {"worker", "coordinator", "api", "all"} <= set(names)
+    assert not names["api"] & {"pybullet", "numba", "mujoco", "eclipse-zenoh"}
+    assert {"pybullet", "numba"} <= names["worker"]
+    assert {"h5py", "eclipse-zenoh"} <= names["coordinator"]

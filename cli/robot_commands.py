@@ -1,0 +1,72 @@
+"""`spinefarm morphologies`, `spinefarm spec NAME` and `spinefarm check FILE.yaml`: the robots there are,
+a built-in's spec file to start a new one from, and the morphology contract run on a user's file."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("morphologies", help="list the built-in robots")
+    p.add_argument("--json", action="store_true", help="print one JSON list")
+    p.set_defaults(func=cmd_morphologies)
+
+    p = sub.add_parser("spec", help="print a built-in's YAML spec file, to start a new robot from",
+                       description="Print the spec file of a built-in morphology. Save it under a new name, "
+                                   "change it, check it with `spinefarm check`, then search it.")
+    p.add_argument("name", help="a built-in morphology (see `spinefarm morphologies`)")
+    p.set_defaults(func=cmd_spec)
+
+    p = sub.add_parser("check", help="run the morphology contract on a spec file",
+                       description="Checks that a robot builds; that its masses, inertias and start lengths "
+                                   "are sane; that a passive settle (no CPG output) holds its shape; and that "
+                                   "two runs agree. Exit 0 when every check passes, 1 otherwise.")
+    p.add_argument("morphology", help="a .yaml spec file (or a built-in name)")
+    p.add_argument("--engine", default="bullet", help="physics engine (default bullet)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_check)
+
+
+def cmd_morphologies(args: argparse.Namespace) -> int:
+    from robot.morphology.registry import builtin_names, load_morphology
+
+    rows = []
+    for name in builtin_names():
+        m = load_morphology(name)
+        rows.append({"name": name, "segments": m.structure.n_segments, "strings": len(m.structure.strings),
+                     "controllers": list(m.controllers), "parameters": len(m.param_space()),
+                     "description": m.description})
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    for r in rows:
+        print(f"{r['name']:<22} {r['segments']:>2} segments {r['strings']:>4} strings  "
+              f"{'/'.join(r['controllers']):<18} {r['description']}")
+    return 0
+
+
+def cmd_spec(args: argparse.Namespace) -> int:
+    from robot.morphology.registry import builtin_path
+
+    sys.stdout.write(builtin_path(args.name).read_text())
+    return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from robot.morphology.registry import load_morphology
+    from worker.contract import run_contract
+
+    morph = load_morphology(args.morphology)
+    results = run_contract(morph, args.engine)
+    ok = all(r.passed for r in results)
+    if args.json:
+        print(json.dumps({"morphology": morph.name, "passed": ok,
+                          "checks": [{"name": r.name, "passed": r.passed, "detail": r.detail} for r in results]},
+                         indent=2))
+    else:
+        for r in results:
+            print(f"{'ok  ' if r.passed else 'FAIL'} {r.name}: {r.detail}")
+        print(f"{morph.name}: {'every check passed' if ok else 'FAILED'}")
+    return 0 if ok else 1
