@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from cli.sim_commands import add_engine_argument
 from protocol.errors import ConfigError
 
 
@@ -27,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also run N replays with the start pose jittered by 1e-6 cm (spec 0a.5) and report "
                         "their spread")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    add_engine_argument(p)
     p.set_defaults(func=cmd_replay)
 
     r = sub.add_parser("render", help="draw a structure to a PNG (rods dark, strings coloured by tension)",
@@ -45,6 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--duration", type=float, default=None, help="simulate this many seconds and draw them")
     r.add_argument("--random-seed", type=int, default=0, help="seed of random parameters when --params is absent")
     r.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
+    add_engine_argument(r)
     r.set_defaults(func=cmd_render)
 
 
@@ -76,6 +79,8 @@ def replay_summary(report: Any) -> dict[str, Any]:
         "ntrt_reference_source": ref.source if ref else None,
         "ratio": report.ratio,
         "wall_time_s": r.wall_time_s,
+        "engine": r.extras.get("engine"),
+        "dt_s": r.extras.get("dt_s"),
     }.items()}
 
 
@@ -84,11 +89,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     if not 0 <= args.seeds <= 100:
         raise ConfigError("--seeds out of range", received=args.seeds, expected="0 to 100 jittered replays")
-    report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix)
+    engine = args.engine or "bullet"
+    report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix, engine=engine)
     s = replay_summary(report)
     if args.seeds:
         spread = replay_spread(args.path, args.morphology, args.seeds, duration_s=args.duration,
-                               suffix=args.suffix)
+                               suffix=args.suffix, engine=engine)
         d = np.array([r.result.ntrt_distance_cm for r in spread if not r.diverged])
         ratios = [r.ratio for r in spread if r.ratio is not None]
         s["spread"] = {"jitter_cm": JITTER_CM, "n": len(spread),
@@ -101,7 +107,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(json.dumps(s))
         return 1 if report.diverged else 0
     print(f"replay of {s['path']} on {s['morphology']} ({s['n_edge_files']} edge files, node "
-          f"{s['node_values'][0]:g}, {s['node_values'][1]:g}; NTRT 2014 motor, dt 1 ms)")
+          f"{s['node_values'][0]:g}, {s['node_values'][1]:g}; NTRT 2014 motor, dt 1 ms, {engine})")
     if report.diverged:
         print(f"  DIVERGED: {report.result.reason}; the figures below are from the last sane state")
     print(f"  NTRT distance {s['ntrt_distance_cm']:9.2f} cm in {s['sim_time_s']:.2f} s "
@@ -175,6 +181,8 @@ def cmd_render(args: argparse.Namespace) -> int:
                                      "controller": controller}
         if args.motor_model:
             overrides["motor_model"] = args.motor_model
+        if args.engine:
+            overrides["engine"] = args.engine
         outcome = simulate(morph, params, TrialConfig(**overrides), args.random_seed)
         record = outcome.trajectory.arrays() if outcome.trajectory else {}
         if not outcome.result.ok:

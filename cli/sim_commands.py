@@ -34,6 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scene", default=None,
                    help="flat (default), slope, rough or obstacles, optionally with ,field=value pairs, e.g. "
                         "'rough,rough_amplitude_cm=3' or 'flat,collision_filter=neighbours' (see docs/model.md)")
+    add_engine_argument(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--record", type=Path, default=None, help="save the trajectory to FILE.npz")
     p.add_argument("--record-every", type=float, default=0.01, help="recording interval in seconds")
@@ -49,9 +50,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--run", type=Path, default=None, help="also test the best trial of this HDF5 run file")
     a.add_argument("--controller", default=None)
     a.add_argument("--jobs", type=int, default=2, help="worker processes")
+    add_engine_argument(a)
     a.add_argument("--out", type=Path, default=Path("accuracy"), help="output prefix for .json and .png")
     a.add_argument("--json", action="store_true", help="end with one JSON object")
     a.set_defaults(func=cmd_accuracy)
+
+
+def add_engine_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--engine", choices=("bullet", "mujoco"), default=None,
+                   help="physics engine (default bullet): bullet, or mujoco (the fast tier, soft contacts)")
 
 
 def load_params_file(path: Path) -> tuple[dict[str, float], str | None]:
@@ -107,6 +114,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
             raise ParameterError("--dt is not a number", received=args.dt, expected="seconds or 'auto'") from exc
     if args.motor_model is not None:
         overrides["motor_model"] = args.motor_model
+    if args.engine is not None:
+        overrides["engine"] = args.engine
     if args.record is not None:
         overrides["record_every_s"] = args.record_every
     if args.scene is not None:
@@ -132,7 +141,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
         print(f"  speed         {r.speed_cm_s:9.3f} cm/s")
         print(f"  work          {r.work_j:9.3f} J")
         print(f"  COT           {r.cot:9.3f}")
-        print(f"  simulated     {r.sim_time_s:9.3f} s in {r.wall_time_s:.2f} s wall")
+        print(f"  simulated     {r.sim_time_s:9.3f} s in {r.wall_time_s:.2f} s wall "
+              f"({r.extras.get('engine')}, dt {r.extras.get('dt_s', 0) * 1e3:g} ms)")
         if args.record is not None:
             print(f"  trajectory -> {args.record}")
     return 0 if r.ok else 1
@@ -168,6 +178,10 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
         best, meta = _best_of_run(args.run)
         controller = controller or meta.controller
         base = {k: v for k, v in meta.trial_config.items() if k not in ("duration_s", "dt_s", "record_every_s")}
+    if args.engine is not None:
+        if base is not None and base.get("engine", "bullet") != args.engine:
+            base.pop("engine_options", None)  # the run's options belong to its own engine
+        base = {**(base or {}), "engine": args.engine}
     seeds = args.seeds if args.seeds is not None else (3 if args.quick else 5)
     report = run_accuracy(args.morphology, quick=args.quick, seeds=seeds, duration_s=args.duration, jobs=args.jobs,
                           best=best, controller=controller, base=base,

@@ -26,12 +26,16 @@ class TrialConfig:
     motor_model: "physical" (limits in cm/s and cm/s^2, independent of dt) or "ntrt2014" (NTRT's
     per-step caps, only faithful at dt = 1 ms, for replaying published gaits).
     cpg_update_period_s: NTRT's controlTime (CPG output held in between).
+    settle_s: seconds simulated before locomotion with the CPG held at rest (zero output, the impedance
+    reflex holding the posture); distance, speed, work and COT count from the pose at its end,
+    NTRT's distance (ntrt_distance_cm) still from the start. 0: scored from the start.
     pose_jitter_cm: seeded Gaussian offset of every segment's start position (0: the seed is unused).
     auto_dt: use min(dt_s, dt_safety_factor * the string network's stable-step estimate).
     refuse_unstable_dt: raise ConfigError for a dt_s above that estimate (known to be unstable).
     """
 
     duration_s: float | None = None
+    settle_s: float = 0.0
     dt_s: float = 1e-3
     auto_dt: bool = False
     dt_safety_factor: float = 0.5
@@ -58,6 +62,7 @@ class TrialConfig:
     def __post_init__(self) -> None:
         if self.duration_s is not None:
             check_range("duration_s", self.duration_s, 0.0, 3600.0, low_inclusive=False)
+        check_range("settle_s", self.settle_s, 0.0, 60.0)
         check_range("dt_s", self.dt_s, 1e-6, 0.02)
         check_range("dt_safety_factor", self.dt_safety_factor, 0.0, 1.0, low_inclusive=False)
         if not isinstance(self.engine, str) or not ENGINE_NAME.match(self.engine):

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-HEAVY = ("pybullet", "zenoh", "h5py", "fastapi", "numba")
+HEAVY = ("pybullet", "zenoh", "h5py", "fastapi", "numba", "mujoco")
 ALLOWED = {
     "protocol.params": set(),
     "protocol.messages": set(),
@@ -16,6 +16,8 @@ ALLOWED = {
     "robot.morphology.registry": set(),
     "worker.trial": {"numba"},
     "worker.engines.bullet": {"pybullet", "numba"},
+    "worker.engines.mujoco": {"mujoco"},
+    "worker.setup": {"numba"},
     "storage.hdf5": {"h5py"},
 }
 

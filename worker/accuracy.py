@@ -39,9 +39,13 @@ class Setting:
         return self.group != "scene"
 
 
-def sweep(quick: bool) -> list[Setting]:
+def sweep(quick: bool, engine: str = "bullet") -> list[Setting]:
     steps = (2e-3, 1e-3, 5e-4) if quick else (4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
+    if engine == "mujoco" and not quick:
+        steps = (8e-3, 4e-3, 3e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
     out = [Setting(BASELINE if dt == 1e-3 else f"dt {dt * 1e3:g} ms", "step", {"dt_s": dt}) for dt in steps]
+    if engine == "mujoco":
+        return out + _mujoco_settings(quick) + _scenes()
     iterations = (50,) if quick else (5, 20, 50)
     out += [Setting(f"solver {n} iterations", "solver", {"engine_options": {"solver_iterations": n}})
             for n in iterations]
@@ -51,10 +55,28 @@ def sweep(quick: bool) -> list[Setting]:
     if not quick:
         out += [Setting("solver 20 iterations, dt 0.5 ms", "solver",
                         {"dt_s": 5e-4, "engine_options": {"solver_iterations": 20}})]
-    out += [Setting("scene: rough 2 cm / 40 cm", "scene", {"scene": {"kind": "rough", "rough_amplitude_cm": 2.0}}),
+    return out + _scenes()
+
+
+def _mujoco_settings(quick: bool) -> list[Setting]:
+    out = [Setting("contacts: capsules (no rod-end proxies)", "contacts",
+                   {"engine_options": {"contact_geometry": "capsules"}}),
+           Setting("contacts: segment-segment off", "contacts", {"engine_options": {"segment_contacts": "off"}}),
+           Setting("contacts: solref 0.02 s (MuJoCo's default)", "contacts",
+                   {"engine_options": {"solref_time_s": 0.02}}),
+           Setting("CPG RK4 sub-step 0.125 ms", "cpg", {"cpg_max_step_s": 1.25e-4})]
+    if not quick:
+        out += [Setting("solver: CG", "solver", {"engine_options": {"solver": "cg"}}),
+                Setting("integrator: Euler", "solver", {"engine_options": {"integrator": "euler"}}),
+                Setting("dt 2 ms, segment-segment off", "contacts",
+                        {"dt_s": 2e-3, "engine_options": {"segment_contacts": "off"}})]
+    return out
+
+
+def _scenes() -> list[Setting]:
+    return [Setting("scene: rough 2 cm / 40 cm", "scene", {"scene": {"kind": "rough", "rough_amplitude_cm": 2.0}}),
             Setting("scene: obstacles 3 cm every 60 cm", "scene", {"scene": {"kind": "obstacles"}}),
             Setting("scene: slope 5 deg", "scene", {"scene": {"kind": "slope", "slope_deg": 5.0}})]
-    return out
 
 
 @dataclass(frozen=True)
@@ -146,7 +168,7 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
             for s in range(1, seeds + 1)]
     if best is not None:
         sets.append(best)
-    settings = sweep(quick)
+    settings = sweep(quick, base.get("engine", "bullet"))
     start_dt, floor_dt, tol = (2.5e-4, 2.5e-4, 1e-3) if quick else (2.5e-4, 3.125e-5, 1e-3)
     with ProcessPoolExecutor(jobs) as pool:
         ref_jobs = [(morph_src, controller, ps, base, start_dt, floor_dt, tol)
@@ -190,7 +212,7 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
         rec = min((r for r in table if r["numerical"]), key=lambda r: r["median_distance_error"])
         why = f"no setting reaches {threshold:.2%}; the most accurate one"
     return {
-        "morphology": morph.name, "duration_s": duration, "quick": quick,
+        "morphology": morph.name, "engine": base.get("engine", "bullet"), "duration_s": duration, "quick": quick,
         "param_sets": [ps.name for ps in sets],
         "reference": [{"param_set": ps.name, "dt_s": ref.get("dt_s"), "converged": ref["converged"],
                        "distance_m": ref.get("distance_m"), "status": ref["status"],

@@ -110,16 +110,19 @@ def check_state(poses: np.ndarray, last: np.ndarray, masses: np.ndarray, sstate:
 
 def score(morph: Morphology, masses: np.ndarray, build: np.ndarray, end_poses: np.ndarray, steps_done: int,
           dt_s: float, work_internal: float, reason: str, seed: int, wall_time_s: float,
-          extras: dict[str, float]) -> TrialResult:
+          extras: dict[str, float], start: np.ndarray | None = None) -> TrialResult:
     """A TrialResult from the start pose `build` (without jitter) and the final poses: the whole
-    robot's COM distance, NTRT's scored-segment distance, speed, work and cost of transport."""
+    robot's COM distance, NTRT's scored-segment distance, speed, work and cost of transport.
+
+    start: the poses locomotion is scored from (the end of a settle phase; default `build`); steps_done
+    and work_internal count from there. NTRT's distance always counts from `build`, as NTRT's did."""
     total_mass = float(masses.sum())
     sim_time = steps_done * dt_s
-    start_com = scoring.robot_com_cm(build, masses)
+    start_com = scoring.robot_com_cm(build if start is None else start, masses)
     distance_cm = scoring.planar_distance_cm(start_com, scoring.robot_com_cm(end_poses, masses))
     seg = morph.scored_segment
     ntrt_cm = scoring.planar_distance_cm(build[seg, :3], end_poses[seg, :3])
-    work_j = work_internal * scoring.WORK_J_PER_INTERNAL
+    work_j = max(0.0, work_internal) * scoring.WORK_J_PER_INTERNAL
     distance_m = distance_cm * scoring.CM
     return TrialResult(
         status=TrialStatus.FAILED if reason else TrialStatus.COMPLETE, reason=reason,

@@ -137,9 +137,10 @@ def unit_params(morph: Morphology, params: NtrtParameterSet) -> np.ndarray:
 
 
 def replay(folder: str | Path, morphology: str | Morphology | None = None, *, duration_s: float | None = None,
-           suffix: str = "default", seed: int = 0, pose_jitter_cm: float = 0.0) -> ReplayReport:
+           suffix: str = "default", seed: int = 0, pose_jitter_cm: float = 0.0,
+           engine: str = "bullet") -> ReplayReport:
     """Run NTRT's published parameters on the NTRT-era morphology (2014 motor, 1 ms, one sub-step,
-    no friction anchors)."""
+    no friction anchors in Bullet; `engine` "mujoco" runs the same on MuJoCo's default contacts)."""
     from robot.morphology.registry import load_morphology
     from worker.trial import TrialConfig, simulate
 
@@ -149,7 +150,8 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     duration = duration_s or morph.duration_s
     # NTRT's Bullet 2.81 had no friction anchors; its motor caps are per 1 ms step (spec 0a.3)
     cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model="ntrt2014", controller="ntrt",
-                      engine_options={"friction_anchor": False}, pose_jitter_cm=pose_jitter_cm)
+                      engine=engine, engine_options={"friction_anchor": False} if engine == "bullet" else {},
+                      pose_jitter_cm=pose_jitter_cm)
     result = simulate(morph, u, cfg, seed).result
     return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result,
                         REFERENCES.get(morph.name))
@@ -159,8 +161,10 @@ JITTER_CM = 1e-6  # spec 0a.5: perturbations this small already spread the tetra
 
 
 def replay_spread(folder: str | Path, morphology: str | Morphology | None, seeds: int, *,
-                  duration_s: float | None = None, suffix: str = "default") -> list[ReplayReport]:
+                  duration_s: float | None = None, suffix: str = "default", engine: str = "bullet"
+                  ) -> list[ReplayReport]:
     """Replays with the start pose jittered by JITTER_CM (seeds 1..seeds): a distribution, not one sample."""
-    return [replay(folder, morphology, duration_s=duration_s, suffix=suffix, seed=s, pose_jitter_cm=JITTER_CM)
+    return [replay(folder, morphology, duration_s=duration_s, suffix=suffix, seed=s, pose_jitter_cm=JITTER_CM,
+                   engine=engine)
             for s in range(1, seeds + 1)]
 

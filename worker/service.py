@@ -99,6 +99,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
         delay_s = float(config.trial_config.get("duration_s") or 0.0)
         return lambda a: sphere_result(space, a, delay_s)
     from robot.morphology.model import Morphology
+    from worker.setup import SetupCache
     from worker.trial import TrialConfig, run_trial
 
     morphology = Morphology.from_dict(config.morphology_spec)
@@ -113,10 +114,11 @@ def build_evaluator(config: RunConfig) -> Evaluator:
     from worker.engines.base import engine_class
 
     engine_class(trial_config.engine)  # a missing engine package fails here, not in every trial
+    setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
 
     def evaluate(a: TrialAssignment) -> TrialResult:
         return run_trial(morphology, np.asarray(a.params_unit, dtype=float), trial_config, a.seed,
-                         controller=config.controller)
+                         controller=config.controller, setup=setup)
 
     return evaluate
 

@@ -13,16 +13,15 @@ import numpy as np
 
 from protocol.errors import ConfigError, ParameterError
 from protocol.messages import TrialResult
-from robot.bodies import build_bodies, build_strings
 from robot.morphology.model import Morphology
 from robot.morphology.registry import load_morphology
 from robot.morphology.structure import NEWTON
-from robot.scene import build_terrain
 from robot.trial_config import TrialConfig
 from worker import scoring
 from worker.control.cpg import CpgIntegrator
-from worker.engines.base import EngineFactory, engine_class
-from worker.episode import build_poses, check_state, choose_step, score, start_lift_cm, start_rotation
+from worker.engines.base import EngineFactory
+from worker.episode import check_state, choose_step, score
+from worker.setup import SetupCache, TrialSetup
 from worker.sim import strings as sk
 
 MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014}
@@ -105,9 +104,12 @@ def string_tables(morph: Morphology, start_length_cm: np.ndarray, node_of_string
 
 def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mapping[str, float] | list,
              config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None,
-             scene_factory: EngineFactory | None = None) -> TrialOutcome:
+             scene_factory: EngineFactory | None = None, setup: TrialSetup | SetupCache | None = None
+             ) -> TrialOutcome:
     """Run one trial and return its result with the recorded trajectory (if config asks for one).
-    `scene_factory` replaces the configured engine's class (same constructor as BasePhysics)."""
+    `scene_factory` replaces the configured engine's class (same constructor as BasePhysics).
+    `setup`: a TrialSetup of this morphology and config, or a SetupCache, to reuse what earlier trials
+    built (the result is the same bits either way)."""
     t_wall = time.perf_counter()
     cfg = config or TrialConfig()
     morph = load_morphology(morphology)
@@ -116,98 +118,120 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     network = morph.controller_space(controller).network(physical)
     if not isinstance(seed, int | np.integer):
         raise ParameterError("seed is not an integer", received=seed, expected="an integer")
-    engine_cls = engine_class(cfg.engine)
-    settings = engine_cls.settings_from_options(cfg.engine_options)
+    if isinstance(setup, SetupCache):
+        setup = setup.get(morph, cfg, controller)
+    elif setup is None or setup.morph != morph or setup.cfg != cfg or setup.controller != controller:
+        setup = TrialSetup(morph, cfg, controller)
+    sparams, sstate = setup.string_tables(network)
+    bodies, geom, masses, dt, terrain = setup.bodies, setup.geom, setup.masses, setup.dt, setup.terrain
 
-    bodies = build_bodies(morph.structure)
-    geom = build_strings(morph.structure, bodies, cfg.relocate_anchors)
-    node_of_string = {int(s): n for n, s in enumerate(network.node_string)}
-    sparams, sstate = string_tables(morph, geom.start_length_cm, node_of_string)
-    masses = np.array([b.mass_kg for b in bodies])
-    rng = np.random.default_rng(seed)
-    offsets = rng.normal(0.0, cfg.pose_jitter_cm, (len(bodies), 3)) if cfg.pose_jitter_cm > 0 else None
-
-    dt = choose_step(morph, cfg)
     duration = cfg.duration_s or morph.duration_s
     n_steps = int(round(duration / dt))
+    n_settle = int(round(cfg.settle_s / dt))
     period = cfg.cpg_update_period_s or morph.control.cpg_update_period_s
     cpg_every = max(1, int(round(period / dt)))
     check_every = max(1, int(round(cfg.check_every_s / dt)))
     record_every = None if cfg.record_every_s is None else max(1, int(round(cfg.record_every_s / dt)))
     motor = MOTOR_MODELS[cfg.motor_model]
 
-    nodes = morph.structure.node_array()
-    terrain = build_terrain(cfg.scene, cfg.ground_friction if cfg.ground_friction is not None
-                            else morph.ground_friction, (float(nodes[:, 2].min()), float(nodes[:, 2].max())))
-    rotation = start_rotation(cfg.scene)
-    lift = start_lift_cm(terrain, morph, rotation)
-    if lift > 0:
-        offsets = np.zeros((len(bodies), 3)) if offsets is None else offsets
-        offsets[:, 1] += lift
-    scene = (scene_factory or engine_cls)(bodies, terrain, dt, settings, offsets, rotation)
+    scene, owned = setup.scene(setup.start_offsets(int(seed)), scene_factory)
     cpg = CpgIntegrator(network, cfg.cpg_max_step_s)
     cpg_out = cpg.output_cm_s
     bank = sk.StringBank(len(bodies), geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm,
                          sparams, sstate)
     sstate = bank.state
     traj = Trajectory() if record_every else None
+    # the compiled loop of an engine that offers one; recording goes step by step in Python
+    fused = getattr(scene, "fused_stepper", None) if record_every is None else None
     reason = ""
+    settle_poses, settle_work = None, 0.0
     try:
-        poses = scene.read_poses()
+        poses = scene.read_poses().copy()
         last_check = poses[:, :3].copy()
         com_path = [scoring.robot_com_cm(poses, masses)]
         # partial metrics of a diverged trial come from the last sane check
         last_good, last_good_step, last_good_work = poses.copy(), 0, 0.0
-        read, apply, step, advance = scene.read_poses, scene.apply_wrenches, scene.step, cpg.advance
-        strings_step, body_force, body_torque, tension = bank.step, bank.force, bank.torque, bank.tension
-        steps_done = 0
-        for n in range(n_steps):
-            if n:
-                poses = read()
-            if (n + 1) % cpg_every == 0:
-                advance(cpg_every * dt)  # the time that really elapsed, also when dt > the period
-            if strings_step(poses, cpg_out, dt, motor) != sk.STATUS_OK:
-                reason = f"diverged: non-finite string state at t={n * dt:.3f} s"
+        steps_done = 0  # since the start, settle included
+        # the settle phase holds the CPG at rest (zero output): the impedance reflex holds the posture
+        for phase_steps, every in ((n_settle, 0), (n_steps, cpg_every)):
+            if reason:
                 break
-            if record_every and n % record_every == 0:
-                _record(traj, n * dt, poses, tension, cpg_out, sstate)
-            apply(body_force, body_torque)
-            step()
-            steps_done = n + 1
-            if steps_done % check_every == 0:
-                poses = read()
-                reason = check_state(poses, last_check, masses, sstate, geom.start_length_cm, check_every * dt, cfg,
-                                     terrain)
-                last_check = poses[:, :3].copy()
-                if reason:
-                    reason = f"{reason} at t={steps_done * dt:.3f} s"
+            if phase_steps and fused is not None:
+                run = fused(bank, cpg, every, motor).run
+            else:
+                run = _python_steps(scene, bank, cpg, every, dt, motor, traj, record_every, steps_done)
+            n = 0
+            while n < phase_steps:
+                stop = min(phase_steps, n + check_every - steps_done % check_every)
+                status, reached = run(n, stop)
+                steps_done += reached - n
+                if status != sk.STATUS_OK:
+                    reason = f"diverged: non-finite string state at t={steps_done * dt:.3f} s"
                     break
-                com_path.append(scoring.robot_com_cm(poses, masses))
-                last_good, last_good_step, last_good_work = poses.copy(), steps_done, float(bank.work[0])
-        end_poses = scene.read_poses()
+                n = stop
+                if steps_done % check_every == 0:
+                    poses = scene.read_poses()
+                    reason = check_state(poses, last_check, masses, sstate, geom.start_length_cm, check_every * dt,
+                                         cfg, terrain)
+                    last_check = poses[:, :3].copy()
+                    if reason:
+                        reason = f"{reason} at t={steps_done * dt:.3f} s"
+                        break
+                    com_path.append(scoring.robot_com_cm(poses, masses))
+                    last_good, last_good_step, last_good_work = poses.copy(), steps_done, float(bank.work[0])
+            if every == 0 and n_settle and not reason:  # locomotion is scored from here
+                settle_poses, settle_work = scene.read_poses().copy(), float(bank.work[0])
+        end_poses = scene.read_poses().copy()
         if not reason and not np.all(np.isfinite(end_poses)):
             reason = "diverged: non-finite pose"
         if record_every and not reason:
-            _record(traj, steps_done * dt, end_poses, tension, cpg_out, sstate)
+            _record(traj, steps_done * dt, end_poses, bank.tension, cpg_out, sstate)
     finally:
-        scene.close()
+        if owned:
+            scene.close()
 
     if reason:  # never score an exploded state: report what was measured up to the last sane check
         end_poses, steps_done = last_good, last_good_step
         bank.work[0] = last_good_work
-    build = build_poses(bodies, lift, rotation)  # the start pose without jitter: distances count from it
-    result = score(morph, masses, build, end_poses, steps_done, dt, float(bank.work[0]), reason, int(seed),
-                   time.perf_counter() - t_wall, {"dt_s": dt, "engine": cfg.engine})
+    loco_steps = max(0, steps_done - n_settle) if settle_poses is not None else 0 if n_settle else steps_done
+    extras = {"dt_s": dt, "engine": cfg.engine, "settle_s": n_settle * dt}
+    # the start pose without jitter (or the pose after the settle): distances count from it
+    result = score(morph, masses, setup.build, end_poses, loco_steps, dt, float(bank.work[0]) - settle_work, reason,
+                   int(seed), time.perf_counter() - t_wall, extras, start=settle_poses)
     path = np.array(com_path)
     return TrialOutcome(result, traj, path, np.arange(len(path)) * check_every * dt)
 
 
+def _python_steps(scene, bank, cpg, every: int, dt: float, motor: int, traj, record_every, base: int):
+    """The loop step by step through the engine seam: steps n0 .. n1-1 of a phase starting at global
+    step `base`. Returns (status, step reached) like a fused stepper."""
+    read, apply, step, advance = scene.read_poses, scene.apply_wrenches, scene.step, cpg.advance
+    strings_step, force, torque, tension, sstate = bank.step, bank.force, bank.torque, bank.tension, bank.state
+    cpg_out = cpg.output_cm_s
+
+    def run(n0: int, n1: int) -> tuple[int, int]:
+        for n in range(n0, n1):
+            poses = read()
+            if every and (n + 1) % every == 0:
+                advance(every * dt)  # the time that really elapsed, also when dt > the period
+            if strings_step(poses, cpg_out, dt, motor) != sk.STATUS_OK:
+                return sk.STATUS_NONFINITE, n
+            if record_every and (base + n) % record_every == 0:
+                _record(traj, (base + n) * dt, poses, tension, cpg_out, sstate)
+            apply(force, torque)
+            step()
+        return sk.STATUS_OK, n1
+
+    return run
+
+
 def run_trial(morphology: Morphology | str | Mapping, params: np.ndarray | Mapping[str, float] | list,
-              config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None) -> TrialResult:
+              config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None,
+              setup: TrialSetup | SetupCache | None = None) -> TrialResult:
     """One trial -> TrialResult. `params`: unit-cube vector of the controller space, or a mapping of
     named physical values. Divergence is a failed result, never an exception; bad parameters raise
     ParameterError."""
-    return simulate(morphology, params, config, seed, controller=controller).result
+    return simulate(morphology, params, config, seed, controller=controller, setup=setup).result
 
 
 def random_unit_params(morph: Morphology, seed: int, controller: str | None = None) -> np.ndarray:

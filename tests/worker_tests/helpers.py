@@ -7,8 +7,10 @@ import numpy as np
 from robot.bodies import build_bodies, build_strings
 from robot.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec
 from robot.scene import GroundSpec
-from worker.engines.bullet import BulletPhysics, BulletSettings
+from worker.engines.base import engine_class
 from worker.sim import strings as sk
+
+ENGINES = ("bullet", "mujoco")
 
 
 def two_rod_structure(gap_cm: float, *, heavy_density: float = 0.014, light_density: float = 0.014,
@@ -44,7 +46,7 @@ class PassiveRig:
     """A scene with fixed-rest-length strings, stepped with the production kernel and engine."""
 
     def __init__(self, spec: StructureSpec, rest_cm: np.ndarray | None = None, dt: float = 1e-4,
-                 gravity: float = 0.0) -> None:
+                 gravity: float = 0.0, engine: str = "bullet") -> None:
         self.bodies = build_bodies(spec)
         geom = build_strings(spec, self.bodies)
         n = len(spec.strings)
@@ -60,7 +62,8 @@ class PassiveRig:
         state[:, sk.S_LPREV] = geom.start_length_cm
         self.bank = sk.StringBank(len(self.bodies), geom.body_a, geom.body_b, geom.anchor_a_cm,
                                   geom.anchor_b_cm, params, state)
-        self.scene = BulletPhysics(self.bodies, GroundSpec(), dt, BulletSettings(gravity_cm_s2=gravity))
+        cls = engine_class(engine)
+        self.scene = cls(self.bodies, GroundSpec(), dt, cls.settings_from_options({"gravity_cm_s2": gravity}))
         self.dt = dt
         self.no_cpg = np.zeros(0)
 

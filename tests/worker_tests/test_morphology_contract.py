@@ -21,6 +21,7 @@ from worker.contract import (
     check_sane_numbers,
     passive_params,
 )
+from tests.worker_tests.helpers import ENGINES
 from worker.sim import strings as sk
 from worker.trial import TrialConfig, simulate, string_tables
 
@@ -152,11 +153,12 @@ def test_ntrt_defaults(built):
     assert bodies[0].friction * morph.ground_friction == pytest.approx(exp.effective_friction)
 
 
+@pytest.mark.parametrize("engine", ENGINES)
 @pytest.mark.parametrize("check", [check_passive_settle, check_deterministic], ids=["settle", "deterministic"])
-def test_every_discovered_spec_meets_the_contract(any_builtin, check):
-    """The contract `spinefarm check` runs, over every spec file the registry discovers."""
+def test_every_discovered_spec_meets_the_contract(any_builtin, check, engine):
+    """The contract `spinefarm check` runs, over every spec file the registry discovers, on both engines."""
     name, morph, _, _ = any_builtin
-    result = check(morph)
+    result = check(morph, engine)
     assert result.passed, f"{name}: {result.name}: {result.detail}"
 
 
@@ -212,13 +214,14 @@ def test_octahedral_ligaments_are_driven_to_start_minus_half_a_centimetre():
     assert not lig[first_cpg:].any()
 
 
-def test_octahedral_vertebrae_rest_on_one_rod_each():
+@pytest.mark.parametrize("engine", ENGINES)
+def test_octahedral_vertebrae_rest_on_one_rod_each(engine):
     """Paper, section IV-C: "When resting on the ground, only one rod from each vertebrae touches"."""
     from worker.render import rod_segments
 
     morph = load_morphology("octahedral-complex")
     bodies = build_bodies(morph.structure)
-    out = simulate(morph, passive_params(morph), TrialConfig(duration_s=3.0, record_every_s=1.0), 0)
+    out = simulate(morph, passive_params(morph), TrialConfig(duration_s=3.0, record_every_s=1.0, engine=engine), 0)
     assert out.result.ok, out.result.reason
     ends = rod_segments(bodies, out.trajectory.arrays()["poses"][-1])
     clearance = ends[:, :, 1].min(axis=1).reshape(12, 6) - 0.5  # lowest rod end centre above the ground top
@@ -227,15 +230,17 @@ def test_octahedral_vertebrae_rest_on_one_rod_each():
     assert np.all(touching >= 1)
 
 
+@pytest.mark.parametrize("engine", ENGINES)
 @pytest.mark.parametrize("name", ALL)
-def test_trial_command_runs_each_builtin(name: str, capsys):
+def test_trial_command_runs_each_builtin(name: str, engine: str, capsys):
     import json
 
     from cli.main import main
 
-    assert main(["trial", name, "--random-seed", "5", "--duration", "0.2", "--dt", "auto", "--json"]) == 0
+    assert main(["trial", name, "--random-seed", "5", "--duration", "0.2", "--dt", "auto", "--engine", engine,
+                 "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["morphology"] == name and out["status"] == "complete"
+    assert out["morphology"] == name and out["status"] == "complete" and out["extras"]["engine"] == engine
 
 
 def test_ribbed_segment_keeps_all_33_rods_in_the_engine():

@@ -7,12 +7,15 @@ import math
 import numpy as np
 import pybullet as pb
 
-from tests.worker_tests.helpers import PassiveRig, mass_between_anchors, two_rod_structure
+import pytest
+
+from tests.worker_tests.helpers import ENGINES, PassiveRig, mass_between_anchors, two_rod_structure
 from worker.engines.couple import wrench_to_force_pairs
 from worker.sim import strings as sk
 
 
-def test_string_oscillates_at_sqrt_k_over_m():
+@pytest.mark.parametrize("engine", ENGINES)
+def test_string_oscillates_at_sqrt_k_over_m(engine):
     """A mass held between two fixed anchors by two taut strings oscillates at sqrt(2 k / m).
 
     (A tension-only string cannot hold a mass alone without gravity; two opposing, pre-stretched
@@ -20,12 +23,11 @@ def test_string_oscillates_at_sqrt_k_over_m():
     """
     k = 1000.0
     rig = PassiveRig(mass_between_anchors(10.0, anchor_density=0.014 * 1e6, stiffness=k),
-                     rest_cm=np.array([9.0, 9.0]), dt=1e-4)  # 1 cm pre-stretch each
+                     rest_cm=np.array([9.0, 9.0]), dt=1e-4, engine=engine)  # 1 cm pre-stretch each
     m = rig.bodies[1].mass_kg
     omega = math.sqrt(2 * k / m)
     amplitude_cm = 0.5
-    pb.resetBaseVelocity(rig.scene.body_ids[1], [amplitude_cm * omega, 0, 0], [0, 0, 0],
-                         physicsClientId=rig.scene.client)
+    rig.scene.set_velocity(1, [amplitude_cm * omega, 0, 0])
     xs = np.array([rig.step()[1, 0] for _ in range(int(0.5 / rig.dt))])
     rig.close()
     assert np.all(rig.bank.tension > 0)
@@ -37,10 +39,11 @@ def test_string_oscillates_at_sqrt_k_over_m():
     assert abs(period_s - expected_s) / expected_s < 0.005
 
 
-def test_slack_string_does_not_push():
+@pytest.mark.parametrize("engine", ENGINES)
+def test_slack_string_does_not_push(engine):
     spec = two_rod_structure(10.0)
-    rig = PassiveRig(spec, rest_cm=np.array([12.0]), dt=1e-3)  # 2 cm of slack
-    pb.resetBaseVelocity(rig.scene.body_ids[1], [-5.0, 0, 0], [0, 0, 0], physicsClientId=rig.scene.client)
+    rig = PassiveRig(spec, rest_cm=np.array([12.0]), dt=1e-3, engine=engine)  # 2 cm of slack
+    rig.scene.set_velocity(1, [-5.0, 0, 0])
     for _ in range(200):  # 0.2 s at 5 cm/s closes 1 cm: the string stays slack
         rig.step()
     vel = rig.scene.velocities()

@@ -125,3 +125,21 @@ def test_cpg_integration_error_is_small_against_substepping():
 def test_stiff_string_string_material_validation():
     with pytest.raises(Exception, match="stiffness_n_per_m"):
         StringMaterial(stiffness_n_per_m=-1.0)
+
+
+@pytest.mark.parametrize("engine", ["bullet", "mujoco"])
+def test_settle_phase_scores_locomotion_from_the_settled_pose(engine):
+    """With no CPG output a Tetraspine 'moves' centimetres in its first second just settling; after a
+    settle phase that motion is not scored, while NTRT's distance still counts from the start."""
+    morph = load_morphology("tetraspine-ntrt")
+    u = random_unit_params(morph, 1)
+    u[1] = 0.0
+    raw = run_trial(morph, u, TrialConfig(duration_s=1.0, engine=engine), 1)
+    settled = run_trial(morph, u, TrialConfig(duration_s=1.0, settle_s=1.0, engine=engine), 1)
+    assert raw.ok and settled.ok
+    assert raw.distance_m > 0.02 and settled.distance_m < 0.1 * raw.distance_m
+    assert settled.sim_time_s == pytest.approx(1.0) and settled.extras["settle_s"] == pytest.approx(1.0)
+    assert settled.ntrt_distance_cm > 0.5 * raw.ntrt_distance_cm  # from the start, settling included
+    assert raw.extras["settle_s"] == 0.0
+    with pytest.raises(Exception, match="settle_s"):
+        TrialConfig(settle_s=-1.0)

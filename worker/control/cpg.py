@@ -84,10 +84,24 @@ class CpgIntegrator:
         self._work = np.zeros((9, network.n_nodes, 3))
         self._steps: dict[float, tuple[float, int]] = {}
 
-    def advance(self, period_s: float) -> None:
+    def plan(self, period_s: float) -> tuple[float, int]:
+        """(sub-step h in s, number of RK4 sub-steps) for one update of period_s."""
         plan = self._steps.get(period_s)
         if plan is None:  # the same period recurs every update: plan its sub-steps once
             n_steps = max(1, int(np.ceil(period_s / self.max_step_s - 1e-9)))
             plan = self._steps[period_s] = (period_s / n_steps, n_steps)
+        return plan
+
+    @property
+    def work(self) -> np.ndarray:
+        return self._work
+
+    def kernel_arrays(self) -> tuple:
+        """(omega, amp, indptr, source, wc, amplitude rate) as rk4_advance takes them, for fused loops."""
+        return (self._omega, self._amp, self._indptr, self._source, self._wc,
+                float(self.network.amplitude_rate_per_s))
+
+    def advance(self, period_s: float) -> None:
+        plan = self.plan(period_s)
         rk4_advance(self.state, self._omega, self._amp, self._indptr, self._source, self._wc,
                     self.network.amplitude_rate_per_s, plan[0], plan[1], self._work, self.output_cm_s)

@@ -9,6 +9,15 @@ A backend knows nothing of strings, CPGs or scoring. The trial loop calls, per t
   step()                                           advance dt_s
   close()                                          free the world (also via `with`)
 
+Optional, used when a backend has them (the contract above is all a backend must provide):
+  reset(start_offsets_cm)                          back to the start pose at rest, the same state as a fresh
+                                                   world (lets a worker keep one world per run: worker.setup)
+  fused_stepper(bank, cpg, cpg_every, motor_mode)  an object whose run(n0, n1) -> (status, step reached) does
+                                                   steps n0..n1-1 of the loop (read, CPG when due, strings,
+                                                   wrench, step) in compiled code, bit-identical to the loop
+                                                   through the methods above; the trial uses it unless recording
+  velocities(), set_velocity(i, linear, angular)   world-frame body velocities, for checks and tests
+
 Engine knobs (solver, contacts, friction combination, workarounds) live in each backend's settings
 dataclass, built from TrialConfig.engine_options by `settings_from_options`, never in morphology data.
 """

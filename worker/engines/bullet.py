@@ -233,6 +233,11 @@ class BulletPhysics(BasePhysics):
         return np.array([tuple(chain.from_iterable(pb.getBaseVelocity(b, physicsClientId=self.client)))
                          for b in self.body_ids])
 
+    def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0)) -> None:
+        """Set one body's world-frame velocity; for checks and tests."""
+        pb.resetBaseVelocity(self.body_ids[index], list(map(float, linear_cm_s)), list(map(float, angular_rad_s)),
+                             physicsClientId=self.client)
+
     def body_dynamics(self, index: int) -> tuple:
         return pb.getDynamicsInfo(self.body_ids[index], -1, physicsClientId=self.client)
 

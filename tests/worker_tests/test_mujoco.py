@@ -1,0 +1,195 @@
+"""The MuJoCo backend: the same model as Bullet behind the same seam, its fused loop, reuse and terrain."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import mujoco
+import numpy as np
+import pytest
+
+from protocol.errors import ConfigError
+from protocol.messages import TrialStatus
+from robot.bodies import build_bodies
+from robot.morphology.registry import load_morphology
+from robot.scene import SceneConfig, build_terrain, surface_height_cm
+from tests.worker_tests.helpers import ENGINES, PassiveRig, two_rod_structure
+from worker.engines.mujoco import MujocoPhysics, MujocoSettings
+from worker.setup import SetupCache
+from worker.sim import strings as sk
+from worker.trial import TrialConfig, random_unit_params, run_trial, simulate
+
+V_CM_S, A_CM_S2 = 24.0, 10000.0
+
+
+def _driven_rest_lengths(engine: str, dt: float, seconds: float = 0.4) -> np.ndarray:
+    """A string between two free rods driven 5 cm shorter by the motor: its rest length over time."""
+    rig = PassiveRig(two_rod_structure(10.0), dt=dt, engine=engine)
+    p = rig.bank.params
+    p[0, sk.P_MODE], p[0, sk.P_DRIVE] = sk.MODE_DRIVEN, rig.bank.state[0, sk.S_REST] - 5.0
+    p[0, sk.P_V], p[0, sk.P_A], p[0, sk.P_TMAX] = V_CM_S, A_CM_S2, 1e9
+    p[0, sk.P_LMIN] = p[0, sk.P_LACT] = 0.1
+    rests = [rig.bank.state[0, sk.S_REST]]
+    for _ in range(int(round(seconds / dt))):
+        rig.step()
+        rests.append(rig.bank.state[0, sk.S_REST])
+    rig.close()
+    return np.array(rests)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_motor_limits_do_not_depend_on_the_step_in_the_engine(engine):
+    times = []
+    for dt in (2e-3, 1e-3, 2.5e-4):
+        rests = _driven_rest_lengths(engine, dt)
+        assert np.max(np.abs(np.diff(rests))) / dt <= V_CM_S + 1e-9
+        times.append(np.argmax(np.abs(rests - rests[-1]) < 1e-6) * dt)
+        assert abs(rests[0] - rests[-1] - 5.0) < 1e-9  # arrived
+    expected = 5.0 / V_CM_S + V_CM_S / A_CM_S2
+    assert np.allclose(times, expected, rtol=0.02), times
+
+
+SNIPPET = """
+import json
+from robot.morphology.registry import load_morphology
+from worker.trial import TrialConfig, random_unit_params, run_trial
+m = load_morphology("tetraspine")
+r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco"), seed=11)
+d = r.to_dict(); d.pop("wall_time_s")
+print(json.dumps(d))
+"""
+
+
+def test_bit_identical_across_processes():
+    outs = [subprocess.run([sys.executable, "-c", SNIPPET], capture_output=True, text=True, check=True)
+            for _ in range(2)]
+    a, b = (json.loads(o.stdout.strip().splitlines()[-1]) for o in outs)
+    assert a == b and a["extras"]["engine"] == "mujoco"
+    m = load_morphology("tetraspine")
+    cfg = TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco")
+    here = run_trial(m, random_unit_params(m, 11), cfg, seed=11)
+    assert here.distance_m == a["distance_m"] and here.work_j == a["work_j"]
+    assert run_trial(m, random_unit_params(m, 11), cfg, seed=12).distance_m != a["distance_m"]
+
+
+def test_fused_loop_gives_the_same_bits_as_the_step_by_step_loop():
+    """Recording runs the loop through the engine seam step by step; without it, one compiled call runs
+    many steps. Both must agree exactly."""
+    m = load_morphology("tetraspine")
+    u = random_unit_params(m, 3)
+    fused = simulate(m, u, TrialConfig(duration_s=0.5, engine="mujoco"), 3).result
+    stepwise = simulate(m, u, TrialConfig(duration_s=0.5, engine="mujoco", record_every_s=0.05), 3).result
+    assert fused.distance_m == stepwise.distance_m and fused.work_j == stepwise.work_j > 0
+
+
+def test_reused_setup_gives_the_same_bits_as_a_fresh_one():
+    m = load_morphology("tetraspine-ntrt")
+    cfg = TrialConfig(duration_s=0.3, engine="mujoco", pose_jitter_cm=0.01)
+    cache = SetupCache()
+    reused = [run_trial(m, random_unit_params(m, s), cfg, s, setup=cache) for s in (1, 2, 1)]
+    assert cache.get(m, cfg, None).scenes_built == 1  # one model compiled, then reset
+    fresh = run_trial(m, random_unit_params(m, 1), cfg, 1)
+    assert reused[0].distance_m == reused[2].distance_m == fresh.distance_m
+    assert reused[1].distance_m != reused[0].distance_m
+    cache.close()
+
+
+def test_absurd_stiffness_fails_as_diverged_on_mujoco():
+    from robot.morphology.variants import with_strings
+
+    morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=1e8)
+    cfg = TrialConfig(duration_s=1.0, refuse_unstable_dt=False, engine="mujoco")
+    r = run_trial(morph, random_unit_params(morph, 1), cfg, seed=1)
+    assert r.status == TrialStatus.FAILED and r.reason.startswith("diverged"), r.reason
+    assert r.sim_time_s < 1.0 and np.isfinite(r.distance_m) and r.distance_m < 100.0
+
+
+def test_spec_file_robot_runs_on_mujoco(tmp_path, capsys):
+    from cli.main import main
+    from tests.worker_tests.test_specfile import GOOD
+
+    path = tmp_path / "chain.yaml"
+    path.write_text(GOOD)
+    assert main(["trial", str(path), "--random-seed", "2", "--duration", "0.3", "--engine", "mujoco", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["morphology"] == "bar-chain" and out["status"] == "complete"
+    assert out["extras"]["engine"] == "mujoco" and out["extras"]["dt_s"] > 0
+
+
+@pytest.mark.parametrize("cfg", [SceneConfig(), SceneConfig(kind="slope", slope_deg=10.0),
+                                 SceneConfig(kind="rough", rough_amplitude_cm=3.0, rough_seed=4),
+                                 SceneConfig(kind="obstacles", obstacle_spacing_cm=40.0)])
+def test_terrain_heights_agree_with_mujoco(cfg):
+    terrain = build_terrain(cfg, 0.5, (-50.0, 50.0))
+    scene = MujocoPhysics([], terrain)
+    mujoco.mj_forward(scene.model, scene.data)
+    rng = np.random.default_rng(0)
+    xs, zs = rng.uniform(-200, 200, 40), rng.uniform(-200, 200, 40)
+    geomid = np.zeros(1, dtype=np.int32)
+    theirs = np.array([200.0 - mujoco.mj_ray(scene.model, scene.data, np.array([x, 200.0, z]),
+                                             np.array([0.0, -1.0, 0.0]), None, 1, -1, geomid)
+                       for x, z in zip(xs, zs, strict=True)])
+    ours = surface_height_cm(terrain, xs, zs)
+    if cfg.kind == "rough":
+        assert np.all(ours >= theirs - 1e-6) and np.max(ours - theirs) < 2 * cfg.rough_amplitude_cm
+        assert np.ptp(theirs) > cfg.rough_amplitude_cm
+    else:
+        assert np.allclose(ours, theirs, atol=1e-6)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_friction_is_the_product_of_ground_and_rod(engine):
+    """The octahedral complex: rods 0.5 on ground 0.5, so 0.25 in Bullet. On a 20 degree slope
+    (tan = 0.36) it slides with the product and would hold with MuJoCo's default max (0.5); on 10 degrees
+    (tan = 0.18) it holds after settling onto the slope (its second second moves less than 1 cm)."""
+    morph = load_morphology("octahedral-complex")
+    u = random_unit_params(morph, 1)
+    u[1] = 0.0  # no CPG output
+    moved = {}
+    for deg in (10.0, 20.0):
+        for seconds in (1.0, 2.0):
+            cfg = TrialConfig(duration_s=seconds, engine=engine, scene=SceneConfig(kind="slope", slope_deg=deg))
+            r = run_trial(morph, u, cfg, 1)
+            assert r.ok, r.reason
+            moved[deg, seconds] = r.distance_m
+    assert moved[20.0, 2.0] - moved[20.0, 1.0] > 1.0, moved  # sliding faster and faster
+    assert moved[10.0, 2.0] - moved[10.0, 1.0] < 0.01, moved
+
+
+def test_filtered_pairs_pass_through_each_other():
+    bodies = build_bodies(load_morphology("tetraspine-ntrt").structure)
+    terrain = build_terrain(SceneConfig(collision_filter="neighbours"), 0.5, (0, 0))
+    for settings, neighbours_touch in ((MujocoSettings(), True), (MujocoSettings(segment_contacts="off"), False)):
+        scene = MujocoPhysics(bodies, terrain, 1e-3, settings)
+        scene.qpos[2, :3] = bodies[0].com_cm + [0, 100, 0]  # segment 2 onto segment 0, well above the ground
+        scene.qpos[0, :3] = bodies[0].com_cm + [0, 100, 0]
+        scene.qpos[1, :3] = bodies[0].com_cm + [0, 100, 0]  # and its neighbour 1 too
+        mujoco.mj_forward(scene.model, scene.data)
+        pairs = {tuple(sorted((scene.model.geom_bodyid[c.geom1] - 1, scene.model.geom_bodyid[c.geom2] - 1)))
+                 for c in scene.data.contact[:scene.data.ncon]}
+        assert (0, 2) not in pairs
+        assert ((0, 1) in pairs) == neighbours_touch
+        scene.close()
+
+
+def test_proxies_rest_like_capsules_on_flat_ground():
+    """Rod-end spheres touch a plane where the capsules' end caps would: same resting pose."""
+    morph = load_morphology("tetraspine-ntrt")
+    u = random_unit_params(morph, 1)
+    u[1] = 0.0
+    ends = [simulate(morph, u, TrialConfig(duration_s=1.0, engine="mujoco", record_every_s=1.0,
+                                           engine_options={"contact_geometry": g}), 1).trajectory.arrays()["poses"][-1]
+            for g in ("ends", "capsules")]
+    assert np.abs(ends[0][:, 1] - ends[1][:, 1]).max() < 0.05  # heights within 0.5 mm
+
+
+def test_bad_engine_options_are_named():
+    with pytest.raises(ConfigError, match="unknown mujoco engine options"):
+        run_trial(load_morphology("tetraspine-ntrt"), random_unit_params(load_morphology("tetraspine-ntrt"), 1),
+                  TrialConfig(duration_s=0.01, engine="mujoco", engine_options={"friction_anchor": False}))
+    with pytest.raises(ConfigError, match="integrator"):
+        MujocoSettings(integrator="verlet")
+    with pytest.raises(ConfigError, match="solimp"):
+        MujocoSettings(solimp=(0.9, 0.95))
