@@ -14,6 +14,7 @@ import pytest
 from robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
 from robot.morphology.registry import builtin_names, load_morphology
 from robot.spaces import NtrtTableSpace
+from tests.worker_tests.helpers import ENGINES
 from worker.contract import (
     check_builds,
     check_deterministic,
@@ -21,7 +22,6 @@ from worker.contract import (
     check_sane_numbers,
     passive_params,
 )
-from tests.worker_tests.helpers import ENGINES
 from worker.sim import strings as sk
 from worker.trial import TrialConfig, simulate, string_tables
 

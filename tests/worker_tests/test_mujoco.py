@@ -163,9 +163,8 @@ def test_filtered_pairs_pass_through_each_other():
     terrain = build_terrain(SceneConfig(collision_filter="neighbours"), 0.5, (0, 0))
     for settings, neighbours_touch in ((MujocoSettings(), True), (MujocoSettings(segment_contacts="off"), False)):
         scene = MujocoPhysics(bodies, terrain, 1e-3, settings)
-        scene.qpos[2, :3] = bodies[0].com_cm + [0, 100, 0]  # segment 2 onto segment 0, well above the ground
-        scene.qpos[0, :3] = bodies[0].com_cm + [0, 100, 0]
-        scene.qpos[1, :3] = bodies[0].com_cm + [0, 100, 0]  # and its neighbour 1 too
+        up = bodies[0].com_cm + np.array([0.0, 100.0, 0.0])  # well above the ground
+        scene.qpos[:3, :3] = up  # segment 2 onto segment 0, and its neighbour 1 too
         mujoco.mj_forward(scene.model, scene.data)
         pairs = {tuple(sorted((scene.model.geom_bodyid[c.geom1] - 1, scene.model.geom_bodyid[c.geom2] - 1)))
                  for c in scene.data.contact[:scene.data.ncon]}

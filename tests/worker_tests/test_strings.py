@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pybullet as pb
-
 import pytest
 
 from tests.worker_tests.helpers import ENGINES, PassiveRig, mass_between_anchors, two_rod_structure
