@@ -13,6 +13,7 @@ unacknowledged results and retry), and the process running the core stops with t
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import deque
@@ -29,6 +30,7 @@ from protocol.messages import (
     ResultSubmission,
     RunInfo,
     TrialAssignment,
+    TrialResult,
     TrialStatus,
     Verdict,
     Verification,
@@ -56,6 +58,7 @@ class CoordinatorCore:
         self.idle_retry_s = idle_retry_s
         self.lock = threading.RLock()
         self.rejected_messages = 0
+        self.forged_results = 0  # results quoting a lease this worker was never given
         self.dropped_results: dict[str, int] = {v.value: 0 for v in Verdict if v != Verdict.STORED}
         self._finish_times: deque[float] = deque()
         self.told_done: set[str] = set()  # workers that have been told the budget is met
@@ -114,6 +117,7 @@ class CoordinatorCore:
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True,
                                                 verdicts))
             leases = self.scheduler.grant(req.worker_id, req.capacity, self.study.ask)
+            self._store_given_up()
             cols = self.study.storage.columns()
             assignments = tuple(
                 TrialAssignment(ls.trial_id, ls.lease_id, tuple(cols["params_unit"][ls.trial_id].tolist()),
@@ -157,6 +161,10 @@ class CoordinatorCore:
         if storage.columns()["status"][tid] != TrialStatus.WAITING.stored:
             return Verdict.DUPLICATE
         if not self.scheduler.is_current(tid, lease_id, worker_id):
+            if not self.scheduler.was_issued(tid, lease_id, worker_id):
+                self.forged_results += 1
+                log.warning("result for trial %d from %s quotes a lease it was never given: dropped", tid,
+                            worker_id)
             return Verdict.STALE
         if result.seed != int(storage.columns()["seed"][tid]):
             log.warning("result for trial %d has seed %d, expected %d: dropped", tid, result.seed,
@@ -164,11 +172,35 @@ class CoordinatorCore:
             return Verdict.INVALID
         if result.worker_id != worker_id:
             result = replace(result, worker_id=worker_id)
+        result = self._finite_or_failed(result)
         self.study.tell(result)
         self.scheduler.release(tid)
+        self.scheduler.observe_trial(result.wall_time_s)
         if self.verifier is not None and result.ok:
             self._verify_best()
         return Verdict.STORED
+
+    def _finite_or_failed(self, result: TrialResult) -> TrialResult:
+        """A complete result whose score is NaN or infinite is a failure (it could never rank)."""
+        if not result.ok:
+            return result
+        parts = {"distance_m": result.distance_m, "ntrt_distance_cm": result.ntrt_distance_cm,
+                 "speed_cm_s": result.speed_cm_s, "work_j": result.work_j,
+                 "objective": self.study.objective(result)}
+        bad = [f"{k}={v!r}" for k, v in parts.items() if not math.isfinite(v)]
+        if not bad:
+            return result
+        return replace(result, status=TrialStatus.FAILED, reason=f"non-finite score: {', '.join(bad)}")
+
+    def _store_given_up(self) -> None:
+        """Store trials the scheduler gave up on (they lost their worker too often) as failed (lock held)."""
+        while self.scheduler.given_up:
+            tid, reason = self.scheduler.given_up.pop(0)
+            seed = int(self.study.storage.columns()["seed"][tid])
+            nan = math.nan
+            log.warning("trial %d %s: stored as failed", tid, reason)
+            self.study.tell(TrialResult(TrialStatus.FAILED, reason, nan, nan, nan, nan, nan, 0.0, nan, nan, seed,
+                                        trial_id=tid))
 
     # --- verification of new bests ----------------------------------------------------------------
     def _verify_best(self) -> None:
@@ -245,6 +277,7 @@ class CoordinatorCore:
     def worker_lost(self, worker_id: str) -> list[int]:
         with self.lock:
             lost = self.scheduler.worker_lost(worker_id)
+            self._store_given_up()
         if lost:
             log.info("worker %s lost; re-issuing trials %s", worker_id, lost[:10])
         return lost
@@ -253,7 +286,9 @@ class CoordinatorCore:
         """Expire overdue leases and store finished verifications (called periodically by the transport)."""
         self.collect_verifications()
         with self.lock:
-            return self.scheduler.expire()
+            expired = self.scheduler.expire()
+            self._store_given_up()
+            return expired
 
     # --- status -----------------------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
@@ -281,6 +316,7 @@ class CoordinatorCore:
                 "rate_trials_s": rate,
                 "eta_s": (remaining / rate) if rate > 0 else None,
                 "rejected_messages": self.rejected_messages,
+                "forged_results": self.forged_results,
                 "dropped_results": dict(self.dropped_results),
                 "workers": [{"worker_id": w.worker_id, "alive": w.alive, "leases": len(w.leases),
                              "last_contact_unix_s": wall - (now - w.last_contact_s)}

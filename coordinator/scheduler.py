@@ -2,7 +2,14 @@
 
 Time comes from an injected clock (seconds, monotonic), so tests move time instead of sleeping.
 A lease is identified by (trial_id, lease_id); each re-issue of a trial gets a new lease_id, so a
-result quoting an old lease is recognised as stale.
+result quoting an old lease is recognised as stale. Lease ids are 62 random bits, known only to the
+worker the lease went to (a query's reply reaches only its querier) and valid only with that worker's
+id: a peer cannot guess one, and one it did not receive counts as forged.
+
+Bounds against a greedy or broken worker: at most `max_grant` trials per request and per worker at a
+time; the i-th lease of a batch lasts lease_s + i x the expected trial time (not (i + 1) x lease_s);
+a trial whose lease is lost `max_attempts` times (it keeps killing or freezing its workers) is given
+up and handed to the caller to be stored as failed.
 """
 
 from __future__ import annotations
@@ -14,6 +21,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from protocol.errors import check_range
+
+MAX_GRANT = 64       # trials per request and per worker at a time
+MAX_ATTEMPTS = 3     # lost leases before a trial is stored as failed
+_TRIAL_TIME_MARGIN = 4.0
 
 
 @dataclass(frozen=True)
@@ -35,15 +46,23 @@ class WorkerState:
 class Scheduler:
     """Not thread-safe: the coordinator calls it under its own lock."""
 
-    def __init__(self, clock: Callable[[], float], lease_s: float = 60.0) -> None:
+    def __init__(self, clock: Callable[[], float], lease_s: float = 60.0, *, max_grant: int = MAX_GRANT,
+                 max_attempts: int = MAX_ATTEMPTS) -> None:
         check_range("lease_s", lease_s, 0.0, low_inclusive=False)
+        check_range("max_grant", max_grant, 1)
+        check_range("max_attempts", max_attempts, 1)
         self.clock = clock
         self.lease_s = float(lease_s)
+        self.max_grant = int(max_grant)
+        self.max_attempts = int(max_attempts)
+        self.expected_trial_s = self.lease_s       # until trials are measured (observe_trial)
+        self._measured = False
         self._queue: deque[int] = deque()          # trials waiting to be (re-)issued
         self._leases: dict[int, Lease] = {}        # trial id -> its current lease
         self._deadlines: list[tuple[float, int, int]] = []  # heap (deadline, trial, lease); lazy deletion
-        # Random start: lease ids of a restarted coordinator do not collide with its predecessor's.
-        self._next_lease_id = secrets.randbits(40)
+        self._issued: dict[int, dict[int, str]] = {}  # unfinished trial -> {lease id: worker} ever issued
+        self._attempts: dict[int, int] = {}        # unfinished trial -> leases lost so far
+        self.given_up: list[tuple[int, str]] = []  # (trial, reason) to be stored as failed by the caller
         self.workers: dict[str, WorkerState] = {}
         self.reissued = 0
 
@@ -64,21 +83,31 @@ class Scheduler:
         """Trials to issue before any new one (e.g. waiting trials found on resume)."""
         self._queue.extend(trial_ids)
 
-    def grant(self, worker_id: str, capacity: int, new_trial: Callable[[], int | None]) -> list[Lease]:
-        """Lease up to `capacity` trials: re-issues first, then new ones from `new_trial` (None = none).
+    def observe_trial(self, wall_time_s: float) -> None:
+        """A stored trial took this long on its worker: batches get leases sized to it."""
+        if wall_time_s > 0 and wall_time_s == wall_time_s:
+            t = min(self.lease_s, _TRIAL_TIME_MARGIN * wall_time_s)
+            self.expected_trial_s = (0.8 * self.expected_trial_s + 0.2 * t) if self._measured else t
+            self._measured = True
 
-        The i-th lease of a batch gets (i + 1) * lease_s, as the worker runs its batch in order.
+    def grant(self, worker_id: str, capacity: int, new_trial: Callable[[], int | None]) -> list[Lease]:
+        """Lease up to `capacity` trials (at most max_grant, counting those the worker holds already):
+        re-issues first, then new ones from `new_trial` (None = none).
+
+        The i-th lease of a batch gets lease_s + i x expected_trial_s, as the worker runs its batch in order.
         """
         now = self.clock()
         self.expire()
         worker = self.contact(worker_id)
+        capacity = min(capacity, self.max_grant - len(worker.leases))
         out: list[Lease] = []
         while len(out) < capacity:
             tid = self._queue.popleft() if self._queue else new_trial()
             if tid is None:
                 break
-            lease = Lease(tid, self._next_lease_id, worker_id, now + self.lease_s * (len(out) + 1))
-            self._next_lease_id += 1
+            lease_id = secrets.randbits(62)
+            lease = Lease(tid, lease_id, worker_id, now + self.lease_s + self.expected_trial_s * len(out))
+            self._issued.setdefault(tid, {})[lease_id] = worker_id
             self._leases[tid] = lease
             heapq.heappush(self._deadlines, (lease.deadline_s, tid, lease.lease_id))
             worker.leases.add(tid)
@@ -89,18 +118,36 @@ class Scheduler:
         lease = self._leases.get(trial_id)
         return lease is not None and lease.lease_id == lease_id and lease.worker_id == worker_id
 
-    def release(self, trial_id: int) -> None:
-        """The trial's result was stored: forget its lease."""
+    def was_issued(self, trial_id: int, lease_id: int, worker_id: str) -> bool:
+        """This lease went to this worker at some point (a late result, not a forged one)."""
+        return self._issued.get(trial_id, {}).get(lease_id) == worker_id
+
+    def _drop_lease(self, trial_id: int) -> None:
         lease = self._leases.pop(trial_id, None)
         if lease is not None and lease.worker_id in self.workers:
             self.workers[lease.worker_id].leases.discard(trial_id)
 
-    def _reissue(self, trial_ids: list[int]) -> None:
-        """Put trials at the head of the queue, in order: re-issues go before new trials."""
+    def release(self, trial_id: int) -> None:
+        """The trial's result was stored: forget its lease and its history."""
+        self._drop_lease(trial_id)
+        self._issued.pop(trial_id, None)
+        self._attempts.pop(trial_id, None)
+
+    def _reissue(self, trial_ids: list[int], why: str) -> None:
+        """Put trials at the head of the queue, in order: re-issues go before new trials; a trial that
+        lost its lease max_attempts times goes to `given_up` instead."""
+        again = []
         for tid in trial_ids:
-            self.release(tid)
-        self._queue.extendleft(reversed(trial_ids))
-        self.reissued += len(trial_ids)
+            self._drop_lease(tid)
+            n = self._attempts[tid] = self._attempts.get(tid, 0) + 1
+            if n >= self.max_attempts:
+                self.given_up.append((tid, f"lost its worker {n} times (last: {why})"))
+                self._issued.pop(tid, None)
+                self._attempts.pop(tid, None)
+            else:
+                again.append(tid)
+        self._queue.extendleft(reversed(again))
+        self.reissued += len(again)
 
     def expire(self) -> list[int]:
         """Re-queue every trial whose lease deadline has passed; returns their ids."""
@@ -111,7 +158,7 @@ class Scheduler:
             lease = self._leases.get(tid)
             if lease is not None and lease.lease_id == lease_id:
                 out.append(tid)
-        self._reissue(out)
+        self._reissue(out, f"lease expired after {self.lease_s:g} s")
         return out
 
     def contact(self, worker_id: str) -> WorkerState:
@@ -131,5 +178,5 @@ class Scheduler:
             return []
         w.alive = False
         lost = sorted(w.leases)
-        self._reissue(lost)
+        self._reissue(lost, f"worker {worker_id} vanished")
         return lost

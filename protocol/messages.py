@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
+from protocol import limits
 from protocol.errors import MessageError
 
 SCHEMA_VERSION = 1
@@ -151,10 +152,23 @@ class TrialResult:
             if name in kwargs and (isinstance(kwargs[name], bool) or not isinstance(kwargs[name], int)):
                 raise MessageError(f"trial result field {name!r} is not an integer", received=kwargs[name],
                                    expected="an integer")
-        if not isinstance(kwargs["reason"], str):
-            raise MessageError("trial result field 'reason' is not a string", received=kwargs["reason"],
-                               expected="a string")
+        limits.check_text(kwargs["reason"], "trial result field 'reason'")
+        if kwargs.get("worker_id"):
+            limits.check_id(kwargs["worker_id"], "trial result field 'worker_id'")
+        if not _extras_ok(kwargs.get("extras", {})):
+            raise MessageError("trial result field 'extras' is malformed", received=str(kwargs["extras"])[:80],
+                               expected=f"at most {limits.MAX_EXTRAS} name: number or short text pairs")
         return cls(**kwargs)
+
+
+def _extras_ok(extras: Any) -> bool:
+    def value_ok(v: Any) -> bool:
+        if isinstance(v, str):
+            return len(v) <= 64
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
+    return (isinstance(extras, dict) and len(extras) <= limits.MAX_EXTRAS
+            and all(isinstance(k, str) and len(k) <= 32 and value_ok(v) for k, v in extras.items()))
 
 
 def _json_default(obj: Any) -> Any:
@@ -196,12 +210,7 @@ def encode(kind: str, body: dict[str, Any]) -> bytes:
 
 def decode(payload: bytes | str, expected_kind: str | None = None) -> tuple[str, dict[str, Any]]:
     """Return (kind, body) of an envelope; raise MessageError for anything malformed or foreign."""
-    try:
-        envelope = json.loads(payload)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        shown = payload[:60] if isinstance(payload, bytes | str) else type(payload).__name__
-        raise MessageError("message is not JSON", received=shown,
-                           expected="a JSON envelope {schema, kind, body}") from exc
+    envelope = limits.loads(payload)  # size, nesting, integer digits and finiteness bounded
     if not isinstance(envelope, dict) or not {"schema", "kind", "body"} <= set(envelope):
         got = sorted(envelope) if isinstance(envelope, dict) else type(envelope).__name__
         raise MessageError("message is not a spinefarm envelope", received=got,
@@ -262,7 +271,7 @@ class WorkRequest:
 
     @classmethod
     def from_dict(cls, data: Any) -> WorkRequest:
-        worker_id = _field(data, "worker_id", str, "work request")
+        worker_id = limits.check_id(_field(data, "worker_id", str, "work request"), "work request worker id")
         capacity = _field(data, "capacity", int, "work request")
         if not worker_id or not 1 <= capacity <= _MAX_BATCH:
             raise MessageError("work request is out of range", received=(worker_id, capacity),
@@ -372,7 +381,8 @@ class ResultSubmission:
         if len(items) > _MAX_BATCH:
             raise MessageError("result submission is too large", received=len(items),
                                expected=f"at most {_MAX_BATCH} results")
-        return cls(_field(data, "worker_id", str, "result submission"),
+        worker_id = limits.check_id(_field(data, "worker_id", str, "result submission"), "result submission worker id")
+        return cls(worker_id,
                    tuple(SubmittedResult.from_dict(i) for i in items))
 
 
@@ -437,6 +447,6 @@ def decode_message(payload: bytes | str, cls: Any) -> Any:
         return cls.from_dict(body)
     except MessageError:
         raise
-    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+    except (TypeError, ValueError, KeyError, AttributeError, ArithmeticError, RecursionError) as exc:
         raise MessageError(f"{cls.KIND} message is malformed: {exc}", received=str(body)[:120],
                            expected=f"a valid {cls.KIND} body") from exc

@@ -1,0 +1,137 @@
+"""Peers that lie or misbehave: forged results, non-finite scores, oversized or malformed messages,
+greedy requests and trials that keep killing their workers."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from coordinator.scheduler import MAX_GRANT, Scheduler
+from protocol import limits
+from protocol.errors import MessageError
+from protocol.messages import SCHEMA_VERSION, TrialResult, TrialStatus, Verdict, decode, encode
+from tests.coordinator_tests.helpers import FakeClock, sphere_core
+from tests.coordinator_tests.test_core import ask, assert_unchanged, res, snapshot, submit
+
+
+def test_lease_ids_are_random_and_bound_to_the_worker_they_went_to():
+    core, storage, _ = sphere_core(trials=30)
+    mine = ask(core, "w1", n=4).assignments
+    ids = [a.lease_id for a in mine]
+    assert len(set(ids)) == 4 and max(ids) > 2**40  # 62 random bits, not a counter
+    assert sorted(set(ids)) != list(range(min(ids), min(ids) + 4))
+    a = mine[0]
+    # w2 knows w1's id (liveliness tokens are public) and guesses lease ids around one it was given.
+    theirs = ask(core, "w2", n=1).assignments[0]
+    forged = [(theirs.lease_id + d, res(a, worker="w1", distance=1237.0)) for d in (-2, -1, 1, 2)]
+    assert set(submit(core, forged, worker="w1").values()) == {Verdict.STALE}
+    # Even the right lease id, sent under another worker's name, is refused.
+    assert submit(core, [(a.lease_id, res(a, distance=1237.0))], worker="w2") == {a.trial_id: Verdict.STALE}
+    assert core.status()["forged_results"] == 5
+    assert storage.columns()["status"][a.trial_id] == b"waiting"
+    assert submit(core, [(a.lease_id, res(a, distance=1.0))], worker="w1") == {a.trial_id: Verdict.STORED}
+    assert core.status()["forged_results"] == 5
+
+
+def test_a_late_result_of_an_expired_lease_is_stale_not_forged():
+    core, _, clock = sphere_core(trials=10, lease_s=5.0)
+    a = ask(core, "w1").assignments[0]
+    clock.advance(6.0)
+    core.tick()
+    ask(core, "w2")  # the trial goes to w2
+    assert submit(core, [(a.lease_id, res(a))], worker="w1") == {a.trial_id: Verdict.STALE}
+    assert core.status()["forged_results"] == 0 and core.status()["dropped_results"]["stale"] == 1
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_non_finite_score_is_stored_as_a_failure_with_its_reason(bad):
+    core, storage, _ = sphere_core(trials=10)
+    a = ask(core).assignments[0]
+    assert submit(core, [(a.lease_id, res(a, distance=bad))]) == {a.trial_id: Verdict.STORED}
+    cols = storage.columns()
+    assert cols["status"][a.trial_id] == b"failed"
+    assert cols["reason"][a.trial_id].decode().startswith("non-finite score: distance_m=")
+    assert storage.best_ids(1) == []
+
+
+def test_one_request_cannot_take_the_run_and_batch_leases_follow_the_trial_time():
+    core, _, _ = sphere_core(trials=500, lease_s=60.0)
+    grant = ask(core, "greedy", n=4096)
+    assert len(grant.assignments) == MAX_GRANT
+    assert ask(core, "greedy", n=4096).assignments == ()  # it holds its share already
+    # Once trials are measured (0.01 s each), a batch's last lease is lease_s plus a few trial times.
+    submit(core, [(a.lease_id, TrialResult(TrialStatus.COMPLETE, "", 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.01, 1.0, a.seed,
+                                           trial_id=a.trial_id)) for a in grant.assignments], worker="greedy")
+    later = ask(core, "greedy", n=64).assignments
+    assert max(a.lease_s for a in later) < 60.0 + 64 * 4 * 0.01 + 1e-6
+    assert core.scheduler.n_leased == 64
+
+
+def test_a_trial_that_keeps_losing_its_worker_is_stored_as_failed_after_three_tries():
+    core, storage, clock = sphere_core(trials=5, lease_s=5.0)
+    for i, how in enumerate(("lost", "expired", "lost")):
+        (a,) = ask(core, f"w{i}").assignments
+        assert a.trial_id == 0
+        if how == "lost":
+            core.worker_lost(f"w{i}")
+        else:
+            clock.advance(6.0)
+            core.tick()
+    cols = storage.columns()
+    assert cols["status"][0] == b"failed"
+    assert cols["reason"][0].decode() == "lost its worker 3 times (last: worker w2 vanished)"
+    assert ask(core, "w9").assignments[0].trial_id == 1  # the run goes on with the next trial
+
+
+def test_max_attempts_is_a_setting():
+    s = Scheduler(FakeClock(0.0), lease_s=1.0, max_attempts=1)
+    s.grant("w1", 1, iter([0, None]).__next__)
+    s.worker_lost("w1")
+    assert s.given_up == [(0, "lost its worker 1 times (last: worker w1 vanished)")] and s.n_queued == 0
+
+
+def envelope(body, kind="work_request") -> bytes:
+    return json.dumps({"schema": SCHEMA_VERSION, "kind": kind, "body": body}).encode()
+
+
+MALFORMED = {
+    "deep nesting": b'{"schema":1,"kind":"work_request","body":' + b"[" * 100_000 + b"]" * 100_000 + b"}",
+    "moderate nesting": envelope({"worker_id": "w", "capacity": 1, "x": json.loads("[" * 40 + "]" * 40)}),
+    "5000-digit integer": envelope({"worker_id": "w", "capacity": int("9" * 4000)}).replace(b"9" * 4000, b"9" * 5000),
+    "1e400": b'{"schema":1,"kind":"work_request","body":{"worker_id":"w","capacity":1e400}}',
+    "NaN literal": b'{"schema":1,"kind":"work_request","body":{"worker_id":"w","capacity":NaN}}',
+    "lone surrogate id": envelope({"worker_id": "\ud800", "capacity": 1}),
+    "10 MB id": envelope({"worker_id": "w" * (10 * 1024 * 1024), "capacity": 1}),
+    "long id": envelope({"worker_id": "w" * 65, "capacity": 1}),
+    "id with a slash": envelope({"worker_id": "a/b", "capacity": 1}),
+    "not UTF-8": b'{"schema":1,"kind":"work_request","body":{"worker_id":"\xff\xfe","capacity":1}}',
+    "huge reason": envelope({"worker_id": "w", "items": [{"lease_id": 1, "result": {
+        "status": "complete", "reason": "x" * 5000, "distance_m": 1, "ntrt_distance_cm": 1, "speed_cm_s": 1,
+        "work_j": 1, "cot": 1, "sim_time_s": 1, "wall_time_s": 1, "mass_kg": 1, "seed": 1, "trial_id": 0}}]},
+        kind="result_submission"),
+    "string capacity": envelope({"worker_id": "w", "capacity": "4096"}),
+    "huge verdict list": envelope({"worker_id": "w", "capacity": 1, "results": [1] * 5000}),
+}
+
+
+@pytest.mark.parametrize("name", sorted(MALFORMED))
+def test_every_malformed_message_gets_an_error_reply_and_changes_nothing(name):
+    core, storage, _ = sphere_core(trials=10)
+    ask(core)
+    before = snapshot(storage)
+    payload = MALFORMED[name]
+    handler = core.handle_results if b"result_submission" in payload[:60] else core.handle_work
+    kind, body = decode(handler(payload))
+    assert kind == "error" and body["code"] == "malformed_message", body
+    assert len(body["message"]) < 400  # one line, never the whole payload
+    assert_unchanged(before, storage)
+    assert core.status()["rejected_messages"] == 1
+
+
+def test_limits_in_isolation():
+    with pytest.raises(MessageError, match="too large"):
+        limits.loads(b" " * (limits.MAX_MESSAGE_BYTES + 1))
+    assert limits.loads(b'{"a": [1, 2.5, "inf"]}') == {"a": [1, 2.5, "inf"]}
+    assert decode(encode("x", {"d": math.inf}))[1]["d"] == math.inf  # our own encoding of inf still travels
