@@ -67,7 +67,11 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     p.add_argument("--run-id", help="run id (default <morphology>-<time>-<random>)")
     p.add_argument("--seed", type=int, default=0, help="run seed: fixes every sampled vector by trial number")
-    p.add_argument("--objective", default="distance", help="distance (default), speed or cot_distance")
+    p.add_argument("--objective", default="distance",
+                   help="distance (default), speed, cot_distance or pareto (front of speed and COT)")
+    p.add_argument("--sampler", default="paper",
+                   help="paper (default: Monte Carlo then hill climbing), cmaes (CMA-ES, IPOP restarts), "
+                        "tpe (Optuna TPE) or random; stored with the run")
     p.add_argument("--controller", help="controller parameter space (default: the morphology's)")
     p.add_argument("--engine", default=None, help="physics engine of every trial: bullet (default) or mujoco")
     p.add_argument("--scene", default=None,
@@ -159,7 +163,8 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     from coordinator.verifier import VerifyPolicy
 
     verify = VerifyPolicy(enabled=not args.no_verify, tolerance=args.verify_tolerance, perturb=args.verify_perturb)
-    settings = SearchSettings(trials=2000 if args.trials is None else args.trials, sigma=args.sigma, top_k=args.top_k,
+    settings = SearchSettings(trials=2000 if args.trials is None else args.trials, sampler=args.sampler,
+                              sigma=args.sigma, top_k=args.top_k,
                               startup_trials=args.startup_trials, lease_s=lease, verify=verify)
     out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
     core, storage = new_run(config, settings, out, overwrite=args.overwrite)

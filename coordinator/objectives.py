@@ -24,10 +24,19 @@ def _cot_penalised(r: TrialResult) -> float:
     return r.distance_m / (1.0 + max(r.cot, 0.0))
 
 
+def _pareto_scalar(r: TrialResult) -> float:
+    # `pareto` keeps the front of speed (max) and COT (min); samplers without a multi-objective mode
+    # and the best-so-far use speed / (1 + COT): at equal COT faster wins, at equal speed cheaper wins.
+    if not math.isfinite(r.cot):
+        return 0.0
+    return r.speed_cm_s / (1.0 + max(r.cot, 0.0))
+
+
 OBJECTIVES: dict[str, Callable[[TrialResult], float]] = {
     "distance": _distance,
     "speed": _speed,
     "cot_distance": _cot_penalised,
+    "pareto": _pareto_scalar,
 }
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from coordinator.core import CoordinatorCore
 from coordinator.objectives import objective_fn
-from coordinator.samplers import GaussianHillClimbSampler, sampler_from_dict
+from coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sampler_class, sampler_from_dict
 from coordinator.scheduler import Scheduler
 from coordinator.study import Study
 from coordinator.verifier import Verifier, VerifyPolicy
@@ -30,9 +30,10 @@ def software_version() -> str:
 
 @dataclass(frozen=True)
 class SearchSettings:
-    """How to search: budget, sampler settings, leases."""
+    """How to search: budget, sampler and its settings (sigma, top_k: the paper's sampler), leases."""
 
     trials: int
+    sampler: str = DEFAULT_SAMPLER
     sigma: float = 0.005
     top_k: int = 1
     startup_trials: int | None = None   # None: half the budget is Monte Carlo
@@ -42,13 +43,14 @@ class SearchSettings:
     def __post_init__(self) -> None:
         check_range("trials", self.trials, 1)
         check_range("lease_s", self.lease_s, 0.0, low_inclusive=False)
+        sampler_class(self.sampler)
 
 
 def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
     space = config.space()
-    startup = settings.startup_trials if settings.startup_trials is not None else settings.trials // 2
-    sampler = GaussianHillClimbSampler(len(space), config.seed, sigma=settings.sigma, top_k=settings.top_k,
-                                       startup_trials=startup)
+    sampler = make_sampler(settings.sampler, len(space), config.seed, budget=settings.trials,
+                           objective=config.objective, sigma=settings.sigma, top_k=settings.top_k,
+                           startup_trials=settings.startup_trials)
     return RunMeta(run_id=config.run_id, morphology=config.morphology, controller=config.controller,
                    param_names=tuple(space.names),
                    param_lows=tuple(space.lows.tolist()), param_highs=tuple(space.highs.tolist()),

@@ -15,7 +15,7 @@ from protocol.messages import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, STORED_
 
 FILE_SCHEMA_VERSION = 3
 
-PHASES = ("monte_carlo", "gaussian")
+PHASES = ("monte_carlo", "gaussian", "cmaes", "tpe")
 STATUSES = tuple(s.value for s in STORED_STATUSES)
 
 
@@ -32,7 +32,8 @@ COLUMNS: tuple[Column, ...] = (
     Column("trial_id", "i8", "", "trial number; equals the row index"),
     Column("params_unit", "f8", "1", "parameter vector in the unit cube; columns named by param_names"),
     Column("params", "f8", "see param_units", "physical parameter values, low + u * (high - low)"),
-    Column("phase", "S16", "", "sampler phase: monte_carlo (uniform) or gaussian (hill climbing)"),
+    Column("phase", "S16", "", "sampler phase: monte_carlo (uniform), gaussian (hill climbing), "
+           "cmaes or tpe"),
     Column("parent", "i8", "", "trial id of the centre a gaussian sample was drawn around; -1 for none"),
     Column("seed", "i8", "", "simulation seed of the trial"),
     Column("status", "S16", "", "waiting (sampled, no result yet), complete or failed"),

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -11,6 +11,8 @@ from storage.base import BaseStorage
 
 MONTE_CARLO = "monte_carlo"
 GAUSSIAN = "gaussian"
+CMAES = "cmaes"
+TPE = "tpe"
 
 
 @dataclass(frozen=True)
@@ -27,12 +29,20 @@ def trial_rng(seed: int, trial_id: int) -> np.random.Generator:
     return np.random.default_rng([seed, trial_id])
 
 
+def trial_seed32(seed: int, trial_id: int, salt: int = 0) -> int:
+    """A 32-bit seed for a library's own generator, fixed by the run seed and the trial number."""
+    return int(np.random.SeedSequence([seed, trial_id, salt]).generate_state(1)[0])
+
+
 class BaseSampler:
     """Called by the study once per new trial, in trial-id order, from one thread.
 
     `propose(trial_id, storage)` may read the storage (finished trials, best so far) but keeps no
     state of its own that storage cannot rebuild, so a resumed run samples as it would have.
+    `name` is the registry name (`--sampler NAME`); `from_dict(describe())` rebuilds the sampler.
     """
+
+    name: ClassVar[str] = ""
 
     def __init__(self, n_params: int, seed: int) -> None:
         self.n_params = n_params
@@ -43,4 +53,29 @@ class BaseSampler:
 
     def describe(self) -> dict[str, Any]:
         """JSON-able settings, stored with the run."""
-        return {"kind": type(self).__name__, "seed": self.seed}
+        return {"name": self.name, "kind": type(self).__name__, "seed": self.seed}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], n_params: int) -> BaseSampler:
+        """Rebuild from describe() output (the stored run's `sampler` attribute)."""
+        return cls(n_params, int(d["seed"]))
+
+
+class FinishedPrefix:
+    """The trials a model-based sampler learns from: every finished trial before the first unfinished one.
+
+    Results arrive out of order; learning only from the finished prefix (ids 0..p-1, none waiting)
+    makes what a sampler has learnt a function of storage alone, replayed in trial-id order, and it
+    only ever grows, so a sampler extends its model instead of rebuilding it. A slow trial holds the
+    model back until it finishes (or its lease expires and it is re-issued).
+    """
+
+    def __init__(self) -> None:
+        self.end = 0
+
+    @staticmethod
+    def scan(storage: BaseStorage, start: int, limit: int) -> int:
+        """First waiting id in [start, limit), or limit."""
+        status = storage.columns()["status"][start:limit]
+        waiting = np.flatnonzero(status == b"waiting")
+        return start + int(waiting[0]) if waiting.size else limit

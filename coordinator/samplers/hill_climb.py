@@ -1,4 +1,4 @@
-"""GaussianHillClimbSampler: uniform for the first trials, then Gaussian steps around the best.
+"""GaussianHillClimbSampler (`paper`): uniform for the first trials, then Gaussian steps around the best.
 
 After `startup_trials` trials (the Monte Carlo phase) each trial is drawn around a centre chosen
 among the `top_k` best complete trials stored so far: x = clip(centre + sigma * N(0, I), 0, 1).
@@ -18,6 +18,8 @@ from storage.base import BaseStorage
 
 
 class GaussianHillClimbSampler(BaseSampler):
+    name = "paper"
+
     def __init__(self, n_params: int, seed: int, *, sigma: float = 0.005, top_k: int = 1,
                  startup_trials: int = 0) -> None:
         super().__init__(n_params, seed)
@@ -42,3 +44,8 @@ class GaussianHillClimbSampler(BaseSampler):
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "sigma": self.sigma, "top_k": self.top_k,
                 "startup_trials": self.startup_trials}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], n_params: int) -> GaussianHillClimbSampler:
+        return cls(n_params, int(d["seed"]), sigma=float(d["sigma"]), top_k=int(d["top_k"]),
+                   startup_trials=int(d["startup_trials"]))

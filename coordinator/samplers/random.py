@@ -7,5 +7,7 @@ from storage.base import BaseStorage
 
 
 class RandomSampler(BaseSampler):
+    name = "random"
+
     def propose(self, trial_id: int, storage: BaseStorage) -> Proposal:
         return Proposal(trial_rng(self.seed, trial_id).random(self.n_params), MONTE_CARLO, -1)

@@ -1,0 +1,48 @@
+"""The sampler registry: `--sampler NAME` -> class; a stored run's `sampler` dict -> sampler."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from coordinator.samplers.base import BaseSampler
+from coordinator.samplers.cmaes_sampler import CmaEsSampler
+from coordinator.samplers.hill_climb import GaussianHillClimbSampler
+from coordinator.samplers.random import RandomSampler
+from coordinator.samplers.tpe import TpeSampler
+from protocol.errors import ConfigError
+
+SAMPLERS: dict[str, type[BaseSampler]] = {
+    "paper": GaussianHillClimbSampler,   # the paper's Monte Carlo then sigma = 0.005 hill climbing
+    "cmaes": CmaEsSampler,
+    "tpe": TpeSampler,
+    "random": RandomSampler,
+}
+DEFAULT_SAMPLER = "paper"
+
+
+def sampler_class(name: str) -> type[BaseSampler]:
+    try:
+        return SAMPLERS[name]
+    except KeyError:
+        raise ConfigError("unknown sampler", received=name, expected=", ".join(sorted(SAMPLERS))) from None
+
+
+def make_sampler(name: str, n_params: int, seed: int, *, budget: int, objective: str, sigma: float = 0.005,
+                 top_k: int = 1, startup_trials: int | None = None) -> BaseSampler:
+    """A new run's sampler from the search settings (the paper's options apply to `paper` only)."""
+    cls = sampler_class(name)
+    if cls is GaussianHillClimbSampler:
+        startup = budget // 2 if startup_trials is None else startup_trials
+        return GaussianHillClimbSampler(n_params, seed, sigma=sigma, top_k=top_k, startup_trials=startup)
+    if cls is TpeSampler:
+        return TpeSampler(n_params, seed, startup_trials=10 if startup_trials is None else startup_trials,
+                          multi_objective=objective == "pareto")
+    return cls(n_params, seed)
+
+
+def sampler_from_dict(d: dict[str, Any], n_params: int) -> BaseSampler:
+    """Rebuild a sampler from its describe() output (used on resume; older files carry only `kind`)."""
+    name = d.get("name")
+    if name is None:
+        name = next((n for n, c in SAMPLERS.items() if c.__name__ == d.get("kind")), d.get("kind"))
+    return sampler_class(str(name)).from_dict(d, n_params)
