@@ -28,6 +28,7 @@ class Trial(BaseModel):
     worker_id: str | None
     finished_at_unix_s: float | None
     verification: Verification
+    pareto_front: bool
 
 
 class Worker(BaseModel):

@@ -33,6 +33,7 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
         "verification": {"verdict": rec.verification or "not_checked",
                          "fine_step_distance_m": _num(rec.verify_distance_m),
                          "reason": rec.verify_reason or None},
+        "pareto_front": bool(rec.pareto_front),
     }
 
 

@@ -130,6 +130,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--csv", nargs="?", const="-", metavar="OUT.csv", help="write every trial as CSV "
                    "(to OUT.csv, or stdout)")
     p.add_argument("--best", type=int, metavar="K", help="print the K best trials")
+    p.add_argument("--pareto", nargs="?", const="-", metavar="OUT.csv",
+                   help="write the Pareto front of speed and COT as CSV, fastest first (to OUT.csv, or stdout)")
     p.set_defaults(func=cmd_export)
 
 
@@ -337,8 +339,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     from storage.export import best_table, write_csv
     from storage.hdf5 import Hdf5Storage
 
-    if args.csv is None and args.best is None:
-        raise ConfigError("nothing to export", expected="--csv [OUT.csv] and/or --best K")
+    if args.csv is None and args.best is None and args.pareto is None:
+        raise ConfigError("nothing to export", expected="--csv [OUT.csv], --best K and/or --pareto [OUT.csv]")
     storage = Hdf5Storage.open_read(args.file)
     if args.csv is not None:
         if args.csv == "-":
@@ -351,4 +353,12 @@ def cmd_export(args: argparse.Namespace) -> int:
         if args.best < 1:
             raise ConfigError("--best out of range", received=args.best, expected="K >= 1")
         print(best_table(storage, args.best))
+    if args.pareto is not None:
+        ids = storage.pareto_ids()
+        if args.pareto == "-":
+            write_csv(storage, sys.stdout, ids)
+        else:
+            with open(args.pareto, "w", newline="") as fh:
+                write_csv(storage, fh, ids)
+            print(f"wrote {len(ids)} Pareto-front trials to {args.pareto}", file=sys.stderr)
     return 0

@@ -17,6 +17,7 @@ from protocol.messages import (
     TrialStatus,
     Verification,
 )
+from storage import pareto
 from storage.schema import RunMeta, TrialRecord
 
 
@@ -88,7 +89,26 @@ class BaseStorage:
             **{name: getattr(result, name) for name in SCORE_NAMES},
             "worker_id": result.worker_id.encode("utf-8", "replace")[:64],
             "finished_at_unix_s": time.time() if finished_at_unix_s is None else finished_at_unix_s})
+        self._update_front(trial_id)
         return True
+
+    def _update_front(self, trial_id: int) -> None:
+        cols = self.columns()
+        speed, cot = cols["speed_cm_s"], cols["cot"]
+        if not pareto.candidates(cols["status"][trial_id : trial_id + 1], speed[trial_id : trial_id + 1],
+                                 cot[trial_id : trial_id + 1])[0]:
+            return
+        joins, off = pareto.join_front(np.flatnonzero(cols["pareto_front"] == 1), speed, cot, trial_id)
+        if joins:
+            self._update(trial_id, {"pareto_front": 1})
+            for i in off:
+                self._update(int(i), {"pareto_front": 0})
+
+    def pareto_ids(self) -> list[int]:
+        """Ids of the trials on the Pareto front of speed (max) and COT (min), fastest first."""
+        cols = self.columns()
+        ids = np.flatnonzero(cols["pareto_front"] == 1)
+        return [int(i) for i in ids[np.lexsort((ids, -cols["speed_cm_s"][ids]))]]
 
     def set_verification(self, trial_id: int, verdict: Verification | str, distance_m: float = math.nan,
                          reason: str = "") -> None:

@@ -3,20 +3,21 @@
 from __future__ import annotations
 
 import csv
+from collections.abc import Sequence
 from typing import TextIO
 
 from storage.base import BaseStorage
 from storage.schema import COLUMNS, VECTOR_COLUMNS
 
 
-def write_csv(storage: BaseStorage, out: TextIO) -> None:
-    """One row per trial; parameters as physical values in columns named after them."""
+def write_csv(storage: BaseStorage, out: TextIO, ids: Sequence[int] | None = None) -> None:
+    """One row per trial (or per trial in `ids`); parameters as physical values in columns named after them."""
     names = list(storage.run_meta().param_names)
     cols = storage.columns()
     scalar = [c.name for c in COLUMNS if c.name not in VECTOR_COLUMNS]
     w = csv.writer(out)
     w.writerow(scalar + names)
-    for i in range(len(cols["trial_id"])):
+    for i in range(len(cols["trial_id"])) if ids is None else ids:
         row = [cols[n][i].decode() if isinstance(cols[n][i], bytes) else cols[n][i].item() for n in scalar]
         w.writerow(row + cols["params"][i].tolist())
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from protocol.messages import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, STORED_STATUSES, Verification
 
-FILE_SCHEMA_VERSION = 3
+FILE_SCHEMA_VERSION = 4
 
 PHASES = ("monte_carlo", "gaussian", "cmaes", "tpe")
 STATUSES = tuple(s.value for s in STORED_STATUSES)
@@ -47,6 +47,8 @@ COLUMNS: tuple[Column, ...] = (
     Column("verify_distance_m", "f8", "m", "distance of that re-simulation at a finer step"),
     Column("verify_reason", "S160", "", "what the re-simulation found when the distance did not hold"),
     *(Column(e.name, e.dtype, e.unit, e.description) for e in RECORDED_EXTRAS),
+    Column("pareto_front", "i1", "", "1 if the trial is on the Pareto front of speed (max) and COT (min) among "
+           "complete trials, else 0; kept up to date as results arrive"),
 )
 VERIFICATIONS = tuple(v.value for v in Verification)
 COLUMN_BY_NAME = {c.name: c for c in COLUMNS}
@@ -118,6 +120,7 @@ class TrialRecord:
     engine: str = ""
     dt_s: float = float("nan")
     settle_s: float = float("nan")
+    pareto_front: int = 0
 
     @classmethod
     def from_columns(cls, cols: dict[str, np.ndarray], i: int) -> TrialRecord:

@@ -1,4 +1,4 @@
-"""GET /runs/{run_id}/best and /runs/{run_id}/trials/{trial_id}."""
+"""GET /runs/{run_id}/best, /runs/{run_id}/pareto and /runs/{run_id}/trials/{trial_id}."""
 
 from __future__ import annotations
 
@@ -19,6 +19,12 @@ router = APIRouter(prefix="/runs/{run_id}", tags=["trials"])
 def best(storage: Annotated[Hdf5Reader, Depends(run_storage)],
          k: Annotated[int, Query(ge=1, le=1000, description="how many trials")] = 10) -> list[dict[str, Any]]:
     return [trial_view(storage, rec) for rec in storage.best(k)]
+
+
+@router.get("/pareto", response_model=list[Trial],
+            summary="The Pareto front of speed (max) and COT (min) among complete trials, fastest first")
+def pareto(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> list[dict[str, Any]]:
+    return [trial_view(storage, storage.trial(i)) for i in storage.pareto_ids()]
 
 
 @router.get("/trials/{trial_id}", response_model=Trial, summary="One trial")
