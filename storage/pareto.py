@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from protocol.messages import TrialStatus
+
 
 def candidates(status: np.ndarray, speed_cm_s: np.ndarray, cot: np.ndarray) -> np.ndarray:
     """Rows that take part: complete, with a finite speed and a COT that is a number (inf: no motion)."""
-    return (status == b"complete") & np.isfinite(speed_cm_s) & ~np.isnan(cot)
+    return (status == TrialStatus.COMPLETE.stored) & np.isfinite(speed_cm_s) & ~np.isnan(cot)
 
 
 def dominates(s_a, c_a, s_b, c_b):

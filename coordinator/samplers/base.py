@@ -7,6 +7,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from protocol.messages import TrialStatus
 from storage.base import BaseStorage
 
 MONTE_CARLO = "monte_carlo"
@@ -77,5 +78,5 @@ class FinishedPrefix:
     def scan(storage: BaseStorage, start: int, limit: int) -> int:
         """First waiting id in [start, limit), or limit."""
         status = storage.columns()["status"][start:limit]
-        waiting = np.flatnonzero(status == b"waiting")
+        waiting = np.flatnonzero(status == TrialStatus.WAITING.stored)
         return start + int(waiting[0]) if waiting.size else limit

@@ -18,6 +18,7 @@ import numpy as np
 
 from coordinator.samplers.base import CMAES, BaseSampler, FinishedPrefix, Proposal, trial_seed32
 from protocol.errors import ConfigError, check_range
+from protocol.messages import TrialStatus
 from storage.base import BaseStorage
 
 _FAILED_VALUE = 1e30  # minimised: a failed trial is worse than any complete one
@@ -65,7 +66,7 @@ class CmaEsSampler(BaseSampler):
         end = FinishedPrefix.scan(storage, self._prefix.end, limit)
         cols = storage.columns()
         for i in range(self._prefix.end, end):
-            ok = cols["status"][i] == b"complete" and math.isfinite(float(cols["objective"][i]))
+            ok = cols["status"][i] == TrialStatus.COMPLETE.stored and math.isfinite(float(cols["objective"][i]))
             value = -float(cols["objective"][i]) if ok else _FAILED_VALUE
             self._buffer.append((np.array(cols["params_unit"][i], dtype=float), value))
             if len(self._buffer) == self._cma.population_size:

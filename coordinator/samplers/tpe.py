@@ -18,6 +18,7 @@ import numpy as np
 
 from coordinator.samplers.base import TPE, BaseSampler, FinishedPrefix, Proposal, trial_seed32
 from protocol.errors import check_range
+from protocol.messages import TrialStatus
 from storage.base import BaseStorage
 
 _COT_CAP = 1e6  # no motion gives COT = inf; Optuna needs finite values
@@ -46,7 +47,7 @@ class TpeSampler(BaseSampler):
         self._study = optuna.create_study(directions=directions, sampler=optuna.samplers.RandomSampler(seed=0))
 
     def _values(self, cols: dict[str, np.ndarray], i: int) -> list[float] | None:
-        if cols["status"][i] != b"complete":
+        if cols["status"][i] != TrialStatus.COMPLETE.stored:
             return None
         if self.multi_objective:
             speed, cot = float(cols["speed_cm_s"][i]), float(cols["cot"][i])
