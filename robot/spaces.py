@@ -6,6 +6,7 @@ Two spaces:
   intrinsic frequency is 3 f Hz and the target amplitude 3 A cm/s) and one (weight, phase) pair
   per slot of the coupling table E[rp][j][k], 2 + 2 N_e parameters.
 - "sidewinding": the paper's 9-parameter Tetraspine space (section IV-A); see SidewindingSpace.
+- "ntrt-followable": NTRT's space with node bounds a motor can follow; see NtrtFollowableSpace.
 """
 
 from __future__ import annotations
@@ -220,7 +221,64 @@ class SidewindingSpace(BaseControllerSpace):
         )
 
 
-SPACES: dict[str, type[BaseControllerSpace]] = {"ntrt": NtrtTableSpace, "sidewinding": SidewindingSpace}
+def followable_limits(morph: Morphology, node_strings: list[int]) -> tuple[float, float]:
+    """(highest intrinsic frequency Hz, highest target amplitude cm/s) the CPG strings' motors can follow.
+
+    The impedance law turns a velocity setpoint V0 = a cos(2 pi f t) into a tension target that moves
+    by B a, which the motor produces by moving the rest length by B a / k: a motion of speed
+    2 pi f B a / k. It can follow while that stays below the motor speed V, and the setpoint itself
+    while a <= V; with a up to V this leaves f <= k / (2 pi B) (1.6 Hz for k = 1000 N/m, B = 100 N s/m).
+    The motor's acceleration limit allows 2 pi f V <= A (66 Hz at the paper's limits), and a CPG output
+    held for a period P samples f <= 1 / (2 P). The tightest string decides.
+    """
+    gains = dict(morph.control.impedance)
+    f_max, a_max = math.inf, math.inf
+    for i in node_strings:
+        string = morph.structure.strings[i]
+        mat = dict(morph.structure.string_materials)[string.tag]
+        imp = gains[string.tag]
+        v, k, b = mat.motor_speed_cm_s, mat.stiffness_n_per_m, imp.velocity_gain_n_s_per_m
+        a_max = min(a_max, v)
+        if b > 0:
+            f_max = min(f_max, k / (2.0 * math.pi * b))
+        f_max = min(f_max, mat.motor_accel_cm_s2 / (2.0 * math.pi * v))
+    f_max = min(f_max, 1.0 / (2.0 * morph.control.cpg_update_period_s))
+    return f_max, a_max
+
+
+class NtrtFollowableSpace(NtrtTableSpace):
+    """NTRT's space with the node parameters bounded to what the motors can follow (followable_limits).
+
+    NTRT's node range (0..30 for most robots) asks for intrinsic frequencies up to 90 Hz and
+    amplitudes up to 90 cm/s with d = 2, far beyond a motor of 24 cm/s; here the frequency and
+    amplitude coefficients span [0, f_max / (1 + d)] and [0, a_max / (1 + d)] (mirrored to negative
+    values when the robot's node range is), so every node target is one the motor can follow. The
+    couplings are NTRT's. Allowed wherever the `ntrt` space is.
+    """
+
+    name = "ntrt-followable"
+    base = "ntrt"
+
+    def __init__(self, morph: Morphology) -> None:
+        super().__init__(morph)
+        f_max, a_max = followable_limits(morph, self.node_strings)
+        scale = 1.0 + morph.control.descending_command
+        mirrored = morph.control.node_range[0] < 0
+        specs = list(self.param_space.specs)
+        for idx, top in ((0, f_max / scale), (1, a_max / scale)):
+            old = specs[idx]
+            specs[idx] = ParamSpec(old.name, -top if mirrored else 0.0, top, old.unit,
+                                   old.doc + "; bounded to what the motor can follow")
+        self.param_space = ParamSpace(f"{morph.name}/{self.name}", tuple(specs))
+
+
+SPACES: dict[str, type[BaseControllerSpace]] = {"ntrt": NtrtTableSpace, "sidewinding": SidewindingSpace,
+                                                NtrtFollowableSpace.name: NtrtFollowableSpace}
+
+
+def space_base(name: str) -> str:
+    """The space a morphology must list to allow `name` (a bounded variant allows as its base does)."""
+    return getattr(SPACES.get(name), "base", name)
 
 
 def make_controller_space(name: str, morph: Morphology) -> BaseControllerSpace:

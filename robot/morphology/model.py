@@ -93,10 +93,10 @@ class Morphology:
                                       received=unknown, expected=f"tags among {sorted(tags)}")
 
     def controller_space(self, controller: str | None = None) -> BaseControllerSpace:
-        from robot.spaces import make_controller_space
+        from robot.spaces import make_controller_space, space_base
 
         name = controller or self.controllers[0]
-        if name not in self.controllers:
+        if name not in self.controllers and space_base(name) not in self.controllers:
             raise ConfigError(f"morphology {self.name!r} has no controller space {name!r}",
                               received=name, expected=list(self.controllers))
         return make_controller_space(name, self)

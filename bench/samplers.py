@@ -1,0 +1,166 @@
+"""Samplers side by side on the paper's spines: verified best speed after a number of trials.
+
+For every sampler, run seed and problem (a morphology with its controller space) the bench runs one
+search with the coordinator's study (the sampler, an in-memory storage, the `speed` objective) and a
+pool of worker processes running real trials, `--workers` trials in flight as with several workers
+(results arrive out of order). At each checkpoint (trials finished) the best trial so far is
+re-simulated at a 4x finer step (the run's verification); a best that does not hold within 5 % is
+replaced by the next best. Reported per sampler and problem: the verified best speed at each
+checkpoint (median, min, max over seeds) and the trials each seed needed before a trial reached 80 %
+of the paper's speed (null: not within the budget).
+
+Full run (hours of CPU):  python bench/samplers.py
+Bounded run:              python bench/samplers.py --budget 40 --checkpoints 20,40 --seeds 5 --duration 4
+
+    --problems tetraspine:sidewinding,tetrahedral-complex:ntrt   morphology:controller pairs
+    --samplers paper,cmaes,tpe    --seeds 5    --budget 1000    --checkpoints 100,300,1000
+    --duration S (default: each morphology's trial length)    --workers 2    --engine bullet
+
+Prints one JSON object (last line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+# The paper's table (speed cm/s) for the 80 % mark.
+PAPER_SPEED_CM_S = {"tetraspine": 9.46, "tetrahedral-complex": 6.13, "octahedral-complex": 4.6, "ribbed": 5.37}
+
+
+def _trial(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int):
+    from worker.trial import TrialConfig, run_trial
+
+    return run_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
+                     controller=controller)
+
+
+def _verify(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int,
+            distance_m: float) -> dict:
+    from worker.trial import TrialConfig
+    from worker.verify import VerifySettings, verify_trial
+
+    return verify_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
+                        distance_m, VerifySettings(), controller=controller).to_dict()
+
+
+def search(pool: ProcessPoolExecutor, morphology: str, controller: str | None, sampler: str, seed: int,
+           budget: int, checkpoints: list[int], duration_s: float | None, engine: str, workers: int) -> dict:
+    from coordinator.problem import build_run_config
+    from coordinator.setup import SearchSettings, new_run
+    from coordinator.verifier import VerifyPolicy
+    from protocol.messages import TrialResult
+
+    overrides = {"engine": engine} if engine != "bullet" else None
+    config = build_run_config(f"bench-{sampler}-{seed}", morphology, objective="speed", seed=seed,
+                              controller=controller, duration_s=duration_s, trial_overrides=overrides)
+    core, storage = new_run(config, SearchSettings(trials=budget, sampler=sampler,
+                                                   verify=VerifyPolicy(enabled=False)), None)
+    study = core.study
+    target = 0.8 * PAPER_SPEED_CM_S.get(morphology, float("nan"))
+    running: dict = {}
+    verdicts: dict[int, dict] = {}
+    out: dict = {"seed": seed, "best_verified_speed_cm_s": {}, "trials_to_80pct": None}
+    finished = 0
+    t0 = time.perf_counter()
+
+    def submit() -> None:
+        tid = study.ask()
+        if tid is None:
+            return
+        cols = storage.columns()
+        running[pool.submit(_trial, config.morphology_spec, controller, config.trial_config,
+                            cols["params_unit"][tid].tolist(), int(cols["seed"][tid]))] = tid
+
+    def verified_best(n: int) -> float | None:
+        cols = storage.columns()
+        done = np.flatnonzero(cols["status"][:n] == b"complete")
+        for tid in done[np.argsort(-cols["objective"][done], kind="stable")][:3]:
+            tid = int(tid)
+            if tid not in verdicts:
+                verdicts[tid] = pool.submit(_verify, config.morphology_spec, controller, config.trial_config,
+                                            cols["params_unit"][tid].tolist(), int(cols["seed"][tid]),
+                                            float(cols["distance_m"][tid])).result()
+            if verdicts[tid]["holds"]:
+                return float(cols["speed_cm_s"][tid])
+        return None
+
+    for _ in range(workers):
+        submit()
+    while running:
+        done, _ = wait(list(running), return_when=FIRST_COMPLETED)
+        for fut in done:
+            tid = running.pop(fut)
+            result: TrialResult = fut.result()
+            from dataclasses import replace
+
+            study.tell(replace(result, trial_id=tid, worker_id="bench"))
+            finished += 1
+            if out["trials_to_80pct"] is None and result.ok and result.speed_cm_s >= target:
+                out["trials_to_80pct"] = finished
+            if finished in checkpoints:
+                # checkpoints count trials in id order: the first n trials are the ones sampled first
+                n = finished
+                while storage.columns()["status"][:n].tolist().count(b"waiting"):
+                    fut2 = next(iter(running))
+                    tid2 = running.pop(fut2)
+                    study.tell(replace(fut2.result(), trial_id=tid2, worker_id="bench"))
+                    finished += 1
+                out["best_verified_speed_cm_s"][str(n)] = verified_best(n)
+            submit()
+    out["wall_time_s"] = time.perf_counter() - t0
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--problems", default="tetraspine:sidewinding,tetrahedral-complex:ntrt")
+    ap.add_argument("--samplers", default="paper,cmaes,tpe")
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--budget", type=int, default=1000)
+    ap.add_argument("--checkpoints", default="100,300,1000")
+    ap.add_argument("--duration", type=float, default=None, help="simulated seconds per trial")
+    ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    ap.add_argument("--engine", default="bullet")
+    ap.add_argument("--runs", action="store_true", help="also print every seed's run")
+    args = ap.parse_args()
+    checkpoints = sorted(int(c) for c in args.checkpoints.split(",") if int(c) <= args.budget)
+    t0 = time.perf_counter()
+    report: dict = {"budget": args.budget, "seeds": args.seeds, "duration_s": args.duration, "engine": args.engine,
+                    "workers": args.workers, "paper_speed_cm_s": PAPER_SPEED_CM_S, "problems": {}}
+    with ProcessPoolExecutor(args.workers) as pool:
+        for problem in args.problems.split(","):
+            morphology, _, controller = problem.partition(":")
+            rows = report["problems"].setdefault(problem, {})
+            for sampler in args.samplers.split(","):
+                runs = [search(pool, morphology, controller or None, sampler, seed, args.budget, checkpoints,
+                               args.duration, args.engine, args.workers) for seed in range(args.seeds)]
+                summary: dict = {"best_verified_speed_cm_s": {},
+                                 "trials_to_80pct": [r["trials_to_80pct"] for r in runs],
+                                 "wall_time_s": sum(r["wall_time_s"] for r in runs)}
+                for c in checkpoints:
+                    v = [r["best_verified_speed_cm_s"].get(str(c)) for r in runs]
+                    got = [x for x in v if x is not None]
+                    summary["best_verified_speed_cm_s"][str(c)] = {
+                        "median": float(np.median(got)) if got else None,
+                        "min": min(got) if got else None, "max": max(got) if got else None,
+                        "not_verified": len(v) - len(got)}
+                if args.runs:
+                    summary["runs"] = runs
+                rows[sampler] = summary
+                print(json.dumps({problem: {sampler: summary}}), file=sys.stderr, flush=True)
+    report["wall_time_s"] = time.perf_counter() - t0
+    print(json.dumps(report))
+
+
+if __name__ == "__main__":
+    main()
