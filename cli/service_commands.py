@@ -95,6 +95,16 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
                    help="relative distance change a re-simulated best may show (default 0.05)")
     p.add_argument("--verify-perturb", action="store_true",
                    help="also re-simulate with a jittered start pose and 10 %% more friction")
+    g = p.add_argument_group("multi-fidelity screening")
+    g.add_argument("--rungs", metavar="S,S,...", default=None,
+                   help="screen every parameter set with a short trial and promote the best 1/eta to each longer "
+                        "one (successive halving), e.g. 10,30; the last is the full trial length")
+    g.add_argument("--eta", type=int, default=3, help="keep the best 1/eta of each rung (default 3)")
+    g.add_argument("--verify-engine", default=None,
+                   help="re-simulate every new best in this engine before it counts, and report its distance "
+                        "(default: bullet whenever the search's --engine is not bullet)")
+    g.add_argument("--verify-dt", type=float, default=2.5e-4, metavar="S",
+                   help="step of that re-simulation (default 0.00025 s, Bullet's converged step)")
     _zenoh_args(p, "tcp/127.0.0.1:<free port>" if local else "tcp/127.0.0.1:7447")
 
 
@@ -156,6 +166,15 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
         overrides["scene"] = parse_scene(args.scene)
     if args.engine is not None:
         overrides["engine"] = args.engine
+    rungs = None
+    if args.rungs is not None:
+        from coordinator.fidelity import Rungs
+
+        rungs = Rungs.parse(args.rungs, args.eta)
+        if args.duration is not None and args.duration != rungs.durations_s[-1]:
+            raise ConfigError("--duration and --rungs disagree on the trial length", received=args.duration,
+                              expected=f"--rungs ending at the full length ({rungs.durations_s[-1]:g} s) alone")
+        args.duration = rungs.durations_s[-1]
     config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
                               controller=args.controller, duration_s=args.duration, trial_overrides=overrides)
     lease = args.lease
@@ -164,10 +183,13 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
         lease = max(60.0, 20.0 * float(duration))
     from coordinator.verifier import VerifyPolicy
 
-    verify = VerifyPolicy(enabled=not args.no_verify, tolerance=args.verify_tolerance, perturb=args.verify_perturb)
+    screen_engine = config.trial_config.get("engine", "bullet")
+    judge = args.verify_engine or ("bullet" if screen_engine != "bullet" else None)
+    verify = VerifyPolicy(enabled=not args.no_verify, tolerance=args.verify_tolerance, perturb=args.verify_perturb,
+                          engine=judge if judge != screen_engine else None, dt_s=args.verify_dt)
     settings = SearchSettings(trials=2000 if args.trials is None else args.trials, sampler=args.sampler,
-                              sigma=args.sigma, top_k=args.top_k,
-                              startup_trials=args.startup_trials, lease_s=lease, verify=verify)
+                              sigma=args.sigma, top_k=args.top_k, startup_trials=args.startup_trials, lease_s=lease,
+                              verify=verify, rungs=rungs)
     out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
     core, storage = new_run(config, settings, out, overwrite=args.overwrite)
     return core, storage, out
@@ -189,7 +211,7 @@ def _progress(core: Any, final: bool = False) -> str:
         st = core.status()
         best = core.study.storage.best(1)
     done = st["trials_complete"] + st["trials_failed"]
-    budget = st["trials_budget"]
+    budget = st.get("trials_planned", st["trials_budget"])
     width = 24
     fill = int(width * done / max(budget, 1))
     best_s = f"{best[0].distance_m:.3f} m" if best else "-"
@@ -208,10 +230,15 @@ def _describe_best(core: Any, path: Path) -> str:
     units = storage.run_meta().param_units
     params = ", ".join(f"{n}={v:.4g}{(' ' + u) if u and u != '1' else ''}"
                        for n, v, u in zip(names, b.params, units, strict=True))
-    check = {"holds": f"holds at a finer step ({b.verify_distance_m:.4g} m)",
-             "pending": "verification pending", "": "not verified"}.get(b.verification, b.verification)
-    return (f"best trial {b.trial_id} ({b.phase}): objective {b.objective:.4g}, distance {b.distance_m:.4g} m, "
-            f"speed {b.speed_cm_s:.4g} cm/s, work {b.work_j:.4g} J, COT {b.cot:.4g}; {check}\n"
+    judge = core.verifier.policy.engine if core.verifier is not None else None
+    holds = (f"verified in {judge}: {b.verify_distance_m:.4g} m, {100 * b.verify_distance_m / b.sim_time_s:.4g} "
+             f"cm/s (the distance that counts)" if judge else f"holds at a finer step ({b.verify_distance_m:.4g} m)")
+    check = {"holds": holds, "pending": "verification pending", "": "not verified"}.get(b.verification,
+                                                                                        b.verification)
+    engine = f" in {b.engine} at {b.dt_s * 1e3:g} ms" if b.engine else ""
+    return (f"best trial {b.trial_id} ({b.phase}, {b.sim_time_s:g} s{engine}): objective {b.objective:.4g}, "
+            f"distance {b.distance_m:.4g} m, speed {b.speed_cm_s:.4g} cm/s, work {b.work_j:.4g} J, "
+            f"COT {b.cot:.4g}; {check}\n"
             f"  params: {params}\nfile: {path}")
 
 

@@ -78,7 +78,8 @@ class CoordinatorCore:
 
     @property
     def done(self) -> bool:
-        return self.study.done
+        with self.lock:  # a multi-fidelity "done" reads several columns the transport threads write
+            return self.study.done
 
     # --- handlers (transport calls these) ---------------------------------------------------------
     def _error(self, what: str, exc: MessageError) -> bytes:
@@ -121,7 +122,8 @@ class CoordinatorCore:
             cols = self.study.storage.columns()
             assignments = tuple(
                 TrialAssignment(ls.trial_id, ls.lease_id, tuple(cols["params_unit"][ls.trial_id].tolist()),
-                                int(cols["seed"][ls.trial_id]), ls.deadline_s - self.clock())
+                                int(cols["seed"][ls.trial_id]), ls.deadline_s - self.clock(),
+                                _duration(cols["duration_s"][ls.trial_id]))
                 for ls in leases)
         retry = 0.0 if assignments else self.idle_retry_s
         return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False, verdicts))
@@ -216,7 +218,7 @@ class CoordinatorCore:
             return
         storage.set_verification(tid, Verification.PENDING)
         self.verifier.submit(tid, cols["params_unit"][tid].tolist(), int(cols["seed"][tid]),
-                             float(cols["distance_m"][tid]))
+                             float(cols["distance_m"][tid]), _duration(cols["duration_s"][tid]))
 
     def collect_verifications(self, wait_s: float = 0.0) -> int:
         """Store finished verdicts; a best that did not hold hands the check to the next best."""
@@ -299,7 +301,7 @@ class CoordinatorCore:
                 self._finish_times.popleft()
             window = min(_RATE_WINDOW_S, max(now - self.started_s, 1e-9))
             rate = len(self._finish_times) / window
-            remaining = self.study.budget - self.study.n_finished
+            remaining = max(0, self.study.planned - self.study.n_finished)
             counts = self.study.storage.counts()
             wall = time.time()
             return {
@@ -307,11 +309,12 @@ class CoordinatorCore:
                 "state": "done" if self.study.done else ("failed" if self.failure else "running"),
                 "failure": self.failure,
                 "trials_budget": self.study.budget,
+                "trials_planned": self.study.planned,
                 "trials_sampled": self.study.n_asked,
                 "trials_complete": counts["complete"],
                 "trials_failed": counts["failed"],
                 "trials_leased": self.scheduler.n_leased,
-                "trials_queued": self.scheduler.n_queued + max(0, self.study.budget - self.study.n_asked),
+                "trials_queued": self.scheduler.n_queued + max(0, self.study.planned - self.study.n_asked),
                 "trials_reissued": self.scheduler.reissued,
                 "rate_trials_s": rate,
                 "eta_s": (remaining / rate) if rate > 0 else None,
@@ -323,3 +326,8 @@ class CoordinatorCore:
                             for w in self.scheduler.workers.values()],
                 "updated_at_unix_s": wall,
             }
+
+
+def _duration(value: float) -> float | None:
+    """A row's requested duration for the wire: None (the run's own) when it has none."""
+    return float(value) if value == value else None

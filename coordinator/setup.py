@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from coordinator.core import CoordinatorCore
+from coordinator.fidelity import Rungs
 from coordinator.objectives import objective_fn
 from coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sampler_class, sampler_from_dict
 from coordinator.scheduler import Scheduler
@@ -39,6 +40,7 @@ class SearchSettings:
     startup_trials: int | None = None   # None: half the budget is Monte Carlo
     lease_s: float = 60.0
     verify: VerifyPolicy = field(default_factory=VerifyPolicy)
+    rungs: Rungs | None = None   # multi-fidelity screening (successive halving over durations)
 
     def __post_init__(self) -> None:
         check_range("trials", self.trials, 1)
@@ -58,8 +60,9 @@ def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
                    objective=config.objective, seed=config.seed, trials_budget=settings.trials,
                    sampler=sampler.describe(), software_version=software_version(),
                    created_at_unix_s=time.time(), config_hash=config.config_hash(),
-                   run=config.to_dict(), extra={"lease_s": settings.lease_s,
-                          "verify": settings.verify.to_dict()})
+                   run=config.to_dict(), extra={"lease_s": settings.lease_s, "verify": settings.verify.to_dict(),
+                                                "fidelity": None if settings.rungs is None else
+                                                settings.rungs.to_dict()})
 
 
 def build_core(storage: BaseStorage, clock=time.monotonic) -> CoordinatorCore:
@@ -68,7 +71,8 @@ def build_core(storage: BaseStorage, clock=time.monotonic) -> CoordinatorCore:
     config = RunConfig.from_dict(meta.run)
     space = config.space()
     sampler = sampler_from_dict(meta.sampler, len(space))
-    study = Study(storage, sampler, space, meta.trials_budget, objective_fn(meta.objective), meta.seed)
+    study = Study(storage, sampler, space, meta.trials_budget, objective_fn(meta.objective), meta.seed,
+                  Rungs.from_dict(meta.extra.get("fidelity")))
     scheduler = Scheduler(clock, float(meta.extra.get("lease_s", 60.0)))
     policy = VerifyPolicy.from_dict(meta.extra.get("verify"))
     verifier = Verifier(config, policy) if policy.enabled and Verifier.applies_to(config) else None

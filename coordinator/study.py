@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 
+import numpy as np
+
+from coordinator.fidelity import Rungs
 from coordinator.samplers.base import BaseSampler
 from protocol.messages import TrialResult
 from protocol.params import ParamSpace
 from storage.base import BaseStorage
+
+PROMOTED = "promoted"
 
 
 def trial_seed(run_seed: int, trial_id):
@@ -23,7 +29,10 @@ class Study:
     """
 
     def __init__(self, storage: BaseStorage, sampler: BaseSampler, space: ParamSpace, budget: int,
-                 objective: Callable[[TrialResult], float], seed: int) -> None:
+                 objective: Callable[[TrialResult], float], seed: int, rungs: Rungs | None = None) -> None:
+        """rungs: multi-fidelity screening; `budget` then counts new parameter sets (the first rung),
+        and promotions to longer rungs come on top."""
+        self.rungs = rungs
         self.storage = storage
         self.sampler = sampler
         self.space = space
@@ -41,20 +50,50 @@ class Study:
         return self._n_finished
 
     @property
+    def n_sampled(self) -> int:
+        """New parameter sets sampled so far (promotions re-run earlier ones)."""
+        if self.rungs is None:
+            return self.storage.n_trials()
+        return int(self.storage.count_rung(0))
+
+    @property
+    def planned(self) -> int:
+        """Evaluations the run expects: the budget, plus about budget / eta^k promotions to rung k."""
+        if self.rungs is None:
+            return self.budget
+        return sum(self.budget // self.rungs.eta**k for k in range(len(self.rungs.durations_s)))
+
+    @property
     def done(self) -> bool:
-        return self._n_finished >= self.budget
+        if self.rungs is None:
+            return self._n_finished >= self.budget
+        if self.n_sampled < self.budget or self._n_finished < self.storage.n_trials():
+            return False
+        return self.rungs.promotion(self.storage) is None
 
     def trial_seed(self, trial_id: int) -> int:
         return trial_seed(self.seed, trial_id)
 
     def ask(self) -> int | None:
-        """Sample and record the next trial; None once the budget is allotted."""
+        """Sample and record the next trial (first a promotion to a longer rung, if one is due);
+        None once the budget is allotted."""
         tid = self.storage.n_trials()
-        if tid >= self.budget:
+        if self.rungs is not None:
+            source = self.rungs.promotion(self.storage)
+            if source is not None:
+                row = self.storage.trial(source)
+                unit = np.asarray(row.params_unit)
+                self.storage.add_trial(tid, unit, self.space.from_unit(unit), PROMOTED, source,
+                                       self.trial_seed(tid), row.rung + 1, self.rungs.durations_s[row.rung + 1])
+                return tid
+            if self.n_sampled >= self.budget:
+                return None
+        elif tid >= self.budget:
             return None
         p = self.sampler.propose(tid, self.storage)
+        duration = math.nan if self.rungs is None else self.rungs.durations_s[0]
         self.storage.add_trial(tid, p.params_unit, self.space.from_unit(p.params_unit), p.phase, p.parent,
-                               self.trial_seed(tid))
+                               self.trial_seed(tid), 0, duration)
         return tid
 
     def tell(self, result: TrialResult) -> bool:

@@ -24,16 +24,24 @@ log = logging.getLogger("spinefarm.verifier")
 @dataclass(frozen=True)
 class VerifyPolicy:
     """refine: step divisor; tolerance: allowed relative change of the distance; perturb: also jitter
-    the start pose (0.01 cm) and raise friction by 10 %."""
+    the start pose (0.01 cm) and raise friction by 10 %.
+
+    engine: re-simulate in another engine (the judge, e.g. bullet behind a mujoco screen) at dt_s (its
+    converged step). Two engines are two models (contacts, friction) whose distances differ by more than
+    any step error, so then the judge's distance is what counts and is reported; the best only fails if
+    the judge's run fails (diverges)."""
 
     enabled: bool = True
     refine: int = 4
     tolerance: float = 0.05
     perturb: bool = False
+    engine: str | None = None
+    dt_s: float = 2.5e-4
 
     def __post_init__(self) -> None:
         check_range("verify refine", self.refine, 1, 64)
         check_range("verify tolerance", self.tolerance, 0.0, 10.0, low_inclusive=False)
+        check_range("verify dt_s", self.dt_s, 1e-6, 0.02)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -44,16 +52,25 @@ class VerifyPolicy:
 
 
 def _verify_job(morphology: Any, controller: str | None, trial_config: dict[str, Any], params_unit: list[float],
-                seed: int, distance_m: float, policy: dict[str, Any]) -> dict[str, Any]:
+                seed: int, distance_m: float, policy: dict[str, Any], duration_s: float | None = None
+                ) -> dict[str, Any]:
     """Runs in the verifier process."""
+    import dataclasses
+
     import numpy as np
 
     from worker.trial import TrialConfig
-    from worker.verify import VerifySettings, verify_trial
+    from worker.verify import VerifySettings, verify_in_engine, verify_trial
 
+    cfg = TrialConfig.from_dict(trial_config)
+    if duration_s is not None:
+        cfg = dataclasses.replace(cfg, duration_s=duration_s)
     settings = VerifySettings(refine=policy["refine"], tolerance=policy["tolerance"], perturb=policy["perturb"])
-    v = verify_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed, distance_m,
-                     settings, controller=controller)
+    if policy.get("engine") and policy["engine"] != cfg.engine:
+        v = verify_in_engine(morphology, np.asarray(params_unit), cfg, seed, distance_m, policy["engine"],
+                             policy["dt_s"], controller=controller)
+    else:
+        v = verify_trial(morphology, np.asarray(params_unit), cfg, seed, distance_m, settings, controller=controller)
     return v.to_dict()
 
 
@@ -74,7 +91,8 @@ class Verifier:
     def pending(self) -> list[int]:
         return list(self._futures)
 
-    def submit(self, trial_id: int, params_unit: list[float], seed: int, distance_m: float) -> None:
+    def submit(self, trial_id: int, params_unit: list[float], seed: int, distance_m: float,
+               duration_s: float | None = None) -> None:
         if trial_id in self._futures:
             return
         if self._pool is None:
@@ -82,7 +100,7 @@ class Verifier:
         morphology = self.config.morphology_spec or self.config.morphology
         self._futures[trial_id] = self._pool.submit(
             _verify_job, morphology, self.config.controller, self.config.trial_config, params_unit, seed,
-            distance_m, self.policy.to_dict())
+            distance_m, self.policy.to_dict(), duration_s)
 
     def collect(self, wait_s: float = 0.0) -> list[tuple[int, dict[str, Any]]]:
         """(trial id, verification dict) of every finished job; an error becomes a not-reproduced verdict."""

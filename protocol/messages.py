@@ -289,6 +289,7 @@ class TrialAssignment:
 
     lease_id identifies this issue of the trial; a result must quote it, so a late result for a
     re-issued trial is recognised and dropped. lease_s: time the coordinator waits for it.
+    duration_s: simulated seconds of this evaluation (a multi-fidelity rung); None: the run's duration.
     """
 
     trial_id: int
@@ -296,10 +297,14 @@ class TrialAssignment:
     params_unit: tuple[float, ...]
     seed: int
     lease_s: float
+    duration_s: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"trial_id": self.trial_id, "lease_id": self.lease_id, "params_unit": list(self.params_unit),
-                "seed": self.seed, "lease_s": self.lease_s}
+        d = {"trial_id": self.trial_id, "lease_id": self.lease_id, "params_unit": list(self.params_unit),
+             "seed": self.seed, "lease_s": self.lease_s}
+        if self.duration_s is not None:
+            d["duration_s"] = self.duration_s
+        return d
 
     @classmethod
     def from_dict(cls, data: Any) -> TrialAssignment:
@@ -308,9 +313,15 @@ class TrialAssignment:
         if not all(isinstance(p, int | float) and not isinstance(p, bool) for p in params):
             raise MessageError("trial assignment has non-numeric parameters", received=params[:8],
                                expected="a list of numbers in [0, 1]")
+        duration = None
+        if data.get("duration_s") is not None:
+            duration = _finite(_field(data, "duration_s", (int, float), what), "duration_s", what)
+            if duration <= 0:
+                raise MessageError("trial assignment has a non-positive duration", received=duration,
+                                   expected="duration_s > 0 s")
         return cls(_field(data, "trial_id", int, what), _field(data, "lease_id", int, what),
                    tuple(float(p) for p in params), _field(data, "seed", int, what),
-                   _finite(_field(data, "lease_s", (int, float), what), "lease_s", what))
+                   _finite(_field(data, "lease_s", (int, float), what), "lease_s", what), duration)
 
 
 @dataclass(frozen=True)

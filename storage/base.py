@@ -64,7 +64,7 @@ class BaseStorage:
         return len(self.columns()["trial_id"])
 
     def add_trial(self, trial_id: int, params_unit: np.ndarray, params: np.ndarray, phase: str,
-                  parent: int, seed: int) -> None:
+                  parent: int, seed: int, rung: int = 0, duration_s: float = math.nan) -> None:
         """Record a sampled trial (status waiting); `trial_id` must be the next id."""
         self._writable()
         n = self.n_trials()
@@ -72,7 +72,7 @@ class BaseStorage:
             raise StorageError("trial ids must be added densely", received=trial_id, expected=n)
         self._append({"trial_id": trial_id, "params_unit": params_unit, "params": params,
                       "phase": phase.encode(), "parent": parent, "seed": seed,
-                      "status": TrialStatus.WAITING.stored})
+                      "status": TrialStatus.WAITING.stored, "rung": rung, "duration_s": duration_s})
 
     def finish_trial(self, trial_id: int, result: TrialResult, objective: float,
                      finished_at_unix_s: float | None = None) -> bool:
@@ -134,26 +134,25 @@ class BaseStorage:
         return {s.value: int(np.count_nonzero(status == s.stored)) for s in STORED_STATUSES}
 
     def best_ids(self, k: int) -> list[int]:
-        """Ids of the k complete trials with the highest objective, best first (ties: lower id)."""
+        """Ids of the k complete trials with the highest objective, best first (ties: lower id). In a
+        multi-fidelity run a trial of a higher rung (a longer trial) ranks before any of a lower one."""
         cols = self.columns()
         obj = cols["objective"]
         # a result a finer re-simulation did not reproduce never counts as best
-        valid = (cols["status"] == TrialStatus.COMPLETE.stored) & \
+        valid = (cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(obj) & \
             (cols["verification"] != Verification.NOT_REPRODUCED.stored)
-        score = np.where(valid & np.isfinite(obj), obj, -np.inf)
-        k = min(k, int(np.count_nonzero(np.isfinite(score))))
-        if k <= 0:
+        ids = np.flatnonzero(valid)
+        if k <= 0 or ids.size == 0:
             return []
-        top = np.argpartition(-score, k - 1)[:k] if k < score.size else np.arange(score.size)
-        # Ties at the cut are broken by the lowest id, so proposals are reproducible.
-        cut = score[top].min()
-        top = np.union1d(top, np.flatnonzero(score == cut))
-        order = np.lexsort((top, -score[top]))
-        return [int(i) for i in top[order[:k]]]
+        order = np.lexsort((ids, -obj[ids], -cols["rung"][ids]))
+        return [int(i) for i in ids[order[:k]]]
 
     def best(self, k: int) -> list[TrialRecord]:
         cols = self.columns()
         return [TrialRecord.from_columns(cols, i) for i in self.best_ids(k)]
+
+    def count_rung(self, rung: int) -> int:
+        return int(np.count_nonzero(self.columns()["rung"] == rung))
 
     def waiting_ids(self) -> list[int]:
         return [int(i) for i in np.flatnonzero(self.columns()["status"] == TrialStatus.WAITING.stored)]

@@ -19,9 +19,9 @@ class InMemoryStorage(BaseStorage):
     def __init__(self) -> None:
         self._meta: RunMeta | None = None
         self._table: TrialTable | None = None
-        # Complete trials as (-objective, id), kept sorted as results arrive: best_ids is O(k),
-        # not a scan of the table per proposal.
-        self._ranking: list[tuple[float, int]] = []
+        # Complete trials as (-rung, -objective, id), kept sorted as results arrive: best_ids is O(k),
+        # not a scan of the table per proposal (a longer multi-fidelity rung ranks first).
+        self._ranking: list[tuple[int, float, int]] = []
 
     def create_run(self, meta: RunMeta) -> None:
         if self._meta is not None:
@@ -46,19 +46,21 @@ class InMemoryStorage(BaseStorage):
     def _update(self, trial_id: int, values: dict[str, Any]) -> None:
         self.table.set_row(trial_id, values)
         if values.get("status") == TrialStatus.COMPLETE.stored and math.isfinite(values.get("objective", math.nan)):
-            bisect.insort(self._ranking, (-float(values["objective"]), trial_id))
+            rung = int(self.table.columns()["rung"][trial_id])
+            bisect.insort(self._ranking, (-rung, -float(values["objective"]), trial_id))
 
     def _rebuild_ranking(self) -> None:
         """Rank a table loaded in one go (resume, read-only open) with the scanning helper."""
-        objective = self.table.columns()["objective"]
-        self._ranking = [(-float(objective[i]), i) for i in BaseStorage.best_ids(self, self.table.n)]
+        cols = self.table.columns()
+        self._ranking = [(-int(cols["rung"][i]), -float(cols["objective"][i]), i)
+                         for i in BaseStorage.best_ids(self, self.table.n)]
 
     def best_ids(self, k: int) -> list[int]:
         if k <= 0:
             return []
         verification = self.table.columns()["verification"]
         out = []
-        for _, i in self._ranking:
+        for *_, i in self._ranking:
             if verification[i] != Verification.NOT_REPRODUCED.stored:
                 out.append(i)
                 if len(out) == k:

@@ -15,7 +15,7 @@ from protocol.messages import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, STORED_
 
 FILE_SCHEMA_VERSION = 4
 
-PHASES = ("monte_carlo", "gaussian", "cmaes", "tpe")
+PHASES = ("monte_carlo", "gaussian", "cmaes", "tpe", "promoted")
 STATUSES = tuple(s.value for s in STORED_STATUSES)
 
 
@@ -33,9 +33,12 @@ COLUMNS: tuple[Column, ...] = (
     Column("params_unit", "f8", "1", "parameter vector in the unit cube; columns named by param_names"),
     Column("params", "f8", "see param_units", "physical parameter values, low + u * (high - low)"),
     Column("phase", "S16", "", "sampler phase: monte_carlo (uniform), gaussian (hill climbing), "
-           "cmaes or tpe"),
+           "cmaes, tpe, or promoted (a multi-fidelity re-run of its parent at a longer rung)"),
     Column("parent", "i8", "", "trial id of the centre a gaussian sample was drawn around; -1 for none"),
     Column("seed", "i8", "", "simulation seed of the trial"),
+    Column("rung", "i8", "", "fidelity rung of a multi-fidelity search (0: the screen); a promoted row re-runs its "
+           "parent's parameters at the next rung"),
+    Column("duration_s", "f8", "s", "simulated duration the trial was asked for (NaN: the run's)"),
     Column("status", "S16", "", "waiting (sampled, no result yet), complete or failed"),
     Column("reason", "S160", "", "why a trial failed (diverged: ..., error: ...); empty when complete"),
     Column("objective", "f8", "see attribute objective", "the score the search maximised"),
@@ -119,6 +122,8 @@ class TrialRecord:
     verify_reason: str = ""
     engine: str = ""
     dt_s: float = float("nan")
+    rung: int = 0
+    duration_s: float = float("nan")
     settle_s: float = float("nan")
     pareto_front: int = 0
 

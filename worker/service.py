@@ -9,6 +9,7 @@ retry, never exit. The only worker module that imports zenoh.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -97,7 +98,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
             raise RunMismatchError("run has no morphology spec", received=config.morphology,
                                    expected="a morphology spec, or the test objective sphere[:N]")
         delay_s = float(config.trial_config.get("duration_s") or 0.0)
-        return lambda a: sphere_result(space, a, delay_s)
+        return lambda a: sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s)
     from robot.morphology.model import Morphology
     from worker.setup import SetupCache
     from worker.trial import TrialConfig, run_trial
@@ -117,7 +118,9 @@ def build_evaluator(config: RunConfig) -> Evaluator:
     setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
 
     def evaluate(a: TrialAssignment) -> TrialResult:
-        return run_trial(morphology, np.asarray(a.params_unit, dtype=float), trial_config, a.seed,
+        # a multi-fidelity rung asks for its own duration; everything else is the run's
+        cfg = trial_config if a.duration_s is None else dataclasses.replace(trial_config, duration_s=a.duration_s)
+        return run_trial(morphology, np.asarray(a.params_unit, dtype=float), cfg, a.seed,
                          controller=config.controller, setup=setup)
 
     return evaluate

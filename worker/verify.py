@@ -92,3 +92,17 @@ def verify_trial(morphology: Morphology | str, params: np.ndarray, config: Trial
     runs = verification_configs(config, s, morph)
     results = {name: run_trial(morph, params, cfg, seed, controller=controller) for name, cfg in runs}
     return judge(distance_m, results, runs[0][1].dt_s, s)
+
+
+def verify_in_engine(morphology: Morphology | str, params: np.ndarray, config: TrialConfig, seed: int,
+                     distance_m: float, engine: str, dt_s: float, *, controller: str | None = None) -> Verification:
+    """Re-simulate a screened result in the judge engine at its converged step. The judge's distance is
+    the one that counts; the result fails only if the judge's run fails."""
+    morph = load_morphology(morphology)
+    judge_cfg = dataclasses.replace(config, engine=engine, engine_options={}, dt_s=dt_s, auto_dt=False)
+    r = run_trial(morph, params, judge_cfg, seed, controller=controller)
+    change = abs(r.distance_m - distance_m) / max(abs(distance_m), 1e-9) if r.ok else math.inf
+    return Verification(
+        holds=r.ok, verdict="holds" if r.ok else f"not reproduced: {engine} run {r.status}: {r.reason}",
+        distance_m=distance_m, fine_distance_m=r.distance_m, fine_dt_s=dt_s, fine_status=str(r.status),
+        perturbed_distance_m=None, relative_change=change, tolerance=math.inf)

@@ -1,0 +1,88 @@
+"""Multi-fidelity search: asynchronous successive halving over trial durations ("rungs").
+
+Every new parameter set is screened at the first rung's duration. Whenever a worker asks for work, a
+parameter set in the top 1/eta of the completed trials of its rung that has not been promoted yet is
+re-run at the next rung's duration (a new row: phase "promoted", parent = the row it re-runs) before
+anything new is sampled. The last rung is the full trial; only it competes for "best".
+
+Promotions are decided from storage alone (which rows exist at which rung, with which parents), so a
+restarted coordinator continues exactly where it stopped, and a lost lease re-issues the same row.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from itertools import pairwise
+from typing import Any
+
+import numpy as np
+
+from protocol.errors import ConfigError
+from protocol.messages import TrialStatus
+from storage.base import BaseStorage
+
+
+@dataclass(frozen=True)
+class Rungs:
+    """durations_s: increasing simulated durations, the last being the full trial; eta: keep 1/eta
+    of each rung for the next."""
+
+    durations_s: tuple[float, ...]
+    eta: int = 3
+
+    def __post_init__(self) -> None:
+        d = tuple(float(x) for x in self.durations_s)
+        object.__setattr__(self, "durations_s", d)
+        if not d or any(not np.isfinite(x) or x <= 0 for x in d) or any(b <= a for a, b in pairwise(d)):
+            raise ConfigError("rungs must be increasing positive durations", received=list(d),
+                              expected="e.g. --rungs 10,30 (seconds; the last is the full trial)")
+        if not isinstance(self.eta, int) or isinstance(self.eta, bool) or self.eta < 2:
+            raise ConfigError("eta out of range", received=self.eta, expected="an integer >= 2")
+
+    @property
+    def top(self) -> int:
+        return len(self.durations_s) - 1
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"durations_s": list(self.durations_s), "eta": self.eta}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any] | None) -> Rungs | None:
+        return None if not d else cls(tuple(d["durations_s"]), int(d["eta"]))
+
+    @classmethod
+    def parse(cls, text: str, eta: int = 3) -> Rungs:
+        try:
+            durations = tuple(float(x) for x in text.split(",") if x.strip())
+        except ValueError as exc:
+            raise ConfigError("rungs are not numbers", received=text,
+                              expected="comma-separated seconds, e.g. 10,30") from exc
+        return cls(durations, eta)
+
+    def promotion(self, storage: BaseStorage) -> int | None:
+        """The row to re-run at the next rung, or None: the best not-yet-promoted row among the top
+        1/eta of some rung's complete rows (higher rungs first)."""
+        cols = storage.columns()
+        n = len(cols["trial_id"])
+        if n == 0:
+            return None
+        rung, parent, obj = cols["rung"], cols["parent"], cols["objective"]
+        complete = cols["status"] == TrialStatus.COMPLETE.stored
+        promoted_from = set(parent[cols["phase"] == b"promoted"].tolist())
+        for r in range(self.top - 1, -1, -1):
+            done = np.flatnonzero(complete & (rung == r) & np.isfinite(obj))
+            keep = len(done) // self.eta
+            if keep == 0:
+                continue
+            order = done[np.lexsort((done, -obj[done]))]  # best first; ties: the lower id
+            for tid in order[:keep].tolist():
+                if tid not in promoted_from:
+                    return int(tid)
+        return None
+
+    def pending_promotions(self, storage: BaseStorage) -> bool:
+        return self.promotion(storage) is not None
+
+
+def describe_rungs(rungs: Rungs | None) -> dict[str, Any] | None:
+    return None if rungs is None else asdict(rungs)

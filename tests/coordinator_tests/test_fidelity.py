@@ -1,0 +1,103 @@
+"""Multi-fidelity search: successive halving over trial durations, end to end with real workers over
+Zenoh, resumed after a SIGKILL mid-rung, and the promotion rule on a known set of results."""
+
+from __future__ import annotations
+
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from coordinator.fidelity import Rungs
+from protocol.errors import ConfigError
+from protocol.messages import TrialResult, TrialStatus
+from storage.hdf5 import Hdf5Storage, read_run
+from storage.memory import InMemoryStorage
+from tests.coordinator_tests.helpers import free_endpoint
+from tests.coordinator_tests.procs import coordinator, stop, wait_status, worker
+
+
+def _result(tid: int, distance: float) -> TrialResult:
+    return TrialResult(TrialStatus.COMPLETE, "", distance, 0.0, distance, 1.0, 1.0, 1.0, 0.0, 1.0, 0,
+                       trial_id=tid)
+
+
+def _storage_with(objectives: list[float]) -> InMemoryStorage:
+    from tests.storage_tests.conftest import make_meta
+
+    st = InMemoryStorage()
+    st.create_run(make_meta(n_params=3))
+    for tid, obj in enumerate(objectives):
+        st.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 0, 0, 1.0)
+        st.finish_trial(tid, _result(tid, obj), obj)
+    return st
+
+
+def test_the_best_third_of_a_rung_is_promoted_best_first_and_once():
+    rungs = Rungs((1.0, 3.0), eta=3)
+    st = _storage_with([0.1, 0.9, 0.5, 0.7, 0.2, 0.8])  # top third of 6: ids 1 and 5
+    assert rungs.promotion(st) == 1
+    st.add_trial(6, np.full(3, 0.5), np.zeros(3), "promoted", 1, 0, 1, 3.0)
+    assert rungs.promotion(st) == 5
+    st.add_trial(7, np.full(3, 0.5), np.zeros(3), "promoted", 5, 0, 1, 3.0)
+    assert rungs.promotion(st) is None  # both promoted; the top rung is never promoted further
+    st.finish_trial(6, _result(6, 0.3), 0.3)
+    assert st.best_ids(2) == [6, 1]  # a full-length trial ranks before any screened one
+
+
+@pytest.mark.parametrize(("text", "eta"), [("30,10", 3), ("10,10", 3), ("0,10", 3), ("ten", 3), ("10,30", 1)])
+def test_bad_rungs_are_refused_with_what_was_expected(text, eta):
+    with pytest.raises(ConfigError):
+        Rungs.parse(text, eta)
+
+
+def _check_fidelity(out, budget: int, rungs: Rungs) -> None:
+    with Hdf5Storage.open_read(out) as s:
+        c = s.columns()
+        assert set(c["status"].tolist()) == {b"complete"}
+        rung = c["rung"]
+        assert int((rung == 0).sum()) == budget  # the budget counts parameter sets
+        promoted = c["phase"] == b"promoted"
+        parents = c["parent"][promoted]
+        assert len(set(parents.tolist())) == len(parents)  # each row promoted at most once
+        np.testing.assert_array_equal(rung[promoted], rung[parents] + 1)
+        np.testing.assert_array_equal(c["params_unit"][promoted], c["params_unit"][parents])
+        np.testing.assert_array_equal(c["duration_s"], np.asarray(rungs.durations_s)[rung])
+        for r in range(rungs.top):  # at the end, every row in the top 1/eta of its rung was promoted
+            at = np.flatnonzero(rung == r)
+            top = at[np.argsort(-c["objective"][at], kind="stable")][: len(at) // rungs.eta]
+            assert set(top.tolist()) <= set(parents.tolist())
+        assert s.best(1)[0].rung == rungs.top
+
+
+def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(tmp_path):
+    ep, out = free_endpoint(), tmp_path / "run.h5"
+    rungs = Rungs((0.01, 0.02, 0.04), 3)
+    coord = coordinator(ep, out, "sphere:3", "--trials", "27", "--rungs", "0.01,0.02,0.04", "--run-id", "mf")
+    workers = [worker(ep, "mf", f"w{i}", batch=2) for i in range(2)]
+    try:
+        assert coord.wait(90) == 0
+        _check_fidelity(out, 27, rungs)
+    finally:
+        stop(coord, *workers)
+
+
+def test_a_multi_fidelity_search_killed_mid_rung_resumes_to_its_exact_budget(tmp_path):
+    ep, out = free_endpoint(), tmp_path / "run.h5"
+    rungs = Rungs((0.05, 0.1), 3)
+    coord = coordinator(ep, out, "sphere:3", "--trials", "60", "--rungs", "0.05,0.1", "--run-id", "mfk")
+    workers = [worker(ep, "mfk", f"w{i}", batch=1) for i in range(2)]
+    resumed = None
+    try:
+        wait_status(out, lambda st: st["trials_complete"] >= 20, "20 evaluations flushed", timeout_s=90)
+        coord.send_signal(signal.SIGKILL)
+        coord.wait(10)
+        _, before = read_run(out)
+        assert (before["rung"] == 1).any() and (before["rung"] == 0).sum() < 60  # killed mid-search
+        time.sleep(0.2)
+        resumed = coordinator(ep, out, "--resume", str(out))
+        assert resumed.wait(120) == 0
+        _check_fidelity(out, 60, rungs)
+    finally:
+        stop(coord, *workers, *([resumed] if resumed else []))
