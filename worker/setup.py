@@ -88,7 +88,7 @@ class TrialSetup:
 class SetupCache:
     """TrialSetups by (morphology, trial config hash, controller); keeps the most recent `size`."""
 
-    def __init__(self, size: int = 2) -> None:
+    def __init__(self, size: int = 4) -> None:
         self.size = size
         self._items: OrderedDict[Any, TrialSetup] = OrderedDict()
 
