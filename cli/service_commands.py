@@ -74,6 +74,9 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
                         "tpe (Optuna TPE) or random; stored with the run")
     p.add_argument("--controller", help="controller parameter space (default: the morphology's)")
     p.add_argument("--engine", default=None, help="physics engine of every trial: bullet (default) or mujoco")
+    p.add_argument("--settle", type=float, default=None, metavar="S",
+                   help="let the robot settle this long with the CPG at rest, and score locomotion from the "
+                        "settled pose (default 0: from the start, as NTRT)")
     p.add_argument("--scene", default=None,
                    help="flat (default), slope, rough or obstacles with optional ,field=value pairs, e.g. "
                         "'rough,rough_amplitude_cm=3'; stored with the run")
@@ -166,6 +169,8 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
         overrides["scene"] = parse_scene(args.scene)
     if args.engine is not None:
         overrides["engine"] = args.engine
+    if args.settle is not None:
+        overrides["settle_s"] = args.settle
     rungs = None
     if args.rungs is not None:
         from coordinator.fidelity import Rungs
