@@ -7,16 +7,23 @@ from pathlib import Path
 
 from api.errors import NotFound
 from protocol.errors import StorageError
-from storage.hdf5 import read_meta
+from storage.probe import probe
+
+PROBE_TIMEOUT_S = 5.0
 
 log = logging.getLogger("spinefarm.api")
 
 
 class RunRegistry:
+    """Each file is read once in a child process with a deadline (storage.probe) when first seen or
+    replaced: a damaged file is left out (and logged), never read in the server, so it cannot hang
+    requests for the healthy runs."""
+
     def __init__(self, files: list[Path], runs_dir: Path | None) -> None:
         self.files = [Path(f) for f in files]
         self.runs_dir = Path(runs_dir) if runs_dir is not None else None
-        self._ids: dict[Path, str] = {}   # path -> run id (files never change their run id)
+        self._ids: dict[Path, tuple[tuple[int, int], str]] = {}   # path -> (file identity, run id)
+        self._bad: dict[Path, tuple[int, int, int, int]] = {}     # path -> (identity, size, mtime) it failed with
 
     def paths(self) -> list[Path]:
         found = list(self.files)
@@ -27,13 +34,22 @@ class RunRegistry:
     def runs(self) -> dict[str, Path]:
         out: dict[str, Path] = {}
         for p in self.paths():
-            if p not in self._ids:
+            try:
+                st = p.stat()
+            except OSError:
+                continue
+            ident = (st.st_dev, st.st_ino)  # resume replaces the file: a new inode is probed again
+            if self._bad.get(p) == (*ident, st.st_size, st.st_mtime_ns):
+                continue
+            if p not in self._ids or self._ids[p][0] != ident:
                 try:
-                    self._ids[p] = read_meta(p).run_id
+                    self._ids[p] = (ident, probe(p, PROBE_TIMEOUT_S))
+                    self._bad.pop(p, None)
                 except StorageError as exc:
-                    log.info("skipping %s: %s", p, exc)
+                    log.warning("leaving out %s: %s", p, exc)
+                    self._bad[p] = (*ident, st.st_size, st.st_mtime_ns)
                     continue
-            out.setdefault(self._ids[p], p)
+            out.setdefault(self._ids[p][1], p)
         return out
 
     def path_of(self, run_id: str) -> Path:

@@ -127,7 +127,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--batch", type=int, default=None,
                    help="trials pulled per request (default auto: about 0.5 s of work, 1 for physics)")
     p.add_argument("--worker-id", help="worker id (default <host>-<pid>-<random>)")
-    p.add_argument("--exit-when-done", action="store_true", help="exit once the run's budget is met")
+    p.add_argument("--exit-when-done", action="store_true",
+                   help="exit once the run's budget is met, or its coordinator has been silent for "
+                        "--coordinator-timeout seconds (it ended while this worker was frozen or cut off)")
+    p.add_argument("--coordinator-timeout", type=float, default=30.0, metavar="S",
+                   help="seconds of silence after which --exit-when-done gives a run up (default 30)")
     _zenoh_args(p, None)
     p.set_defaults(func=cmd_worker)
 
@@ -281,7 +285,11 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
                 with socket.socket() as s:
                     s.bind((args.api_host, port))
             except OSError:
-                port = free_port(args.api_host)
+                try:
+                    port = free_port(args.api_host)
+                except OSError as exc:
+                    raise ConfigError(f"cannot serve the API on {args.api_host}: {exc.strerror or exc}",
+                                      received=args.api_host, expected="a local address (or --api-port -1)") from exc
             api = _start_api(path, args.api_host, port)
             print(f"API on http://{args.api_host}:{port}/runs/{core.run_id} (docs at /docs)", file=sys.stderr)
         workers = LocalWorkers(worker_command(endpoint, core.run_id, args.batch, args.zenoh_config), n_workers)
@@ -352,7 +360,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
         args.connect = ["tcp/127.0.0.1:7447"]
     service = WorkerService(connect=args.connect or (), run_id=args.run_id, worker_id=args.worker_id,
                             batch=args.batch, listen=args.listen or (), zenoh_config_file=args.zenoh_config,
-                            exit_when_done=args.exit_when_done)
+                            exit_when_done=args.exit_when_done, coordinator_timeout_s=args.coordinator_timeout)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: service.stop.set())
     return service.run()
@@ -363,7 +371,9 @@ def cmd_api(args: argparse.Namespace) -> int:
 
     from api.app import create_app
 
-    uvicorn.run(create_app(args.files, args.runs_dir), host=args.host, port=args.port, log_level="info")
+    # A bounded graceful shutdown: SIGTERM stops the server even while a request is still running.
+    uvicorn.run(create_app(args.files, args.runs_dir), host=args.host, port=args.port, log_level="info",
+                timeout_graceful_shutdown=5)
     return 0
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
+import os
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -74,6 +75,21 @@ def _verify_job(morphology: Any, controller: str | None, trial_config: dict[str,
     return v.to_dict()
 
 
+def _exit_with_parent(parent_pid: int) -> None:
+    """Verifier-process initializer: leave as soon as the coordinator is gone, however it ended
+    (SIGKILL included): a reparented process sees another parent id."""
+    import os
+    import threading
+    import time
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(0.5)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
 class Verifier:
     """One background process re-simulating new bests; `collect` hands back finished verdicts."""
 
@@ -96,7 +112,8 @@ class Verifier:
         if trial_id in self._futures:
             return
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_exit_with_parent, initargs=(os.getpid(),))
         morphology = self.config.morphology_spec or self.config.morphology
         self._futures[trial_id] = self._pool.submit(
             _verify_job, morphology, self.config.controller, self.config.trial_config, params_unit, seed,
@@ -124,5 +141,8 @@ class Verifier:
 
     def close(self) -> None:
         if self._pool is not None:
+            # A re-simulation still running is stopped, not waited for (exit would join it).
+            for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
+                proc.terminate()
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None

@@ -27,6 +27,7 @@ import numpy as np
 from protocol.errors import StorageError
 from protocol.messages import SCHEMA_VERSION
 from storage.memory import InMemoryStorage
+from storage.probe import check_eof, probe
 from storage.runlock import RunLock
 from storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
 from storage.table import EMPTY_STATUS, TrialTable, empty_value
@@ -105,17 +106,22 @@ def read_run(path: str | Path) -> tuple[RunMeta, dict[str, np.ndarray]]:
     path = Path(path)
     if not path.is_file():
         raise StorageError("run file does not exist", received=str(path), expected="an existing .h5 file")
+    check_eof(path)  # a truncated file would hang an SWMR reader
     try:
         f = h5py.File(path, "r", libver="latest", swmr=True)
     except OSError as exc:
         raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
     with f:
-        meta = _read_meta(f, path)
-        if "trials" not in f:
-            raise StorageError(f"{path} has no /trials group", expected="a spinefarm run file")
-        g = f["trials"]
-        n = min(g[c.name].shape[0] for c in COLUMNS)
-        cols = {c.name: g[c.name][:n] for c in COLUMNS}
+        try:
+            meta = _read_meta(f, path)
+            if "trials" not in f:
+                raise StorageError(f"{path} has no /trials group", expected="a spinefarm run file")
+            g = f["trials"]
+            n = min(g[c.name].shape[0] for c in COLUMNS)
+            cols = {c.name: g[c.name][:n] for c in COLUMNS}
+        except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:  # damaged attributes or data
+            raise StorageError(f"cannot read run file {path}: {str(exc).splitlines()[0][:200]}",
+                               expected="an undamaged spinefarm run file") from exc
     # A row the writer extended but had not filled yet has an empty status: cut the table there.
     empty = np.flatnonzero(cols["status"] == EMPTY_STATUS)
     if empty.size:
@@ -126,12 +132,17 @@ def read_run(path: str | Path) -> tuple[RunMeta, dict[str, np.ndarray]]:
 def read_meta(path: str | Path) -> RunMeta:
     """Only the run metadata (cheap: attributes, no table)."""
     path = Path(path)
+    check_eof(path)
     try:
         f = h5py.File(path, "r", libver="latest", swmr=True)
     except (OSError, FileNotFoundError) as exc:
         raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
     with f:
-        return _read_meta(f, path)
+        try:
+            return _read_meta(f, path)
+        except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:
+            raise StorageError(f"cannot read run file {path}: {str(exc).splitlines()[0][:200]}",
+                               expected="an undamaged spinefarm run file") from exc
 
 
 def write_run(path: str | Path, meta: RunMeta, cols: dict[str, np.ndarray]) -> None:
@@ -201,6 +212,7 @@ class Hdf5Storage(InMemoryStorage):
         lock = RunLock(path).acquire()
         try:
             _refuse_read_only(path)
+            probe(path)  # a damaged file gives a clear error within seconds, never a hang
             meta, cols = read_run(path)
             validate_rows(path, meta, cols, seed_of)
             if trials_budget is not None:
@@ -235,7 +247,9 @@ class Hdf5Storage(InMemoryStorage):
 
     @classmethod
     def open_read(cls, path: str | Path) -> Hdf5Storage:
-        """A read-only in-memory snapshot of the file as it is now."""
+        """A read-only in-memory snapshot of the file as it is now (probed first: never hangs)."""
+        if Path(path).is_file():
+            probe(path)
         meta, cols = read_run(path)
         table = TrialTable(meta.n_params, capacity=max(1, len(cols["trial_id"])))
         table.load(cols)

@@ -11,6 +11,7 @@ import numpy as np
 from protocol.errors import StorageError
 from storage.base import BaseStorage
 from storage.hdf5 import _read_meta
+from storage.probe import check_eof
 from storage.schema import COLUMNS, RunMeta, TrialRecord
 from storage.table import EMPTY_STATUS
 
@@ -47,6 +48,7 @@ class Hdf5Reader(BaseStorage):
         self.path = Path(path)
         if not self.path.is_file():
             raise StorageError("run file does not exist", received=str(path), expected="an existing .h5 file")
+        check_eof(self.path)  # a truncated file would hang the SWMR open below
         try:
             self._file = h5py.File(self.path, "r", libver="latest", swmr=True)
         except OSError as exc:

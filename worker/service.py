@@ -47,6 +47,9 @@ log = logging.getLogger("spinefarm.worker")
 Evaluator = Callable[[TrialAssignment], TrialResult]
 # A 2 s transport lease lets the coordinator notice a frozen (SIGSTOPped) worker in ~2 s, not 10 s.
 WORKER_LEASE_MS = 2000
+# With --exit-when-done: a run whose coordinator stays silent this long has ended (it may have ended
+# while this worker was frozen or cut off, and then nobody is left to say "done").
+COORDINATOR_TIMEOUT_S = 30.0
 
 
 def default_worker_id() -> str:
@@ -172,7 +175,8 @@ class WorkerService:
     def __init__(self, *, connect: Sequence[str], run_id: str | None = None, worker_id: str | None = None,
                  batch: int | None = None, listen: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
                  exit_when_done: bool = False, query_timeout_s: float = 5.0,
-                 submit_interval_s: float = 1.0, idle_exit_s: float = 2.0) -> None:
+                 submit_interval_s: float = 1.0, idle_exit_s: float = 2.0,
+                 coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S) -> None:
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
         self.run_id = keys.check_run_id(run_id) if run_id else None
         if batch is not None and not 1 <= batch <= 4096:
@@ -182,6 +186,11 @@ class WorkerService:
         self.query_timeout_s = query_timeout_s
         self.submit_interval_s = submit_interval_s
         self.idle_exit_s = idle_exit_s
+        if not coordinator_timeout_s > 0:
+            raise ConfigError("coordinator timeout out of range", received=coordinator_timeout_s,
+                              expected="seconds > 0")
+        self.coordinator_timeout_s = coordinator_timeout_s
+        self._last_heard = time.monotonic()   # the last reply from the current run's coordinator
         self._conf_args = (tuple(connect), tuple(listen), zenoh_config_file)
         zenoh_config(*self._conf_args)  # fail fast on a bad config file
         self._evaluators: dict[str, Evaluator] = {}
@@ -307,6 +316,7 @@ class WorkerService:
     def _loop(self, session: zenoh.Session) -> None:
         backoff = Backoff()
         idle_since: float | None = None
+        self._last_heard = time.monotonic()
         while not self.stop.is_set():
             run_id = self._discover(session)
             # Results of other runs go on their own; this run's ride along with the next work request.
@@ -327,8 +337,17 @@ class WorkerService:
             if not grants:
                 if refused and carried:
                     self._submit(session)  # let the result path decide what to do with them
+                if self.exit_when_done and time.monotonic() - self._last_heard >= self.coordinator_timeout_s:
+                    log.warning("the coordinator of run %s has been silent for %.0f s: its run is over here",
+                                run_id, time.monotonic() - self._last_heard)
+                    self._done_runs.add(run_id)
+                    if self.run_id is not None:
+                        return
+                    self._last_heard = time.monotonic()  # a roaming worker gives the next run its own time
+                    continue
                 self.stop.wait(backoff.next())
                 continue
+            self._last_heard = time.monotonic()
             grant = grants[0]
             self._apply(run_id, grant.verdicts)
             if grant.run_done:

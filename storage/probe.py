@@ -1,0 +1,91 @@
+"""Damaged run files fail fast instead of hanging their readers.
+
+HDF5 opened for SWMR reading (needed while a writer is live or after one was killed) skips its
+truncation check and retries unreadable metadata for a very long time while holding h5py's global
+lock, so one truncated or corrupted file would hang every reader in the process and keep it from
+handling SIGTERM. Two guards:
+
+- `check_eof`: the superblock (48 bytes) states the file's end; a shorter file is truncated. Cheap,
+  done before every open.
+- `probe`: read the whole file in a child process with a deadline; a child that hangs is killed and
+  the file reported as damaged. Done once per file (resume, the API's first sight of a file).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from protocol.errors import StorageError
+
+PROBE_TIMEOUT_S = 10.0
+_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+_PROBE_CODE = (
+    "import sys\n"
+    "from storage.hdf5 import read_run\n"
+    "meta, cols = read_run(sys.argv[1])\n"
+    "print(meta.run_id)\n"
+)
+
+
+def _stored_eof(head: bytes) -> int | None:
+    """End-of-file address from a version 2/3 superblock at the start of `head`, else None."""
+    for base in (0, 512, 1024, 2048):  # a user block moves the superblock to a power of two >= 512
+        if head[base:base + 8] != _SIGNATURE:
+            continue
+        version, size_of_offsets = head[base + 8], head[base + 9]
+        if version < 2 or size_of_offsets != 8:
+            return None  # older layouts: HDF5 checks these itself
+        # signature 8, version 1, offsets 1, lengths 1, flags 1, base address 8, extension 8, eof 8
+        (base_addr, eof) = struct.unpack_from("<Q8xQ", head, base + 12)
+        return base_addr + eof
+    return None
+
+
+def check_eof(path: str | Path, settle_s: float = 0.3) -> None:
+    """Raise StorageError if the file is shorter than its superblock says (or is not HDF5 at all).
+
+    A live SWMR writer may have announced space it has not written yet; the check is repeated for
+    `settle_s` before a short file counts as truncated.
+    """
+    path = Path(path)
+    end = time.monotonic() + settle_s
+    while True:
+        try:
+            with open(path, "rb") as fh:
+                head = fh.read(2048 + 48)
+                size = os.fstat(fh.fileno()).st_size
+        except OSError as exc:
+            raise StorageError(f"cannot read run file {path}: {exc.strerror}", expected="a readable file") from exc
+        if _SIGNATURE not in head[:2048 + 8]:
+            raise StorageError(f"cannot open run file {path}: not an HDF5 file",
+                               received=f"{size} bytes starting {head[:8]!r}", expected="a spinefarm run file")
+        eof = _stored_eof(head)
+        if eof is None or size >= eof:
+            return
+        if time.monotonic() >= end:
+            raise StorageError(f"run file {path} is truncated", received=f"{size} bytes",
+                               expected=f"{eof} bytes, as its header says")
+        time.sleep(0.05)
+
+
+def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S) -> str:
+    """Read the whole file in a child process within `timeout_s`; its run id, else StorageError."""
+    path = Path(path)
+    check_eof(path)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    try:
+        r = subprocess.run([sys.executable, "-c", _PROBE_CODE, str(path)], capture_output=True, text=True,
+                           timeout=timeout_s, env=env, stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        raise StorageError(f"reading run file {path} did not finish within {timeout_s:g} s",
+                           expected="an undamaged run file (this one is truncated or corrupted)") from None
+    if r.returncode != 0:
+        lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()]
+        last = lines[-1] if lines else f"exit code {r.returncode}"
+        raise StorageError(f"cannot read run file {path}: {last[:300]}", expected="an undamaged run file")
+    return r.stdout.strip()

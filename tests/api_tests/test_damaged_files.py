@@ -1,0 +1,77 @@
+"""A damaged run file among healthy ones: left out quickly, never hanging the server or its shutdown."""
+
+from __future__ import annotations
+
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import httpx
+import pytest
+
+from tests.coordinator_tests.helpers import sphere_core, wait_for
+from tests.coordinator_tests.procs import ROOT
+from tests.coordinator_tests.test_core import ask, res, submit
+
+
+def run_file(path, run_id):
+    core, storage, _ = sphere_core(trials=400, out=path, run_id=run_id)
+    for _ in range(5):
+        grant = ask(core, n=64)
+        submit(core, [(a.lease_id, res(a)) for a in grant.assignments])
+    storage.close()
+
+
+@pytest.fixture
+def runs_dir(tmp_path):
+    d = tmp_path / "runs"
+    d.mkdir()
+    run_file(d / "good.h5", "good")
+    run_file(tmp_path / "src.h5", "damaged")
+    shutil.copy(tmp_path / "src.h5", d / "header.h5")
+    with open(d / "header.h5", "r+b") as fh:  # garbage in the metadata: an SWMR reader retries for ever
+        fh.seek(200)
+        fh.write(b"\xff" * 512)
+    shutil.copy(tmp_path / "src.h5", d / "truncated.h5")
+    with open(d / "truncated.h5", "r+b") as fh:
+        fh.truncate((d / "truncated.h5").stat().st_size // 2)
+    (d / "junk.h5").write_bytes(b"\x00" * 100)
+    return d
+
+
+def test_damaged_files_are_left_out_and_sigterm_stops_the_server(runs_dir):
+    from cli.service_commands import free_port
+
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "cli.main", "api", "--runs-dir", str(runs_dir), "--port", str(port)],
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        url = f"http://127.0.0.1:{port}"
+        wait_for(lambda: _ok(url + "/health"), timeout_s=30, what="the API")
+        t0 = time.monotonic()
+        runs = httpx.get(url + "/runs", timeout=30).json()
+        assert [r["run_id"] for r in runs] == ["good"]
+        assert time.monotonic() - t0 < 15  # the hanging file costs one probe deadline (5 s), once
+        t0 = time.monotonic()
+        for _ in range(3):  # known-bad files are not probed again
+            assert httpx.get(url + "/runs/good", timeout=5).status_code == 200
+            assert httpx.get(url + "/runs", timeout=5).status_code == 200
+        assert time.monotonic() - t0 < 5
+        assert httpx.get(url + "/runs/damaged", timeout=5).status_code == 404
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(15) in (0, -signal.SIGTERM)  # uvicorn re-raises the signal once it has stopped
+        err = proc.stderr.read()
+        assert "truncated" in err and "did not finish within 5 s" in err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _ok(url):
+    try:
+        return httpx.get(url, timeout=1).status_code == 200
+    except httpx.HTTPError:
+        return False
