@@ -74,6 +74,9 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
                         "tpe (Optuna TPE) or random; stored with the run")
     p.add_argument("--controller", help="controller parameter space (default: the morphology's)")
     p.add_argument("--engine", default=None, help="physics engine of every trial: bullet (default) or mujoco")
+    p.add_argument("--dt", default=None, metavar="S|auto",
+                   help="physics step of every trial in seconds (default 0.001), or 'auto' for half the string "
+                        "network's stable-step estimate (needed e.g. by tetraspine-hardware); stored with the run")
     p.add_argument("--settle", type=float, default=None, metavar="S",
                    help="let the robot settle this long with the CPG at rest, and score locomotion from the "
                         "settled pose (default 0: from the start, as NTRT)")
@@ -175,6 +178,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
         overrides["engine"] = args.engine
     if args.settle is not None:
         overrides["settle_s"] = args.settle
+    overrides.update(_dt_overrides(args.dt))
     rungs = None
     if args.rungs is not None:
         from coordinator.fidelity import Rungs
@@ -186,6 +190,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
         args.duration = rungs.durations_s[-1]
     config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
                               controller=args.controller, duration_s=args.duration, trial_overrides=overrides)
+    _check_step(config)
     lease = args.lease
     if lease is None:
         duration = config.trial_config.get("duration_s") or 0.0
@@ -202,6 +207,31 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
     core, storage = new_run(config, settings, out, overwrite=args.overwrite)
     return core, storage, out
+
+
+def _check_step(config: Any) -> None:
+    """Refuse before the run starts a step every trial would refuse (e.g. tetraspine-hardware at 1 ms)."""
+    if config.is_test_objective:
+        return
+    try:
+        from robot.morphology.model import Morphology
+        from worker.episode import choose_step
+        from worker.trial import TrialConfig
+    except ImportError:  # a coordinator without the simulator: the workers will say it
+        return
+    choose_step(Morphology.from_dict(config.morphology_spec), TrialConfig.from_dict(config.trial_config))
+
+
+def _dt_overrides(dt: str | None) -> dict[str, Any]:
+    """--dt S or --dt auto as trial-config overrides (validated by TrialConfig with the rest)."""
+    if dt is None:
+        return {}
+    if dt == "auto":
+        return {"auto_dt": True}
+    try:
+        return {"dt_s": float(dt)}
+    except ValueError:
+        raise ConfigError("--dt is not a number", received=dt, expected="seconds (e.g. 0.0005) or 'auto'") from None
 
 
 def _start_api(path: Path, host: str, port: int) -> tuple[Any, threading.Thread, int]:

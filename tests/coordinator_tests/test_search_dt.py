@@ -1,0 +1,31 @@
+"""--dt on search and coordinator: the hardware Tetraspine (stiff strings) can be searched."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+
+from storage.hdf5 import read_run
+from tests.coordinator_tests.procs import ROOT
+
+
+def search(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cli.main", "search", *args], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+
+
+def test_tetraspine_hardware_is_searched_with_dt_auto_and_refused_without(tmp_path):
+    common = ("tetraspine-hardware", "--trials", "2", "--workers", "1", "--duration", "0.3", "--api-port", "-1",
+              "--no-verify", "--quiet")
+    refused = search(*common, "--out", str(tmp_path / "a.h5"))
+    assert refused.returncode == 2 and "dt_s is unstable" in refused.stderr and "--dt auto" in refused.stderr
+    ok = search(*common, "--dt", "auto", "--out", str(tmp_path / "b.h5"))
+    assert ok.returncode == 0, ok.stderr[-2000:]
+    meta, cols = read_run(tmp_path / "b.h5")
+    assert meta.trial_config["auto_dt"] is True
+    assert list(cols["status"]) == [b"complete", b"complete"]
+    assert np.all(cols["dt_s"] < 5.1e-4)  # the automatic step, below the stable limit, stored per trial
+    bad = search(*common, "--dt", "fast", "--out", str(tmp_path / "c.h5"))
+    assert bad.returncode == 2 and "--dt is not a number" in bad.stderr
