@@ -28,13 +28,16 @@ def _die_with_parent() -> None:  # runs in the child between fork and exec
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
-def worker_command(endpoint: str, run_id: str, batch: int | None, zenoh_config: str | None) -> list[str]:
+def worker_command(endpoint: str, run_id: str, batch: int | None, zenoh_config: str | None,
+                   credentials: str | None = None) -> list[str]:
     cmd = [sys.executable, "-P", "-m", "cli.main", "worker", "--connect", endpoint, "--run", run_id,
            "--exit-when-done"]
     if batch:
         cmd += ["--batch", str(batch)]
     if zenoh_config:
         cmd += ["--zenoh-config", zenoh_config]
+    if credentials:
+        cmd += ["--credentials", credentials]
     return cmd
 
 

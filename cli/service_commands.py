@@ -49,6 +49,10 @@ def _zenoh_args(p: argparse.ArgumentParser, listen_default: str | None) -> None:
                    help=f"endpoint to listen on, e.g. tcp/0.0.0.0:7447 (default {listen_default or 'none'})")
     g.add_argument("--connect", action="append", metavar="ENDPOINT",
                    help="router or coordinator to connect to, e.g. tcp/HOST:7447")
+    g.add_argument("--credentials", metavar="FILE",
+                   help="access control: user:password lines (Zenoh user/password authentication); this process "
+                        "authenticates with the first line and, when it listens, refuses every session whose "
+                        "credentials are not in the file")
     g.add_argument("--zenoh-config", metavar="FILE.json5",
                    help="Zenoh JSON5 config passed through (TLS, access control); endpoints above override it")
 
@@ -209,6 +213,18 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     return core, storage, out
 
 
+def _credentials(args: argparse.Namespace) -> Any:
+    if not args.credentials:
+        return None
+    from protocol.credentials import load_credentials
+
+    creds = load_credentials(args.credentials)
+    if creds.world_readable:
+        print(f"warning: credentials file {args.credentials} is readable by every user (chmod 600 it)",
+              file=sys.stderr)
+    return creds
+
+
 def _check_step(config: Any) -> None:
     """Refuse before the run starts a step every trial would refuse (e.g. tetraspine-hardware at 1 ms)."""
     if config.is_test_objective:
@@ -285,10 +301,12 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     from coordinator.service import CoordinatorService
 
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    credentials = _credentials(args)  # a bad credentials file fails before any run file is touched
     core, storage, path = _open_run(args)
     listen = args.listen if args.listen is not None else ([] if args.connect else default_listen)
     service = CoordinatorService(core, storage, listen=listen, connect=args.connect or (),
-                                 zenoh_config_file=args.zenoh_config, status_file_for=path)
+                                 zenoh_config_file=args.zenoh_config, status_file_for=path,
+                                 credentials=credentials)
     try:
         service.start()
     except BaseException:
@@ -322,7 +340,8 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
                                       received=args.api_host, expected="a local address (or --api-port -1)") from exc
             api = _start_api(path, args.api_host, port)
             print(f"API on http://{args.api_host}:{port}/runs/{core.run_id} (docs at /docs)", file=sys.stderr)
-        workers = LocalWorkers(worker_command(endpoint, core.run_id, args.batch, args.zenoh_config), n_workers)
+        workers = LocalWorkers(worker_command(endpoint, core.run_id, args.batch, args.zenoh_config,
+                                              args.credentials), n_workers)
         while not core.done and not stopped.wait(0.25):
             failure = core.failure or (None if core.done else workers.check())
             if failure:
@@ -390,7 +409,8 @@ def cmd_worker(args: argparse.Namespace) -> int:
         args.connect = ["tcp/127.0.0.1:7447"]
     service = WorkerService(connect=args.connect or (), run_id=args.run_id, worker_id=args.worker_id,
                             batch=args.batch, listen=args.listen or (), zenoh_config_file=args.zenoh_config,
-                            exit_when_done=args.exit_when_done, coordinator_timeout_s=args.coordinator_timeout)
+                            exit_when_done=args.exit_when_done, coordinator_timeout_s=args.coordinator_timeout,
+                            credentials_file=args.credentials)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: service.stop.set())
     return service.run()

@@ -18,6 +18,7 @@ import zenoh
 
 from coordinator.core import CoordinatorCore
 from protocol import keys
+from protocol.credentials import Credentials, is_loopback
 from protocol.errors import ConfigError
 from storage.base import BaseStorage
 from storage.status import write_status
@@ -27,10 +28,11 @@ DEFAULT_LISTEN = ("tcp/127.0.0.1:7447",)
 
 
 def zenoh_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str] = (),
-                 config_file: str | Path | None = None) -> zenoh.Config:
+                 config_file: str | Path | None = None, credentials: Credentials | None = None) -> zenoh.Config:
     """A Zenoh config: a JSON5 file passed through (TLS, access control), then our explicit settings.
 
     Multicast scouting is off: peers meet only through explicit endpoints, never a stray network.
+    credentials: authenticate with them, and (when listening) refuse every session without them.
     """
     try:
         conf = zenoh.Config.from_file(str(config_file)) if config_file else zenoh.Config()
@@ -42,6 +44,12 @@ def zenoh_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str] =
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    if credentials is not None:
+        for key, value in credentials.zenoh_settings(accept=bool(listen)).items():
+            conf.insert_json5(key, value)
+    elif any(not is_loopback(e) for e in listen):
+        log.warning("listening on %s without --credentials: anyone who reaches it can take and return work",
+                    ", ".join(e for e in listen if not is_loopback(e)))
     return conf
 
 
@@ -53,11 +61,11 @@ class CoordinatorService:
     def __init__(self, core: CoordinatorCore, storage: BaseStorage, *, listen: Sequence[str] = DEFAULT_LISTEN,
                  connect: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
                  status_file_for: str | Path | None = None, flush_interval_s: float = 1.0,
-                 tick_s: float = 0.1) -> None:
+                 tick_s: float = 0.1, credentials: Credentials | None = None) -> None:
         self.core = core
         self.storage = storage
         mode = "router" if listen and not connect else "peer"
-        self._conf = zenoh_config(mode, listen, connect, zenoh_config_file)
+        self._conf = zenoh_config(mode, listen, connect, zenoh_config_file, credentials)
         self._status_for = status_file_for
         self.flush_interval_s = flush_interval_s
         self.tick_s = tick_s

@@ -58,8 +58,9 @@ def default_worker_id() -> str:
 
 
 def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
-                 config_file: str | Path | None = None) -> zenoh.Config:
-    """Client of the coordinator/router at `connect`; multicast scouting off; short transport lease."""
+                 config_file: str | Path | None = None, credentials_file: str | Path | None = None) -> zenoh.Config:
+    """Client of the coordinator/router at `connect`; multicast scouting off; short transport lease;
+    with a credentials file (protocol.credentials) it authenticates, and as a listening peer checks others."""
     try:
         conf = zenoh.Config.from_file(str(config_file)) if config_file else zenoh.Config()
     except Exception as exc:
@@ -71,6 +72,11 @@ def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("transport/link/tx/lease", str(WORKER_LEASE_MS))
+    if credentials_file is not None:
+        from protocol.credentials import load_credentials
+
+        for key, value in load_credentials(credentials_file).zenoh_settings(accept=bool(listen)).items():
+            conf.insert_json5(key, value)
     return conf
 
 
@@ -176,7 +182,8 @@ class WorkerService:
                  batch: int | None = None, listen: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
                  exit_when_done: bool = False, query_timeout_s: float = 5.0,
                  submit_interval_s: float = 1.0, idle_exit_s: float = 2.0,
-                 coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S) -> None:
+                 coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S,
+                 credentials_file: str | Path | None = None) -> None:
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
         self.run_id = keys.check_run_id(run_id) if run_id else None
         if batch is not None and not 1 <= batch <= 4096:
@@ -191,7 +198,7 @@ class WorkerService:
                               expected="seconds > 0")
         self.coordinator_timeout_s = coordinator_timeout_s
         self._last_heard = time.monotonic()   # the last reply from the current run's coordinator
-        self._conf_args = (tuple(connect), tuple(listen), zenoh_config_file)
+        self._conf_args = (tuple(connect), tuple(listen), zenoh_config_file, credentials_file)
         zenoh_config(*self._conf_args)  # fail fast on a bad config file
         self._evaluators: dict[str, Evaluator] = {}
         self._pending: dict[str, dict[int, SubmittedResult]] = {}   # run id -> trial id -> result
