@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from cli import checks
 from cli.sim_commands import add_engine_argument
 from protocol.errors import ConfigError
 
@@ -25,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, default=None, help="simulated seconds (default: NTRT's trial length)")
     p.add_argument("--suffix", default="default", help="parameter set name (NTRT's argv[1]; default 'default')")
     p.add_argument("--seeds", type=int, default=0,
-                   help="also run N replays with the start pose jittered by 1e-6 cm (spec 0a.5) and report "
+                   help="also run N replays with the start pose jittered by 1e-6 cm and report "
                         "their spread")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     add_engine_argument(p)
@@ -168,6 +169,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     from worker.render import frames_from_record, initial_frame, render
     from worker.trial import TrialConfig, simulate
 
+    checks.output_path("--out", args.out, (".png",))
+    if args.record is not None and (args.duration is not None or args.params is not None):
+        checks.output_path("--record", args.record, (".npz",))
     morph = load_morphology(args.morphology)
     if args.frames is not None and not 1 <= args.frames <= 24:
         raise ConfigError("--frames out of range", received=args.frames, expected="1 to 24 keyframes")

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from cli import checks
 from cli.local_workers import LocalWorkers, worker_command
 from protocol.errors import ConfigError
 
@@ -250,6 +251,15 @@ def _dt_overrides(dt: str | None) -> dict[str, Any]:
         raise ConfigError("--dt is not a number", received=dt, expected="seconds (e.g. 0.0005) or 'auto'") from None
 
 
+def _check_run_args(args: argparse.Namespace) -> None:
+    """Everything typed that can be checked before a run file is created."""
+    checks.endpoints("--listen", args.listen)
+    checks.endpoints("--connect", args.connect)
+    checks.port("--api-port", args.api_port, allow_off=True)
+    if args.out:
+        checks.output_path("--out", args.out, (".h5", ".hdf5"))
+
+
 def _start_api(path: Path, host: str, port: int) -> tuple[Any, threading.Thread, int]:
     import uvicorn
 
@@ -301,6 +311,7 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     from coordinator.service import CoordinatorService
 
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    _check_run_args(args)
     credentials = _credentials(args)  # a bad credentials file fails before any run file is touched
     core, storage, path = _open_run(args)
     listen = args.listen if args.listen is not None else ([] if args.connect else default_listen)
@@ -322,6 +333,9 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     stopped = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):  # Ctrl-C or a service manager: stop cleanly, store all
         signal.signal(sig, lambda *_: stopped.set())
+    if n_workers == 0:
+        print(f"no local workers: attach some with `spinefarm worker --connect {endpoint} --run {core.run_id}`",
+              file=sys.stderr)
     tty = sys.stderr.isatty()
     last_line = 0.0
     code = 0
@@ -329,17 +343,18 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     try:  # from here on every exit (a startup error too) stops the workers and releases the file
         if args.api_port is None or args.api_port >= 0:
             port = args.api_port if args.api_port is not None else 8000
+            taken = ""
             try:
                 with socket.socket() as s:
                     s.bind((args.api_host, port))
             except OSError:
                 try:
-                    port = free_port(args.api_host)
+                    taken, port = f" (port {port} is taken)", free_port(args.api_host)
                 except OSError as exc:
                     raise ConfigError(f"cannot serve the API on {args.api_host}: {exc.strerror or exc}",
                                       received=args.api_host, expected="a local address (or --api-port -1)") from exc
             api = _start_api(path, args.api_host, port)
-            print(f"API on http://{args.api_host}:{port}/runs/{core.run_id} (docs at /docs)", file=sys.stderr)
+            print(f"dashboard on http://{args.api_host}:{port}/{taken}; API docs at /docs", file=sys.stderr)
         workers = LocalWorkers(worker_command(endpoint, core.run_id, args.batch, args.zenoh_config,
                                               args.credentials), n_workers)
         while not core.done and not stopped.wait(0.25):
@@ -355,9 +370,15 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
         while core.done and not core.workers_released() and time.monotonic() < end:
             time.sleep(0.05)  # let remote workers hear "done" before the coordinator goes away
         if core.done and core.verifier is not None and core.verifier.pending:
-            print("\nre-simulating the best at a finer step before reporting it ...", file=sys.stderr)
-            if not core.finish_verifications(timeout_s=600.0):
-                print("verification still running; the best is reported unverified", file=sys.stderr)
+            print("\nre-simulating the best at a finer step before reporting it (Ctrl-C skips) ...",
+                  file=sys.stderr)
+            end = time.monotonic() + 600.0
+            while not stopped.is_set() and not core.finish_verifications(timeout_s=0.5) and time.monotonic() < end:
+                pass
+            if core.verifier.pending:
+                why = "stopped" if stopped.is_set() else "verification not finished"
+                print(f"{why}; the best is reported unverified (everything else is stored)", file=sys.stderr)
+                code = 130 if stopped.is_set() else code
     except KeyboardInterrupt:
         code = 130
     finally:
@@ -405,6 +426,8 @@ def cmd_worker(args: argparse.Namespace) -> int:
     from worker.service import WorkerService
 
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    checks.endpoints("--connect", args.connect)
+    checks.endpoints("--listen", args.listen)
     if not args.connect and not args.zenoh_config:
         args.connect = ["tcp/127.0.0.1:7447"]
     service = WorkerService(connect=args.connect or (), run_id=args.run_id, worker_id=args.worker_id,
@@ -420,9 +443,30 @@ def cmd_api(args: argparse.Namespace) -> int:
     import uvicorn
 
     from api.app import create_app
+    from protocol.errors import StorageError
+    from storage.hdf5 import read_meta
 
+    checks.port("--port", args.port)
+    if not args.files and args.runs_dir is None:
+        raise ConfigError("nothing to serve", expected="run files (RUN.h5 ...) and/or --runs-dir DIR")
+    served = []
+    for f in args.files:
+        try:
+            if not Path(f).is_file():
+                raise StorageError("no such file", expected="an existing run file")
+            read_meta(f)
+            served.append(f)
+        except StorageError as exc:
+            print(f"spinefarm api: skipping {f}: {exc}", file=sys.stderr)
+    if not served and args.runs_dir is None:
+        raise ConfigError("none of the given run files can be served", received=args.files,
+                          expected="spinefarm run files (.h5) written by `spinefarm search`")
+    if args.runs_dir is not None and not Path(args.runs_dir).is_dir():
+        raise ConfigError("--runs-dir is not a folder", received=args.runs_dir, expected="an existing folder")
+    print(f"dashboard on http://{args.host}:{args.port}/ ({len(served)} file(s)"
+          + (f", every *.h5 in {args.runs_dir}" if args.runs_dir else "") + ")", file=sys.stderr)
     # A bounded graceful shutdown: SIGTERM stops the server even while a request is still running.
-    uvicorn.run(create_app(args.files, args.runs_dir), host=args.host, port=args.port, log_level="info",
+    uvicorn.run(create_app(served, args.runs_dir), host=args.host, port=args.port, log_level="warning",
                 timeout_graceful_shutdown=5)
     return 0
 
@@ -433,6 +477,11 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     if args.csv is None and args.best is None and args.pareto is None:
         raise ConfigError("nothing to export", expected="--csv [OUT.csv], --best K and/or --pareto [OUT.csv]")
+    if args.csv not in (None, "-"):
+        checks.output_path("--csv", args.csv, (".csv",))
+    if args.pareto not in (None, "-"):
+        checks.output_path("--pareto", args.pareto, (".csv",))
+    checks.at_least("--best", args.best, 1, "K best trials")
     storage = Hdf5Storage.open_read(args.file)
     if args.csv is not None:
         if args.csv == "-":

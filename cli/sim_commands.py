@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from cli import checks
 from protocol.errors import ParameterError
 
 
@@ -95,6 +96,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
     from robot.morphology.registry import load_morphology
     from worker.trial import TrialConfig, random_unit_params, simulate
 
+    if args.record is not None:
+        checks.output_path("--record", args.record, (".npz",))
     morph = load_morphology(args.morphology)
     controller = args.controller
     if args.params is not None:
@@ -173,6 +176,8 @@ def _best_of_run(path: Path):
 def cmd_accuracy(args: argparse.Namespace) -> int:
     from worker.accuracy import format_table, plot, run_accuracy
 
+    checks.at_least("--seeds", args.seeds, 1, "random parameter sets")
+    checks.at_least("--jobs", args.jobs, 1, "worker processes")
     best, controller, base = None, args.controller, None
     if args.run is not None:
         best, meta = _best_of_run(args.run)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import signal
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -90,6 +91,17 @@ def _exit_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
+def _verifier_init(parent_pid: int) -> None:
+    """Initializer of the re-simulation process: deaf to Ctrl-C, silent, gone with its coordinator."""
+    # Ctrl-C reaches the whole process group: the coordinator decides, the re-simulation must not print
+    # (a traceback, or the engine's banner, would land in the user's progress line).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    os.dup2(devnull, 2)  # pybullet's banner goes to stderr; a failed job comes back through its future
+    _exit_with_parent(parent_pid)
+
+
 class Verifier:
     """One background process re-simulating new bests; `collect` hands back finished verdicts."""
 
@@ -113,7 +125,7 @@ class Verifier:
             return
         if self._pool is None:
             self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=_exit_with_parent, initargs=(os.getpid(),))
+                                             initializer=_verifier_init, initargs=(os.getpid(),))
         morphology = self.config.morphology_spec or self.config.morphology
         self._futures[trial_id] = self._pool.submit(
             _verify_job, morphology, self.config.controller, self.config.trial_config, params_unit, seed,

@@ -50,6 +50,8 @@ WORKER_LEASE_MS = 2000
 # With --exit-when-done: a run whose coordinator stays silent this long has ended (it may have ended
 # while this worker was frozen or cut off, and then nobody is left to say "done").
 COORDINATOR_TIMEOUT_S = 30.0
+# A worker still without its coordinator after this long says so (then keeps trying).
+UNREACHABLE_WARN_S = 3.0
 
 
 def default_worker_id() -> str:
@@ -299,11 +301,16 @@ class WorkerService:
     def _open(self) -> zenoh.Session | None:
         """A client session opens only once its router is reachable: retry with back-off until stopped."""
         backoff = Backoff(0.1, 2.0)
+        since, told = time.monotonic(), False
         while not self.stop.is_set():
             try:
                 return zenoh.open(zenoh_config(*self._conf_args))  # a config is used up by open
             except zenoh.ZError as exc:
                 log.info("coordinator not reachable yet (%s); retrying", exc)
+                if not told and time.monotonic() - since >= UNREACHABLE_WARN_S:
+                    where = ", ".join(self._conf_args[0]) or "the configured endpoints"
+                    log.warning("cannot reach a coordinator at %s; still trying (Ctrl-C to stop)", where)
+                    told = True
                 self.stop.wait(backoff.next())
         return None
 

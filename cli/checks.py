@@ -1,0 +1,72 @@
+"""Checks of what a user typed, done before any work starts: output paths, Zenoh endpoints, ports.
+
+Each raises ConfigError with one line naming what was received and what was expected, so a mistake
+ends with a clear message (and no run file or half a simulation left behind).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+from protocol.errors import ConfigError
+
+# Zenoh endpoint locators a user types: proto/host:port (IPv6 hosts in brackets); unix sockets take a path.
+_ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})(#.*)?$")
+_UNIX = re.compile(r"^unixsock-stream/\S+$")
+
+
+def output_path(flag: str, path: str | Path, suffixes: tuple[str, ...]) -> Path:
+    """`path` ends in one of `suffixes` and its folder exists (or can be made) and is writable."""
+    p = Path(path)
+    if p.suffix.lower() not in suffixes:
+        raise ConfigError(f"{flag} has the wrong extension", received=str(p),
+                          expected=f"a file name ending in {' or '.join(suffixes)}")
+    if p.is_dir():
+        raise ConfigError(f"{flag} is a folder", received=str(p), expected=f"a file name ending in {suffixes[0]}")
+    folder = p.parent if str(p.parent) else Path(".")
+    existing = folder
+    while not existing.exists():  # the nearest existing ancestor decides whether the folder can be made
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ConfigError(f"{flag} cannot be written: {existing} is a file, not a folder", received=str(p),
+                          expected="a path inside a folder")
+    if not os.access(existing, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise ConfigError(f"{flag} cannot be written: no write permission", received=str(p),
+                          expected="a path in a writable folder")
+    return p
+
+
+def endpoint(flag: str, value: str) -> str:
+    """A Zenoh endpoint such as tcp/127.0.0.1:7447 with a port in 1..65535."""
+    if _UNIX.match(value):
+        return value
+    m = _ENDPOINT.match(value)
+    if m is None:
+        raise ConfigError(f"{flag} is not a Zenoh endpoint", received=value,
+                          expected="PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447 (tcp, udp, tls, quic or ws)")
+    if not 1 <= int(m.group(3)) <= 65535:
+        raise ConfigError(f"{flag} port out of range", received=value, expected="a port from 1 to 65535")
+    return value
+
+
+def endpoints(flag: str, values: Iterable[str] | None) -> list[str] | None:
+    return None if values is None else [endpoint(flag, v) for v in values]
+
+
+def port(flag: str, value: int | None, *, allow_off: bool = False) -> int | None:
+    """A TCP port in 1..65535 (or -1 = off when allowed; None = the default)."""
+    if value is None or (allow_off and value == -1):
+        return value
+    if not 1 <= value <= 65535:
+        raise ConfigError(f"{flag} out of range", received=value,
+                          expected="a port from 1 to 65535" + (", or -1 for no API" if allow_off else ""))
+    return value
+
+
+def at_least(flag: str, value: int | None, low: int, what: str) -> int | None:
+    if value is not None and value < low:
+        raise ConfigError(f"{flag} out of range", received=value, expected=f"{what} (at least {low})")
+    return value

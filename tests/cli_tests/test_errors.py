@@ -1,0 +1,173 @@
+"""Every ordinary mistake ends in one clear line on stderr, no traceback, a non-zero exit, nothing left behind."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from tests.coordinator_tests.procs import ROOT
+
+
+def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cli.main", *args], cwd=ROOT, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def one_line_error(r: subprocess.CompletedProcess, *needles: str) -> None:
+    assert r.returncode != 0, r.stdout
+    assert "Traceback" not in r.stderr, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if "error:" in ln]
+    assert len(lines) == 1, r.stderr
+    for n in needles:
+        assert n in lines[0], r.stderr
+
+
+@pytest.fixture(scope="module")
+def sphere_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "sphere.h5"
+    r = run("search", "sphere:3", "--trials", "1500", "--workers", "1", "--out", str(out), "--api-port", "-1",
+            "--quiet")
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+@pytest.fixture
+def a_file(tmp_path):
+    f = tmp_path / "plain-file"
+    f.write_text("x")
+    return f
+
+
+@pytest.mark.parametrize("case", ["search-out", "search-out-ext", "trial-record", "trial-record-ext",
+                                  "render-out", "render-out-ext", "export-csv", "export-csv-ext"])
+def test_an_output_path_that_cannot_be_written_or_has_the_wrong_extension(case, a_file, tmp_path, sphere_run):
+    bad_dir = a_file / "sub"  # a path below a plain file can never be created
+    args = {
+        "search-out": ("search", "sphere:3", "--workers", "0", "--api-port", "-1", "--out", str(bad_dir / "r.h5")),
+        "search-out-ext": ("search", "sphere:3", "--workers", "0", "--api-port", "-1", "--out",
+                           str(tmp_path / "r.csv")),
+        "trial-record": ("trial", "tetraspine", "--duration", "0.1", "--record", str(bad_dir / "t.npz")),
+        "trial-record-ext": ("trial", "tetraspine", "--duration", "0.1", "--record", str(tmp_path / "t.json")),
+        "render-out": ("render", "tetraspine", "--out", str(bad_dir / "s.png")),
+        "render-out-ext": ("render", "tetraspine", "--out", str(tmp_path / "s.txt")),
+        "export-csv": ("export", str(sphere_run), "--csv", str(bad_dir / "x.csv")),
+        "export-csv-ext": ("export", str(sphere_run), "--csv", str(tmp_path / "x.h5")),
+    }[case]
+    r = run(*args)
+    one_line_error(r, "received")
+    assert ("wrong extension" in r.stderr) == case.endswith("-ext"), r.stderr
+    assert not list(tmp_path.glob("r.*")) and not list(tmp_path.glob("s.*")) and not list(tmp_path.glob("t.*"))
+
+
+def test_export_csv_into_a_pipe_closed_early_is_quiet(sphere_run):
+    p = subprocess.Popen([sys.executable, "-m", "cli.main", "export", str(sphere_run), "--csv"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stdout.readline().startswith("trial_id,")
+    p.stdout.close()  # as `| head -1` does
+    err = p.stderr.read()
+    assert p.wait(30) != 0
+    assert "Traceback" not in err and "BrokenPipe" not in err, err
+
+
+@pytest.mark.parametrize(("flag", "value", "command"), [
+    ("--listen", "tcp/127.0.0.1", "search"), ("--listen", "127.0.0.1:7447", "coordinator"),
+    ("--connect", "tcp/localhost:99999", "search"), ("--connect", "tcp:/host:7447", "worker"),
+])
+def test_a_malformed_endpoint_is_refused_before_a_run_file_exists(flag, value, command, tmp_path):
+    out = tmp_path / "r.h5"
+    args = ("worker", flag, value) if command == "worker" else (
+        command, "sphere:3", "--trials", "5", "--out", str(out), flag, value, "--api-port", "-1",
+        *(("--workers", "0") if command == "search" else ()))
+    r = run(*args, timeout=30)
+    one_line_error(r, flag, value)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("port", ["70000", "-5", "0"])
+def test_api_port_out_of_range_is_refused_at_once(port, tmp_path):
+    r = run("search", "sphere:3", "--workers", "0", "--api-port", port, "--out", str(tmp_path / "r.h5"),
+            timeout=20)
+    one_line_error(r, "--api-port", port)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_api_port_of_the_api_command_out_of_range(tmp_path):
+    one_line_error(run("api", "x.h5", "--port", "65536", timeout=20), "--port", "65536")
+
+
+def test_accuracy_with_zero_seeds():
+    one_line_error(run("accuracy", "tetraspine", "--quick", "--seeds", "0", timeout=30), "--seeds", "0")
+
+
+def test_search_without_workers_says_how_to_attach_them(tmp_path):
+    out = tmp_path / "r.h5"
+    p = subprocess.Popen([sys.executable, "-m", "cli.main", "search", "sphere:3", "--trials", "5", "--workers", "0",
+                          "--out", str(out), "--api-port", "-1", "--quiet"], cwd=ROOT, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        lines = [p.stderr.readline() for _ in range(3)]
+    finally:
+        p.send_signal(signal.SIGINT)
+        p.communicate(timeout=30)
+    hint = next(ln for ln in lines if "no local workers" in ln)
+    assert "spinefarm worker --connect tcp/127.0.0.1:" in hint and "--run " in hint
+
+
+def test_a_worker_that_cannot_reach_its_coordinator_says_so_within_seconds():
+    p = subprocess.Popen([sys.executable, "-m", "cli.main", "worker", "--connect", "tcp/127.0.0.1:9"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.monotonic()
+    try:
+        line = p.stderr.readline()
+    finally:
+        p.send_signal(signal.SIGINT)
+        p.communicate(timeout=30)
+    assert "cannot reach a coordinator at tcp/127.0.0.1:9" in line
+    assert time.monotonic() - t0 < 8.0
+
+
+def test_api_says_which_files_it_skips_and_why(sphere_run, tmp_path, a_file):
+    p = subprocess.Popen([sys.executable, "-m", "cli.main", "api", str(sphere_run), str(tmp_path / "gone.h5"),
+                          str(a_file), "--port", "18731"], cwd=ROOT, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    try:
+        lines = [p.stderr.readline() for _ in range(3)]
+    finally:
+        p.send_signal(signal.SIGINT)
+        p.communicate(timeout=30)
+    assert f"skipping {tmp_path / 'gone.h5'}: no such file" in lines[0]
+    assert f"skipping {a_file}: cannot open run file" in lines[1]
+    assert "dashboard on http://127.0.0.1:18731/ (1 file(s))" in lines[2]
+    one_line_error(run("api", str(a_file), timeout=20), "none of the given run files")
+
+
+@pytest.mark.integration
+def test_ctrl_c_while_the_best_is_re_simulated(tmp_path):
+    out = tmp_path / "r.h5"
+    p = subprocess.Popen([sys.executable, "-m", "cli.main", "search", "tetraspine", "--trials", "1", "--workers",
+                          "1", "--duration", "3", "--out", str(out), "--api-port", "-1"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    err = []
+    for line in p.stderr:
+        err.append(line)
+        if "re-simulating the best" in line:
+            break
+    time.sleep(1.0)
+    t0 = time.monotonic()
+    os.killpg(p.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole process group
+    stdout, rest = p.communicate(timeout=30)
+    stderr = "".join(err) + rest
+    assert time.monotonic() - t0 < 10.0
+    assert p.returncode == 130, stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
+    assert "stopped; the best is reported unverified" in stderr
+    assert "best trial 0" in stdout
+    from storage.hdf5 import read_run
+
+    _, cols = read_run(out)
+    assert cols["status"].tolist() == [b"complete"]
