@@ -18,10 +18,12 @@ run: $(STAMP)
 	$(VENV)/bin/spinefarm search tetraspine --trials 100 --workers 2 --duration 5 --out runs/tetraspine-demo.h5 --overwrite
 
 test: $(STAMP)
+	sh .ci/ensure-chromium
 	$(PY) -m ruff check .
 	$(PY) -m pytest -q -ra
 
 test-all: $(STAMP)
+	sh .ci/ensure-chromium
 	$(PY) -m pytest -q -ra -m ''
 
 bench: $(STAMP)

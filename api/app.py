@@ -9,14 +9,17 @@ from pathlib import Path
 from fastapi import FastAPI
 
 from api import errors
+from api.pictures import PictureCache
 from api.registry import RunRegistry
-from api.routers import files, runs, trials
+from api.routers import dashboard, files, runs, trials
 from api.schemas import ErrorResponse
 from protocol.errors import ConfigError
 
 
-def create_app(run_files: Sequence[str | Path] = (), runs_dir: str | Path | None = None) -> FastAPI:
-    """Serve the given run files and/or every *.h5 in `runs_dir`. Storage is only ever read."""
+def create_app(run_files: Sequence[str | Path] = (), runs_dir: str | Path | None = None,
+               picture_cache_dir: str | Path | None = None) -> FastAPI:
+    """Serve the given run files and/or every *.h5 in `runs_dir`. Storage is only ever read; gait
+    pictures are drawn on demand into `picture_cache_dir` (default: a folder in the temp dir)."""
     if not run_files and runs_dir is None:
         raise ConfigError("the API needs run files or a runs directory", expected="run_files or runs_dir")
 
@@ -24,15 +27,17 @@ def create_app(run_files: Sequence[str | Path] = (), runs_dir: str | Path | None
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         app.state.registry = RunRegistry([Path(f) for f in run_files],
                                          Path(runs_dir) if runs_dir is not None else None)
+        app.state.pictures = PictureCache(Path(picture_cache_dir) if picture_cache_dir is not None else None)
         yield
 
     responses = {404: {"model": ErrorResponse}, 409: {"model": ErrorResponse}, 422: {"model": ErrorResponse}}
     app = FastAPI(title="spinefarm", summary="Status and results of gait searches (read-only)",
-                  lifespan=lifespan, responses=responses)
+                  lifespan=lifespan, responses=responses, docs_url=None, redoc_url=None)
     errors.install(app)
     app.include_router(runs.router)
     app.include_router(trials.router)
     app.include_router(files.router)
+    dashboard.install(app)
 
     @app.get("/health", tags=["health"])
     def health() -> dict[str, str]:

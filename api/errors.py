@@ -14,6 +14,16 @@ class NotFound(SpinefarmError):
     code = "not_found"
 
 
+class SimulatorUnavailable(SpinefarmError):
+    """This server cannot re-simulate trials (an API-only install)."""
+
+    code = "simulator_unavailable"
+
+
+class RenderFailed(SpinefarmError):
+    code = "render_failed"
+
+
 def detail(code: str, message: str, **extra: object) -> dict[str, object]:
     return {"detail": {"code": code, "message": message, **extra}}
 
@@ -30,6 +40,14 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(NotFound)
     async def _not_found(_: Request, exc: NotFound) -> JSONResponse:
         return JSONResponse(status_code=404, content={"detail": exc.to_detail()})
+
+    @app.exception_handler(SimulatorUnavailable)
+    async def _unavailable(_: Request, exc: SimulatorUnavailable) -> JSONResponse:
+        return JSONResponse(status_code=503, content={"detail": exc.to_detail()})
+
+    @app.exception_handler(RenderFailed)
+    async def _render_failed(_: Request, exc: RenderFailed) -> JSONResponse:
+        return JSONResponse(status_code=500, content={"detail": exc.to_detail()})
 
     @app.exception_handler(StorageError)
     async def _storage(_: Request, exc: StorageError) -> JSONResponse:

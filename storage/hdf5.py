@@ -36,6 +36,9 @@ CHUNK_ROWS = 1024
 # A file handle whose writes failed: closing it makes HDF5 retry the failed writes (and crash at exit),
 # so it is kept here, never closed, and the process leaves with os._exit (see CoordinatorCore.write_failure).
 _ABANDONED: list[h5py.File] = []
+# Chunks are mostly fill values and repeated bytes early in a run: gzip (with byte shuffling, which
+# groups the bytes of floats) shrinks an 8-trial file from 2.5 MB to about 0.1 MB; readers need nothing extra.
+COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 _JSON_FIELDS = ("sampler", "extra", "run")
 _TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
 
@@ -94,7 +97,7 @@ def _create_datasets(f: h5py.File, n_params: int, n_rows: int) -> dict[str, h5py
             c.name, shape=(n_rows, n_params) if vec else (n_rows,), dtype=c.dtype,
             maxshape=(None, n_params) if vec else (None,),
             chunks=(CHUNK_ROWS, max(n_params, 1)) if vec else (CHUNK_ROWS,),
-            fillvalue=empty_value(c.name))
+            fillvalue=empty_value(c.name), **COMPRESSION)
         ds.attrs["unit"] = c.unit
         ds.attrs["description"] = c.description
         out[c.name] = ds

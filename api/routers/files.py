@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import io
 import os
 import tempfile
 from pathlib import Path
 from typing import Annotated
 
 from fastapi import APIRouter, Depends
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, Response
 from starlette.background import BackgroundTask
 
-from api.deps import run_path
+from api.deps import run_path, run_storage
+from storage.export import write_csv
 from storage.hdf5 import snapshot
+from storage.hdf5_reader import Hdf5Reader
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["files"])
 
@@ -28,3 +31,12 @@ def download(path: Annotated[Path, Depends(run_path)]) -> FileResponse:
         raise
     return FileResponse(tmp, media_type="application/x-hdf5", filename=path.name,
                         background=BackgroundTask(os.unlink, tmp))
+
+
+@router.get("/trials.csv", summary="Every trial as CSV (parameters in named columns)")
+def csv_file(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> Response:
+    buf = io.StringIO()
+    write_csv(storage, buf)
+    name = f"{storage.run_meta().run_id}.csv"
+    return Response(buf.getvalue(), media_type="text/csv",
+                    headers={"Content-Disposition": f'attachment; filename="{name}"'})

@@ -5,8 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter, Depends, Query
 
+from api.analysis import analysis_view, columns_view
 from api.deps import registry, run_path, run_storage
 from api.registry import RunRegistry
 from api.schemas import RunStatus
@@ -33,3 +34,25 @@ def list_runs(reg: Annotated[RunRegistry, Depends(registry)]) -> list[dict[str, 
 def get_run(storage: Annotated[Hdf5Reader, Depends(run_storage)],
             path: Annotated[Path, Depends(run_path)]) -> dict[str, Any]:
     return run_view(storage, path)
+
+
+@router.get("/{run_id}/columns", summary="Every trial as columns (row i = trial i), parameters by name")
+def get_columns(storage: Annotated[Hdf5Reader, Depends(run_storage)],
+                params: bool = Query(True, description="include the parameter columns")) -> dict[str, Any]:
+    return columns_view(storage, with_params=params)
+
+
+@router.get("/{run_id}/analysis", summary="Pareto front (distance vs COT), parameter importance, failures")
+def get_analysis(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> dict[str, Any]:
+    return analysis_view(storage)
+
+
+@router.get("/{run_id}/meta", summary="The run's configuration: morphology, controller, trial config, sampler")
+def get_meta(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> dict[str, Any]:
+    m = storage.run_meta()
+    return {"run_id": m.run_id, "morphology": m.morphology, "controller": m.controller, "objective": m.objective,
+            "seed": m.seed, "trials_budget": m.trials_budget, "sampler": m.sampler, "trial_config": m.trial_config,
+            "param_names": list(m.param_names), "param_units": list(m.param_units),
+            "param_lows": list(m.param_lows), "param_highs": list(m.param_highs),
+            "software_version": m.software_version, "created_at_unix_s": m.created_at_unix_s,
+            "physical": bool(m.morphology_spec)}

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Path, Query
+from fastapi import APIRouter, Depends, Path, Query, Request
+from fastapi.responses import FileResponse, JSONResponse
 
 from api.deps import run_storage
 from api.errors import NotFound
 from api.schemas import Trial
 from api.views import trial_view
 from storage.hdf5_reader import Hdf5Reader
+from storage.schema import TrialRecord
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["trials"])
 
@@ -30,7 +32,35 @@ def pareto(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> list[dict[st
 @router.get("/trials/{trial_id}", response_model=Trial, summary="One trial")
 def trial(storage: Annotated[Hdf5Reader, Depends(run_storage)],
           trial_id: Annotated[int, Path(ge=0, le=2**62, description="trial number")]) -> dict[str, Any]:
+    return trial_view(storage, _record(storage, trial_id))
+
+
+TrialId = Annotated[int, Path(ge=0, le=2**62, description="trial number")]
+
+
+def _record(storage: Hdf5Reader, trial_id: int) -> TrialRecord:
     n = storage.n_trials()
     if trial_id >= n:
         raise NotFound("no such trial", received=trial_id, expected=f"0 <= trial_id < {n}")
-    return trial_view(storage, storage.trial(trial_id))
+    return storage.trial(trial_id)
+
+
+@router.get("/trials/{trial_id}/params.json", summary="The trial's parameters as a `spinefarm trial --params` file")
+def params_file(storage: Annotated[Hdf5Reader, Depends(run_storage)], trial_id: TrialId) -> JSONResponse:
+    rec = _record(storage, trial_id)
+    meta = storage.run_meta()
+    body = {"controller": meta.controller, "params": dict(zip(meta.param_names, rec.params, strict=True))}
+    name = f"{meta.run_id}-trial-{trial_id}-params.json"
+    return JSONResponse(body, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+
+@router.get("/trials/{trial_id}/picture.png", response_class=FileResponse,
+            summary="The gait as a strip of keyframes, strings coloured by tension (rendered once, then cached)",
+            responses={503: {"description": "this server has no simulator to draw with"}})
+def picture(request: Request, storage: Annotated[Hdf5Reader, Depends(run_storage)],
+            trial_id: TrialId) -> FileResponse:
+    rec = _record(storage, trial_id)
+    meta = storage.run_meta()
+    storage.close()  # drawing can take a while: do not hold the run file open meanwhile
+    path = request.app.state.pictures.picture(meta, rec)
+    return FileResponse(path, media_type="image/png")

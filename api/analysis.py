@@ -1,0 +1,101 @@
+"""Whole-run views for the dashboard: every trial as columns, the Pareto front, parameter importance."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from typing import Any
+
+import numpy as np
+
+from storage.base import BaseStorage
+
+# Columns the dashboard plots and tabulates (parameters come separately, by name).
+TABLE_COLUMNS = ("trial_id", "status", "reason", "phase", "parent", "objective", "distance_m", "speed_cm_s",
+                 "work_j", "cot", "wall_time_s", "finished_at_unix_s", "verification", "verify_distance_m",
+                 "worker_id")
+
+
+def _jsonable(a: np.ndarray) -> list[Any]:
+    if a.dtype.kind == "S":
+        return [x.decode("utf-8", "replace") for x in a.tolist()]
+    if a.dtype.kind == "f":
+        return [x if math.isfinite(x) else None for x in a.tolist()]
+    return a.tolist()
+
+
+def columns_view(storage: BaseStorage, with_params: bool = True) -> dict[str, Any]:
+    """Every stored trial, one list per column (row i = trial i); NaN becomes null."""
+    meta = storage.run_meta()
+    cols = storage.columns()
+    out: dict[str, Any] = {
+        "run_id": meta.run_id, "n_trials": storage.n_trials(), "objective": meta.objective,
+        "param_names": list(meta.param_names), "param_units": list(meta.param_units),
+        "param_lows": list(meta.param_lows), "param_highs": list(meta.param_highs),
+        "columns": {name: _jsonable(np.asarray(cols[name])) for name in TABLE_COLUMNS},
+    }
+    if with_params:
+        params = np.asarray(cols["params"])
+        out["params"] = {n: _jsonable(params[:, j]) for j, n in enumerate(meta.param_names)}
+    return out
+
+
+def pareto_front(distance_m: np.ndarray, cot: np.ndarray) -> list[int]:
+    """Indices of the trials no other trial beats on both counts (farther and cheaper), by distance."""
+    ok = np.flatnonzero(np.isfinite(distance_m) & np.isfinite(cot))
+    # Sorted by distance descending (cheaper first among equals): a trial is on the front when its COT
+    # is below every COT seen so far.
+    order = ok[np.lexsort((cot[ok], -distance_m[ok]))]
+    front, best_cot = [], math.inf
+    for i in order:
+        if cot[i] < best_cot:
+            front.append(int(i))
+            best_cot = cot[i]
+    return sorted(front, key=lambda i: distance_m[i])
+
+
+def _ranks(x: np.ndarray) -> np.ndarray:
+    order = np.argsort(x, kind="stable")
+    r = np.empty(len(x))
+    r[order] = np.arange(len(x))
+    # ties share their mean rank
+    _, inv, counts = np.unique(x, return_inverse=True, return_counts=True)
+    sums = np.bincount(inv, weights=r)
+    return sums[inv] / counts[inv]
+
+
+def importance(params_unit: np.ndarray, objective: np.ndarray) -> np.ndarray:
+    """|Spearman rank correlation| of each parameter with the objective over finished trials: (n_params,).
+
+    A cheap, model-free ranking that reads the same for 9 and for 200 parameters; 0 when undefined.
+    """
+    ok = np.isfinite(objective)
+    n_params = params_unit.shape[1] if params_unit.ndim == 2 else 0
+    if ok.sum() < 3 or n_params == 0:
+        return np.zeros(n_params)
+    y = _ranks(objective[ok])
+    y = y - y.mean()
+    x = np.apply_along_axis(_ranks, 0, params_unit[ok])
+    x = x - x.mean(axis=0)
+    den = np.sqrt((x * x).sum(axis=0) * (y * y).sum())
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.where(den > 0, (x * y[:, None]).sum(axis=0) / np.where(den > 0, den, 1.0), 0.0)
+    return np.abs(rho)
+
+
+def analysis_view(storage: BaseStorage) -> dict[str, Any]:
+    meta = storage.run_meta()
+    cols = storage.columns()
+    status = np.asarray(cols["status"])
+    complete = status == b"complete"
+    distance = np.where(complete, np.asarray(cols["distance_m"], dtype=float), np.nan)
+    cot = np.where(complete, np.asarray(cols["cot"], dtype=float), np.nan)
+    objective = np.where(complete, np.asarray(cols["objective"], dtype=float), np.nan)
+    imp = importance(np.asarray(cols["params_unit"], dtype=float), objective)
+    reasons = Counter(r.decode("utf-8", "replace").split(":")[0] or "unknown"
+                      for r in np.asarray(cols["reason"])[status == b"failed"])
+    return {
+        "pareto_front": pareto_front(distance, cot),
+        "importance": dict(zip(meta.param_names, (float(v) for v in imp), strict=True)),
+        "failed_by_reason": dict(reasons.most_common()),
+    }

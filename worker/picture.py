@@ -1,0 +1,53 @@
+"""The gait picture of a stored trial: re-simulate it as the run did and draw the `render` strip.
+
+Run as `python -m worker.picture JOB.json OUT.png` (the API calls it in a subprocess, so a server
+without the simulator still serves everything else). JOB holds morphology (a Morphology.to_dict()),
+controller, trial_config, params_unit, seed and frames.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def render_trial(job: dict[str, Any], out: str | Path) -> Path:
+    from robot.morphology.registry import load_morphology
+    from worker.render import frames_from_record, render
+    from worker.trial import TrialConfig, simulate
+
+    morph = load_morphology(job["morphology"])
+    base = dict(job["trial_config"])
+    duration = float(base.get("duration_s") or morph.duration_s)
+    base["record_every_s"] = max(0.01, duration / 200)
+    outcome = simulate(morph, np.asarray(job["params_unit"], dtype=float), TrialConfig.from_dict(base),
+                       int(job["seed"]), controller=job.get("controller"))
+    record = outcome.trajectory.arrays() if outcome.trajectory is not None else {}
+    frames = frames_from_record(record, int(job.get("frames", 6)), morph.structure.n_segments,
+                                len(morph.structure.strings))
+    r = outcome.result
+    title = (f"{job.get('title', morph.name)}: {r.distance_m:.3g} m, {r.speed_cm_s:.3g} cm/s, COT {r.cot:.3g}"
+             + ("" if r.ok else f" ({r.reason})"))
+    return render(morph, frames, out, title=title)
+
+
+def main(argv: list[str]) -> int:
+    from protocol.errors import SpinefarmError
+
+    if len(argv) != 2:
+        print("usage: python -m worker.picture JOB.json OUT.png", file=sys.stderr)
+        return 2
+    try:
+        render_trial(json.loads(Path(argv[0]).read_text()), argv[1])
+    except SpinefarmError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
