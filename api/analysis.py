@@ -1,4 +1,4 @@
-"""Whole-run views for the dashboard: every trial as columns, the Pareto front, parameter importance."""
+"""Whole-run views for the dashboard: every trial as columns, parameter importance, failures by reason."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from storage.base import BaseStorage
 # Columns the dashboard plots and tabulates (parameters come separately, by name).
 TABLE_COLUMNS = ("trial_id", "status", "reason", "phase", "parent", "objective", "distance_m", "speed_cm_s",
                  "work_j", "cot", "wall_time_s", "finished_at_unix_s", "verification", "verify_distance_m",
-                 "worker_id")
+                 "worker_id", "pareto_front")
 
 
 def _jsonable(a: np.ndarray) -> list[Any]:
@@ -38,20 +38,6 @@ def columns_view(storage: BaseStorage, with_params: bool = True) -> dict[str, An
         params = np.asarray(cols["params"])
         out["params"] = {n: _jsonable(params[:, j]) for j, n in enumerate(meta.param_names)}
     return out
-
-
-def pareto_front(distance_m: np.ndarray, cot: np.ndarray) -> list[int]:
-    """Indices of the trials no other trial beats on both counts (farther and cheaper), by distance."""
-    ok = np.flatnonzero(np.isfinite(distance_m) & np.isfinite(cot))
-    # Sorted by distance descending (cheaper first among equals): a trial is on the front when its COT
-    # is below every COT seen so far.
-    order = ok[np.lexsort((cot[ok], -distance_m[ok]))]
-    front, best_cot = [], math.inf
-    for i in order:
-        if cot[i] < best_cot:
-            front.append(int(i))
-            best_cot = cot[i]
-    return sorted(front, key=lambda i: distance_m[i])
 
 
 def _ranks(x: np.ndarray) -> np.ndarray:
@@ -88,14 +74,12 @@ def analysis_view(storage: BaseStorage) -> dict[str, Any]:
     cols = storage.columns()
     status = np.asarray(cols["status"])
     complete = status == b"complete"
-    distance = np.where(complete, np.asarray(cols["distance_m"], dtype=float), np.nan)
-    cot = np.where(complete, np.asarray(cols["cot"], dtype=float), np.nan)
     objective = np.where(complete, np.asarray(cols["objective"], dtype=float), np.nan)
     imp = importance(np.asarray(cols["params_unit"], dtype=float), objective)
     reasons = Counter(r.decode("utf-8", "replace").split(":")[0] or "unknown"
                       for r in np.asarray(cols["reason"])[status == b"failed"])
     return {
-        "pareto_front": pareto_front(distance, cot),
+        "pareto_front": storage.pareto_ids(),  # speed (max) against COT (min), as stored
         "importance": dict(zip(meta.param_names, (float(v) for v in imp), strict=True)),
         "failed_by_reason": dict(reasons.most_common()),
     }

@@ -114,18 +114,18 @@ function drawRunPlots(runId, cols, analysis, meta) {
   plot("plot-time", [{x: byTime.x, y: byTime.y, mode: "lines+markers", type: "scatter", name: "best so far",
     line: {color: "#3461c1", shape: "hv"}, marker: {size: 3}}],
   {xaxis: {title: {text: "time since first result (s)"}}, yaxis: {title: {text: objName}}}, timed.length);
-  // distance against COT with the Pareto front
+  // speed against COT with the Pareto front (stored with the run: faster and cheaper)
   const sc = [];
-  for (let i = 0; i < n; i++) if (c.status[i] === "complete" && c.distance_m[i] !== null && c.cot[i] !== null) sc.push(i);
-  const front = analysis.pareto_front;
+  for (let i = 0; i < n; i++) if (c.status[i] === "complete" && c.speed_cm_s[i] !== null && c.cot[i] !== null) sc.push(i);
+  const front = analysis.pareto_front.slice().sort((a, b) => c.speed_cm_s[a] - c.speed_cm_s[b]);
   const positive = sc.every((i) => c.cot[i] > 0);
   el = plot("plot-pareto", [
-    {x: sc.map((i) => c.distance_m[i]), y: sc.map((i) => c.cot[i]), customdata: sc.map((i) => c.trial_id[i]),
+    {x: sc.map((i) => c.speed_cm_s[i]), y: sc.map((i) => c.cot[i]), customdata: sc.map((i) => c.trial_id[i]),
       mode: "markers", type: "scatter", name: "trial", marker: {size: 5, color: "#9aa7bd"},
-      hovertemplate: "trial %{customdata}<br>%{x:.4g} m, COT %{y:.4g}<extra></extra>"},
-    {x: front.map((i) => c.distance_m[i]), y: front.map((i) => c.cot[i]), customdata: front.map((i) => c.trial_id[i]),
+      hovertemplate: "trial %{customdata}<br>%{x:.4g} cm/s, COT %{y:.4g}<extra></extra>"},
+    {x: front.map((i) => c.speed_cm_s[i]), y: front.map((i) => c.cot[i]), customdata: front.map((i) => c.trial_id[i]),
       mode: "lines+markers", type: "scatter", name: "Pareto front", line: {color: "#c0392b"}, marker: {size: 7}},
-  ], {xaxis: {title: {text: "distance (m)"}}, yaxis: {title: {text: "cost of transport"}, type: positive && sc.length ? "log" : "linear"}},
+  ], {xaxis: {title: {text: "speed (cm/s)"}}, yaxis: {title: {text: "cost of transport"}, type: positive && sc.length ? "log" : "linear"}},
   sc.length);
   el.dataset.run = runId; el.dataset.front = String(front.length); onPointClick(el);
   const complete = c.status.filter((s) => s === "complete").length;
@@ -245,7 +245,7 @@ function runSkeleton(runId) {
     <div class="grid">
       <div class="panel"><h2>Best so far against trials</h2><div class="plot" id="plot-progress"></div></div>
       <div class="panel"><h2>Best so far against time</h2><div class="plot" id="plot-time"></div></div>
-      <div class="panel"><h2>Distance against cost of transport <span class="muted" id="pareto-note"></span></h2><div class="plot" id="plot-pareto"></div></div>
+      <div class="panel"><h2>Speed against cost of transport <span class="muted" id="pareto-note"></span></h2><div class="plot" id="plot-pareto"></div></div>
       <div class="panel"><h2>Failed trials by reason</h2><div class="plot" id="plot-failed"></div></div>
       <div class="panel"><h2>Parallel coordinates <span class="muted">(the 12 most important parameters)</span></h2>
         <div class="plot" id="plot-parallel"></div></div>
