@@ -10,7 +10,8 @@ import sys
 from protocol.errors import SpinefarmError
 
 # Each module exposes register(subparsers); a sub-command sets `func(args) -> int`.
-COMMAND_MODULES = ("cli.sim_commands", "cli.morph_commands", "cli.robot_commands", "cli.service_commands")
+COMMAND_MODULES = ("cli.sim_commands", "cli.morph_commands", "cli.robot_commands", "cli.service_commands",
+                   "cli.docs_command")
 
 
 def build_parser() -> argparse.ArgumentParser:

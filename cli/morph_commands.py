@@ -17,10 +17,14 @@ from protocol.errors import ConfigError
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="run NTRT's published parameters and compare with NTRT's figure",
-                       description="Replay a folder of NTRT .nnw files (e.g. ntrt-reference/OctahedralComplex/"
-                                   "paper-2014-06-07/) on the matching NTRT-era morphology with NTRT's 2014 "
-                                   "motor at 1 ms, and print distance, speed and COT beside NTRT's own figure.")
-    p.add_argument("path", type=Path, help="folder holding logs/bestParameters-<suffix>_{node,edge}-<i>.nnw")
+                       description="Replay NTRT's published parameters for a robot (shipped with spinefarm: "
+                                   "tetraspine-ntrt, tetrahedral-complex, octahedral-complex, ribbed) or a "
+                                   "folder of NTRT .nnw files on the matching NTRT-era morphology with NTRT's "
+                                   "2014 motor at 1 ms, and print distance, speed and COT beside NTRT's own "
+                                   "figure.")
+    p.add_argument("path", metavar="ROBOT_OR_FOLDER",
+                   help="a robot with published parameters (e.g. octahedral-complex) or a folder holding "
+                        "logs/bestParameters-<suffix>_{node,edge}-<i>.nnw")
     p.add_argument("--morphology", default=None,
                    help="morphology to run (default: from the robot folder name in PATH)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds (default: NTRT's trial length)")
@@ -43,8 +47,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--frames", type=int, default=None,
                    help="number of keyframes in a strip (default 6 for a trajectory, 1 for the initial pose)")
     r.add_argument("--params", type=Path, default=None,
-                   help="JSON parameter file (as for `spinefarm trial`) or an NTRT .nnw folder; implies a "
-                        "simulation")
+                   help="JSON parameter file (as for `spinefarm trial`), an NTRT .nnw folder or a robot with "
+                        "published parameters (e.g. tetrahedral-complex); implies a simulation")
     r.add_argument("--duration", type=float, default=None, help="simulate this many seconds and draw them")
     r.add_argument("--random-seed", type=int, default=0, help="seed of random parameters when --params is absent")
     r.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
@@ -86,11 +90,12 @@ def replay_summary(report: Any) -> dict[str, Any]:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from worker.replay import JITTER_CM, replay, replay_spread
+    from worker.replay import JITTER_CM, parameter_folder, replay, replay_spread
 
     if not 0 <= args.seeds <= 100:
         raise ConfigError("--seeds out of range", received=args.seeds, expected="0 to 100 jittered replays")
     engine = args.engine or "bullet"
+    args.path = parameter_folder(args.path)
     report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix, engine=engine)
     s = replay_summary(report)
     if args.seeds:
@@ -154,10 +159,12 @@ def _params(morph: Any, path: Path | None, seed: int) -> tuple[Any, str | None]:
 
     if path is None:
         return random_unit_params(morph, seed), None
-    if path.is_dir():
+    from worker.replay import PUBLISHED, parameter_folder
+
+    if path.is_dir() or str(path) in PUBLISHED:
         from worker.replay import read_parameter_set, unit_params
 
-        return unit_params(morph, read_parameter_set(path)), "ntrt"
+        return unit_params(morph, read_parameter_set(parameter_folder(path))), "ntrt"
     from cli.sim_commands import load_params_file
 
     return load_params_file(path)

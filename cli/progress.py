@@ -7,6 +7,8 @@ re-simulation process write to files or nowhere, never to this terminal.
 
 from __future__ import annotations
 
+import os
+import shutil
 import sys
 import time
 from contextlib import AbstractContextManager, nullcontext
@@ -25,8 +27,16 @@ class ProgressLine:
         if self.tty and not quiet:
             from tqdm import tqdm
 
-            self._bar = tqdm(total=total, unit="trial", file=self.stream, dynamic_ncols=True, leave=True,
-                             bar_format="{l_bar}{bar}| {n}/{total} trials [{elapsed}<{remaining}] {postfix}")
+            # A terminal that reports no size (0 x 0, e.g. a bare pty) would get no bar at all: assume one.
+            try:
+                size = os.get_terminal_size(self.stream.fileno())
+                sized = size.columns > 0 and size.lines > 0
+            except (OSError, ValueError):
+                sized = False
+            fallback = shutil.get_terminal_size((100, 24))
+            self._bar = tqdm(total=total, unit="trial", file=self.stream, leave=True, dynamic_ncols=sized,
+                             ncols=None if sized else fallback.columns, nrows=None if sized else 24,
+                             bar_format="{l_bar}{bar}| {n}/{total} trials [{elapsed}<{remaining}{postfix}]")
 
     def logging_redirect(self) -> AbstractContextManager:
         """Route log records above the bar while it is shown."""

@@ -12,11 +12,13 @@ import socket
 import sys
 import threading
 import time
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
 from cli import checks
 from cli.local_workers import LocalWorkers, worker_command
+from cli.progress import ProgressLine
 from protocol.errors import ConfigError
 
 
@@ -154,6 +156,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("file", metavar="RUN.h5")
     p.add_argument("--csv", nargs="?", const="-", metavar="OUT.csv", help="write every trial as CSV "
                    "(to OUT.csv, or stdout)")
+    p.add_argument("--parquet", metavar="OUT.parquet", help="write every trial as a Parquet table (the "
+                   "DataFrame of spinefarm.load_run, units in its metadata)")
     p.add_argument("--best", type=int, metavar="K", help="print the K best trials")
     p.add_argument("--pareto", nargs="?", const="-", metavar="OUT.csv",
                    help="write the Pareto front of speed and COT as CSV, fastest first (to OUT.csv, or stdout)")
@@ -271,7 +275,8 @@ def _start_api(path: Path, host: str, port: int) -> tuple[Any, threading.Thread,
     return server, thread, port
 
 
-def _progress(core: Any, final: bool = False) -> str:
+def _progress(core: Any) -> tuple[int, int, str, str]:
+    """(trials done, budget, what follows a progress bar, the whole line for a log)."""
     with core.lock:  # the transport threads write the table concurrently
         st = core.status()
         best = core.study.storage.best(1)
@@ -281,8 +286,9 @@ def _progress(core: Any, final: bool = False) -> str:
     fill = int(width * done / max(budget, 1))
     best_s = f"{best[0].distance_m:.3f} m" if best else "-"
     eta = "-" if st["eta_s"] is None else f"{st['eta_s']:.0f}s"
-    return (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{budget} trials ({st['trials_failed']} failed)  "
-            f"{st['rate_trials_s']:.1f}/s  best {best_s}  ETA {eta}" + ("\n" if final else ""))
+    text = f"{st['trials_failed']} failed, {st['rate_trials_s']:.1f}/s, best {best_s}"
+    return done, budget, text, (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{budget} trials ({st['trials_failed']} "
+                                f"failed)  {st['rate_trials_s']:.1f}/s  best {best_s}  ETA {eta}")
 
 
 def _describe_best(core: Any, path: Path) -> str:
@@ -336,8 +342,9 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
     if n_workers == 0:
         print(f"no local workers: attach some with `spinefarm worker --connect {endpoint} --run {core.run_id}`",
               file=sys.stderr)
-    tty = sys.stderr.isatty()
-    last_line = 0.0
+    progress = ProgressLine(core.study.budget, quiet=args.quiet)
+    redirect = ExitStack()
+    redirect.enter_context(progress.logging_redirect())
     code = 0
     failure: str | None = None
     try:  # from here on every exit (a startup error too) stops the workers and releases the file
@@ -354,30 +361,26 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
                     raise ConfigError(f"cannot serve the API on {args.api_host}: {exc.strerror or exc}",
                                       received=args.api_host, expected="a local address (or --api-port -1)") from exc
             api = _start_api(path, args.api_host, port)
-            print(f"dashboard on http://{args.api_host}:{port}/{taken}; API docs at /docs", file=sys.stderr)
+            progress.write(f"dashboard on http://{args.api_host}:{port}/{taken}; API docs at /docs")
         workers = LocalWorkers(worker_command(endpoint, core.run_id, args.batch, args.zenoh_config,
                                               args.credentials), n_workers)
         while not core.done and not stopped.wait(0.25):
             failure = core.failure or (None if core.done else workers.check())
             if failure:
                 break
-            now = time.monotonic()
-            if not args.quiet and (tty or now - last_line >= 5.0):
-                print(("\r" if tty else "") + _progress(core), end="" if tty else "\n", file=sys.stderr,
-                      flush=True)
-                last_line = now
+            progress.update(*_progress(core))
         end = time.monotonic() + 5.0
         while core.done and not core.workers_released() and time.monotonic() < end:
             time.sleep(0.05)  # let remote workers hear "done" before the coordinator goes away
         if core.done and core.verifier is not None and core.verifier.pending:
-            print("\nre-simulating the best at a finer step before reporting it (Ctrl-C skips) ...",
-                  file=sys.stderr)
+            progress.update(*_progress(core))
+            progress.write("re-simulating the best at a finer step before reporting it (Ctrl-C skips) ...")
             end = time.monotonic() + 600.0
             while not stopped.is_set() and not core.finish_verifications(timeout_s=0.5) and time.monotonic() < end:
                 pass
             if core.verifier.pending:
                 why = "stopped" if stopped.is_set() else "verification not finished"
-                print(f"{why}; the best is reported unverified (everything else is stored)", file=sys.stderr)
+                progress.write(f"{why}; the best is reported unverified (everything else is stored)")
                 code = 130 if stopped.is_set() else code
     except KeyboardInterrupt:
         code = 130
@@ -390,6 +393,8 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
         if api is not None:
             api[0].should_exit = True
             api[1].join(5)
+        progress.close(_progress(core)[3])
+        redirect.close()
     if core.write_failure is not None:
         # The file handle whose writes failed is never closed (HDF5 would retry them and crash);
         # the kernel closes it. Every acknowledged result was written before the failure.
@@ -398,8 +403,6 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
               file=sys.stderr, flush=True)
         sys.stdout.flush()
         os._exit(1)
-    if not args.quiet:
-        print(("\r" if tty else "") + _progress(core, final=True), end="", file=sys.stderr)
     if failure and not core.done:
         print(f"\nerror: {failure}", file=sys.stderr)
         code = 1
@@ -475,14 +478,19 @@ def cmd_export(args: argparse.Namespace) -> int:
     from storage.export import best_table, write_csv
     from storage.hdf5 import Hdf5Storage
 
-    if args.csv is None and args.best is None and args.pareto is None:
-        raise ConfigError("nothing to export", expected="--csv [OUT.csv], --best K and/or --pareto [OUT.csv]")
+    if args.csv is None and args.best is None and args.pareto is None and args.parquet is None:
+        raise ConfigError("nothing to export", expected="--csv [OUT.csv], --parquet OUT.parquet, --best K and/or "
+                          "--pareto [OUT.csv]")
     if args.csv not in (None, "-"):
         checks.output_path("--csv", args.csv, (".csv",))
     if args.pareto not in (None, "-"):
         checks.output_path("--pareto", args.pareto, (".csv",))
+    if args.parquet is not None:
+        checks.output_path("--parquet", args.parquet, (".parquet",))
     checks.at_least("--best", args.best, 1, "K best trials")
     storage = Hdf5Storage.open_read(args.file)
+    if args.parquet is not None:
+        _write_parquet(args.file, args.parquet)
     if args.csv is not None:
         if args.csv == "-":
             write_csv(storage, sys.stdout)
@@ -503,3 +511,16 @@ def cmd_export(args: argparse.Namespace) -> int:
                 write_csv(storage, fh, ids)
             print(f"wrote {len(ids)} Pareto-front trials to {args.pareto}", file=sys.stderr)
     return 0
+
+
+def _write_parquet(run_file: str, out: str) -> None:
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError as exc:
+        raise ConfigError("--parquet needs pyarrow", received="no pyarrow here",
+                          expected="pip install 'spinefarm[data]'") from exc
+    from spinefarm import load_run
+
+    df = load_run(run_file)
+    df.to_parquet(out)
+    print(f"wrote {len(df)} trials to {out}", file=sys.stderr)

@@ -62,6 +62,15 @@ def add_engine_argument(p: argparse.ArgumentParser) -> None:
                    help="physics engine (default bullet): bullet, or mujoco (the fast tier, soft contacts)")
 
 
+def say_if_compiling() -> None:
+    """The first simulation after an install compiles the kernels (numba) for a while: say so."""
+    from worker.warmup import kernels_cached
+
+    if not kernels_cached():
+        print("compiling the simulation kernels (first run after installing; about a minute, then cached) ...",
+              file=sys.stderr, flush=True)
+
+
 def load_params_file(path: Path) -> tuple[dict[str, float], str | None]:
     """Named physical values (and an optional controller name) from a JSON file."""
     try:
@@ -126,6 +135,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
 
         overrides["scene"] = parse_scene(args.scene)
     cfg = TrialConfig.from_dict(overrides)
+    say_if_compiling()
     outcome = simulate(morph, params, cfg, seed)
     r = outcome.result
     if args.record is not None and outcome.trajectory is not None:

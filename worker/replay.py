@@ -25,6 +25,23 @@ ROBOT_FOLDERS = {
 }
 
 
+# NTRT's published parameter sets ship with the package (data, Apache-2.0: LICENSE and NOTICE beside them)
+PUBLISHED_DIR = Path(__file__).resolve().parent / "replay_data"
+PUBLISHED = {name: PUBLISHED_DIR / folder / "paper-2014-06-07" for folder, name in ROBOT_FOLDERS.items()
+             if folder != "ribDemo"}
+
+
+def parameter_folder(where: str | Path) -> Path:
+    """A folder of .nnw files: an existing path, or the shipped set of a robot named in PUBLISHED."""
+    path = Path(where)
+    if path.exists():
+        return path
+    if str(where) in PUBLISHED:
+        return PUBLISHED[str(where)]
+    raise ConfigError("no such NTRT parameter folder or robot with published parameters", received=str(where),
+                      expected=f"one of {', '.join(PUBLISHED)} or a folder holding logs/bestParameters-*.nnw")
+
+
 @dataclass(frozen=True)
 class NtrtReference:
     """A distance NTRT itself recorded for the published parameters (spec 8)."""

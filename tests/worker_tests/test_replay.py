@@ -13,6 +13,7 @@ from cli.main import main
 from protocol.errors import ConfigError
 from robot.morphology.registry import load_morphology
 from worker.replay import (
+    PUBLISHED_DIR,
     REFERENCES,
     detect_morphology,
     read_nnw,
@@ -21,7 +22,7 @@ from worker.replay import (
     unit_params,
 )
 
-REF = Path("/work/shared/ntrt-reference")
+REF = PUBLISHED_DIR  # NTRT's parameter sets, shipped with the package
 FOLDERS = {"tetraspine-ntrt": "TetraSpine", "tetrahedral-complex": "TetrahedralComplex",
            "octahedral-complex": "OctahedralComplex", "ribbed": "Ribbed"}
 needs_data = pytest.mark.skipif(not REF.is_dir(), reason="NTRT reference data not present")
