@@ -77,6 +77,8 @@ def runs(tmp_path_factory):
     d = tmp_path_factory.mktemp("runs")
     spinefarm("search", "sphere:9", "--trials", "300", "--workers", "1", "--out", str(d / "sphere.h5"),
               "--run-id", "sphere-view", "--api-port", "-1", "--quiet", "--seed", "3")
+    spinefarm("search", "sphere:200", "--trials", "80", "--workers", "1", "--out", str(d / "wide.h5"),
+              "--run-id", "wide-view", "--api-port", "-1", "--quiet")
     spinefarm("search", "tetraspine", "--trials", "3", "--workers", "1", "--duration", "1", "--out",
               str(d / "tetra.h5"), "--run-id", "tetra-view", "--api-port", "-1", "--quiet")
     return d
@@ -125,9 +127,9 @@ def points(page, plot_id: str, trace: int = 0) -> int:
 
 def test_runs_page_lists_every_run_file(page, server):
     page.goto(server.url + "/")
-    page.wait_for_selector("#runs-table tr.row >> nth=1")
+    page.wait_for_selector("#runs-table tr.row >> nth=2")
     rows = page.locator("#runs-table tr.row")
-    assert sorted(rows.nth(i).get_attribute("data-run") for i in range(rows.count())) == ["sphere-view", "tetra-view"]
+    assert sorted(rows.nth(i).get_attribute("data-run") for i in range(rows.count())) == ["sphere-view", "tetra-view", "wide-view"]
     page.screenshot(path=ARTIFACTS / "runs.png", full_page=True)
     assert all(u.startswith(server.url) for u in page.requests), page.requests
 
@@ -246,3 +248,18 @@ def test_docs_and_redoc_load_only_local_assets(page, server):
     page.screenshot(path=ARTIFACTS / "redoc.png")
     foreign = [u for u in page.requests if not (u.startswith(server.url) or u.startswith(("blob:", "data:")))]
     assert not foreign, foreign
+
+
+def test_two_hundred_parameters_stay_readable(page, server):
+    page.goto(server.url + "/#/run/wide-view")
+    page.wait_for_selector("#trial-table tr.row")
+    wait_for(lambda: page.locator("#plot-importance .bars path").count() == 30, timeout_s=30, poll_s=0.1,
+             what="the importance plot")
+    assert page.locator("#importance-note").inner_text() == "the 30 strongest of 200 parameters"
+    assert page.locator("#param-select option").count() == 200
+    assert page.locator("#plot-parallel .xtick").count() == 12
+    page.select_option("#param-select", "x123")
+    wait_for(lambda: "x123" in page.locator("#plot-param .xtitle").inner_text(), timeout_s=10, poll_s=0.1,
+             what="the chosen parameter's plot")
+    assert points(page, "plot-param") == 80
+    page.screenshot(path=ARTIFACTS / "run-200-parameters.png", full_page=True)
