@@ -129,7 +129,8 @@ def test_runs_page_lists_every_run_file(page, server):
     page.goto(server.url + "/")
     page.wait_for_selector("#runs-table tr.row >> nth=2")
     rows = page.locator("#runs-table tr.row")
-    assert sorted(rows.nth(i).get_attribute("data-run") for i in range(rows.count())) == ["sphere-view", "tetra-view", "wide-view"]
+    shown = sorted(rows.nth(i).get_attribute("data-run") for i in range(rows.count()))
+    assert shown == ["sphere-view", "tetra-view", "wide-view"]
     page.screenshot(path=ARTIFACTS / "runs.png", full_page=True)
     assert all(u.startswith(server.url) for u in page.requests), page.requests
 
@@ -259,7 +260,7 @@ def test_two_hundred_parameters_stay_readable(page, server):
     assert page.locator("#param-select option").count() == 200
     assert page.locator("#plot-parallel .xtick").count() == 12
     page.select_option("#param-select", "x123")
-    wait_for(lambda: "x123" in page.locator("#plot-param .xtitle").inner_text(), timeout_s=10, poll_s=0.1,
+    wait_for(lambda: "x123" in page.locator("#plot-param .xtitle").text_content(), timeout_s=10, poll_s=0.1,
              what="the chosen parameter's plot")
     assert points(page, "plot-param") == 80
     page.screenshot(path=ARTIFACTS / "run-200-parameters.png", full_page=True)
