@@ -10,7 +10,9 @@ RUN python -m venv /opt/venv
 ENV PATH=/opt/venv/bin:$PATH PIP_NO_CACHE_DIR=1
 WORKDIR /src
 # Only what the package needs: the build context may hold runs and a local venv.
-COPY pyproject.toml README* ./
+COPY pyproject.toml setup.py README* ./
+COPY docs docs
+COPY spinefarm spinefarm
 COPY protocol protocol
 COPY robot robot
 COPY worker worker
