@@ -19,11 +19,13 @@ run: $(STAMP)
 
 test: $(STAMP)
 	sh .ci/ensure-chromium
+	sh .ci/ensure-netns-tools
 	$(PY) -m ruff check .
 	$(PY) -m pytest -q -ra
 
 test-all: $(STAMP)
 	sh .ci/ensure-chromium
+	sh .ci/ensure-netns-tools
 	$(PY) -m pytest -q -ra -m ''
 
 bench: $(STAMP)
