@@ -29,6 +29,11 @@ class Trial(BaseModel):
     finished_at_unix_s: float | None
     verification: Verification
     pareto_front: bool
+    engine: str | None = None        # the engine and step this trial actually ran with
+    dt_s: float | None = None
+    settle_s: float | None = None
+    rung: int = 0                    # multi-fidelity rung (0: the screen)
+    duration_s: float | None = None  # simulated duration asked for (null: the run's)
 
 
 class Worker(BaseModel):

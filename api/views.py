@@ -34,6 +34,8 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
                          "fine_step_distance_m": _num(rec.verify_distance_m),
                          "reason": rec.verify_reason or None},
         "pareto_front": bool(rec.pareto_front),
+        "engine": rec.engine or None, "dt_s": _num(rec.dt_s), "settle_s": _num(rec.settle_s),
+        "rung": rec.rung, "duration_s": _num(rec.duration_s),
     }
 
 

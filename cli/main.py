@@ -15,7 +15,11 @@ COMMAND_MODULES = ("cli.sim_commands", "cli.morph_commands", "cli.robot_commands
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="spinefarm", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="spinefarm", description="Search for gaits of tensegrity spines: single trials, distributed searches, "
+        "a dashboard of their results.",
+        epilog="Documentation: `spinefarm docs` lists the topics, `spinefarm docs TOPIC` prints one; "
+               "`spinefarm COMMAND --help` gives a command's options.")
     parser.add_argument("--version", action="version", version=f"spinefarm {software_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:

@@ -145,14 +145,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     _zenoh_args(p, None)
     p.set_defaults(func=cmd_worker)
 
-    p = sub.add_parser("api", help="serve run files over HTTP (read-only)")
+    p = sub.add_parser("api", help="serve run files over HTTP: the dashboard at /, the JSON API (read-only)")
     p.add_argument("files", nargs="*", metavar="RUN.h5")
     p.add_argument("--runs-dir", metavar="DIR", help="serve every *.h5 in DIR (rescanned)")
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=8000)
     p.set_defaults(func=cmd_api)
 
-    p = sub.add_parser("export", help="quick looks at a run file: CSV or the best trials")
+    p = sub.add_parser("export", help="a run file as CSV or Parquet, its best trials or its Pareto front")
     p.add_argument("file", metavar="RUN.h5")
     p.add_argument("--csv", nargs="?", const="-", metavar="OUT.csv", help="write every trial as CSV "
                    "(to OUT.csv, or stdout)")

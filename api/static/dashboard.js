@@ -297,8 +297,10 @@ async function showTrial(runId, trialId, gen) {
   view.innerHTML = `<h1 id="trial-title">Trial ${t.trial_id} <span class="state ${esc(t.status)}">${esc(t.status)}</span></h1>
     <div class="cards">${card("objective (" + esc(meta.objective) + ")", fmt(t.objective, 6))}
       ${card("phase", esc(t.phase))}${card("parent", t.parent ?? "–")}${card("seed", t.seed)}
-      ${card("engine", esc(tc.engine || "–"))}${card("step", tc.dt_s ? fmt(tc.dt_s * 1000) + " ms" : "–")}
-      ${card("duration", tc.duration_s ? fmt(tc.duration_s) + " s" : "–")}${card("worker", esc(t.worker_id || "–"))}</div>
+      ${meta.physical ? card("engine", esc(t.engine || tc.engine || "bullet")) +
+        card("step", (t.dt_s || tc.dt_s) ? fmt((t.dt_s || tc.dt_s) * 1000) + " ms" : "–") +
+        card("duration", (t.duration_s || tc.duration_s) ? fmt(t.duration_s || tc.duration_s) + " s" : "–") : ""}
+      ${t.rung ? card("rung", t.rung) : ""}${card("worker", esc(t.worker_id || "–"))}</div>
     ${t.reason ? `<p class="error">${esc(t.reason)}</p>` : ""}
     <div class="buttons"><a class="button" id="dl-params" href="/runs/${r}/trials/${t.trial_id}/params.json"
       download>download --params file</a></div>

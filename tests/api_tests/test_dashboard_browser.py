@@ -194,7 +194,8 @@ def test_the_gait_picture_of_a_physics_trial(page, server, runs):
     page.wait_for_selector("#gait", timeout=240_000)
     assert page.evaluate("document.getElementById('gait').naturalWidth") > 400
     assert page.locator("#verification").inner_text().count("distance") == 2
-    assert "bullet" in page.locator(".cards").inner_text()
+    cards = page.locator(".cards").inner_text()
+    assert "bullet" in cards and f"{cols['dt_s'][0] * 1000:g} ms" in cards  # the step this trial ran with
     page.screenshot(path=ARTIFACTS / "trial-tetraspine.png", full_page=True)
     page.goto(server.url + "/#/run/tetra-view")
     page.wait_for_selector("#trial-table tr.row")
