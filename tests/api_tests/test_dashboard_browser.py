@@ -72,6 +72,26 @@ class Server:
         self.proc.wait(30)
 
 
+FAILURES = {"diverged": 3, "error": 1}  # reasons are grouped by what precedes the first colon
+
+
+def write_failing_run(path: Path) -> None:
+    """A run file with failed trials (what a real search writes when trials diverge or raise)."""
+    from protocol.messages import TrialStatus
+    from storage.hdf5 import Hdf5Storage
+    from tests.storage_tests.conftest import make_meta, result
+
+    s = Hdf5Storage.create(path, make_meta("failing-view", n_params=3))
+    reasons = ["", "diverged: NaN in poses", "", "diverged: energy runaway", "error: ValueError: boom",
+               "diverged: left its bounds", ""]
+    for i, reason in enumerate(reasons):
+        u = np.full(3, (i + 1) / 10)
+        s.add_trial(i, u, 2 * u - 1, "monte_carlo", -1, i)
+        status = TrialStatus.FAILED if reason else TrialStatus.COMPLETE
+        s.finish_trial(i, result(i, i / 10, status=status, reason=reason, seed=i), i / 10 if not reason else np.nan)
+    s.close()
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     d = tmp_path_factory.mktemp("runs")
@@ -79,6 +99,7 @@ def runs(tmp_path_factory):
               "--run-id", "sphere-view", "--api-port", "-1", "--quiet", "--seed", "3")
     spinefarm("search", "sphere:200", "--trials", "80", "--workers", "1", "--out", str(d / "wide.h5"),
               "--run-id", "wide-view", "--api-port", "-1", "--quiet")
+    write_failing_run(d / "failing.h5")
     spinefarm("search", "tetraspine", "--trials", "3", "--workers", "1", "--duration", "1", "--out",
               str(d / "tetra.h5"), "--run-id", "tetra-view", "--api-port", "-1", "--quiet")
     return d
@@ -127,10 +148,10 @@ def points(page, plot_id: str, trace: int = 0) -> int:
 
 def test_runs_page_lists_every_run_file(page, server):
     page.goto(server.url + "/")
-    page.wait_for_selector("#runs-table tr.row >> nth=2")
+    page.wait_for_selector("#runs-table tr.row >> nth=3")
     rows = page.locator("#runs-table tr.row")
     shown = sorted(rows.nth(i).get_attribute("data-run") for i in range(rows.count()))
-    assert shown == ["sphere-view", "tetra-view", "wide-view"]
+    assert shown == ["failing-view", "sphere-view", "tetra-view", "wide-view"]
     page.screenshot(path=ARTIFACTS / "runs.png", full_page=True)
     assert all(u.startswith(server.url) for u in page.requests), page.requests
 
@@ -265,3 +286,16 @@ def test_two_hundred_parameters_stay_readable(page, server):
              what="the chosen parameter's plot")
     assert points(page, "plot-param") == 80
     page.screenshot(path=ARTIFACTS / "run-200-parameters.png", full_page=True)
+
+
+def test_failed_trials_by_reason(page, server):
+    page.goto(server.url + "/#/run/failing-view")
+    page.wait_for_selector("#trial-table tr.row")
+    wait_for(lambda: page.locator("#plot-failed .bars path").count() == len(FAILURES), timeout_s=30, poll_s=0.1,
+             what="the failures plot")
+    assert page.locator("#plot-failed").get_attribute("data-points") == str(sum(FAILURES.values()))
+    labels = page.locator("#plot-failed .xtick").all_text_contents()
+    assert labels == list(FAILURES)  # most frequent first
+    page.click("#trial-table th[data-key=status]")
+    assert page.locator("#trial-table tr.row").first.locator("td").nth(1).inner_text() == "failed"
+    page.screenshot(path=ARTIFACTS / "run-failures.png", full_page=True)
