@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import json
+import math
 import os
 import subprocess
 import sys
@@ -63,8 +64,11 @@ class PictureCache:
         if missing:
             raise SimulatorUnavailable(f"cannot draw gaits: {missing}",
                                        expected="the API on a machine with `pip install spinefarm` complete")
+        trial_config = dict(meta.trial_config)
+        if math.isfinite(rec.duration_s):  # a multi-fidelity rung asks for its own duration
+            trial_config["duration_s"] = rec.duration_s
         job = {"morphology": meta.morphology_spec, "controller": meta.controller,
-               "trial_config": meta.trial_config, "params_unit": list(rec.params_unit), "seed": rec.seed,
+               "trial_config": trial_config, "params_unit": list(rec.params_unit), "seed": rec.seed,
                "frames": FRAMES, "title": f"{meta.run_id} trial {rec.trial_id}"}
         key = hashlib.sha256(json.dumps({k: v for k, v in job.items() if k != "title"},
                                         sort_keys=True).encode()).hexdigest()[:32]
