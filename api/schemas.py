@@ -12,6 +12,7 @@ class Verification(BaseModel):
     verdict: str
     fine_step_distance_m: float | None
     reason: str | None
+    judge: str | None = None  # how it was re-simulated: "bullet at 0.25 ms", or a finer step of the same engine
 
 
 class Trial(BaseModel):

@@ -19,8 +19,17 @@ def _num(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def judge_of(meta: Any) -> str:
+    """How the run re-simulates its bests: in another engine at its step, or at a finer step."""
+    policy = (meta.extra or {}).get("verify") or {}
+    if policy.get("engine"):
+        return f"{policy['engine']} at {1e3 * float(policy.get('dt_s', 2.5e-4)):g} ms"
+    return f"the search's engine at a {int(policy.get('refine', 4))}x finer step"
+
+
 def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
-    names = storage.run_meta().param_names
+    meta = storage.run_meta()
+    names = meta.param_names
     return {
         "trial_id": rec.trial_id, "status": rec.status, "reason": rec.reason, "phase": rec.phase,
         "parent": rec.parent if rec.parent >= 0 else None, "seed": rec.seed,
@@ -32,7 +41,7 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
         "finished_at_unix_s": _num(rec.finished_at_unix_s),
         "verification": {"verdict": rec.verification or "not_checked",
                          "fine_step_distance_m": _num(rec.verify_distance_m),
-                         "reason": rec.verify_reason or None},
+                         "reason": rec.verify_reason or None, "judge": judge_of(meta)},
         "pareto_front": bool(rec.pareto_front),
         "engine": rec.engine or None, "dt_s": _num(rec.dt_s), "settle_s": _num(rec.settle_s),
         "rung": rec.rung, "duration_s": _num(rec.duration_s),

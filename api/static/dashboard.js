@@ -308,7 +308,7 @@ async function showTrial(runId, trialId, gen) {
       <div class="panel"><h2>Verification</h2><table id="verification"><tbody>
         <tr><td class="l">verdict</td><td class="l verdict ${esc(v.verdict)}">${esc(v.verdict)}</td></tr>
         <tr><td class="l">distance at the search's step (m)</td><td>${fmt(t.scores.distance_m, 6)}</td></tr>
-        <tr><td class="l">distance at a finer step (m)</td><td>${fmt(v.fine_step_distance_m, 6)}</td></tr>
+        <tr><td class="l">distance re-simulated in ${esc(v.judge || "a finer step")} (m)</td><td>${fmt(v.fine_step_distance_m, 6)}</td></tr>
         ${v.reason ? `<tr><td class="l">reason</td><td class="l">${esc(v.reason)}</td></tr>` : ""}</tbody></table>
         <h2 style="margin-top:1em">Score parts</h2><table id="scores"><tbody>${scoreRows}</tbody></table></div>
       <div class="panel"><h2>Parameters</h2><div class="tablewrap"><table id="params"><thead><tr><th class="l">name</th>

@@ -123,4 +123,7 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
         assert best.verification == "holds"
         assert np.isfinite(best.verify_distance_m) and best.verify_distance_m != best.distance_m
         assert s.run_meta().extra["verify"]["engine"] == "bullet"
+        from api.views import trial_view
+
+        assert trial_view(s, best)["verification"]["judge"] == "bullet at 0.25 ms"
     assert f"verified in bullet: {best.verify_distance_m:.4g} m" in r.stdout
