@@ -161,6 +161,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--best", type=int, metavar="K", help="print the K best trials")
     p.add_argument("--pareto", nargs="?", const="-", metavar="OUT.csv",
                    help="write the Pareto front of speed and COT as CSV, fastest first (to OUT.csv, or stdout)")
+    p.add_argument("--gait", metavar="OUT.json", help="write the best trial as a --params file for "
+                   "`spinefarm trial` (named physical values, controller space, scores)")
     p.set_defaults(func=cmd_export)
 
 
@@ -478,15 +480,17 @@ def cmd_export(args: argparse.Namespace) -> int:
     from storage.export import best_table, write_csv
     from storage.hdf5 import Hdf5Storage
 
-    if args.csv is None and args.best is None and args.pareto is None and args.parquet is None:
-        raise ConfigError("nothing to export", expected="--csv [OUT.csv], --parquet OUT.parquet, --best K and/or "
-                          "--pareto [OUT.csv]")
+    if all(v is None for v in (args.csv, args.best, args.pareto, args.parquet, args.gait)):
+        raise ConfigError("nothing to export", expected="--csv [OUT.csv], --parquet OUT.parquet, --best K, "
+                          "--pareto [OUT.csv] and/or --gait OUT.json")
     if args.csv not in (None, "-"):
         checks.output_path("--csv", args.csv, (".csv",))
     if args.pareto not in (None, "-"):
         checks.output_path("--pareto", args.pareto, (".csv",))
     if args.parquet is not None:
         checks.output_path("--parquet", args.parquet, (".parquet",))
+    if args.gait is not None:
+        checks.output_path("--gait", args.gait, (".json",))
     checks.at_least("--best", args.best, 1, "K best trials")
     storage = Hdf5Storage.open_read(args.file)
     if args.parquet is not None:
@@ -510,6 +514,14 @@ def cmd_export(args: argparse.Namespace) -> int:
             with open(args.pareto, "w", newline="") as fh:
                 write_csv(storage, fh, ids)
             print(f"wrote {len(ids)} Pareto-front trials to {args.pareto}", file=sys.stderr)
+    if args.gait is not None:
+        import json
+
+        from storage.export import gait_params
+
+        Path(args.gait).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.gait).write_text(json.dumps(gait_params(storage), indent=1) + "\n")
+        print(f"wrote the best trial's parameters to {args.gait}", file=sys.stderr)
     return 0
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import csv
 from collections.abc import Sequence
-from typing import TextIO
+from typing import Any, TextIO
 
 from storage.base import BaseStorage
 from storage.schema import COLUMNS, VECTOR_COLUMNS
@@ -38,3 +38,23 @@ def best_table(storage: BaseStorage, k: int) -> str:
     else:
         lines.append("no complete trial")
     return "\n".join(lines)
+
+
+def gait_params(storage: BaseStorage) -> dict[str, Any]:
+    """The best trial as a `spinefarm trial --params` file: controller space, named physical values, and
+    where it came from (run, trial, scores, trial length) for the record."""
+    from protocol.errors import StorageError
+
+    best = storage.best(1)
+    if not best:
+        raise StorageError("no complete trial to export", received=str(storage.run_meta().run_id),
+                           expected="a run with at least one complete trial")
+    b, meta = best[0], storage.run_meta()
+    # no controller given: the morphology's first (its default), named so the file says which space it is
+    controller = meta.controller or (meta.morphology_spec.get("controllers") or [None])[0]
+    return {"morphology": meta.morphology, "controller": controller,
+            "params": dict(zip(meta.param_names, b.params, strict=True)),
+            "source": {"run_id": meta.run_id, "trial_id": b.trial_id, "seed": b.seed,
+                       "sampler": meta.sampler.get("name", meta.sampler.get("kind")),
+                       "speed_cm_s": b.speed_cm_s, "cot": b.cot, "distance_m": b.distance_m,
+                       "sim_time_s": b.sim_time_s, "verification": b.verification or "not_checked"}}

@@ -56,3 +56,12 @@ def test_a_short_search_then_export(tmp_path):
     assert len(lines) == 51 and lines[0].endswith("x0,x1,x2")
     best = run("export", str(out), "--best", "3").stdout.splitlines()
     assert best[0].split()[:2] == ["rank", "trial"] and len([ln for ln in best if ln[:4].strip().isdigit()]) == 3
+    gait = tmp_path / "gait.json"
+    assert run("export", str(out), "--gait", str(gait)).returncode == 0
+    import json
+
+    from storage.hdf5 import Hdf5Storage
+
+    g, top = json.loads(gait.read_text()), Hdf5Storage.open_read(out).best(1)[0]
+    assert g["source"]["trial_id"] == top.trial_id and list(g["params"].values()) == list(top.params)
+    assert list(g["params"]) == ["x0", "x1", "x2"]
