@@ -163,6 +163,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write the Pareto front of speed and COT as CSV, fastest first (to OUT.csv, or stdout)")
     p.add_argument("--gait", metavar="OUT.json", help="write the best trial as a --params file for "
                    "`spinefarm trial` (named physical values, controller space, scores)")
+    p.add_argument("--trial", type=int, metavar="N", help="with --gait: this trial instead of the best")
     p.set_defaults(func=cmd_export)
 
 
@@ -520,8 +521,9 @@ def cmd_export(args: argparse.Namespace) -> int:
         from storage.export import gait_params
 
         Path(args.gait).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.gait).write_text(json.dumps(gait_params(storage), indent=1) + "\n")
-        print(f"wrote the best trial's parameters to {args.gait}", file=sys.stderr)
+        Path(args.gait).write_text(json.dumps(gait_params(storage, args.trial), indent=1) + "\n")
+        which = "the best trial" if args.trial is None else f"trial {args.trial}"
+        print(f"wrote the parameters of {which} to {args.gait}", file=sys.stderr)
     return 0
 
 

@@ -40,15 +40,15 @@ def best_table(storage: BaseStorage, k: int) -> str:
     return "\n".join(lines)
 
 
-def gait_params(storage: BaseStorage) -> dict[str, Any]:
-    """The best trial as a `spinefarm trial --params` file: controller space, named physical values, and
-    where it came from (run, trial, scores, trial length) for the record."""
+def gait_params(storage: BaseStorage, trial_id: int | None = None) -> dict[str, Any]:
+    """The best trial (or `trial_id`) as a `spinefarm trial --params` file: controller space, named
+    physical values, and where it came from (run, trial, scores, trial length) for the record."""
     from protocol.errors import StorageError
 
-    best = storage.best(1)
-    if not best:
-        raise StorageError("no complete trial to export", received=str(storage.run_meta().run_id),
-                           expected="a run with at least one complete trial")
+    best = storage.best(1) if trial_id is None else [storage.trial(trial_id)]
+    if not best or best[0].status != "complete":
+        raise StorageError("no complete trial to export", received=trial_id if trial_id is not None
+                           else str(storage.run_meta().run_id), expected="a complete trial")
     b, meta = best[0], storage.run_meta()
     # no controller given: the morphology's first (its default), named so the file says which space it is
     controller = meta.controller or (meta.morphology_spec.get("controllers") or [None])[0]

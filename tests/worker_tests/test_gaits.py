@@ -1,0 +1,29 @@
+"""Every shipped gait (examples/gaits/<morphology>.json) loads as a --params file and runs for 1 s."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from cli.sim_commands import load_params_file
+from robot.morphology.registry import load_morphology
+from worker.trial import TrialConfig, run_trial
+
+GAITS = sorted((Path(__file__).resolve().parents[2] / "examples" / "gaits").glob("*.json"))
+
+
+def test_gaits_are_shipped():
+    assert GAITS, "examples/gaits holds no gait"
+
+
+@pytest.mark.parametrize("path", GAITS, ids=[p.stem for p in GAITS])
+def test_a_shipped_gait_loads_and_runs_for_one_second(path):
+    params, controller = load_params_file(path)
+    record = json.loads(path.read_text())
+    assert record["morphology"] == path.stem and controller
+    morph = load_morphology(path.stem)
+    assert list(params) == morph.param_space(controller).names
+    r = run_trial(morph, params, TrialConfig(duration_s=1.0, controller=controller))
+    assert r.ok and r.distance_m > 0
