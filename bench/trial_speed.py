@@ -1,4 +1,4 @@
-"""Per-step cost of the 12-segment Tetraspine trial loop against a bare stepSimulation.
+"""Per-step cost of the 12-segment Tetraspine trial loop against a bare stepSimulation, and the two tiers.
 
 Prints one JSON object (last line): wall seconds per simulated second at the default step, the
 split per step (state read, control = CPG, string law, force write, stepSimulation) in
@@ -6,7 +6,13 @@ microseconds, and step_to_bare_ratio = whole step / bare stepSimulation of the s
 strings and no control. Both scenes are measured in this one run, interleaved, so machine noise
 affects them alike.
 
-    python bench/trial_speed.py [--morphology tetraspine] [--steps 3000] [--repeats 3]
+The tiers: whole trials (the production loop, set-up reused) on Bullet and on MuJoCo, each at its
+default step, interleaved: CPU seconds per simulated second of each and `mujoco_speedup` = Bullet's
+over MuJoCo's; MuJoCo's split (mj_step from MuJoCo's own timers, the rest = CPG, strings and the
+fused loop); and `setup_s_per_trial`: a trial's set-up built fresh (as before set-up reuse) against
+reused from the worker's SetupCache, per engine.
+
+    python bench/trial_speed.py [--morphology tetraspine] [--steps 3000] [--repeats 3] [--tier-seconds 10]
 """
 
 from __future__ import annotations
@@ -14,6 +20,8 @@ from __future__ import annotations
 import argparse
 import json
 import time
+
+import numpy as np
 
 from robot.bodies import build_bodies, build_strings
 from robot.morphology.registry import load_morphology
@@ -27,7 +35,7 @@ from worker.trial import TrialConfig, random_unit_params, string_tables
 def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
     morph = load_morphology(morph_name)
     cfg = TrialConfig()
-    dt = cfg.dt_s
+    dt = cfg.step_s
     space = morph.controller_space()
     net = space.network(space.param_space.from_unit(random_unit_params(morph, seed)))
     bodies = build_bodies(morph.structure)
@@ -73,17 +81,84 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
             "n_cpg_nodes": net.n_nodes, "n_couplings": net.n_couplings, "dt_s": dt}
 
 
+def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict) -> dict:
+    """CPU s per simulated second of whole trials on both engines at their default steps, interleaved."""
+    import mujoco
+
+    from worker.setup import SetupCache
+    from worker.trial import simulate
+
+    morph = load_morphology(morph_name)
+    configs = {"bullet": TrialConfig(duration_s=seconds, engine="bullet"),
+               "mujoco": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=mujoco_options)}
+    caches = {e: SetupCache() for e in configs}
+    cpu: dict[str, list[float]] = {e: [] for e in configs}
+    mj_step_us, dts, contacts = [], {}, []
+    for r in range(repeats + 1):  # the first round warms caches and compiled code
+        u = random_unit_params(morph, 7 + r)
+        for engine, cfg in configs.items():
+            t0 = time.process_time()
+            res = simulate(morph, u, cfg, 7 + r, setup=caches[engine]).result
+            el = time.process_time() - t0
+            dts[engine] = res.extras["dt_s"]
+            if r:
+                cpu[engine].append(el / res.sim_time_s)
+            if engine == "mujoco" and r:
+                scene = caches[engine].get(morph, cfg, None)._scene
+                t = scene.data.timer[mujoco.mjtTimer.mjTIMER_STEP]
+                mj_step_us.append(t.duration / max(t.number, 1) * 1e6)
+                contacts.append(int(scene.data.ncon))
+                mujoco.mj_resetData(scene.model, scene.data)  # also clears the timers
+    med = {e: float(np.median(v)) for e, v in cpu.items()}
+    steps_per_s = 1.0 / dts["mujoco"]
+    mj = float(np.median(mj_step_us))
+    return {"tier_seconds": seconds, "cpu_s_per_sim_s": med, "dt_s": dts, "mujoco_options": mujoco_options,
+            "mujoco_split_us_per_step": {"mj_step": mj, "rest": med["mujoco"] * 1e6 / steps_per_s - mj},
+            "mujoco_contacts_at_end": contacts, "mujoco_speedup": med["bullet"] / med["mujoco"],
+            "cpu_s_per_sim_s_all": {e: [round(x, 4) for x in v] for e, v in cpu.items()}}
+
+
+def setup_cost(morph_name: str, repeats: int) -> dict:
+    """Set-up of one trial (a 1-step trial's wall time): built fresh against reused, per engine."""
+    from worker.setup import SetupCache
+    from worker.trial import simulate
+
+    morph = load_morphology(morph_name)
+    out = {}
+    for engine in ("bullet", "mujoco"):
+        cfg = TrialConfig(duration_s=1e-3, engine=engine, check_every_s=1e-3)
+        cache = SetupCache()
+        fresh, reused = [], []
+        for r in range(repeats + 1):
+            u = random_unit_params(morph, r)
+            t0 = time.perf_counter()
+            simulate(morph, u, cfg, r)
+            t1 = time.perf_counter()
+            simulate(morph, u, cfg, r, setup=cache)
+            t2 = time.perf_counter()
+            if r:
+                fresh.append(t1 - t0)
+                reused.append(t2 - t1)
+        out[engine] = {"fresh_s": float(np.median(fresh)), "reused_s": float(np.median(reused))}
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--morphology", default="tetraspine")
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--warmup", type=int, default=500)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--tier-seconds", type=float, default=10.0, help="simulated seconds per tier trial")
+    ap.add_argument("--mujoco-options", default="{}", help="MuJoCo engine options as JSON (default: its defaults)")
     args = ap.parse_args()
     runs = [measure(args.morphology, args.steps, args.warmup, seed=7 + r) for r in range(args.repeats)]
     best = min(runs, key=lambda r: r["step_to_bare_ratio"])
+    tier = tiers(args.morphology, args.tier_seconds, args.repeats, json.loads(args.mujoco_options))
     out = {"benchmark": "trial_speed", "morphology": args.morphology, **best,
-           "step_to_bare_ratio_all": [round(r["step_to_bare_ratio"], 3) for r in runs]}
+           "step_to_bare_ratio_all": [round(r["step_to_bare_ratio"], 3) for r in runs],
+           "mujoco_speedup": tier["mujoco_speedup"], "tiers": tier,
+           "setup_s_per_trial": setup_cost(args.morphology, args.repeats)}
     print(json.dumps(out))
 
 

@@ -27,8 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                           "{\"controller\": ..., \"params\": {name: value}})")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the morphology's)")
     p.add_argument("--dt", default=None,
-                   help="physics step in seconds (default 0.001), or 'auto' for half the string network's "
-                        "stable-step estimate")
+                   help="physics step in seconds (default: the engine's, 0.001 for Bullet; see docs/engines.md), "
+                        "or 'auto' for half the string network's stable-step estimate")
     p.add_argument("--controller", default=None, help="controller space (e.g. ntrt, sidewinding)")
     p.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
     p.add_argument("--seed", type=int, default=None, help="trial seed (default: the random seed or 0)")

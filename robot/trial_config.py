@@ -14,6 +14,9 @@ from protocol.errors import ConfigError, check_range
 from robot.scene import SceneConfig
 
 MOTOR_MODEL_NAMES = ("physical", "ntrt2014")
+# each engine's default physics step when dt_s is not given: the largest whose median distance error on the
+# 12-segment Tetraspine stays within max(1 %, chaos floor) of the converged reference (docs/accuracy.md)
+ENGINE_DEFAULT_DT_S = {"bullet": 1e-3, "mujoco": 1e-3}
 ENGINE_NAME = re.compile(r"^[a-z][a-z0-9_-]{0,31}$")
 
 
@@ -21,6 +24,7 @@ ENGINE_NAME = re.compile(r"^[a-z][a-z0-9_-]{0,31}$")
 class TrialConfig:
     """How to run one trial. None means "the morphology's default".
 
+    dt_s: the physics step; None means the engine's default (ENGINE_DEFAULT_DT_S; `step_s` resolves it).
     engine: the physics backend ("bullet", "mujoco"); engine_options: that backend's own settings
     (solver iterations, friction anchors, contact parameters), validated by the backend.
     motor_model: "physical" (limits in cm/s and cm/s^2, independent of dt) or "ntrt2014" (NTRT's
@@ -36,7 +40,7 @@ class TrialConfig:
 
     duration_s: float | None = None
     settle_s: float = 0.0
-    dt_s: float = 1e-3
+    dt_s: float | None = None
     auto_dt: bool = False
     dt_safety_factor: float = 0.5
     refuse_unstable_dt: bool = True
@@ -63,7 +67,8 @@ class TrialConfig:
         if self.duration_s is not None:
             check_range("duration_s", self.duration_s, 0.0, 3600.0, low_inclusive=False)
         check_range("settle_s", self.settle_s, 0.0, 60.0)
-        check_range("dt_s", self.dt_s, 1e-6, 0.02)
+        if self.dt_s is not None:
+            check_range("dt_s", self.dt_s, 1e-6, 0.02)
         check_range("dt_safety_factor", self.dt_safety_factor, 0.0, 1.0, low_inclusive=False)
         if not isinstance(self.engine, str) or not ENGINE_NAME.match(self.engine):
             raise ConfigError("engine is not an engine name", received=self.engine,
@@ -91,6 +96,11 @@ class TrialConfig:
         if not isinstance(self.scene, SceneConfig):
             raise ConfigError("scene is not a scene config", received=type(self.scene).__name__,
                               expected="a SceneConfig or its dict")
+
+    @property
+    def step_s(self) -> float:
+        """The physics step asked for: dt_s, or the engine's default."""
+        return self.dt_s if self.dt_s is not None else ENGINE_DEFAULT_DT_S.get(self.engine, 1e-3)
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -21,10 +21,13 @@ from typing import Any
 import numpy as np
 
 from robot.morphology.registry import load_morphology
+from robot.trial_config import ENGINE_DEFAULT_DT_S
 from worker import scoring
 from worker.trial import TrialConfig, random_unit_params, simulate
 
-BASELINE = "dt 1 ms (default)"
+
+def baseline_label(engine: str = "bullet") -> str:
+    return f"dt {ENGINE_DEFAULT_DT_S.get(engine, 1e-3) * 1e3:g} ms (default)"
 
 
 @dataclass(frozen=True)
@@ -43,7 +46,11 @@ def sweep(quick: bool, engine: str = "bullet") -> list[Setting]:
     steps = (2e-3, 1e-3, 5e-4) if quick else (4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
     if engine == "mujoco" and not quick:
         steps = (8e-3, 4e-3, 3e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
-    out = [Setting(BASELINE if dt == 1e-3 else f"dt {dt * 1e3:g} ms", "step", {"dt_s": dt}) for dt in steps]
+    default = ENGINE_DEFAULT_DT_S.get(engine, 1e-3)
+    if default not in steps:
+        steps = tuple(sorted((*steps, default), reverse=True))
+    out = [Setting(baseline_label(engine) if dt == default else f"dt {dt * 1e3:g} ms", "step", {"dt_s": dt})
+           for dt in steps]
     if engine == "mujoco":
         return out + _mujoco_settings(quick) + _scenes()
     iterations = (50,) if quick else (5, 20, 50)
@@ -204,7 +211,7 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
     threshold = max(0.01, floor)
     ok = [r for r in table if r["label"] in front and r["median_distance_error"] <= threshold
           and all(st == "complete" for st in r["statuses"])]
-    baseline = next(r for r in table if r["label"] == BASELINE)
+    baseline = next(r for r in table if r["label"] == baseline_label(base.get("engine", "bullet")))
     if ok:
         rec = min(ok, key=lambda r: r["wall_s_per_sim_s"])
         why = f"fastest setting on the Pareto front with median distance error <= {threshold:.2%}"

@@ -29,15 +29,16 @@ def _stable_step(morph: Morphology, relocate: bool):
 def choose_step(morph: Morphology, cfg: TrialConfig) -> float:
     """The physics step: dt_s, or the automatic choice; refuses a step known to be unstable."""
     est = _stable_step(morph, cfg.relocate_anchors)
+    dt = cfg.step_s
     if cfg.auto_dt:
-        return min(cfg.dt_s, cfg.dt_safety_factor * est.dt_limit_s)
-    if cfg.refuse_unstable_dt and cfg.dt_s > est.dt_limit_s:
+        return min(dt, cfg.dt_safety_factor * est.dt_limit_s)
+    if cfg.refuse_unstable_dt and dt > est.dt_limit_s:
         raise ConfigError(
             f"dt_s is unstable for {morph.name}: its string network has omega_max = {est.omega_max_rad_s:.4g} rad/s "
             f"and gamma_max = {est.gamma_max_per_s:.4g} 1/s, so explicit string forces diverge above "
             f"dt = {est.dt_limit_s:.3g} s; set auto_dt (--dt auto) or a smaller step",
-            received=cfg.dt_s, expected=f"dt_s <= {est.dt_limit_s:.3g} s")
-    return cfg.dt_s
+            received=dt, expected=f"dt_s <= {est.dt_limit_s:.3g} s")
+    return dt
 
 
 def _rotation_matrix(rotation: tuple[float, float, float, float] | None) -> np.ndarray:

@@ -48,7 +48,7 @@ class Verification:
 def verification_configs(config: TrialConfig, settings: VerifySettings,
                          morph: Morphology) -> list[tuple[str, TrialConfig]]:
     """The re-simulations a verification needs, as (name, config) pairs."""
-    fine = dataclasses.replace(config, dt_s=config.dt_s / settings.refine, auto_dt=False)
+    fine = dataclasses.replace(config, dt_s=config.step_s / settings.refine, auto_dt=False)
     out = [("fine", fine)]
     if settings.perturb:
         friction = (config.ground_friction if config.ground_friction is not None else morph.ground_friction)

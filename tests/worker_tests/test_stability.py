@@ -61,9 +61,9 @@ def test_every_builtin_is_stable_at_its_default_step():
         est = estimate_stable_step(load_morphology(name))
         assert np.isfinite(est.omega_max_rad_s)
         if name == "tetraspine-hardware":  # 600,000 N/m cables: the hard case, needs ~0.5 ms
-            assert est.dt_limit_s < TrialConfig().dt_s
+            assert est.dt_limit_s < TrialConfig().step_s
         else:
-            assert est.dt_limit_s > TrialConfig().dt_s, name
+            assert est.dt_limit_s > TrialConfig().step_s, name
 
 
 def test_light_segments_are_limited_by_damping_and_run_at_the_auto_step():

@@ -18,7 +18,7 @@ def test_creep_artefact_is_not_reproduced_at_a_finer_step():
     r = run_trial(morph, u, cfg, 1)
     v = verify_trial(morph, u, cfg, 1, r.distance_m)
     assert not v.holds and v.verdict.startswith("not reproduced")
-    assert v.fine_dt_s == cfg.dt_s / 4 and v.relative_change > 0.05
+    assert v.fine_dt_s == cfg.step_s / 4 and v.relative_change > 0.05
 
 
 def test_diverging_parameters_are_not_reproduced():

@@ -1,0 +1,178 @@
+"""Agreement between the tiers: do MuJoCo and Bullet rank gaits alike?
+
+For each of the four paper spines, seeded random parameter sets (and optionally the best trials of a run
+file) run on both engines, at each engine's default step and at a converged step. Per spine and pair of
+tiers it reports the Spearman rank correlation of the distance, the median distance ratio (MuJoCo / Bullet,
+over gaits that move at least 1 cm in Bullet) and how many of MuJoCo's top 10 are in Bullet's top 10. NTRT's
+published gaits are replayed on both engines with the ratio to NTRT's own figures. Prints one JSON object.
+
+    python bench/tier_agreement.py                  # >= 100 sets per spine, 10 s trials (hours on 2 cores)
+    python bench/tier_agreement.py --quick          # 12 sets per spine, 3 s trials, no converged steps
+    python bench/tier_agreement.py --sets 40 --duration 5 --best-of tetraspine=runs/x.h5 --jobs 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+SPINES = ("tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed")
+# converged steps: Bullet is within ~1.5 % at 0.25 ms (docs/accuracy.md), MuJoCo well within 1 % at 0.5 ms
+CONVERGED_DT_S = {"bullet": 2.5e-4, "mujoco": 5e-4}
+NTRT = Path("/work/shared/ntrt-reference")
+REPLAYS = {"octahedral-complex": "OctahedralComplex/paper-2014-06-07",
+           "tetrahedral-complex": "TetrahedralComplex/paper-2014-06-07",
+           "tetraspine-ntrt": "TetraSpine/paper-2014-06-07", "ribbed": "Ribbed/paper-2014-06-07"}
+MOVING_M = 0.01
+
+
+def _trial(args: tuple) -> dict:
+    from robot.morphology.registry import load_morphology
+    from worker.trial import TrialConfig, run_trial
+
+    spine, unit, seed, engine, dt, duration, settle = args
+    morph = load_morphology(spine)
+    cfg = {"duration_s": duration, "engine": engine, "settle_s": settle}
+    if dt is not None:
+        cfg["dt_s"] = dt
+    try:
+        choose = TrialConfig(**cfg)
+        from worker.episode import choose_step
+
+        choose_step(morph, choose)
+    except Exception:  # a step the string network cannot take: the automatic one
+        cfg["auto_dt"] = True
+    t0 = time.process_time()
+    r = run_trial(morph, np.asarray(unit), TrialConfig(**cfg), seed)
+    return {"distance_m": r.distance_m if r.ok else math.nan, "status": str(r.status), "dt_s": r.extras["dt_s"],
+            "cpu_s": time.process_time() - t0}
+
+
+def _replay(args: tuple) -> dict:
+    from worker.replay import replay
+
+    spine, folder, engine = args
+    rep = replay(NTRT / folder, spine, engine=engine)
+    return {"ntrt_distance_cm": rep.result.ntrt_distance_cm, "status": str(rep.result.status),
+            "ratio_to_ntrt": rep.ratio, "ntrt_reference_cm": rep.reference.distance_cm if rep.reference else None}
+
+
+def ranks(x: np.ndarray) -> np.ndarray:
+    """Average ranks (ties share their mean rank)."""
+    order = np.argsort(x, kind="mergesort")
+    r = np.empty(len(x))
+    r[order] = np.arange(len(x), dtype=float)
+    for v in np.unique(x):
+        tie = x == v
+        if tie.sum() > 1:
+            r[tie] = r[tie].mean()
+    return r
+
+
+def spearman(a: np.ndarray, b: np.ndarray) -> float:
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3:
+        return math.nan
+    ra, rb = ranks(a[ok]), ranks(b[ok])
+    return float(np.corrcoef(ra, rb)[0, 1])
+
+
+def agreement(bullet: np.ndarray, mujoco: np.ndarray, top: int = 10) -> dict:
+    ok = np.isfinite(bullet) & np.isfinite(mujoco)
+    moving = ok & (np.abs(bullet) >= MOVING_M)
+    k = min(top, int(ok.sum()))
+    idx = np.flatnonzero(ok)
+    top_b = set(idx[np.argsort(-bullet[ok])[:k]])
+    top_m = set(idx[np.argsort(-mujoco[ok])[:k]])
+    return {"n": int(ok.sum()), "spearman": spearman(bullet, mujoco),
+            "median_distance_ratio": float(np.median(mujoco[moving] / bullet[moving])) if moving.any() else None,
+            "top_overlap": len(top_b & top_m), "top_k": k,
+            "failed": {"bullet": int((~np.isfinite(bullet)).sum()), "mujoco": int((~np.isfinite(mujoco)).sum())}}
+
+
+def _best_sets(path: str, n: int) -> list[tuple[tuple[float, ...], int]]:
+    from storage.hdf5 import Hdf5Storage
+
+    store = Hdf5Storage.open_read(path)
+    try:
+        return [(tuple(rec.params_unit), int(rec.seed)) for rec in store.best(n)]
+    finally:
+        store.close()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="12 sets per spine, 3 s trials, defaults only")
+    ap.add_argument("--sets", type=int, default=None, help="random parameter sets per spine (default 100)")
+    ap.add_argument("--duration", type=float, default=None, help="simulated seconds per trial (default 10)")
+    ap.add_argument("--settle", type=float, default=0.0, help="settle phase before scoring (s)")
+    ap.add_argument("--spines", default=",".join(SPINES))
+    ap.add_argument("--no-converged", action="store_true", help="only each engine's default step")
+    ap.add_argument("--no-replays", action="store_true")
+    ap.add_argument("--best-of", action="append", default=[], metavar="SPINE=RUN.h5",
+                    help="also the 10 best trials of this run file")
+    ap.add_argument("--jobs", type=int, default=2)
+    args = ap.parse_args()
+    sets = args.sets or (12 if args.quick else 100)
+    duration = args.duration or (3.0 if args.quick else 10.0)
+    tiers = {"default": {"bullet": None, "mujoco": None}}
+    if not (args.quick or args.no_converged):
+        tiers["converged"] = dict(CONVERGED_DT_S)
+    best_of = dict(b.split("=", 1) for b in args.best_of)
+    from robot.morphology.registry import load_morphology
+    from worker.trial import random_unit_params
+
+    t0 = time.time()
+    jobs: list[tuple] = []
+    for spine in args.spines.split(","):
+        morph = load_morphology(spine)
+        cases = [(tuple(random_unit_params(morph, s)), s) for s in range(1, sets + 1)]
+        if spine in best_of:
+            cases += _best_sets(best_of[spine], 10)
+        for tier, steps in tiers.items():
+            for engine, dt in steps.items():
+                jobs += [(spine, tier, engine, i, (spine, u, s, engine, dt, duration, args.settle))
+                         for i, (u, s) in enumerate(cases)]
+    replays = [] if args.no_replays else [(s, f, e) for s, f in REPLAYS.items() if (NTRT / f).is_dir()
+                                          for e in ("bullet", "mujoco")]
+    with ProcessPoolExecutor(args.jobs) as pool:
+        futures = [pool.submit(_trial, j[-1]) for j in jobs]
+        rfutures = [pool.submit(_replay, r) for r in replays]
+        rows = [f.result() for f in futures]
+        rrows = [f.result() for f in rfutures]
+    table: dict = {}
+    for (spine, tier, engine, i, _), row in zip(jobs, rows, strict=True):
+        table.setdefault(spine, {}).setdefault(tier, {}).setdefault(engine, {})[i] = row
+    out: dict = {"benchmark": "tier_agreement", "sets_per_spine": sets, "duration_s": duration,
+                 "settle_s": args.settle, "spines": {}}
+    for spine, by_tier in table.items():
+        res = {}
+        dist = {}
+        for tier, by_engine in by_tier.items():
+            for engine, cases in by_engine.items():
+                dist[tier, engine] = np.array([cases[i]["distance_m"] for i in sorted(cases)])
+                res.setdefault("cpu_s_per_sim_s", {})[f"{engine}@{tier}"] = float(
+                    np.median([c["cpu_s"] for c in cases.values()]) / duration)
+                res.setdefault("dt_s", {})[f"{engine}@{tier}"] = float(np.median([c["dt_s"] for c in cases.values()]))
+        for tier in by_tier:
+            res[f"mujoco_vs_bullet@{tier}"] = agreement(dist[tier, "bullet"], dist[tier, "mujoco"])
+        if "converged" in by_tier:
+            for name, ref, other in (("mujoco_default_vs_bullet_converged", "bullet", "mujoco"),
+                                     ("bullet_default_vs_bullet_converged", "bullet", "bullet"),
+                                     ("mujoco_default_vs_mujoco_converged", "mujoco", "mujoco")):
+                res[name] = agreement(dist["converged", ref], dist["default", other])
+        out["spines"][spine] = res
+    out["replays"] = [{"morphology": s, "folder": f, "engine": e, **r}
+                      for (s, f, e), r in zip(replays, rrows, strict=True)]
+    out["wall_s"] = time.time() - t0
+    print(json.dumps(out, default=lambda v: None if isinstance(v, float) and not math.isfinite(v) else v))
+
+
+if __name__ == "__main__":
+    main()
