@@ -49,6 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--seeds", type=int, default=None, help="random parameter sets (default 3 quick, 5 full)")
     a.add_argument("--duration", type=float, default=None, help="simulated seconds per trial")
     a.add_argument("--run", type=Path, default=None, help="also test the best trial of this HDF5 run file")
+    a.add_argument("--run-best", type=int, default=1, help="how many of the run's best trials (default 1)")
     a.add_argument("--controller", default=None)
     a.add_argument("--jobs", type=int, default=2, help="worker processes")
     add_engine_argument(a)
@@ -167,20 +168,20 @@ def _physical(morph, params, controller) -> np.ndarray:
     return resolve_params(morph, params, controller)
 
 
-def _best_of_run(path: Path):
+def _best_of_run(path: Path, n: int = 1):
     from storage.hdf5 import Hdf5Storage
     from worker.accuracy import ParamSet
 
     store = Hdf5Storage.open_read(path)
     try:
-        best = store.best(1)
+        best = store.best(n)
         meta = store.run_meta()
     finally:
         store.close()
     if not best:
         raise ParameterError("run file has no finished trial", received=str(path), expected="a run with results")
-    rec = best[0]
-    return ParamSet(f"best of {path.name} (trial {rec.trial_id})", tuple(rec.params_unit), rec.seed), meta
+    return [ParamSet(f"best of {path.name} (trial {rec.trial_id})", tuple(rec.params_unit), rec.seed)
+            for rec in best], meta
 
 
 def cmd_accuracy(args: argparse.Namespace) -> int:
@@ -190,7 +191,9 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     checks.at_least("--jobs", args.jobs, 1, "worker processes")
     best, controller, base = None, args.controller, None
     if args.run is not None:
-        best, meta = _best_of_run(args.run)
+        if not 1 <= args.run_best <= 50:
+            raise ParameterError("--run-best out of range", received=args.run_best, expected="1 to 50")
+        best, meta = _best_of_run(args.run, args.run_best)
         controller = controller or meta.controller
         base = {k: v for k, v in meta.trial_config.items() if k not in ("duration_s", "dt_s", "record_every_s")}
     if args.engine is not None:

@@ -165,7 +165,8 @@ def pareto(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float | None, jobs: int,
-                 best: ParamSet | None = None, controller: str | None = None, base: dict[str, Any] | None = None,
+                 best: ParamSet | list[ParamSet] | None = None, controller: str | None = None,
+                 base: dict[str, Any] | None = None,
                  progress: Callable[[str], None] = lambda s: None) -> dict[str, Any]:
     morph = load_morphology(morphology)
     morph_src = morphology if isinstance(morphology, str) else morph.to_dict()
@@ -174,7 +175,7 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
     sets = [ParamSet(f"random seed {s}", tuple(random_unit_params(morph, s, controller)), s)
             for s in range(1, seeds + 1)]
     if best is not None:
-        sets.append(best)
+        sets.extend(best if isinstance(best, list) else [best])
     settings = sweep(quick, base.get("engine", "bullet"))
     start_dt, floor_dt, tol = (2.5e-4, 2.5e-4, 1e-3) if quick else (2.5e-4, 3.125e-5, 1e-3)
     with ProcessPoolExecutor(jobs) as pool:

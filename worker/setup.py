@@ -9,6 +9,7 @@ Bullet worlds (whose contact caches a reset would not clear) are built fresh eve
 
 from __future__ import annotations
 
+import dataclasses
 from collections import OrderedDict
 from typing import Any
 
@@ -85,15 +86,26 @@ class TrialSetup:
             self._scene = None
 
 
+# fields a set-up does not depend on: trials differing only in these (the rungs of a multi-fidelity
+# search: other durations, settle phases) share one set-up
+PER_TRIAL_FIELDS = ("duration_s", "settle_s", "record_every_s", "check_every_s", "extras")
+
+
+def setup_key(cfg: TrialConfig) -> str:
+    return dataclasses.replace(cfg, **{f: TrialConfig.__dataclass_fields__[f].default if f != "extras" else {}
+                                       for f in PER_TRIAL_FIELDS}).config_hash()
+
+
 class SetupCache:
-    """TrialSetups by (morphology, trial config hash, controller); keeps the most recent `size`."""
+    """TrialSetups by (morphology, trial config hash without the per-trial fields, controller); keeps the most
+    recent `size`."""
 
     def __init__(self, size: int = 4) -> None:
         self.size = size
         self._items: OrderedDict[Any, TrialSetup] = OrderedDict()
 
     def get(self, morph: Morphology, cfg: TrialConfig, controller: str | None) -> TrialSetup:
-        key = (morph, cfg.config_hash(), controller)
+        key = (morph, setup_key(cfg), controller)
         if key in self._items:
             self._items.move_to_end(key)
             return self._items[key]

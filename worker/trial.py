@@ -21,7 +21,7 @@ from worker import scoring
 from worker.control.cpg import CpgIntegrator
 from worker.engines.base import EngineFactory
 from worker.episode import check_state, choose_step, score
-from worker.setup import SetupCache, TrialSetup
+from worker.setup import SetupCache, TrialSetup, setup_key
 from worker.sim import strings as sk
 
 MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014}
@@ -120,7 +120,8 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
         raise ParameterError("seed is not an integer", received=seed, expected="an integer")
     if isinstance(setup, SetupCache):
         setup = setup.get(morph, cfg, controller)
-    elif setup is None or setup.morph != morph or setup.cfg != cfg or setup.controller != controller:
+    elif setup is None or setup.morph != morph or setup_key(setup.cfg) != setup_key(cfg) \
+            or setup.controller != controller:
         setup = TrialSetup(morph, cfg, controller)
     sparams, sstate = setup.string_tables(network)
     bodies, geom, masses, dt, terrain = setup.bodies, setup.geom, setup.masses, setup.dt, setup.terrain

@@ -30,3 +30,18 @@ def test_pareto_front_keeps_only_undominated_settings():
     rows = [{"label": lbl, "numerical": True, "wall_s_per_sim_s": w, "median_distance_error": e}
             for lbl, w, e in (("a", 1.0, 0.3), ("b", 2.0, 0.1), ("c", 3.0, 0.2), ("d", 4.0, 0.05))]
     assert pareto(rows) == ["a", "b", "d"]
+
+
+def test_accuracy_command_on_mujoco(tmp_path):
+    out = tmp_path / "acc"
+    proc = subprocess.run(
+        [sys.executable, "-m", "cli.main", "accuracy", "tetraspine-ntrt", "--quick", "--seeds", "1",
+         "--duration", "0.2", "--jobs", "2", "--out", str(out), "--engine", "mujoco", "--json"],
+        capture_output=True, text=True, check=True)
+    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert report["engine"] == "mujoco"
+    labels = [r["label"] for r in report["table"]]
+    assert any(lbl.endswith("(default)") for lbl in labels)
+    assert "contacts: capsules (no rod-end proxies)" in labels and not any("friction anchors" in lbl for lbl in labels)
+    assert all(st == "complete" for r in report["table"] for st in r["statuses"])
+    assert 0.0 <= report["default_distance_error"] < math.inf

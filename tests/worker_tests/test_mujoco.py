@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -93,6 +94,11 @@ def test_reused_setup_gives_the_same_bits_as_a_fresh_one():
     fresh = run_trial(m, random_unit_params(m, 1), cfg, 1)
     assert reused[0].distance_m == reused[2].distance_m == fresh.distance_m
     assert reused[1].distance_m != reused[0].distance_m
+    # a shorter rung with a settle phase shares the set-up (and the compiled model) of the run
+    rung = dataclasses.replace(cfg, duration_s=0.2, settle_s=0.1)
+    short = run_trial(m, random_unit_params(m, 1), rung, 1, setup=cache)
+    assert cache.get(m, rung, None).scenes_built == 1
+    assert short.distance_m == run_trial(m, random_unit_params(m, 1), rung, 1).distance_m
     cache.close()
 
 
