@@ -30,11 +30,16 @@ REPLAYS = {"octahedral-complex": "OctahedralComplex/paper-2014-06-07",
            "tetrahedral-complex": "TetrahedralComplex/paper-2014-06-07",
            "tetraspine-ntrt": "TetraSpine/paper-2014-06-07", "ribbed": "Ribbed/paper-2014-06-07"}
 MOVING_M = 0.01
+_CACHE = None  # one SetupCache per pool process: set-up reused as a worker does
 
 
 def _trial(args: tuple) -> dict:
     from robot.morphology.registry import load_morphology
+    from worker.setup import SetupCache
     from worker.trial import TrialConfig, run_trial
+
+    global _CACHE
+    _CACHE = _CACHE or SetupCache(8)
 
     spine, unit, seed, engine, dt, duration, settle = args
     morph = load_morphology(spine)
@@ -49,7 +54,7 @@ def _trial(args: tuple) -> dict:
     except Exception:  # a step the string network cannot take: the automatic one
         cfg["auto_dt"] = True
     t0 = time.process_time()
-    r = run_trial(morph, np.asarray(unit), TrialConfig(**cfg), seed)
+    r = run_trial(morph, np.asarray(unit), TrialConfig(**cfg), seed, setup=_CACHE)
     return {"distance_m": r.distance_m if r.ok else math.nan, "status": str(r.status), "dt_s": r.extras["dt_s"],
             "cpu_s": time.process_time() - t0}
 

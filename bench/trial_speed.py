@@ -8,9 +8,10 @@ affects them alike.
 
 The tiers: whole trials (the production loop, set-up reused) on Bullet and on MuJoCo, each at its
 default step, interleaved: CPU seconds per simulated second of each and `mujoco_speedup` = Bullet's
-over MuJoCo's; MuJoCo's split (mj_step from MuJoCo's own timers, the rest = CPG, strings and the
-fused loop); and `setup_s_per_trial`: a trial's set-up built fresh (as before set-up reuse) against
-reused from the worker's SetupCache, per engine.
+over MuJoCo's (also without segment-segment contacts, as a 2 ms screen, and against Bullet at 0.25 ms,
+the step where Bullet is about as accurate as MuJoCo at its default); MuJoCo's split (mj_step from
+MuJoCo's own timers; the rest = CPG, strings and the fused loop); and `setup_s_per_trial`: a trial's
+set-up built fresh (as before set-up reuse) against reused from the worker's SetupCache, per engine.
 
     python bench/trial_speed.py [--morphology tetraspine] [--steps 3000] [--repeats 3] [--tier-seconds 10]
 """
@@ -82,39 +83,51 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
 
 
 def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict) -> dict:
-    """CPU s per simulated second of whole trials on both engines at their default steps, interleaved."""
+    """CPU s per simulated second of whole trials, interleaved: both engines at their default steps, and for
+    context MuJoCo without segment-segment contacts, MuJoCo as a screen (2 ms, no segment-segment contacts)
+    and Bullet at 0.25 ms (about MuJoCo's default-step accuracy, docs/accuracy.md)."""
     import mujoco
 
     from worker.setup import SetupCache
     from worker.trial import simulate
 
     morph = load_morphology(morph_name)
+    off = {**mujoco_options, "segment_contacts": "off"}
     configs = {"bullet": TrialConfig(duration_s=seconds, engine="bullet"),
-               "mujoco": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=mujoco_options)}
+               "mujoco": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=mujoco_options),
+               "mujoco_segment_contacts_off": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=off),
+               "mujoco_screen_2ms": TrialConfig(duration_s=seconds, engine="mujoco", dt_s=2e-3, engine_options=off),
+               "bullet_0.25ms": TrialConfig(duration_s=seconds, engine="bullet", dt_s=2.5e-4)}
     caches = {e: SetupCache() for e in configs}
     cpu: dict[str, list[float]] = {e: [] for e in configs}
     mj_step_us, dts, contacts = [], {}, []
     for r in range(repeats + 1):  # the first round warms caches and compiled code
         u = random_unit_params(morph, 7 + r)
-        for engine, cfg in configs.items():
+        for name, cfg in configs.items():
             t0 = time.process_time()
-            res = simulate(morph, u, cfg, 7 + r, setup=caches[engine]).result
+            res = simulate(morph, u, cfg, 7 + r, setup=caches[name]).result
             el = time.process_time() - t0
-            dts[engine] = res.extras["dt_s"]
+            dts[name] = res.extras["dt_s"]
             if r:
-                cpu[engine].append(el / res.sim_time_s)
-            if engine == "mujoco" and r:
-                scene = caches[engine].get(morph, cfg, None)._scene
-                t = scene.data.timer[mujoco.mjtTimer.mjTIMER_STEP]
-                mj_step_us.append(t.duration / max(t.number, 1) * 1e6)
+                cpu[name].append(el / res.sim_time_s)
+            if name == "mujoco" and r:
+                # bare mj_step from the trial's last state with its last string wrenches held (CPU time;
+                # MuJoCo's own timers count wall time, which a shared machine inflates)
+                scene = caches[name].get(morph, cfg, None)._scene
                 contacts.append(int(scene.data.ncon))
-                mujoco.mj_resetData(scene.model, scene.data)  # also clears the timers
+                t1 = time.process_time()
+                for _ in range(200):
+                    mujoco.mj_step(scene.model, scene.data)
+                mj_step_us.append((time.process_time() - t1) / 200 * 1e6)
     med = {e: float(np.median(v)) for e, v in cpu.items()}
-    steps_per_s = 1.0 / dts["mujoco"]
     mj = float(np.median(mj_step_us))
     return {"tier_seconds": seconds, "cpu_s_per_sim_s": med, "dt_s": dts, "mujoco_options": mujoco_options,
-            "mujoco_split_us_per_step": {"mj_step": mj, "rest": med["mujoco"] * 1e6 / steps_per_s - mj},
+            "mujoco_split_us_per_step": {"whole": med["mujoco"] * 1e6 * dts["mujoco"], "mj_step": mj,
+                                         "rest_cpg_strings_loop": med["mujoco"] * 1e6 * dts["mujoco"] - mj},
             "mujoco_contacts_at_end": contacts, "mujoco_speedup": med["bullet"] / med["mujoco"],
+            "mujoco_speedup_segment_contacts_off": med["bullet"] / med["mujoco_segment_contacts_off"],
+            "mujoco_screen_speedup": med["bullet"] / med["mujoco_screen_2ms"],
+            "speedup_at_equal_accuracy": med["bullet_0.25ms"] / med["mujoco"],
             "cpu_s_per_sim_s_all": {e: [round(x, 4) for x in v] for e, v in cpu.items()}}
 
 
