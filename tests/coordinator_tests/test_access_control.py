@@ -77,9 +77,11 @@ def test_a_malformed_credentials_file_is_a_clear_error(tmp_path, text, message):
         load_credentials(tmp_path / "c")
 
 
-def test_the_compose_credentials_script_gives_a_router_that_refuses_strangers(tmp_path):
-    """deploy/make-credentials.sh (the compose init service) with the router config it writes, on a real
-    Zenoh router: the coordinator's and the workers' lines get in, nobody else does; made once, kept."""
+def test_the_compose_deployment_tls_and_passwords_let_its_services_in_and_nobody_else(tmp_path):
+    """deploy/make-credentials.sh (the compose init service) and the configs it writes, with the compose
+    topology on loopback: a Zenoh router from router.json5, the coordinator and a worker process as the
+    compose file starts them. A client without the deployment's certificate, or with it but an unknown
+    password, is refused; the files are made once and kept."""
     import os
     import shutil
     import subprocess
@@ -88,27 +90,47 @@ def test_the_compose_credentials_script_gives_a_router_that_refuses_strangers(tm
 
     if shutil.which("openssl") is None:
         pytest.skip("openssl is not installed (the compose image installs it from Debian)")
-    secrets_dir = tmp_path / "secrets"
-    env = dict(os.environ, SECRETS_DIR=str(secrets_dir), SECRETS_OWNER=str(os.getuid()))
+    d = tmp_path / "secrets"
+    env = dict(os.environ, SECRETS_DIR=str(d), SECRETS_OWNER=str(os.getuid()))
     for _ in range(2):
         subprocess.run(["sh", str(ROOT / "deploy" / "make-credentials.sh")], env=env, check=True, capture_output=True)
-    first = (secrets_dir / "credentials").read_text()
+    first = (d / "credentials").read_text()
     assert [ln.split(":")[0] for ln in first.splitlines()] == ["coordinator", "worker"]
-    assert (secrets_dir / "worker").read_text() == first.splitlines()[1] + "\n"
-    assert all((secrets_dir / n).stat().st_mode & 0o077 == 0 for n in ("credentials", "coordinator", "worker"))
-    ep = free_endpoint()
-    conf = zenoh.Config.from_file(str(secrets_dir / "router.json5"))
+    assert (d / "worker").read_text() == first.splitlines()[1] + "\n"
+    assert all((d / n).stat().st_mode & 0o077 == 0 for n in ("credentials", "ca.key", "worker.key", "router.key"))
+    port = free_endpoint().rsplit(":", 1)[1]
+    ep = f"tls/localhost:{port}"
+    conf = zenoh.Config.from_file(str(d / "router.json5"))
     conf.insert_json5("mode", '"router"')
     conf.insert_json5("listen/endpoints", f'["{ep}"]')
     conf.insert_json5("scouting/multicast/enabled", "false")
     router = zenoh.open(conf)
+    out = tmp_path / "run.h5"
+    coord = spinefarm("coordinator", "sphere:3", "--trials", "30", "--run-id", "compose", "--out", str(out),
+                      "--connect", ep, "--api-port", "-1", "--quiet", "--credentials", str(d / "coordinator"),
+                      "--zenoh-config", str(d / "coordinator.json5"))
+    worker = spinefarm("worker", "--connect", ep, "--run", "compose", "--exit-when-done", "--credentials",
+                       str(d / "worker"), "--zenoh-config", str(d / "worker.json5"))
     try:
-        for user in ("coordinator", "worker"):
-            zenoh.open(zenoh_config("client", connect=[ep],
-                                    credentials=load_credentials(secrets_dir / user))).close()
+        assert coord.wait(60) == 0 and worker.wait(30) == 0
+        assert status(out)["trials_complete"] == 30
         stranger = write(tmp_path / "stranger", f"worker:{secrets.token_hex(16)}")
-        for creds in (None, load_credentials(stranger)):
-            with pytest.raises(zenoh.ZError):
-                zenoh.open(zenoh_config("client", connect=[ep], credentials=creds))
+        attempts = [(None, load_credentials(d / "worker")),          # the password, but no certificate
+                    (d / "worker.json5", load_credentials(stranger)),  # the certificate, a wrong password
+                    (d / "worker.json5", None)]                        # the certificate, no password
+        for config_file, creds in attempts:
+            with pytest.raises(ConfigError):
+                open_session(ep, config_file, creds)
     finally:
+        stop(coord, worker)
         router.close()
+
+
+def open_session(ep, config_file, creds):
+    """A client session as the coordinator's zenoh_config builds it; ConfigError when refused."""
+    from coordinator.service import zenoh_config
+
+    try:
+        zenoh.open(zenoh_config("client", connect=[ep], config_file=config_file, credentials=creds)).close()
+    except zenoh.ZError as exc:
+        raise ConfigError(str(exc)) from exc
