@@ -26,6 +26,18 @@ def write_status(run_path: str | Path, status: dict[str, Any]) -> None:
 
 def read_status(run_path: str | Path) -> dict[str, Any] | None:
     try:
-        return json.loads(status_path(run_path).read_text())
+        status = json.loads(status_path(run_path).read_text())
     except (OSError, ValueError):
         return None
+    return _valid_text(status) if isinstance(status, dict) else None
+
+
+def _valid_text(x: Any) -> Any:
+    """Lone surrogates (JSON may spell "\ud800") cannot be served as UTF-8: replace them."""
+    if isinstance(x, str):
+        return x.encode("utf-8", "replace").decode("utf-8")
+    if isinstance(x, dict):
+        return {_valid_text(k): _valid_text(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_valid_text(v) for v in x]
+    return x

@@ -75,3 +75,19 @@ def _ok(url):
         return httpx.get(url, timeout=1).status_code == 200
     except httpx.HTTPError:
         return False
+
+
+def test_a_status_file_with_a_lone_surrogate_is_served(tmp_path):
+    """An old status file holding a worker id like "\\ud800" must not turn /runs into 500 for good."""
+    from fastapi.testclient import TestClient
+
+    from api.app import create_app
+    from storage.status import status_path
+
+    run_file(tmp_path / "run.h5", "odd")
+    status_path(tmp_path / "run.h5").write_text(
+        '{"run_id": "odd", "state": "running", "workers": [{"worker_id": "\\ud800", "alive": true, "leases": 0, '
+        '"last_contact_unix_s": 1.0}], "updated_at_unix_s": 1.0}')
+    with TestClient(create_app(runs_dir=tmp_path)) as client:
+        assert client.get("/runs").status_code == 200
+        assert client.get("/runs/odd").status_code == 200
