@@ -9,6 +9,8 @@ published gaits are replayed on both engines with the ratio to NTRT's own figure
     python bench/tier_agreement.py                  # >= 100 sets per spine, 10 s trials (hours on 2 cores)
     python bench/tier_agreement.py --quick          # 12 sets per spine, 3 s trials, no converged steps
     python bench/tier_agreement.py --sets 40 --duration 5 --best-of tetraspine=runs/x.h5 --jobs 2
+    python bench/tier_agreement.py --spines octahedral-complex --sets 16 --duration 5 --no-replays \
+        --mujoco-options '{"contact_geometry": "capsules"}'    # which model choices bring the tiers closer
 """
 
 from __future__ import annotations
@@ -41,9 +43,9 @@ def _trial(args: tuple) -> dict:
     global _CACHE
     _CACHE = _CACHE or SetupCache(8)
 
-    spine, unit, seed, engine, dt, duration, settle = args
+    spine, unit, seed, engine, dt, duration, settle, extra = args
     morph = load_morphology(spine)
-    cfg = {"duration_s": duration, "engine": engine, "settle_s": settle}
+    cfg = {"duration_s": duration, "engine": engine, "settle_s": settle, **extra}
     if dt is not None:
         cfg["dt_s"] = dt
     try:
@@ -122,8 +124,17 @@ def main() -> None:
     ap.add_argument("--no-replays", action="store_true")
     ap.add_argument("--best-of", action="append", default=[], metavar="SPINE=RUN.h5",
                     help="also the 10 best trials of this run file")
+    ap.add_argument("--mujoco-options", default="{}", help="MuJoCo engine options (JSON), e.g. "
+                    "'{\"contact_geometry\": \"capsules\"}'")
+    ap.add_argument("--bullet-options", default="{}", help="Bullet engine options (JSON)")
+    ap.add_argument("--mujoco-ground-friction", type=float, default=None,
+                    help="ground friction of the MuJoCo runs (default: the morphology's)")
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
+    extra = {"bullet": {"engine_options": json.loads(args.bullet_options)},
+             "mujoco": {"engine_options": json.loads(args.mujoco_options)}}
+    if args.mujoco_ground_friction is not None:
+        extra["mujoco"]["ground_friction"] = args.mujoco_ground_friction
     sets = args.sets or (12 if args.quick else 100)
     duration = args.duration or (3.0 if args.quick else 10.0)
     tiers = {"default": {"bullet": None, "mujoco": None}}
@@ -142,7 +153,7 @@ def main() -> None:
             cases += _best_sets(best_of[spine], 10)
         for tier, steps in tiers.items():
             for engine, dt in steps.items():
-                jobs += [(spine, tier, engine, i, (spine, u, s, engine, dt, duration, args.settle))
+                jobs += [(spine, tier, engine, i, (spine, u, s, engine, dt, duration, args.settle, extra[engine]))
                          for i, (u, s) in enumerate(cases)]
     replays = [] if args.no_replays else [(s, f, e) for s, f in REPLAYS.items() if (NTRT / f).is_dir()
                                           for e in ("bullet", "mujoco")]
@@ -155,7 +166,7 @@ def main() -> None:
     for (spine, tier, engine, i, _), row in zip(jobs, rows, strict=True):
         table.setdefault(spine, {}).setdefault(tier, {}).setdefault(engine, {})[i] = row
     out: dict = {"benchmark": "tier_agreement", "sets_per_spine": sets, "duration_s": duration,
-                 "settle_s": args.settle, "spines": {}}
+                 "settle_s": args.settle, "options": extra, "spines": {}}
     for spine, by_tier in table.items():
         res = {}
         dist = {}
