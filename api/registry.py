@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from api.errors import NotFound
@@ -10,6 +11,14 @@ from protocol.errors import StorageError
 from storage.probe import probe
 
 PROBE_TIMEOUT_S = 5.0
+PARALLEL_PROBES = 4
+
+
+def _probe_or_error(path: Path) -> tuple[str, StorageError | None]:
+    try:
+        return probe(path, PROBE_TIMEOUT_S), None
+    except StorageError as exc:
+        return "", exc
 
 log = logging.getLogger("spinefarm.api")
 
@@ -32,24 +41,31 @@ class RunRegistry:
         return found
 
     def runs(self) -> dict[str, Path]:
-        out: dict[str, Path] = {}
+        seen: list[tuple[Path, tuple[int, int], tuple[int, int, int, int]]] = []
         for p in self.paths():
             try:
                 st = p.stat()
             except OSError:
                 continue
             ident = (st.st_dev, st.st_ino)  # resume replaces the file: a new inode is probed again
-            if self._bad.get(p) == (*ident, st.st_size, st.st_mtime_ns):
-                continue
-            if p not in self._ids or self._ids[p][0] != ident:
-                try:
-                    self._ids[p] = (ident, probe(p, PROBE_TIMEOUT_S))
+            if self._bad.get(p) != (*ident, st.st_size, st.st_mtime_ns):
+                seen.append((p, ident, (*ident, st.st_size, st.st_mtime_ns)))
+        new = [(p, ident, mark) for p, ident, mark in seen if p not in self._ids or self._ids[p][0] != ident]
+        if new:  # each probe is a child process: several at once, so many new files cost one deadline
+            with ThreadPoolExecutor(max_workers=PARALLEL_PROBES) as pool:
+                results = list(pool.map(_probe_or_error, [p for p, _, _ in new]))
+            for (p, ident, mark), (run_id, error) in zip(new, results, strict=True):
+                if error is not None:
+                    log.warning("leaving out %s: %s", p, error)
+                    self._bad[p] = mark
+                    self._ids.pop(p, None)
+                else:
+                    self._ids[p] = (ident, run_id)
                     self._bad.pop(p, None)
-                except StorageError as exc:
-                    log.warning("leaving out %s: %s", p, exc)
-                    self._bad[p] = (*ident, st.st_size, st.st_mtime_ns)
-                    continue
-            out.setdefault(self._ids[p][1], p)
+        out: dict[str, Path] = {}
+        for p, _, _ in seen:
+            if p in self._ids and p not in self._bad:
+                out.setdefault(self._ids[p][1], p)
         return out
 
     def path_of(self, run_id: str) -> Path:
