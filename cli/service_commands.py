@@ -81,6 +81,8 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
                         "tpe (Optuna TPE) or random; stored with the run")
     p.add_argument("--controller", help="controller parameter space (default: the morphology's)")
     p.add_argument("--engine", default=None, help="physics engine of every trial: bullet (default) or mujoco")
+    p.add_argument("--engine-option", action="append", default=None, metavar="KEY=VALUE",
+                   help="a setting of that engine, e.g. segment_contacts=off; repeatable; stored with the run")
     p.add_argument("--dt", default=None, metavar="S|auto",
                    help="physics step of every trial in seconds (default 0.001), or 'auto' for half the string "
                         "network's stable-step estimate (needed e.g. by tetraspine-hardware); stored with the run")
@@ -190,6 +192,10 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
         overrides["engine"] = args.engine
     if args.settle is not None:
         overrides["settle_s"] = args.settle
+    if args.engine_option:
+        from cli.sim_commands import parse_engine_options
+
+        overrides["engine_options"] = parse_engine_options(args.engine_option)
     overrides.update(_dt_overrides(args.dt))
     rungs = None
     if args.rungs is not None:

@@ -36,6 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="flat (default), slope, rough or obstacles, optionally with ,field=value pairs, e.g. "
                         "'rough,rough_amplitude_cm=3' or 'flat,collision_filter=neighbours' (see docs/model.md)")
     add_engine_argument(p)
+    add_engine_option_argument(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--record", type=Path, default=None, help="save the trajectory to FILE.npz")
     p.add_argument("--record-every", type=float, default=0.01, help="recording interval in seconds")
@@ -61,6 +62,31 @@ def register(sub: argparse._SubParsersAction) -> None:
 def add_engine_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument("--engine", choices=("bullet", "mujoco"), default=None,
                    help="physics engine (default bullet): bullet, or mujoco (the fast tier, soft contacts)")
+
+
+def add_engine_option_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--engine-option", action="append", default=None, metavar="KEY=VALUE",
+                   help="a setting of the engine, e.g. segment_contacts=off (mujoco) or solver_iterations=20 "
+                        "(bullet); repeatable; see docs/engines.md")
+
+
+def parse_engine_options(items: list[str] | None) -> dict[str, Any]:
+    """KEY=VALUE pairs; values are JSON when they parse as JSON (numbers, true/false, lists), else strings.
+    The engine validates names and values when the trial is built."""
+    import json
+
+    out: dict[str, Any] = {}
+    for item in items or []:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise ParameterError("--engine-option is not KEY=VALUE", received=item,
+                                 expected="e.g. segment_contacts=off")
+        try:
+            value = json.loads(raw)
+        except ValueError:
+            value = raw
+        out[key.strip()] = value
+    return out
 
 
 def say_if_compiling() -> None:
@@ -129,6 +155,8 @@ def cmd_trial(args: argparse.Namespace) -> int:
         overrides["motor_model"] = args.motor_model
     if args.engine is not None:
         overrides["engine"] = args.engine
+    if args.engine_option:
+        overrides["engine_options"] = parse_engine_options(args.engine_option)
     if args.record is not None:
         overrides["record_every_s"] = args.record_every
     if args.scene is not None:

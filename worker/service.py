@@ -125,7 +125,8 @@ def build_evaluator(config: RunConfig) -> Evaluator:
                                    "version?)", received=value, expected=getattr(config, name))
     from worker.engines.base import engine_class
 
-    engine_class(trial_config.engine)  # a missing engine package fails here, not in every trial
+    # a missing engine package or an option the engine does not have fails here, not in every trial
+    engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
     setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
 
     def evaluate(a: TrialAssignment) -> TrialResult:
