@@ -263,6 +263,12 @@ class CoordinatorCore:
         except MessageError as exc:
             return self._error("worker problem", exc)
         with self.lock:
+            if not self.scheduler.is_current(problem.trial_id, problem.lease_id, problem.worker_id):
+                self.forged_results += 1  # only a worker holding this run's work may stop it
+                return self._error("worker problem", MessageError(
+                    "worker problem quotes no lease this worker holds", received=(problem.trial_id,
+                                                                                  problem.lease_id),
+                    expected="the trial id and lease id of a trial leased to that worker"))
             if self.failure is None:
                 self.failure = f"worker {problem.worker_id} cannot serve run {self.run_id}: {problem.reason}"
                 log.error("%s", self.failure)

@@ -93,18 +93,23 @@ class RunConfig:
 @dataclass(frozen=True)
 class WorkerProblem:
     """A worker cannot serve a run (its spec does not build, a hash does not match, an engine is
-    missing): the coordinator stops the run with this reason instead of waiting for ever."""
+    missing): the coordinator stops the run with this reason instead of waiting for ever. It quotes
+    a lease the worker holds (trial_id, lease_id), so only a worker the run has handed work can stop it."""
 
     KIND = "worker_problem"
     worker_id: str
     reason: str
+    trial_id: int
+    lease_id: int
 
     def to_dict(self) -> dict[str, Any]:
-        return {"worker_id": self.worker_id, "reason": self.reason}
+        return {"worker_id": self.worker_id, "reason": self.reason, "trial_id": self.trial_id,
+                "lease_id": self.lease_id}
 
     @classmethod
     def from_dict(cls, data: Any) -> WorkerProblem:
         from protocol.messages import _field
 
-        return cls(_field(data, "worker_id", str, "worker problem")[:200],
-                   _field(data, "reason", str, "worker problem")[:2000])
+        what = "worker problem"
+        return cls(_field(data, "worker_id", str, what)[:200], _field(data, "reason", str, what)[:2000],
+                   _field(data, "trial_id", int, what), _field(data, "lease_id", int, what))

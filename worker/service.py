@@ -244,7 +244,8 @@ class WorkerService:
         self._current = open_runs[0] if open_runs else None
         return self._current
 
-    def _evaluator(self, session: zenoh.Session, run_id: str, config_hash: str) -> Evaluator | None:
+    def _evaluator(self, session: zenoh.Session, run_id: str, config_hash: str,
+                   lease: TrialAssignment) -> Evaluator | None:
         if config_hash not in self._evaluators:
             configs = self._ask(session, keys.config(run_id, config_hash), None, RunConfig)
             configs = [c for c in configs if c.config_hash() == config_hash]
@@ -255,13 +256,13 @@ class WorkerService:
             except Exception as exc:  # a spec this worker cannot build: say so, serve nothing of it
                 reason = str(exc) if isinstance(exc, SpinefarmError) else f"{type(exc).__name__}: {exc}"
                 log.error("cannot run trials of run %s: %s", run_id, reason)
-                self._report_problem(session, run_id, reason)
+                self._report_problem(session, run_id, reason, lease)
                 return None
         return self._evaluators[config_hash]
 
-    def _report_problem(self, session: zenoh.Session, run_id: str, reason: str) -> None:
+    def _report_problem(self, session: zenoh.Session, run_id: str, reason: str, lease: TrialAssignment) -> None:
         self.unservable[run_id] = reason
-        payload = encode_message(WorkerProblem(self.worker_id, reason))
+        payload = encode_message(WorkerProblem(self.worker_id, reason, lease.trial_id, lease.lease_id))
         for _ in session.get(keys.problem(run_id), payload=payload, timeout=self.query_timeout_s):
             pass
 
@@ -373,7 +374,7 @@ class WorkerService:
             if not grant.assignments:
                 self.stop.wait(grant.retry_after_s)
                 continue
-            evaluate = self._evaluator(session, run_id, grant.config_hash)
+            evaluate = self._evaluator(session, run_id, grant.config_hash, grant.assignments[0])
             if evaluate is None:
                 # Leases expire on the coordinator; nothing is lost by not running them.
                 if run_id in self.unservable:

@@ -222,3 +222,17 @@ def test_malformed_carried_results_refuse_the_whole_request():
     kind, body = decode(core.handle_work(bad))
     assert kind == "error" and "result" in body["message"]
     assert_unchanged(before, storage)
+
+
+def test_only_a_worker_holding_this_runs_work_can_stop_it_with_a_problem():
+    from protocol.run import WorkerProblem
+
+    core, _, _ = sphere_core(5)
+    forged = WorkerProblem("w9", "nothing builds here", 0, 12345)
+    kind, body = decode(core.handle_problem(encode_message(forged)))
+    assert kind == "error" and "no lease" in body["message"]
+    assert core.failure is None and core.status()["state"] == "running"
+    a = ask(core, "w1", 1).assignments[0]
+    genuine = WorkerProblem("w1", "engine 'mujoco' is not installed", a.trial_id, a.lease_id)
+    assert decode(core.handle_problem(encode_message(genuine)))[0] == "ack"
+    assert "w1 cannot serve" in core.failure and core.status()["state"] == "failed"
