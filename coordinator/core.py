@@ -216,6 +216,9 @@ class CoordinatorCore:
         done = (Verification.HOLDS.stored, Verification.NOT_REPRODUCED.stored)
         if cols["verification"][tid] in done or tid in self.verifier.pending:
             return
+        # a queued check of a best that has since been overtaken would only delay this one: drop it
+        for old in self.verifier.cancel_queued():
+            storage.set_verification(old, Verification.NOT_CHECKED)
         storage.set_verification(tid, Verification.PENDING)
         self.verifier.submit(tid, cols["params_unit"][tid].tolist(), int(cols["seed"][tid]),
                              float(cols["distance_m"][tid]), _duration(cols["duration_s"][tid]))

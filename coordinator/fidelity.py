@@ -3,7 +3,9 @@
 Every new parameter set is screened at the first rung's duration. Whenever a worker asks for work, a
 parameter set in the top 1/eta of the completed trials of its rung that has not been promoted yet is
 re-run at the next rung's duration (a new row: phase "promoted", parent = the row it re-runs) before
-anything new is sampled. The last rung is the full trial; only it competes for "best".
+anything new is sampled, as long as that rung has promoted fewer than 1/eta of its completed trials
+(at the end, each rung's best goes on past that quota).
+The last rung is the full trial; a longer rung ranks before any shorter one for "best".
 
 Promotions are decided from storage alone (which rows exist at which rung, with which parents), so a
 restarted coordinator continues exactly where it stopped, and a lost lease re-issues the same row.
@@ -59,29 +61,36 @@ class Rungs:
                               expected="comma-separated seconds, e.g. 10,30") from exc
         return cls(durations, eta)
 
-    def promotion(self, storage: BaseStorage) -> int | None:
+    def promotion(self, storage: BaseStorage, sampling_done: bool = False) -> int | None:
         """The row to re-run at the next rung, or None: the best not-yet-promoted row among the top
-        1/eta of some rung's complete rows (higher rungs first)."""
+        1/eta of some rung's complete rows (higher rungs first), while that rung has promoted fewer
+        than 1/eta of its complete rows (so a search that keeps improving, as hill climbing does,
+        promotes about 1/eta, not every row that was once in the top). Once no new parameter set will
+        be sampled (`sampling_done`), each rung's best goes on past the quota too, so the best screened
+        parameter set always reaches the full length."""
         cols = storage.columns()
         n = len(cols["trial_id"])
         if n == 0:
             return None
         rung, parent, obj = cols["rung"], cols["parent"], cols["objective"]
         complete = cols["status"] == TrialStatus.COMPLETE.stored
-        promoted_from = set(parent[cols["phase"] == b"promoted"].tolist())
+        promoted = cols["phase"] == b"promoted"
+        promoted_from = set(parent[promoted].tolist())
         for r in range(self.top - 1, -1, -1):
             done = np.flatnonzero(complete & (rung == r) & np.isfinite(obj))
             keep = len(done) // self.eta
             if keep == 0:
                 continue
             order = done[np.lexsort((done, -obj[done]))]  # best first; ties: the lower id
+            if int(np.count_nonzero(promoted & (rung == r + 1))) >= keep:
+                if not sampling_done:
+                    continue
+                order = order[:1]  # quota used: at the end only the rung's best still goes on
             for tid in order[:keep].tolist():
                 if tid not in promoted_from:
                     return int(tid)
         return None
 
-    def pending_promotions(self, storage: BaseStorage) -> bool:
-        return self.promotion(storage) is not None
 
 
 def describe_rungs(rungs: Rungs | None) -> dict[str, Any] | None:

@@ -69,7 +69,7 @@ class Study:
             return self._n_finished >= self.budget
         if self.n_sampled < self.budget or self._n_finished < self.storage.n_trials():
             return False
-        return self.rungs.promotion(self.storage) is None
+        return self.rungs.promotion(self.storage, True) is None
 
     def trial_seed(self, trial_id: int) -> int:
         return trial_seed(self.seed, trial_id)
@@ -79,7 +79,7 @@ class Study:
         None once the budget is allotted."""
         tid = self.storage.n_trials()
         if self.rungs is not None:
-            source = self.rungs.promotion(self.storage)
+            source = self.rungs.promotion(self.storage, self.n_sampled >= self.budget)
             if source is not None:
                 row = self.storage.trial(source)
                 unit = np.asarray(row.params_unit)

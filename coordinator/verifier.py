@@ -131,6 +131,13 @@ class Verifier:
             _verify_job, morphology, self.config.controller, self.config.trial_config, params_unit, seed,
             distance_m, self.policy.to_dict(), duration_s)
 
+    def cancel_queued(self) -> list[int]:
+        """Cancel checks that have not started yet; their trial ids."""
+        out = [tid for tid, fut in list(self._futures.items()) if fut.cancel()]
+        for tid in out:
+            del self._futures[tid]
+        return out
+
     def collect(self, wait_s: float = 0.0) -> list[tuple[int, dict[str, Any]]]:
         """(trial id, verification dict) of every finished job; an error becomes a not-reproduced verdict."""
         from concurrent.futures import FIRST_COMPLETED

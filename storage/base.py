@@ -112,11 +112,12 @@ class BaseStorage:
 
     def set_verification(self, trial_id: int, verdict: Verification | str, distance_m: float = math.nan,
                          reason: str = "") -> None:
-        """Record the re-simulation verdict of a trial (pending, holds, not_reproduced)."""
+        """Record the re-simulation verdict of a trial (pending, holds, not_reproduced; not_checked when a
+        queued check is dropped)."""
         self._writable()
         if not 0 <= trial_id < self.n_trials():
             raise StorageError("no such trial", received=trial_id, expected=f"0 <= id < {self.n_trials()}")
-        allowed = (Verification.PENDING, Verification.HOLDS, Verification.NOT_REPRODUCED)
+        allowed = tuple(Verification)
         if verdict not in allowed:
             raise StorageError("unknown verification verdict", received=verdict, expected=[str(v) for v in allowed])
         self._update(trial_id, {"verification": Verification(verdict).stored, "verify_distance_m": distance_m,
