@@ -13,7 +13,7 @@ import numpy as np
 
 from protocol.messages import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, STORED_STATUSES, Verification
 
-FILE_SCHEMA_VERSION = 4
+FILE_SCHEMA_VERSION = 5
 
 PHASES = ("monte_carlo", "gaussian", "cmaes", "tpe", "promoted")
 STATUSES = tuple(s.value for s in STORED_STATUSES)
