@@ -183,20 +183,9 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     if not args.morphology:
         raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")
     run_id = args.run_id or default_run_id(robot_name(args.morphology))
-    overrides: dict[str, Any] = {}
-    if args.scene is not None:
-        from robot.scene import parse_scene
+    from cli.sim_commands import trial_overrides
 
-        overrides["scene"] = parse_scene(args.scene)
-    if args.engine is not None:
-        overrides["engine"] = args.engine
-    if args.settle is not None:
-        overrides["settle_s"] = args.settle
-    if args.engine_option:
-        from cli.sim_commands import parse_engine_options
-
-        overrides["engine_options"] = parse_engine_options(args.engine_option)
-    overrides.update(_dt_overrides(args.dt))
+    overrides = trial_overrides(args)
     rungs = None
     if args.rungs is not None:
         from coordinator.fidelity import Rungs
@@ -250,18 +239,6 @@ def _check_step(config: Any) -> None:
     except ImportError:  # a coordinator without the simulator: the workers will say it
         return
     choose_step(Morphology.from_dict(config.morphology_spec), TrialConfig.from_dict(config.trial_config))
-
-
-def _dt_overrides(dt: str | None) -> dict[str, Any]:
-    """--dt S or --dt auto as trial-config overrides (validated by TrialConfig with the rest)."""
-    if dt is None:
-        return {}
-    if dt == "auto":
-        return {"auto_dt": True}
-    try:
-        return {"dt_s": float(dt)}
-    except ValueError:
-        raise ConfigError("--dt is not a number", received=dt, expected="seconds (e.g. 0.0005) or 'auto'") from None
 
 
 def _check_run_args(args: argparse.Namespace) -> None:

@@ -70,6 +70,32 @@ def add_engine_option_argument(p: argparse.ArgumentParser) -> None:
                         "(bullet); repeatable; see docs/engines.md")
 
 
+def trial_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """TrialConfig overrides from the flags `trial`, `search` and `coordinator` share (--dt, --engine,
+    --engine-option, --scene, --settle, --motor-model; those a command lacks are skipped). TrialConfig
+    validates the values."""
+    out: dict[str, Any] = {}
+    dt = getattr(args, "dt", None)
+    if dt == "auto":
+        out["auto_dt"] = True
+    elif dt is not None:
+        try:
+            out["dt_s"] = float(dt)
+        except ValueError as exc:
+            raise ParameterError("--dt is not a number", received=dt, expected="seconds (e.g. 0.0005) or 'auto'") \
+                from exc
+    for flag, field in (("motor_model", "motor_model"), ("engine", "engine"), ("settle", "settle_s")):
+        if getattr(args, flag, None) is not None:
+            out[field] = getattr(args, flag)
+    if getattr(args, "engine_option", None):
+        out["engine_options"] = parse_engine_options(args.engine_option)
+    if getattr(args, "scene", None) is not None:
+        from robot.scene import parse_scene
+
+        out["scene"] = parse_scene(args.scene)
+    return out
+
+
 def parse_engine_options(items: list[str] | None) -> dict[str, Any]:
     """KEY=VALUE pairs; values are JSON when they parse as JSON (numbers, true/false, lists), else strings.
     The engine validates names and values when the trial is built."""
@@ -144,25 +170,9 @@ def cmd_trial(args: argparse.Namespace) -> int:
         params = random_unit_params(morph, rseed, controller)
     seed = args.seed if args.seed is not None else (args.random_seed or 0)
     overrides: dict[str, Any] = {"duration_s": args.duration, "controller": controller}
-    if args.dt == "auto":
-        overrides["auto_dt"] = True
-    elif args.dt is not None:
-        try:
-            overrides["dt_s"] = float(args.dt)
-        except ValueError as exc:
-            raise ParameterError("--dt is not a number", received=args.dt, expected="seconds or 'auto'") from exc
-    if args.motor_model is not None:
-        overrides["motor_model"] = args.motor_model
-    if args.engine is not None:
-        overrides["engine"] = args.engine
-    if args.engine_option:
-        overrides["engine_options"] = parse_engine_options(args.engine_option)
+    overrides.update(trial_overrides(args))
     if args.record is not None:
         overrides["record_every_s"] = args.record_every
-    if args.scene is not None:
-        from robot.scene import parse_scene
-
-        overrides["scene"] = parse_scene(args.scene)
     cfg = TrialConfig.from_dict(overrides)
     say_if_compiling()
     outcome = simulate(morph, params, cfg, seed)
