@@ -5,9 +5,14 @@ and `spinefarm worker` processes on the built-in test objective "sphere" (micros
 the coordinator, not the objective, is what is measured. The rate counts only the steady state:
 from the moment every worker has asked for work until the budget is met.
 
+The cost of durable acknowledgement: the same runs with and without the fsync that ends every flush
+(a result is acknowledged only after it), one after the other, as a ratio (`fsync` in the summary).
+The run files go to --dir (default: the system's temp directory), whose disk is what fsync pays for.
+
 Prints one JSON object per measurement; the last line is one JSON object with everything.
 usage: python bench/coordinator_throughput.py [--workers 2 8 32] [--batch 1 16 0] [--trials 20000]
-       [--physics-trials 8 --physics-duration 1.0 | --no-physics]
+       [--physics-trials 8 --physics-duration 1.0 | --no-physics] [--fsync-workers 2 8] [--fsync-batch 1 0]
+       [--dir DIR] [--no-resume]
 """
 
 from __future__ import annotations
@@ -63,11 +68,12 @@ class StartGate:
 
 
 def measure(morphology: str, n_workers: int, batch: int, trials: int, duration_s: float | None,
-            tmp: Path) -> dict:
+            tmp: Path, fsync: bool = True) -> dict:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    run_id = f"bench-{morphology.replace(':', '')}-{n_workers}-{batch}-{os.getpid()}"
+    run_id = f"bench-{morphology.replace(':', '')}-{n_workers}-{batch}-{int(fsync)}-{os.getpid()}"
     config = build_run_config(run_id, morphology, duration_s=duration_s)
     core, storage = new_run(config, SearchSettings(trials=trials, lease_s=600.0), tmp / f"{run_id}.h5")
+    storage.fsync = fsync
     gate = StartGate(core, n_workers)
     core.handle_work = gate.handle_work
     service = CoordinatorService(core, storage, listen=[endpoint]).start()
@@ -85,9 +91,25 @@ def measure(morphology: str, n_workers: int, batch: int, trials: int, duration_s
         service.close()
     t0 = gate.t0 if gate.t0 is not None else t1
     rate = trials / (t1 - t0) if t1 > t0 else float("nan")
-    return {"morphology": morphology, "workers": n_workers, "batch": batch, "trials": trials,
+    return {"morphology": morphology, "workers": n_workers, "batch": batch, "fsync": fsync, "trials": trials,
             "duration_s": duration_s, "measured_wall_s": round(t1 - t0, 3), "trials_per_s": round(rate, 1),
             "complete": counts["complete"], "failed": counts["failed"], "startup_s": round(t0 - t_spawn, 2)}
+
+
+def fsync_cost(workers: list[int], batches: list[int], trials: int, tmp: Path) -> list[dict]:
+    """Trials per second with and without fsync before acknowledging, measured back to back."""
+    out = []
+    for batch in batches:
+        for n in workers:
+            without = measure("sphere:8", n, batch, trials, None, tmp, fsync=False)
+            with_ = measure("sphere:8", n, batch, trials, None, tmp, fsync=True)
+            r = {"workers": n, "batch": batch, "trials": trials,
+                 "without_fsync_trials_per_s": without["trials_per_s"],
+                 "with_fsync_trials_per_s": with_["trials_per_s"],
+                 "ratio": round(with_["trials_per_s"] / without["trials_per_s"], 3)}
+            print(json.dumps({"fsync_cost": r}), flush=True)
+            out.append(r)
+    return out
 
 
 def resume_cost(tmp: Path, rows: int) -> dict:
@@ -113,6 +135,12 @@ def resume_cost(tmp: Path, rows: int) -> dict:
             "file_mb": round((tmp / "resume.h5").stat().st_size / 1e6, 1)}
 
 
+def _filesystem(path: str) -> str:
+    """Type and device of the file system holding `path` (fsync on tmpfs costs nothing)."""
+    r = subprocess.run(["df", "--output=fstype,source", path], capture_output=True, text=True)
+    return " ".join(r.stdout.split()[2:]) if r.returncode == 0 else "unknown"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, nargs="*", default=[2, 8, 32], help="none: physics only")
@@ -121,9 +149,14 @@ def main() -> None:
     ap.add_argument("--physics-trials", type=int, default=16)
     ap.add_argument("--physics-duration", type=float, default=1.0)
     ap.add_argument("--no-physics", action="store_true")
+    ap.add_argument("--fsync-workers", type=int, nargs="*", default=[2, 8], help="none: no fsync comparison")
+    ap.add_argument("--fsync-batch", type=int, nargs="+", default=[1, 0], help="0: auto")
+    ap.add_argument("--dir", default=None, help="where the run files go (its disk is what fsync costs)")
+    ap.add_argument("--no-resume", action="store_true")
     args = ap.parse_args()
-    out: dict = {"cpus": os.cpu_count(), "sphere": [], "physics": None}
-    with tempfile.TemporaryDirectory() as d:
+    out: dict = {"cpus": os.cpu_count(), "sphere": [], "physics": None, "fsync": []}
+    with tempfile.TemporaryDirectory(dir=args.dir) as d:
+        out["dir_filesystem"] = _filesystem(d)
         tmp = Path(d)
         for batch in args.batch:
             for n in args.workers:
@@ -138,8 +171,10 @@ def main() -> None:
             out["physics"] = {"one_worker": one, "two_workers": two,
                               "speedup": round(two["trials_per_s"] / one["trials_per_s"], 3),
                               "efficiency": round(two["trials_per_s"] / (2 * one["trials_per_s"]), 3)}
-        out["resume"] = resume_cost(tmp, 20000)
-        print(json.dumps(out["resume"]), flush=True)
+        out["fsync"] = fsync_cost(args.fsync_workers, args.fsync_batch, args.trials, tmp)
+        if not args.no_resume:
+            out["resume"] = resume_cost(tmp, 20000)
+            print(json.dumps(out["resume"]), flush=True)
     print(json.dumps(out))
 
 

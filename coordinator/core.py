@@ -4,10 +4,12 @@ Every handler decodes and validates its message, so a malformed or foreign messa
 answered with an error, never raised into the transport and never touching what is stored. One
 lock serialises the handlers, which the transport may call from several threads.
 
-A result is acknowledged ("stored") only after the storage has written it out (`commit`), so a
-killed coordinator has every acknowledged result in its file. A failed write (disk full, read-only
-remount) sets `write_failure` (and `failure`): from then on no handler answers (workers keep their
-unacknowledged results and retry), and the process running the core stops with that reason.
+A result is acknowledged ("stored") only after the storage has written it out and synced it to the
+disk (`commit`: one fsync per request, however many results it carries), so the file holds every
+acknowledged result after a killed coordinator, a crashed machine or a power cut. A failed write or
+sync (disk full, I/O error) sets `write_failure` (and `failure`): from then on no handler answers
+(workers keep their unacknowledged results and retry), and the process running the core stops with
+that reason.
 """
 
 from __future__ import annotations
@@ -88,13 +90,13 @@ class CoordinatorCore:
         return encode("error", exc.to_detail())
 
     def commit(self) -> bool:
-        """Write out everything stored so far; False (and `write_failure` set) if the storage cannot."""
+        """Write out and sync everything stored so far; False (and `write_failure` set) if the storage cannot."""
         if self.write_failure is not None:
             return False
         with self.lock:
             try:
                 self.study.storage.flush()
-            except Exception as exc:  # disk full, read-only file system, I/O error: stop taking work
+            except Exception as exc:  # disk full, I/O error, a file system shut down: stop taking work
                 self.write_failure = str(exc)
                 self.failure = self.failure or self.write_failure
                 log.error("stopping: %s", self.write_failure)

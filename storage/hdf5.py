@@ -5,6 +5,9 @@ one chunked, resizable dataset per column (see storage.schema), row i = trial i,
 `description` attributes. The writer keeps the table in memory, writes changed rows at `flush()`
 and runs in SWMR mode, so readers (the API, a notebook) see every flushed row while the run goes on.
 
+`flush()` ends with fsync: what it wrote is on the disk when it returns (it survives a power cut or
+a crashed machine, not only a killed process), so the coordinator acknowledges a result only then.
+
 A file whose SWMR writer was killed keeps its consistency flags set and then opens only for SWMR
 reading; `resume()` therefore reads it that way and rewrites it to a fresh file (atomic replace)
 instead of relying on external tools to clear the flags.
@@ -177,6 +180,7 @@ class Hdf5Storage(InMemoryStorage):
         self._rebuild_ranking()
         self.read_only = file is None
         self.write_error: str | None = None  # set once a write failed: nothing is written after it
+        self.fsync = True  # False: flush hands rows to the OS only (bench/coordinator_throughput.py compares)
         self._lock: RunLock | None = None
         self._datasets = {c.name: file["trials"][c.name] for c in COLUMNS} if file is not None else {}
 
@@ -195,6 +199,7 @@ class Hdf5Storage(InMemoryStorage):
             path.unlink(missing_ok=True)
             status_path(path).unlink(missing_ok=True)
             write_run(path, meta, TrialTable(meta.n_params).columns())
+            _fsync_dir(path)  # the new name too must survive a power cut
             return cls._open_writer(path, meta, TrialTable(meta.n_params), lock)
         except BaseException:
             lock.release()
@@ -229,6 +234,7 @@ class Hdf5Storage(InMemoryStorage):
             with open(tmp, "rb") as fh:
                 os.fsync(fh.fileno())
             os.replace(tmp, path)  # atomic: the old file stays intact until the new one is complete
+            _fsync_dir(path)
             table = TrialTable(meta.n_params, capacity=max(1024, len(cols["trial_id"])))
             table.load(cols)
             return cls._open_writer(path, meta, table, lock)
@@ -262,10 +268,11 @@ class Hdf5Storage(InMemoryStorage):
         raise StorageError("an Hdf5Storage holds its run already", expected="Hdf5Storage.create(path, meta)")
 
     def flush(self) -> None:
-        """Write changed rows and hand them to the OS (they survive a killed process).
+        """Write changed rows, flush HDF5 and fsync the file: on return they are on the disk.
 
-        Raises StorageError when the write fails (disk full, read-only remount); from then on every
-        flush raises the same error and nothing more is written.
+        One fsync per call, however many rows changed, so a batch of results costs one disk round trip.
+        Raises StorageError when a write, the flush or the fsync fails (disk full, I/O error, a file
+        system shut down); from then on every flush raises the same error and nothing more is written.
         """
         if self.write_error is not None:
             raise StorageError(self.write_error, expected="a writable file system with free space")
@@ -303,6 +310,8 @@ class Hdf5Storage(InMemoryStorage):
             a, b = int(run[0]), int(run[-1]) + 1
             status[a:b] = cols["status"][a:b]
         self._file.flush()
+        if self.fsync:  # sec2, HDF5's default driver, writes through this descriptor
+            os.fsync(self._file.id.get_vfd_handle())
 
     def close(self) -> None:
         try:
@@ -329,6 +338,15 @@ def _reason(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.strerror:
         return exc.strerror
     return str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+
+
+def _fsync_dir(path: Path) -> None:
+    """Make a created or replaced directory entry durable (the file's own fsync does not cover it)."""
+    fd = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def _refuse_read_only(path: Path) -> None:
