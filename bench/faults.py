@@ -1,12 +1,13 @@
 """The fault suite as figures: kills survived, acknowledged trials lost or duplicated, re-issue latency,
-forged and malformed messages rejected, a full disk, damaged files.
+forged and malformed messages rejected, a full disk, a disk that dies mid-run (as in a power cut),
+damaged files.
 
 Real processes, real Zenoh on loopback, real HDF5 files. Workers here are "witness" workers: they
 speak the real protocol and log every result the coordinator acknowledged as stored, so "lost" means
 acknowledged but absent from the file and "duplicated" means acknowledged as stored twice.
 
 Prints one JSON object per part; the last line is one JSON object with everything.
-usage: python bench/faults.py [--runs 4] [--trials 300] [--seed 1] [--skip disk,netns]
+usage: python bench/faults.py [--runs 4] [--trials 300] [--seed 1] [--skip disk,power_cut]
 """
 
 from __future__ import annotations
@@ -113,7 +114,14 @@ def wait(pred, timeout_s: float, what: str) -> None:
 def check_file(out: Path, budget: int, acks: list[tuple[int, float]]) -> dict:
     import numpy as np
 
-    _, cols = read_run(out)
+    from protocol.errors import StorageError
+
+    try:
+        _, cols = read_run(out)
+    except StorageError as exc:  # a file that cannot be read has lost everything acknowledged
+        ids = [t for t, _ in acks]
+        return {"rows": 0, "complete": 0, "budget": budget, "acknowledged": len(ids), "lost": len(ids),
+                "duplicated": len(ids) - len(set(ids)), "unreadable": str(exc)[:200]}
     stored = {int(i): float(cols["distance_m"][i]) for i in np.flatnonzero(cols["status"] == b"complete")}
     ids = [t for t, _ in acks]
     return {"rows": len(cols["trial_id"]), "complete": len(stored), "budget": budget,
@@ -308,6 +316,55 @@ def full_disk(tmp: Path) -> dict:
         subprocess.run(["umount", "-l", str(mnt)], check=False)
 
 
+def power_cut(tmp: Path, workers: int = 2, cut_after_acks: int = 300) -> dict:
+    """The disk under a writing coordinator dies (a real ext4 on a loop device, shut down without
+    flushing its journal, as a power cut); after a remount the file must hold every acknowledged result."""
+    from tests.ext4_image import Ext4Image
+
+    why = Ext4Image.unavailable()
+    if why is not None:
+        return {"skipped": why}
+    (tmp / "powercut").mkdir()
+    disk = Ext4Image(tmp / "powercut")
+    try:
+        disk.open()
+    except RuntimeError as exc:
+        return {"skipped": str(exc)}
+    procs: list[subprocess.Popen] = []
+    try:
+        ep, out = f"tcp/127.0.0.1:{free_port()}", disk.mnt / "run.h5"
+        c = coordinator(ep, out, "sphere:8", "--trials", "1000000", "--run-id", "powercut")
+        logs = [tmp / f"powercut-w{i}.jsonl" for i in range(workers)]
+        procs = [c, *(witness(ep, "powercut", f"pc{i}", log) for i, log in enumerate(logs))]
+        wait(lambda: c.poll() is not None or len(acked(logs)) >= cut_after_acks, 60, "acknowledged results")
+        t0 = time.monotonic()
+        disk.shutdown()
+        try:
+            rc: int | None = c.wait(60)
+        except subprocess.TimeoutExpired:
+            rc = None  # a hang: killed so the disk can be remounted and checked
+            c.kill()
+            c.wait()
+        seconds = time.monotonic() - t0
+        err = c.stderr.read()
+        for w in procs[1:]:
+            w.kill()
+            w.wait()
+        disk.remount()  # journal replay: what a reboot finds
+        f = check_file(out, 0, acked(logs))
+        return {"exit_code": rc, "says_why": "Input/output error" in err, "seconds_to_exit": round(seconds, 2),
+                "hung": rc is None, "acknowledged": f["acknowledged"], "lost": f["lost"],
+                "duplicated": f["duplicated"], "rows_in_file": f["rows"], "complete_in_file": f["complete"],
+                **({"unreadable": f["unreadable"]} if "unreadable" in f else {}),
+                "error": (err.strip().splitlines() or [""])[-1][:200]}
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        disk.close()
+
+
 def damaged_files(tmp: Path) -> dict:
     """Seconds until `search --resume` of a damaged file gives its error (never a hang)."""
     from tests.coordinator_tests.test_run_file_faults import finished_run
@@ -350,7 +407,8 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=4, help="runs of the kill matrix")
     ap.add_argument("--trials", type=int, default=300, help="trial budget of each kill-matrix run")
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--skip", default="", help="comma-separated parts to skip: kills,reissue,hostile,disk,files")
+    ap.add_argument("--skip", default="",
+                    help="comma-separated parts to skip: kills,reissue,hostile,disk,power_cut,files")
     args = ap.parse_args()
     skip = set(filter(None, args.skip.split(",")))
     results = {}
@@ -358,7 +416,8 @@ def main() -> None:
         tmp = Path(d)
         parts = {"kills": lambda: kill_matrix(args.runs, args.trials, args.seed, tmp),
                  "reissue": lambda: reissue_latency(tmp), "hostile": lambda: hostile_peer(tmp),
-                 "disk": lambda: full_disk(tmp), "files": lambda: damaged_files(tmp)}
+                 "disk": lambda: full_disk(tmp), "power_cut": lambda: power_cut(tmp),
+                 "files": lambda: damaged_files(tmp)}
         for name, fn in parts.items():
             if name in skip:
                 continue

@@ -1,6 +1,6 @@
 """The whole fault suite (bench/faults.py) with its figures asserted: kills of workers, of the
 coordinator and of everything at once over several runs; a frozen worker; forged and malformed
-messages; a full disk; damaged files. Minutes, so `slow` (run with -m slow)."""
+messages; a full disk; a disk that dies mid-run; damaged files. Minutes, so `slow` (run with -m slow)."""
 
 from __future__ import annotations
 
@@ -33,3 +33,7 @@ def test_the_fault_suite_loses_nothing_accepts_nothing_forged_and_never_hangs():
     f = fig["files"]
     assert all(v["exit_code"] == 2 for k, v in f.items() if k != "wall_s")
     assert f["truncated"]["seconds"] < 5 and f["garbled_header"]["seconds"] < 20
+    pc = fig["power_cut"]
+    if "skipped" not in pc:
+        assert pc["exit_code"] == 1 and pc["says_why"] and not pc["hung"]
+        assert pc["lost"] == 0 and pc["duplicated"] == 0 and pc["acknowledged"] >= 300

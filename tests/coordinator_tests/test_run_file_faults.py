@@ -1,4 +1,5 @@
-"""The run file under faults: one writer, acknowledged means written, damaged or read-only files refused."""
+"""The run file under faults: one writer, acknowledged means synced to the disk (a full disk, a disk
+that dies mid-run), damaged or read-only files refused."""
 
 from __future__ import annotations
 
@@ -174,3 +175,25 @@ def test_search_on_a_full_disk_exits_non_zero_saying_why(small_fs):
     assert np.count_nonzero(cols["status"] == b"complete") > 500
     st = read_status(path)
     assert st is None or st["state"] in ("running", "failed")
+
+
+# --- a disk that dies under a writing coordinator (a real ext4 on a loop device) --------------------
+def test_a_disk_that_dies_mid_run_leaves_every_acknowledged_result_on_it(tmp_path):
+    """The coordinator process writes to an ext4 image that is shut down without flushing its journal
+    (a power cut, as the kernel sees it) once its workers hold 300 acknowledgements. It must exit 1
+    naming the I/O error; after a remount the file holds every acknowledged result with its distance:
+    what fsync before acknowledging guarantees (without it the file is lost entirely)."""
+    from bench.faults import power_cut
+    from tests.ext4_image import Ext4Image
+
+    why = Ext4Image.unavailable()
+    if why is not None:
+        pytest.skip(f"no ext4 image to shut down: {why}")
+    fig = power_cut(tmp_path, workers=2, cut_after_acks=300)
+    if "skipped" in fig:
+        pytest.skip(f"no ext4 image to shut down: {fig['skipped']}")
+    assert not fig["hung"] and fig["seconds_to_exit"] < 30, fig
+    assert fig["exit_code"] == 1 and fig["says_why"], fig
+    assert fig["acknowledged"] >= 300 and "unreadable" not in fig, fig
+    assert fig["lost"] == 0 and fig["duplicated"] == 0, fig
+    assert fig["complete_in_file"] >= fig["acknowledged"], fig
