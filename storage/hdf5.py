@@ -15,6 +15,7 @@ instead of relying on external tools to clear the flags.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
@@ -30,7 +31,7 @@ import numpy as np
 from protocol.errors import StorageError
 from protocol.messages import SCHEMA_VERSION
 from storage.memory import InMemoryStorage
-from storage.probe import check_eof, probe
+from storage.probe import check_eof, probe, stored_eof
 from storage.runlock import RunLock
 from storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
 from storage.table import EMPTY_STATUS, TrialTable, empty_value
@@ -42,6 +43,12 @@ _ABANDONED: list[h5py.File] = []
 # Chunks are mostly fill values and repeated bytes early in a run: gzip (with byte shuffling, which
 # groups the bytes of floats) shrinks an 8-trial file from 2.5 MB to about 0.1 MB; readers need nothing extra.
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
+# The space a file grows into is written (zeros) and synced before HDF5 uses it. On ext4 a sync writes the
+# data first and commits a new file size or new blocks afterwards: a disk dying in between would leave
+# HDF5's new superblock in a file shorter than it says (seen: "truncated", every row unreadable). Inside
+# the reserve a sync only overwrites blocks the file already has. Trimmed to HDF5's end at close.
+RESERVE_B = 8 << 20      # reserved beyond HDF5's end when it is topped up
+RESERVE_LOW_B = 4 << 20  # topped up when less than this is left (one flush grows the file far less)
 _JSON_FIELDS = ("sampler", "extra", "run")
 _TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
 
@@ -252,6 +259,12 @@ class Hdf5Storage(InMemoryStorage):
                                expected="a writable file system") from exc
         storage = cls(path, f, meta, table)
         storage._lock = lock
+        try:
+            storage._reserve()
+        except OSError as exc:
+            f.close()
+            raise StorageError(f"cannot open run file {path} for writing: {_reason(exc)}",
+                               expected="a writable file system with free space") from exc
         return storage
 
     @classmethod
@@ -312,6 +325,28 @@ class Hdf5Storage(InMemoryStorage):
         self._file.flush()
         if self.fsync:  # sec2, HDF5's default driver, writes through this descriptor
             os.fsync(self._file.id.get_vfd_handle())
+            self._reserve()
+
+    def _reserve(self) -> None:
+        """Keep at least RESERVE_LOW_B of written, synced zeros beyond HDF5's end of file (see RESERVE_B)."""
+        if not self.fsync or self._file is None:
+            return
+        fd = self._file.id.get_vfd_handle()
+        end = stored_eof(os.pread(fd, 2048 + 48, 0))
+        size = os.fstat(fd).st_size
+        if end is None or size - end >= RESERVE_LOW_B:
+            return
+        target = end + max(RESERVE_B, end // 4)
+        zeros = bytes(1 << 20)
+        try:
+            while size < target:  # written, not ftruncate'd or fallocate'd: those leave blocks to commit
+                size += os.pwrite(fd, zeros[: target - size], size)
+        except OSError as exc:
+            if exc.errno != errno.ENOSPC:
+                raise
+            # A nearly full disk: what was reserved is still HDF5's to use; once that is used up,
+            # HDF5's own write fails with "No space left on device" and the run stops.
+        os.fsync(fd)
 
     def close(self) -> None:
         try:
@@ -319,6 +354,7 @@ class Hdf5Storage(InMemoryStorage):
                 if self.write_error is None:
                     self.flush()
                     self._file.close()
+                    _trim(self.path)
                 else:
                     _ABANDONED.append(self._file)
                     self._datasets = {}
@@ -338,6 +374,15 @@ def _reason(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.strerror:
         return exc.strerror
     return str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+
+
+def _trim(path: Path) -> None:
+    """Cut a closed file's unused reserve (beyond the end its superblock states)."""
+    with open(path, "r+b") as fh:
+        end = stored_eof(fh.read(2048 + 48))
+        if end is not None and os.fstat(fh.fileno()).st_size > end:
+            fh.truncate(end)
+            os.fsync(fh.fileno())
 
 
 def _fsync_dir(path: Path) -> None:

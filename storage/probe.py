@@ -32,7 +32,7 @@ _PROBE_CODE = (
 )
 
 
-def _stored_eof(head: bytes) -> int | None:
+def stored_eof(head: bytes) -> int | None:
     """End-of-file address from a version 2/3 superblock at the start of `head`, else None."""
     for base in (0, 512, 1024, 2048):  # a user block moves the superblock to a power of two >= 512
         if head[base:base + 8] != _SIGNATURE:
@@ -64,7 +64,7 @@ def check_eof(path: str | Path, settle_s: float = 0.3) -> None:
         if _SIGNATURE not in head[:2048 + 8]:
             raise StorageError(f"cannot open run file {path}: not an HDF5 file",
                                received=f"{size} bytes starting {head[:8]!r}", expected="a spinefarm run file")
-        eof = _stored_eof(head)
+        eof = stored_eof(head)
         if eof is None or size >= eof:
             return
         if time.monotonic() >= end:

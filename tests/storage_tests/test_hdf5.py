@@ -65,6 +65,30 @@ def test_reader_sees_flushed_rows_while_the_writer_runs(tmp_path):
     s.close()
 
 
+def test_a_live_file_keeps_synced_room_to_grow_and_a_closed_one_is_trimmed(tmp_path):
+    """While writing, the file holds written zeros beyond HDF5's end (a sync cut short by a dying disk
+    then never leaves the file shorter than its header says); closed, it ends where its header says."""
+    from storage.hdf5 import RESERVE_LOW_B
+    from storage.probe import stored_eof
+
+    path = tmp_path / "run.h5"
+    s = Hdf5Storage.create(path, make_meta())
+    done = 0
+    for n in (1, 2000):  # also past the first chunk of rows
+        for i in range(done, n):
+            s.add_trial(i, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, i)
+            s.finish_trial(i, result(i, float(i), seed=i), float(i))
+        done = n
+        s.flush()
+        end = stored_eof(path.read_bytes()[:4096])
+        assert path.stat().st_size - end >= RESERVE_LOW_B
+        assert not any(path.read_bytes()[end:])  # the reserve is zeros, written
+        assert len(read_run(path)[1]["trial_id"]) == n  # readers do not mind it
+    s.close()
+    assert path.stat().st_size == stored_eof(path.read_bytes()[:4096])
+    assert len(read_run(path)[1]["trial_id"]) == 2000
+
+
 def test_read_only_storage_refuses_writes(tmp_path):
     path = tmp_path / "run.h5"
     Hdf5Storage.create(path, make_meta()).close()
