@@ -383,9 +383,10 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
         redirect.close()
     if core.write_failure is not None:
         # The file handle whose writes failed is never closed (HDF5 would retry them and crash);
-        # the kernel closes it. Every acknowledged result was written before the failure.
-        print(f"\nstopped: {core.write_failure}; every acknowledged result is in {path}; free space (or make "
-              f"the file system writable) and continue with: spinefarm search --resume {path}",
+        # the kernel closes it. Every acknowledged result was synced to the disk before the failure.
+        print(f"\nstopped: {core.write_failure}; every acknowledged result is in {path}; free space, make "
+              f"the file system writable or replace the failed disk, then continue with: "
+              f"spinefarm search --resume {path}",
               file=sys.stderr, flush=True)
         sys.stdout.flush()
         os._exit(1)

@@ -264,7 +264,7 @@ class Hdf5Storage(InMemoryStorage):
         except OSError as exc:
             f.close()
             raise StorageError(f"cannot open run file {path} for writing: {_reason(exc)}",
-                               expected="a writable file system with free space") from exc
+                               expected="a working, writable file system with free space") from exc
         return storage
 
     @classmethod
@@ -288,7 +288,7 @@ class Hdf5Storage(InMemoryStorage):
         system shut down); from then on every flush raises the same error and nothing more is written.
         """
         if self.write_error is not None:
-            raise StorageError(self.write_error, expected="a writable file system with free space")
+            raise StorageError(self.write_error, expected="a working, writable file system with free space")
         if self._file is None:
             return
         if not self.table.dirty and self._datasets["trial_id"].shape[0] == self.table.n:
@@ -297,7 +297,7 @@ class Hdf5Storage(InMemoryStorage):
             self._write_dirty()
         except Exception as exc:
             self.write_error = f"cannot write run file {self.path}: {_reason(exc)}"
-            raise StorageError(self.write_error, expected="a writable file system with free space") from exc
+            raise StorageError(self.write_error, expected="a working, writable file system with free space") from exc
 
     def _write_dirty(self) -> None:
         n = self.table.n
