@@ -336,7 +336,7 @@ class Hdf5Storage(InMemoryStorage):
         size = os.fstat(fd).st_size
         if end is None or size - end >= RESERVE_LOW_B:
             return
-        target = end + max(RESERVE_B, end // 4)
+        target = end + RESERVE_B  # zeros written ~ the file's growth: a bounded extra write
         zeros = bytes(1 << 20)
         try:
             while size < target:  # written, not ftruncate'd or fallocate'd: those leave blocks to commit
