@@ -352,10 +352,11 @@ def power_cut(tmp: Path, workers: int = 2, cut_after_acks: int = 300) -> dict:
             w.wait()
         disk.remount()  # journal replay: what a reboot finds
         f = check_file(out, 0, acked(logs))
+        resumes = _resumes(out) if "unreadable" not in f else "unreadable"
         return {"exit_code": rc, "says_why": "Input/output error" in err, "seconds_to_exit": round(seconds, 2),
                 "hung": rc is None, "acknowledged": f["acknowledged"], "lost": f["lost"],
                 "duplicated": f["duplicated"], "rows_in_file": f["rows"], "complete_in_file": f["complete"],
-                **({"unreadable": f["unreadable"]} if "unreadable" in f else {}),
+                "resumes": resumes, **({"unreadable": f["unreadable"]} if "unreadable" in f else {}),
                 "error": (err.strip().splitlines() or [""])[-1][:200]}
     finally:
         for p in procs:
@@ -365,10 +366,23 @@ def power_cut(tmp: Path, workers: int = 2, cut_after_acks: int = 300) -> dict:
         disk.close()
 
 
+def _resumes(out: Path) -> str:
+    """'yes' if the run reopens for writing as `--resume` would (every row validated), else the error."""
+    from coordinator.setup import resume_run
+
+    try:
+        _, storage = resume_run(out)
+    except Exception as exc:
+        return str(exc)[:200]
+    storage.close()
+    return "yes"
+
+
 def power_cuts(tmp: Path, tries: int) -> dict:
     """`power_cut` repeated: the first try's figures, and over all tries how many were lost."""
     first: dict = {}
-    totals = {"tries": 0, "acknowledged": 0, "lost": 0, "duplicated": 0, "unreadable": 0, "hung": 0,
+    totals = {"tries": 0, "acknowledged": 0, "lost": 0, "duplicated": 0, "unreadable": 0, "not_resumable": 0,
+              "hung": 0,
               "not_exit_code_1": 0, "max_seconds_to_exit": 0.0}
     for k in range(tries):
         d = tmp / f"cut{k}"
@@ -381,6 +395,7 @@ def power_cuts(tmp: Path, tries: int) -> dict:
         for key in ("acknowledged", "lost", "duplicated"):
             totals[key] += r[key]
         totals["unreadable"] += int("unreadable" in r)
+        totals["not_resumable"] += int(r["resumes"] != "yes")
         totals["hung"] += int(r["hung"])
         totals["not_exit_code_1"] += int(r["exit_code"] != 1 or not r["says_why"])
         totals["max_seconds_to_exit"] = max(totals["max_seconds_to_exit"], r["seconds_to_exit"])

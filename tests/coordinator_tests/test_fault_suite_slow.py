@@ -37,3 +37,4 @@ def test_the_fault_suite_loses_nothing_accepts_nothing_forged_and_never_hangs():
     if "skipped" not in pc:
         assert pc["exit_code"] == 1 and pc["says_why"] and not pc["hung"]
         assert pc["lost"] == 0 and pc["duplicated"] == 0 and pc["acknowledged"] >= 300
+        assert pc["resumes"] == "yes"

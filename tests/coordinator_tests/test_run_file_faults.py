@@ -181,8 +181,8 @@ def test_search_on_a_full_disk_exits_non_zero_saying_why(small_fs):
 def test_a_disk_that_dies_mid_run_leaves_every_acknowledged_result_on_it(tmp_path):
     """The coordinator process writes to an ext4 image that is shut down without flushing its journal
     (a power cut, as the kernel sees it) once its workers hold 300 acknowledgements. It must exit 1
-    naming the I/O error; after a remount the file holds every acknowledged result with its distance:
-    what fsync before acknowledging guarantees (without it the file is lost entirely)."""
+    naming the I/O error; after a remount the file holds every acknowledged result with its distance
+    (what fsync before acknowledging guarantees: without it the file is lost entirely) and resumes."""
     from bench.faults import power_cut
     from tests.ext4_image import Ext4Image
 
@@ -197,3 +197,4 @@ def test_a_disk_that_dies_mid_run_leaves_every_acknowledged_result_on_it(tmp_pat
     assert fig["acknowledged"] >= 300 and "unreadable" not in fig, fig
     assert fig["lost"] == 0 and fig["duplicated"] == 0, fig
     assert fig["complete_in_file"] >= fig["acknowledged"], fig
+    assert fig["resumes"] == "yes", fig  # and the run continues from it (every row validated)
