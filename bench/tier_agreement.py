@@ -9,6 +9,8 @@ published gaits are replayed on both engines with the ratio to NTRT's own figure
     python bench/tier_agreement.py                  # >= 100 sets per spine, 10 s trials (hours on 2 cores)
     python bench/tier_agreement.py --quick          # 12 sets per spine, 3 s trials, no converged steps
     python bench/tier_agreement.py --sets 40 --duration 5 --best-of tetraspine=runs/x.h5 --jobs 2
+    python bench/tier_agreement.py --controller tetraspine=sidewinding --duration 5 --settle 1 \
+        --best-of tetraspine=runs/tetraspine.h5      # the Tetraspine in the paper's 9-parameter space
     python bench/tier_agreement.py --spines octahedral-complex --sets 16 --duration 5 --no-replays \
         --mujoco-options '{"contact_geometry": "capsules"}'    # which model choices bring the tiers closer
 """
@@ -43,7 +45,7 @@ def _trial(args: tuple) -> dict:
     global _CACHE
     _CACHE = _CACHE or SetupCache(8)
 
-    spine, unit, seed, engine, dt, duration, settle, extra = args
+    spine, unit, seed, engine, dt, duration, settle, extra, controller = args
     morph = load_morphology(spine)
     cfg = {"duration_s": duration, "engine": engine, "settle_s": settle, **extra}
     if dt is not None:
@@ -56,7 +58,7 @@ def _trial(args: tuple) -> dict:
     except Exception:  # a step the string network cannot take: the automatic one
         cfg["auto_dt"] = True
     t0 = time.process_time()
-    r = run_trial(morph, np.asarray(unit), TrialConfig(**cfg), seed, setup=_CACHE)
+    r = run_trial(morph, np.asarray(unit), TrialConfig(**cfg), seed, setup=_CACHE, controller=controller)
     return {"distance_m": r.distance_m if r.ok else math.nan, "status": str(r.status), "dt_s": r.extras["dt_s"],
             "cpu_s": time.process_time() - t0}
 
@@ -103,14 +105,20 @@ def agreement(bullet: np.ndarray, mujoco: np.ndarray, top: int = 10) -> dict:
             "failed": {"bullet": int((~np.isfinite(bullet)).sum()), "mujoco": int((~np.isfinite(mujoco)).sum())}}
 
 
-def _best_sets(path: str, n: int) -> list[tuple[tuple[float, ...], int]]:
-    from storage.hdf5 import Hdf5Storage
+def _best_sets(path: str, n: int, controller: str | None) -> list[tuple[tuple[float, ...], int]]:
+    """The n best complete trials of a run file by objective, read with h5py alone so that run files of
+    earlier schema versions serve too."""
+    import h5py
 
-    store = Hdf5Storage.open_read(path)
-    try:
-        return [(tuple(rec.params_unit), int(rec.seed)) for rec in store.best(n)]
-    finally:
-        store.close()
+    with h5py.File(path, "r") as f:
+        stored = f.attrs.get("controller")
+        stored = stored.decode() if isinstance(stored, bytes) else stored
+        if controller and stored and stored != controller:
+            raise SystemExit(f"{path} searched the {stored!r} space; expected {controller!r}")
+        t = f["trials"]
+        ok = np.flatnonzero(t["status"][:] == b"complete")
+        best = ok[np.argsort(-t["objective"][:][ok], kind="stable")[:n]]
+        return [(tuple(float(x) for x in t["params_unit"][i]), int(t["seed"][i])) for i in best]
 
 
 def main() -> None:
@@ -129,6 +137,11 @@ def main() -> None:
     ap.add_argument("--bullet-options", default="{}", help="Bullet engine options (JSON)")
     ap.add_argument("--mujoco-ground-friction", type=float, default=None,
                     help="ground friction of the MuJoCo runs (default: the morphology's)")
+    ap.add_argument("--controller", action="append", default=[], metavar="SPINE=SPACE",
+                    help="controller space of a spine (default: the morphology's first)")
+    ap.add_argument("--no-screen", action="store_true", help="leave out the screen tier")
+    ap.add_argument("--screen-dt", type=float, default=0.002)
+    ap.add_argument("--screen-options", default='{"segment_contacts": "off"}')
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     extra = {"bullet": {"engine_options": json.loads(args.bullet_options)},
@@ -140,6 +153,11 @@ def main() -> None:
     tiers = {"default": {"bullet": None, "mujoco": None}}
     if not (args.quick or args.no_converged):
         tiers["converged"] = dict(CONVERGED_DT_S)
+    if not args.no_screen:
+        tiers["screen"] = {"mujoco": args.screen_dt}
+        extra["screen"] = {"engine_options": {**extra["mujoco"]["engine_options"], **json.loads(args.screen_options)},
+                           **{k: v for k, v in extra["mujoco"].items() if k != "engine_options"}}
+    controllers = dict(c.split("=", 1) for c in args.controller)
     best_of = dict(b.split("=", 1) for b in args.best_of)
     from robot.morphology.registry import load_morphology
     from worker.trial import random_unit_params
@@ -148,12 +166,14 @@ def main() -> None:
     jobs: list[tuple] = []
     for spine in args.spines.split(","):
         morph = load_morphology(spine)
-        cases = [(tuple(random_unit_params(morph, s)), s) for s in range(1, sets + 1)]
+        controller = controllers.get(spine)
+        cases = [(tuple(random_unit_params(morph, s, controller=controller)), s) for s in range(1, sets + 1)]
         if spine in best_of:
-            cases += _best_sets(best_of[spine], 10)
+            cases += _best_sets(best_of[spine], 10, controller)
         for tier, steps in tiers.items():
             for engine, dt in steps.items():
-                jobs += [(spine, tier, engine, i, (spine, u, s, engine, dt, duration, args.settle, extra[engine]))
+                opts = extra["screen" if tier == "screen" else engine]
+                jobs += [(spine, tier, engine, i, (spine, u, s, engine, dt, duration, args.settle, opts, controller))
                          for i, (u, s) in enumerate(cases)]
     replays = [] if args.no_replays else [(s, f, e) for s, f in REPLAYS.items() if (NTRT / f).is_dir()
                                           for e in ("bullet", "mujoco")]
@@ -166,7 +186,8 @@ def main() -> None:
     for (spine, tier, engine, i, _), row in zip(jobs, rows, strict=True):
         table.setdefault(spine, {}).setdefault(tier, {}).setdefault(engine, {})[i] = row
     out: dict = {"benchmark": "tier_agreement", "sets_per_spine": sets, "duration_s": duration,
-                 "settle_s": args.settle, "options": extra, "spines": {}}
+                 "settle_s": args.settle, "options": extra, "controllers": controllers,
+                 "best_of": best_of, "spines": {}}
     for spine, by_tier in table.items():
         res = {}
         dist = {}
@@ -176,13 +197,20 @@ def main() -> None:
                 res.setdefault("cpu_s_per_sim_s", {})[f"{engine}@{tier}"] = float(
                     np.median([c["cpu_s"] for c in cases.values()]) / duration)
                 res.setdefault("dt_s", {})[f"{engine}@{tier}"] = float(np.median([c["dt_s"] for c in cases.values()]))
-        for tier in by_tier:
+        for tier in ("default", "converged"):
+            if tier not in by_tier:
+                continue
             res[f"mujoco_vs_bullet@{tier}"] = agreement(dist[tier, "bullet"], dist[tier, "mujoco"])
         if "converged" in by_tier:
             for name, ref, other in (("mujoco_default_vs_bullet_converged", "bullet", "mujoco"),
                                      ("bullet_default_vs_bullet_converged", "bullet", "bullet"),
                                      ("mujoco_default_vs_mujoco_converged", "mujoco", "mujoco")):
                 res[name] = agreement(dist["converged", ref], dist["default", other])
+            if "screen" in by_tier:
+                res["mujoco_screen_vs_bullet_converged"] = agreement(dist["converged", "bullet"],
+                                                                     dist["screen", "mujoco"])
+        if "screen" in by_tier:
+            res["mujoco_screen_vs_bullet_default"] = agreement(dist["default", "bullet"], dist["screen", "mujoco"])
         out["spines"][spine] = res
     out["replays"] = [{"morphology": s, "folder": f, "engine": e, **r}
                       for (s, f, e), r in zip(replays, rrows, strict=True)]
