@@ -7,6 +7,11 @@ anything new is sampled, as long as that rung has promoted fewer than 1/eta of i
 (at the end, each rung's best goes on past that quota).
 The last rung is the full trial; a longer rung ranks before any shorter one for "best".
 
+Samplers see only the first rung (FirstRungView): every parameter set they proposed has exactly one
+first-rung row, so a model-based sampler (CMA-ES, TPE) learns from values of one duration, and the n-th
+proposal of a run is the same with and without rungs (proposal n draws from the stream of set n, not of
+row n, which promotions shift).
+
 Promotions are decided from storage alone (which rows exist at which rung, with which parents), so a
 restarted coordinator continues exactly where it stopped, and a lost lease re-issues the same row.
 """
@@ -91,6 +96,49 @@ class Rungs:
                     return int(tid)
         return None
 
+
+class FirstRungView:
+    """What a sampler reads of a multi-fidelity run: the first-rung rows only, renumbered 0..k-1 in
+    trial-id order (row k is the k-th parameter set sampled). `best_ids` ranks as the storage does
+    (a longer rung first) and answers with the first-rung row of each best parameter set, so the
+    hill climber's centre is still the best full-length gait."""
+
+    def __init__(self, storage: BaseStorage) -> None:
+        self.storage = storage
+        cols = storage.columns()
+        self.ids = np.flatnonzero(cols["rung"] == 0)
+        self._cols = cols
+
+    def n_trials(self) -> int:
+        return len(self.ids)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        cols = self.storage.columns()
+        if len(cols["rung"]) != len(self._cols["rung"]):
+            self.ids = np.flatnonzero(cols["rung"] == 0)
+        self._cols = cols
+        return {name: col[self.ids] for name, col in cols.items()}
+
+    def first_rung_row(self, trial_id: int) -> int:
+        """The first-rung row a (possibly promoted) row re-runs, as a trial id."""
+        cols = self.storage.columns()
+        while cols["rung"][trial_id] > 0 and cols["parent"][trial_id] >= 0:
+            trial_id = int(cols["parent"][trial_id])
+        return trial_id
+
+    def trial_id(self, index: int) -> int:
+        """The storage trial id of view row `index`."""
+        return int(self.ids[index])
+
+    def best_ids(self, k: int) -> list[int]:
+        out: list[int] = []
+        for tid in self.storage.best_ids(k * 4 if k > 0 else 0):  # promotions repeat a set: ask for more
+            index = int(np.searchsorted(self.ids, self.first_rung_row(tid)))
+            if index < len(self.ids) and self.ids[index] == self.first_rung_row(tid) and index not in out:
+                out.append(index)
+            if len(out) == k:
+                break
+        return out
 
 
 def describe_rungs(rungs: Rungs | None) -> dict[str, Any] | None:

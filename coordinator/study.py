@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from coordinator.fidelity import Rungs
+from coordinator.fidelity import FirstRungView, Rungs
 from coordinator.samplers.base import BaseSampler
 from protocol.messages import TrialResult
 from protocol.params import ParamSpace
@@ -90,9 +90,14 @@ class Study:
                 return None
         elif tid >= self.budget:
             return None
-        p = self.sampler.propose(tid, self.storage)
-        duration = math.nan if self.rungs is None else self.rungs.durations_s[0]
-        self.storage.add_trial(tid, p.params_unit, self.space.from_unit(p.params_unit), p.phase, p.parent,
+        if self.rungs is None:
+            p = self.sampler.propose(tid, self.storage)
+            parent, duration = p.parent, math.nan
+        else:  # the sampler sees the first rung only: proposal k is the k-th parameter set
+            view = FirstRungView(self.storage)
+            p = self.sampler.propose(view.n_trials(), view)
+            parent, duration = (view.trial_id(p.parent) if p.parent >= 0 else -1), self.rungs.durations_s[0]
+        self.storage.add_trial(tid, p.params_unit, self.space.from_unit(p.params_unit), p.phase, parent,
                                self.trial_seed(tid), 0, duration)
         return tid
 
