@@ -215,6 +215,9 @@ class CoordinatorCore:
             return
         tid = best[0]
         cols = storage.columns()
+        rungs = self.study.rungs
+        if rungs is not None and int(cols["rung"][tid]) < rungs.top:
+            return  # a screened best is provisional: only a full-length trial is judged (and can count)
         done = (Verification.HOLDS.stored, Verification.NOT_REPRODUCED.stored)
         if cols["verification"][tid] in done or tid in self.verifier.pending:
             return

@@ -124,6 +124,8 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
         assert best.verification == "holds"
         assert np.isfinite(best.verify_distance_m) and best.verify_distance_m != best.distance_m
         assert s.run_meta().extra["verify"]["engine"] == "bullet"
+        c = s.columns()  # a screened best is provisional: only full-length trials go to the judge
+        assert set(c["verification"][c["rung"] == 0].tolist()) == {b""}
         from api.views import trial_view
 
         assert trial_view(s, best)["verification"]["judge"] == "bullet at 0.25 ms"
