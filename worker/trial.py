@@ -5,6 +5,7 @@ The start pose, guards and score live in worker.episode; the engine behind worke
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -102,6 +103,10 @@ def string_tables(morph: Morphology, start_length_cm: np.ndarray, node_of_string
     return params, state
 
 
+class _ContactsNeeded(Exception):
+    """An engine left out contacts (MuJoCo's segment_contacts "auto") that this trial may need."""
+
+
 def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mapping[str, float] | list,
              config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None,
              scene_factory: EngineFactory | None = None, setup: TrialSetup | SetupCache | None = None
@@ -110,8 +115,22 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
     `scene_factory` replaces the configured engine's class (same constructor as BasePhysics).
     `setup`: a TrialSetup of this morphology and config, or a SetupCache, to reuse what earlier trials
     built (the result is the same bits either way)."""
-    t_wall = time.perf_counter()
     cfg = config or TrialConfig()
+    try:
+        return _simulate(morphology, params, cfg, seed, controller, scene_factory, setup)
+    except _ContactsNeeded as why:  # run again from the start with every contact the scene has
+        options = {**cfg.engine_options, "segment_contacts": "scene"}
+        if isinstance(setup, TrialSetup):
+            setup = None
+        out = _simulate(morphology, params, dataclasses.replace(cfg, engine_options=options), seed, controller,
+                        scene_factory, setup)
+        out.result.extras["segment_contacts"] = f"modelled: {why}"
+        return out
+
+
+def _simulate(morphology, params, cfg: TrialConfig, seed: int, controller: str | None,
+              scene_factory: EngineFactory | None, setup: TrialSetup | SetupCache | None) -> TrialOutcome:
+    t_wall = time.perf_counter()
     morph = load_morphology(morphology)
     controller = controller or cfg.controller
     physical = resolve_params(morph, params, controller)
@@ -153,6 +172,9 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
         # partial metrics of a diverged trial come from the last sane check
         last_good, last_good_step, last_good_work = poses.copy(), 0, 0.0
         steps_done = 0  # since the start, settle included
+        unmodelled = getattr(scene, "unmodelled_contact", None)
+        if unmodelled is not None and (why := unmodelled(check_every * dt)):
+            raise _ContactsNeeded(f"{why} at t=0")
         # the settle phase holds the CPG at rest (zero output): the impedance reflex holds the posture
         for phase_steps, every in ((n_settle, 0), (n_steps, cpg_every)):
             if reason:
@@ -178,6 +200,8 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
                     if reason:
                         reason = f"{reason} at t={steps_done * dt:.3f} s"
                         break
+                    if unmodelled is not None and (why := unmodelled(check_every * dt)):
+                        raise _ContactsNeeded(f"{why} at t={steps_done * dt:.3f} s")
                     com_path.append(scoring.robot_com_cm(poses, masses))
                     last_good, last_good_step, last_good_work = poses.copy(), steps_done, float(bank.work[0])
             if every == 0 and n_settle and not reason:  # locomotion is scored from here

@@ -167,7 +167,9 @@ def test_friction_is_the_product_of_ground_and_rod(engine):
 def test_filtered_pairs_pass_through_each_other():
     bodies = build_bodies(load_morphology("tetraspine-ntrt").structure)
     terrain = build_terrain(SceneConfig(collision_filter="neighbours"), 0.5, (0, 0))
-    for settings, neighbours_touch in ((MujocoSettings(), True), (MujocoSettings(segment_contacts="off"), False)):
+    for settings, neighbours_touch in ((MujocoSettings(segment_contacts="scene"), True),
+                                       (MujocoSettings(segment_contacts="off"), False),
+                                       (MujocoSettings(segment_contacts="auto"), False)):
         scene = MujocoPhysics(bodies, terrain, 1e-3, settings)
         up = bodies[0].com_cm + np.array([0.0, 100.0, 0.0])  # well above the ground
         scene.qpos[:3, :3] = up  # segment 2 onto segment 0, and its neighbour 1 too
@@ -176,7 +178,47 @@ def test_filtered_pairs_pass_through_each_other():
                  for c in scene.data.contact[:scene.data.ncon]}
         assert (0, 2) not in pairs
         assert ((0, 1) in pairs) == neighbours_touch
+        # "auto" leaves them out of the model, and its guard sees that they would touch
+        assert bool(scene.unmodelled_contact(1e-2)) == (settings.segment_contacts == "auto")
         scene.close()
+
+
+def test_the_contact_guard_is_silent_while_segments_are_apart():
+    bodies = build_bodies(load_morphology("tetraspine-ntrt").structure)
+    scene = MujocoPhysics(bodies, build_terrain(SceneConfig(), 0.5, (0, 0)), 1e-3, MujocoSettings())
+    assert scene.unmodelled_contact(1e-2) == ""
+    scene.qvel[1, :3] = [0.0, 0.0, -1e5]  # segment 1 flying at segment 0: it could reach it before a check
+    assert scene.unmodelled_contact(1e-2).startswith("gap")
+    scene.close()
+
+
+def test_segment_distance_agrees_with_dense_sampling():
+    from worker.engines.contact_guard import _segment_distance
+
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 1.0, 401)[:, None]
+    for _ in range(50):
+        p1, q1, p2, q2 = rng.normal(size=(4, 3))
+        if _ < 5:
+            q2 = p2 + (q1 - p1) * 0.5  # parallel segments
+        a, b = p1 + t * (q1 - p1), p2 + t * (q2 - p2)
+        sampled = np.min(np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2))
+        exact = _segment_distance(p1, q1, p2, q2)
+        assert exact <= sampled + 1e-12 and sampled - exact < 1e-2
+
+
+@pytest.mark.parametrize(("name", "controller", "seconds", "needs_contacts"),
+                         [("tetraspine", "sidewinding", 1.0, False), ("ribbed", None, 0.3, True)])
+def test_auto_segment_contacts_give_the_bits_of_modelled_ones(name, controller, seconds, needs_contacts):
+    """Left out while no segment comes near (the Tetraspine), run again with them when one does (the
+    ribbed spine's ribs start 2 mm apart): either way the same result as modelling them throughout."""
+    morph = load_morphology(name)
+    u = random_unit_params(morph, 1, controller)
+    runs = {mode: run_trial(morph, u, TrialConfig(duration_s=seconds, engine="mujoco",
+                                                  engine_options={"segment_contacts": mode}), 1, controller=controller)
+            for mode in ("scene", "auto")}
+    assert runs["auto"].distance_m == runs["scene"].distance_m and runs["auto"].work_j == runs["scene"].work_j
+    assert runs["auto"].extras.get("segment_contacts", "").startswith("modelled") == needs_contacts
 
 
 def test_proxies_rest_like_capsules_on_flat_ground():

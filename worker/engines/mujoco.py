@@ -34,6 +34,7 @@ from protocol.errors import ConfigError, check_range
 from robot.bodies import BodyModel
 from robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
 from worker.engines.base import GRAVITY_CM_S2, BasePhysics
+from worker.engines.contact_guard import SegmentContactGuard
 
 INTEGRATORS = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
                "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "rk4": mujoco.mjtIntegrator.mjINT_RK4}
@@ -41,7 +42,7 @@ CONES = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCon
 SOLVERS = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG,
            "pgs": mujoco.mjtSolver.mjSOL_PGS}
 CONTACT_GEOMETRIES = ("auto", "ends", "capsules")
-SEGMENT_CONTACTS = ("scene", "off")
+SEGMENT_CONTACTS = ("auto", "scene", "off")
 # contype/conaffinity bits: terrain, terrain-only proxies, capsules (segment-segment, and terrain in
 # "capsules" mode). Two geoms collide if (contype1 & conaffinity2) or (contype2 & conaffinity1).
 _TERRAIN = (1, 0)
@@ -58,8 +59,10 @@ class MujocoSettings:
     solref_time_s, solref_damping_ratio: contact stiffness as a time constant and damping ratio
     (0.005 s converges best on the Tetraspine; MuJoCo clamps it to >= 2 dt). solimp: MuJoCo's
     impedance (d0, dwidth, width_cm, midpoint, power). contact_geometry: "auto" (rod-end spheres on
-    plane terrains, capsules otherwise), "ends" or "capsules". segment_contacts: "scene" (segments
-    collide as the scene's collision filter says) or "off" (segments touch only the terrain).
+    plane terrains, capsules otherwise), "ends" or "capsules". segment_contacts: "auto" (modelled
+    only if a trial needs them: left out while a guard sees every gap stay open, see
+    worker.engines.contact_guard; the same bits as "scene"), "scene" (segments collide as the scene's
+    collision filter says) or "off" (segments touch only the terrain).
     islands: MuJoCo's constraint island discovery (slower here: every segment is its own island).
     """
 
@@ -73,7 +76,7 @@ class MujocoSettings:
     solref_damping_ratio: float = 1.0
     solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
     contact_geometry: str = "auto"
-    segment_contacts: str = "scene"
+    segment_contacts: str = "auto"
     islands: bool = False
     margin_cm: float = 0.0
     gravity_cm_s2: float = GRAVITY_CM_S2
@@ -194,7 +197,7 @@ def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: 
     rot = np.eye(3) if start_rotation is None else _matrix(start_rotation)
     quat = "1 0 0 0" if start_rotation is None else _vec(_wxyz(start_rotation))
     capsule_bits = _CAPSULE_SELF if geometry == "ends" else _CAPSULE_ALL
-    if s.segment_contacts == "off":
+    if s.segment_contacts != "scene":  # "auto": left out while the guard sees no segment come near
         capsule_bits = (0, 0) if geometry == "ends" else _END_PROXY  # capsules touch the terrain only
     rgeom = f'friction="{_f(mu_rod * mu_rod)} 0 0" {common}'
     for i, body in enumerate(bodies):
@@ -212,7 +215,7 @@ def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: 
                              f'conaffinity="{_END_PROXY[1]}" {rgeom}/>')
         parts.append("</body>")
         world.append("".join(parts))
-    pairs = [] if s.segment_contacts == "off" else excluded
+    pairs = excluded if s.segment_contacts == "scene" else []
     excludes = "".join(f'<exclude body1="s{a}" body2="s{b}"/>' for a, b in pairs)
     integrator = {"euler": "Euler", "implicit": "implicit", "implicitfast": "implicitfast", "rk4": "RK4"}
     solver = {"newton": "Newton", "cg": "CG", "pgs": "PGS"}
@@ -283,6 +286,7 @@ class MujocoPhysics(BasePhysics):
         self.n_bodies = len(bodies)
         rot = np.eye(3) if start_rotation is None else _matrix(start_rotation)
         self.base_pos = np.array([rot @ b.com_cm for b in bodies])  # start COMs before offsets
+        self.guard = SegmentContactGuard(bodies, off) if self.settings.segment_contacts == "auto" else None
         self._bind()
 
     def _bind(self) -> None:
@@ -327,6 +331,16 @@ class MujocoPhysics(BasePhysics):
         rot = _matrix(self.read_poses()[index, 3:])
         self.qvel[index, :3] = linear_cm_s
         self.qvel[index, 3:] = rot.T @ np.asarray(angular_rad_s, dtype=float)
+
+    def unmodelled_contact(self, interval_s: float) -> str:
+        """Why the segment-segment contacts this model leaves out ("auto") could matter before the next
+        check in interval_s, or "" (always "" when they are modelled or switched off)."""
+        if self.guard is None:
+            return ""
+        gap, reach = self.guard.gap_and_reach_cm(self.qpos, self.qvel, interval_s)
+        if gap > reach:
+            return ""
+        return f"gap {gap:.3g} < {reach:.3g} cm"
 
     def contact_count(self) -> int:
         return int(self.data.ncon)
