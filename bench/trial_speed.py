@@ -84,8 +84,9 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
 
 def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict) -> dict:
     """CPU s per simulated second of whole trials, interleaved: both engines at their default steps, and for
-    context MuJoCo without segment-segment contacts, MuJoCo as a screen (2 ms, no segment-segment contacts)
-    and Bullet at 0.25 ms (about MuJoCo's default-step accuracy, docs/accuracy.md)."""
+    context MuJoCo with segment-segment contacts modelled throughout ("scene"; the default "auto" leaves
+    them out while no segment comes near, same bits), without them, MuJoCo as a screen (2 ms, no
+    segment-segment contacts) and Bullet at 0.25 ms (about MuJoCo's default-step accuracy, docs/accuracy.md)."""
     import mujoco
 
     from worker.setup import SetupCache
@@ -93,14 +94,17 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict) -
 
     morph = load_morphology(morph_name)
     off = {**mujoco_options, "segment_contacts": "off"}
+    modelled = {**mujoco_options, "segment_contacts": "scene"}
     configs = {"bullet": TrialConfig(duration_s=seconds, engine="bullet"),
                "mujoco": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=mujoco_options),
+               "mujoco_segment_contacts_modelled": TrialConfig(duration_s=seconds, engine="mujoco",
+                                                               engine_options=modelled),
                "mujoco_segment_contacts_off": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=off),
                "mujoco_screen_2ms": TrialConfig(duration_s=seconds, engine="mujoco", dt_s=2e-3, engine_options=off),
                "bullet_0.25ms": TrialConfig(duration_s=seconds, engine="bullet", dt_s=2.5e-4)}
     caches = {e: SetupCache() for e in configs}
     cpu: dict[str, list[float]] = {e: [] for e in configs}
-    mj_step_us, dts, contacts = [], {}, []
+    mj_step_us, dts, contacts, fallbacks = [], {}, [], []
     for r in range(repeats + 1):  # the first round warms caches and compiled code
         u = random_unit_params(morph, 7 + r)
         for name, cfg in configs.items():
@@ -108,6 +112,8 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict) -
             res = simulate(morph, u, cfg, 7 + r, setup=caches[name]).result
             el = time.process_time() - t0
             dts[name] = res.extras["dt_s"]
+            if name == "mujoco" and r:
+                fallbacks.append(res.extras.get("segment_contacts", "left out"))
             if r:
                 cpu[name].append(el / res.sim_time_s)
             if name == "mujoco" and r:
@@ -126,6 +132,8 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict) -
                                          "rest_cpg_strings_loop": med["mujoco"] * 1e6 * dts["mujoco"] - mj},
             "mujoco_contacts_at_end": contacts, "mujoco_speedup": med["bullet"] / med["mujoco"],
             "mujoco_speedup_segment_contacts_off": med["bullet"] / med["mujoco_segment_contacts_off"],
+            "mujoco_speedup_segment_contacts_modelled": med["bullet"] / med["mujoco_segment_contacts_modelled"],
+            "mujoco_segment_contacts_auto": fallbacks,
             "mujoco_screen_speedup": med["bullet"] / med["mujoco_screen_2ms"],
             "speedup_at_equal_accuracy": med["bullet_0.25ms"] / med["mujoco"],
             "cpu_s_per_sim_s_all": {e: [round(x, 4) for x in v] for e, v in cpu.items()}}
