@@ -37,13 +37,14 @@ def _rotate(q, v, out):
 
 @njit(cache=True)
 def _segment_distance(p1, q1, p2, q2) -> float:
-    """Shortest distance between segments p1-q1 and p2-q2 (closest points, clamped to both)."""
-    d1 = q1 - p1
-    d2 = q2 - p2
-    r = p1 - p2
-    a = d1 @ d1
-    e = d2 @ d2
-    f = d2 @ r
+    """Shortest distance between segments p1-q1 and p2-q2 (closest points, clamped to both); scalar
+    arithmetic only, so no temporary arrays are made in the guard's inner loop."""
+    d1x, d1y, d1z = q1[0] - p1[0], q1[1] - p1[1], q1[2] - p1[2]
+    d2x, d2y, d2z = q2[0] - p2[0], q2[1] - p2[1], q2[2] - p2[2]
+    rx, ry, rz = p1[0] - p2[0], p1[1] - p2[1], p1[2] - p2[2]
+    a = d1x * d1x + d1y * d1y + d1z * d1z
+    e = d2x * d2x + d2y * d2y + d2z * d2z
+    f = d2x * rx + d2y * ry + d2z * rz
     eps = 1e-12
     if a <= eps and e <= eps:
         s = 0.0
@@ -52,12 +53,12 @@ def _segment_distance(p1, q1, p2, q2) -> float:
         s = 0.0
         t = min(max(f / e, 0.0), 1.0)
     else:
-        c = d1 @ r
+        c = d1x * rx + d1y * ry + d1z * rz
         if e <= eps:
             t = 0.0
             s = min(max(-c / a, 0.0), 1.0)
         else:
-            b = d1 @ d2
+            b = d1x * d2x + d1y * d2y + d1z * d2z
             denom = a * e - b * b
             s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom > eps else 0.0
             t = (b * s + f) / e
@@ -67,19 +68,20 @@ def _segment_distance(p1, q1, p2, q2) -> float:
             elif t > 1.0:
                 t = 1.0
                 s = min(max((b - c) / a, 0.0), 1.0)
-    diff = (p1 + d1 * s) - (p2 + d2 * t)
-    return math.sqrt(diff @ diff)
+    x = rx + d1x * s - d2x * t
+    y = ry + d1y * s - d2y * t
+    z = rz + d1z * s - d2z * t
+    return math.sqrt(x * x + y * y + z * z)
 
 
 @njit(cache=True)
-def closest_approach(qpos, qvel, interval_s, cap_start, cap_p0, cap_p1, cap_radius, body_radius, pair_a, pair_b,
-                     world0, world1):
-    """(slack, gap, reach) of the tightest listed body pair: gap, the smallest surface gap (cm) between
-    their capsules; reach, how far they could close within interval_s: SAFETY_FACTOR times the largest
-    relative speed of two of their points, |v_a - v_b| + |w_a| r_a + |w_b| r_b with r the bounding
-    radii, plus MIN_CLEARANCE_CM; slack = gap - reach.
-    Pairs whose bounding spheres are further apart than their reach plus the tightest slack so far are
-    skipped."""
+def first_close_pair(qpos, qvel, interval_s, cap_start, cap_p0, cap_p1, cap_radius, cap_reach, body_radius, pair_a,
+                     pair_b, world0, world1):
+    """(gap, reach) of the first listed body pair whose capsules are closer than the distance the two
+    segments could close within interval_s, or (inf, 0). reach: SAFETY_FACTOR times the largest relative
+    speed of two of their points, |v_a - v_b| + |w_a| r_a + |w_b| r_b with r the bounding radii, plus
+    MIN_CLEARANCE_CM. Body pairs and capsule pairs whose bounding spheres are further apart than that are
+    skipped without a segment-segment distance."""
     nb = qpos.shape[0]
     spin = np.empty(nb)
     for b in range(nb):
@@ -90,26 +92,30 @@ def closest_approach(qpos, qvel, interval_s, cap_start, cap_p0, cap_p1, cap_radi
             for k in range(3):
                 world0[c, k] += qpos[b, k]
                 world1[c, k] += qpos[b, k]
-    best, best_gap, best_reach = np.inf, np.inf, 0.0
     for i in range(pair_a.shape[0]):
         a, b = pair_a[i], pair_b[i]
         vx = qvel[a, 0] - qvel[b, 0]
         vy = qvel[a, 1] - qvel[b, 1]
         vz = qvel[a, 2] - qvel[b, 2]
-        closing = math.sqrt(vx * vx + vy * vy + vz * vz) + spin[a] + spin[b]
-        reach = SAFETY_FACTOR * closing * interval_s + MIN_CLEARANCE_CM
+        reach = SAFETY_FACTOR * (math.sqrt(vx * vx + vy * vy + vz * vz) + spin[a] + spin[b]) * interval_s \
+            + MIN_CLEARANCE_CM
         dx = qpos[a, 0] - qpos[b, 0]
         dy = qpos[a, 1] - qpos[b, 1]
         dz = qpos[a, 2] - qpos[b, 2]
-        if math.sqrt(dx * dx + dy * dy + dz * dz) - body_radius[a] - body_radius[b] - reach > best:
+        if math.sqrt(dx * dx + dy * dy + dz * dz) - body_radius[a] - body_radius[b] > reach:
             continue
         for ca in range(cap_start[a], cap_start[a + 1]):
             for cb in range(cap_start[b], cap_start[b + 1]):
+                mx = 0.5 * (world0[ca, 0] + world1[ca, 0] - world0[cb, 0] - world1[cb, 0])
+                my = 0.5 * (world0[ca, 1] + world1[ca, 1] - world0[cb, 1] - world1[cb, 1])
+                mz = 0.5 * (world0[ca, 2] + world1[ca, 2] - world0[cb, 2] - world1[cb, 2])
+                if math.sqrt(mx * mx + my * my + mz * mz) - cap_reach[ca] - cap_reach[cb] > reach:
+                    continue  # capsule bounding spheres apart
                 gap = _segment_distance(world0[ca], world1[ca], world0[cb], world1[cb]) - cap_radius[ca] \
                     - cap_radius[cb]
-                if gap - reach < best:
-                    best, best_gap, best_reach = gap - reach, gap, reach
-    return best, best_gap, best_reach
+                if gap <= reach:
+                    return gap, reach
+    return np.inf, 0.0
 
 
 class SegmentContactGuard:
@@ -136,6 +142,8 @@ class SegmentContactGuard:
         self.cap_p0 = np.array(p0, dtype=float).reshape(-1, 3)
         self.cap_p1 = np.array(p1, dtype=float).reshape(-1, 3)
         self.cap_radius = np.array(radius, dtype=float)
+        # bounding sphere of each capsule about its midpoint: half its length plus its radius
+        self.cap_reach = 0.5 * np.linalg.norm(self.cap_p1 - self.cap_p0, axis=1) + self.cap_radius
         self.body_radius = body_radius
         self.pair_a = np.array([a for a, _ in pairs], dtype=np.int64)
         self.pair_b = np.array([b for _, b in pairs], dtype=np.int64)
@@ -143,11 +151,9 @@ class SegmentContactGuard:
         self._w1 = np.zeros_like(self.cap_p1)
 
     def gap_and_reach_cm(self, qpos: np.ndarray, qvel: np.ndarray, interval_s: float) -> tuple[float, float]:
-        """(gap, reach) of the segment pair closest to touching within interval_s (see closest_approach);
-        no contact can form before the next check while gap > reach."""
+        """(gap, reach) of a segment pair that could touch within interval_s (see first_close_pair), or
+        (inf, 0): no contact can form before the next check."""
         if self.pair_a.size == 0:
             return math.inf, 0.0
-        _, gap, reach = closest_approach(qpos, qvel, interval_s, self.cap_start, self.cap_p0, self.cap_p1,
-                                         self.cap_radius, self.body_radius, self.pair_a, self.pair_b, self._w0,
-                                         self._w1)
-        return gap, reach
+        return first_close_pair(qpos, qvel, interval_s, self.cap_start, self.cap_p0, self.cap_p1, self.cap_radius,
+                                self.cap_reach, self.body_radius, self.pair_a, self.pair_b, self._w0, self._w1)
