@@ -34,7 +34,6 @@ from protocol.errors import ConfigError, check_range
 from robot.bodies import BodyModel
 from robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
 from worker.engines.base import GRAVITY_CM_S2, BasePhysics
-from worker.engines.contact_guard import SegmentContactGuard
 
 INTEGRATORS = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
                "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "rk4": mujoco.mjtIntegrator.mjINT_RK4}
@@ -286,7 +285,11 @@ class MujocoPhysics(BasePhysics):
         self.n_bodies = len(bodies)
         rot = np.eye(3) if start_rotation is None else _matrix(start_rotation)
         self.base_pos = np.array([rot @ b.com_cm for b in bodies])  # start COMs before offsets
-        self.guard = SegmentContactGuard(bodies, off) if self.settings.segment_contacts == "auto" else None
+        self.guard = None
+        if self.settings.segment_contacts == "auto":
+            from worker.engines.contact_guard import SegmentContactGuard  # compiled: numba only when used
+
+            self.guard = SegmentContactGuard(bodies, off)
         self._bind()
 
     def _bind(self) -> None:
