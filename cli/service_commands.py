@@ -76,9 +76,9 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
     p.add_argument("--seed", type=int, default=0, help="run seed: fixes every sampled vector by trial number")
     p.add_argument("--objective", default="distance",
                    help="distance (default), speed, cot_distance or pareto (front of speed and COT)")
-    p.add_argument("--sampler", default="paper",
-                   help="paper (default: Monte Carlo then hill climbing), cmaes (CMA-ES, IPOP restarts), "
-                        "tpe (Optuna TPE) or random; stored with the run")
+    p.add_argument("--sampler", default=None,
+                   help="cmaes (default: CMA-ES with IPOP restarts), paper (Monte Carlo then hill climbing, "
+                        "the paper's), tpe (Optuna TPE) or random; stored with the run")
     p.add_argument("--controller", help="controller parameter space (default: the morphology's)")
     p.add_argument("--engine", default=None, help="physics engine of every trial: bullet (default) or mujoco")
     p.add_argument("--engine-option", action="append", default=None, metavar="KEY=VALUE",
@@ -208,9 +208,11 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     judge = args.verify_engine or ("bullet" if screen_engine != "bullet" else None)
     verify = VerifyPolicy(enabled=not args.no_verify, tolerance=args.verify_tolerance, perturb=args.verify_perturb,
                           engine=judge if judge != screen_engine else None, dt_s=args.verify_dt)
-    settings = SearchSettings(trials=2000 if args.trials is None else args.trials, sampler=args.sampler,
-                              sigma=args.sigma, top_k=args.top_k, startup_trials=args.startup_trials, lease_s=lease,
-                              verify=verify, rungs=rungs)
+    from coordinator.samplers import DEFAULT_SAMPLER
+
+    settings = SearchSettings(trials=2000 if args.trials is None else args.trials,
+                              sampler=args.sampler or DEFAULT_SAMPLER, sigma=args.sigma, top_k=args.top_k,
+                              startup_trials=args.startup_trials, lease_s=lease, verify=verify, rungs=rungs)
     out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
     core, storage = new_run(config, settings, out, overwrite=args.overwrite)
     return core, storage, out

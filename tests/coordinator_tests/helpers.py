@@ -23,7 +23,8 @@ def sphere_core(trials: int = 20, *, lease_s: float = 10.0, clock=None, out=None
     """duration_s: wall time each test-objective trial takes on the worker."""
     clock = clock or FakeClock()
     config = build_run_config(run_id, morphology, seed=seed, duration_s=duration_s)
-    core, storage = new_run(config, SearchSettings(trials=trials, lease_s=lease_s,
+    # the paper's sampler: these tests check its phases and parents
+    core, storage = new_run(config, SearchSettings(trials=trials, lease_s=lease_s, sampler="paper",
                                                    startup_trials=startup_trials), out, clock)
     return core, storage, clock
 

@@ -34,6 +34,7 @@ def test_coordinator_two_workers_and_api_run_a_search(tmp_path):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
+    wait_for(out.exists, timeout_s=30, poll_s=0.05, what="the run file")  # the API serves an existing file
     api = spinefarm("api", str(out), "--port", str(port))
     try:
         assert coord.wait(60) == 0

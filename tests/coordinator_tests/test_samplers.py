@@ -106,7 +106,7 @@ def test_sampler_settings_round_trip_and_validate():
 
 def test_registry_names_every_sampler_and_rejects_unknown_names():
     assert {"paper", "cmaes", "tpe", "random"} <= set(SAMPLERS)
-    assert DEFAULT_SAMPLER == "paper"
+    assert DEFAULT_SAMPLER == "cmaes"  # bench/samplers.py (docs/samplers.md)
     for name, cls in SAMPLERS.items():
         assert cls.name == name
     with pytest.raises(ConfigError, match=r"unknown sampler.*annealing.*expected.*cmaes"):
