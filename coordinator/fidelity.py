@@ -104,20 +104,15 @@ class FirstRungView:
     hill climber's centre is still the best full-length gait."""
 
     def __init__(self, storage: BaseStorage) -> None:
+        # made per proposal: no row is added while a sampler reads it
         self.storage = storage
-        cols = storage.columns()
-        self.ids = np.flatnonzero(cols["rung"] == 0)
-        self._cols = cols
+        self.ids = np.flatnonzero(storage.columns()["rung"] == 0)
 
     def n_trials(self) -> int:
         return len(self.ids)
 
     def columns(self) -> dict[str, np.ndarray]:
-        cols = self.storage.columns()
-        if len(cols["rung"]) != len(self._cols["rung"]):
-            self.ids = np.flatnonzero(cols["rung"] == 0)
-        self._cols = cols
-        return {name: col[self.ids] for name, col in cols.items()}
+        return {name: col[self.ids] for name, col in self.storage.columns().items()}
 
     def first_rung_row(self, trial_id: int) -> int:
         """The first-rung row a (possibly promoted) row re-runs, as a trial id."""
@@ -133,8 +128,9 @@ class FirstRungView:
     def best_ids(self, k: int) -> list[int]:
         out: list[int] = []
         for tid in self.storage.best_ids(k * 4 if k > 0 else 0):  # promotions repeat a set: ask for more
-            index = int(np.searchsorted(self.ids, self.first_rung_row(tid)))
-            if index < len(self.ids) and self.ids[index] == self.first_rung_row(tid) and index not in out:
+            row = self.first_rung_row(tid)
+            index = int(np.searchsorted(self.ids, row))
+            if index < len(self.ids) and self.ids[index] == row and index not in out:
                 out.append(index)
             if len(out) == k:
                 break

@@ -120,7 +120,7 @@ def first_close_pair(qpos, qvel, interval_s, cap_start, cap_p0, cap_p1, cap_radi
 
 class SegmentContactGuard:
     """Capsules of every segment (body frame, about the COM) and the segment pairs the scene lets
-    collide; `gap_too_small(qpos, qvel, interval_s)` says whether a contact could form before the next
+    collide; `gap_and_reach_cm(qpos, qvel, interval_s)` says whether a contact could form before the next
     check (qpos (nb, 7) x y z w x y z, qvel (nb, 6) as MuJoCo's free joints hold them)."""
 
     def __init__(self, bodies: list[BodyModel], excluded: list[tuple[int, int]]) -> None:
