@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 
 from coordinator.problem import build_run_config
 from coordinator.setup import SearchSettings, new_run
-from coordinator.verifier import VerifyPolicy
+from coordinator.verifier import JUDGE_NICENESS, VerifyPolicy
 from protocol.messages import ResultAck, ResultSubmission, SubmittedResult, WorkGrant, WorkRequest, decode_message
 from protocol.messages import encode_message as enc
 from storage.hdf5 import Hdf5Storage
@@ -54,3 +55,17 @@ def test_test_objectives_and_disabled_policies_have_no_verifier(tmp_path):
     config = build_run_config("v", "tetraspine-ntrt", duration_s=0.1)
     core, _storage = new_run(config, SearchSettings(trials=2, verify=VerifyPolicy(enabled=False)), None, FakeClock())
     assert core.verifier is None
+
+
+def test_the_judge_runs_below_the_workers_priority(tmp_path):
+    config = build_run_config("v", "tetraspine-ntrt", duration_s=0.05)
+    core, storage = new_run(config, SearchSettings(trials=1), tmp_path / "run.h5", FakeClock())
+    try:
+        core.verifier.submit(0, [0.5] * len(config.param_space), 1, 0.0)
+        [(tid, verdict)] = core.verifier.collect(wait_s=120.0)
+        assert tid == 0 and "holds" in verdict
+        [proc] = core.verifier._pool._processes.values()
+        assert os.getpriority(os.PRIO_PROCESS, proc.pid) >= JUDGE_NICENESS
+    finally:
+        core.verifier.close()
+        storage.close()
