@@ -6,8 +6,10 @@ contact ever forms. With `segment_contacts="auto"` the model leaves them out and
 the gaps instead: at each of the trial's checks it measures the smallest gap between the capsules of
 every segment pair the scene lets collide. While every gap stays larger than the distance the segments
 could close before the next check (from their current speeds, with a factor of two to spare), no
-contact can have formed, and the trial is the same bits as one with the contacts modelled; otherwise
-the trial is run again from the start with them (worker.trial).
+contact can have formed, and the trial is the same bits as one with the contacts modelled. The next
+look comes sooner when segments come near: the guard says how many steps are safe (up to the next check,
+fewer when a gap could close sooner), and the trial loop looks again after them. Only when a gap could
+close within a single step is the trial run again from the start with the contacts (worker.trial).
 """
 
 from __future__ import annotations
@@ -75,13 +77,13 @@ def _segment_distance(p1, q1, p2, q2) -> float:
 
 
 @njit(cache=True)
-def first_close_pair(qpos, qvel, interval_s, cap_start, cap_p0, cap_p1, cap_radius, cap_reach, body_radius, pair_a,
-                     pair_b, world0, world1):
-    """(gap, reach) of the first listed body pair whose capsules are closer than the distance the two
-    segments could close within interval_s, or (inf, 0). reach: SAFETY_FACTOR times the largest relative
-    speed of two of their points, |v_a - v_b| + |w_a| r_a + |w_b| r_b with r the bounding radii, plus
-    MIN_CLEARANCE_CM. Body pairs and capsule pairs whose bounding spheres are further apart than that are
-    skipped without a segment-segment distance."""
+def contact_free_time(qpos, qvel, horizon_s, cap_start, cap_p0, cap_p1, cap_radius, cap_reach, body_radius,
+                      pair_a, pair_b, world0, world1):
+    """(t, gap): no two segments can touch for t seconds (at most horizon_s), and the gap (cm) of the pair
+    that limits it (inf if none does). A pair's t is (gap - MIN_CLEARANCE_CM) / (SAFETY_FACTOR * v), with v
+    the largest relative speed of two of their points, |v_a - v_b| + |w_a| r_a + |w_b| r_b (r the bounding
+    radii). Body pairs and capsule pairs whose bounding spheres alone give a longer t than the shortest
+    found so far are skipped without a segment-segment distance."""
     nb = qpos.shape[0]
     spin = np.empty(nb)
     for b in range(nb):
@@ -92,13 +94,14 @@ def first_close_pair(qpos, qvel, interval_s, cap_start, cap_p0, cap_p1, cap_radi
             for k in range(3):
                 world0[c, k] += qpos[b, k]
                 world1[c, k] += qpos[b, k]
+    t_free, limiting_gap = horizon_s, np.inf
     for i in range(pair_a.shape[0]):
         a, b = pair_a[i], pair_b[i]
         vx = qvel[a, 0] - qvel[b, 0]
         vy = qvel[a, 1] - qvel[b, 1]
         vz = qvel[a, 2] - qvel[b, 2]
-        reach = SAFETY_FACTOR * (math.sqrt(vx * vx + vy * vy + vz * vz) + spin[a] + spin[b]) * interval_s \
-            + MIN_CLEARANCE_CM
+        closing = SAFETY_FACTOR * (math.sqrt(vx * vx + vy * vy + vz * vz) + spin[a] + spin[b])
+        reach = closing * t_free + MIN_CLEARANCE_CM  # a gap wider than this cannot shorten t_free
         dx = qpos[a, 0] - qpos[b, 0]
         dy = qpos[a, 1] - qpos[b, 1]
         dz = qpos[a, 2] - qpos[b, 2]
@@ -114,14 +117,17 @@ def first_close_pair(qpos, qvel, interval_s, cap_start, cap_p0, cap_p1, cap_radi
                 gap = _segment_distance(world0[ca], world1[ca], world0[cb], world1[cb]) - cap_radius[ca] \
                     - cap_radius[cb]
                 if gap <= reach:
-                    return gap, reach
-    return np.inf, 0.0
+                    t_free = max(0.0, gap - MIN_CLEARANCE_CM) / closing if closing > 0.0 else \
+                        (0.0 if gap <= MIN_CLEARANCE_CM else t_free)
+                    limiting_gap = gap
+                    reach = closing * t_free + MIN_CLEARANCE_CM
+    return t_free, limiting_gap
 
 
 class SegmentContactGuard:
     """Capsules of every segment (body frame, about the COM) and the segment pairs the scene lets
-    collide; `gap_and_reach_cm(qpos, qvel, interval_s)` says whether a contact could form before the next
-    check (qpos (nb, 7) x y z w x y z, qvel (nb, 6) as MuJoCo's free joints hold them)."""
+    collide; `free_time_s(qpos, qvel, horizon_s)` says for how long no contact can form (qpos (nb, 7)
+    x y z w x y z, qvel (nb, 6) as MuJoCo's free joints hold them)."""
 
     def __init__(self, bodies: list[BodyModel], excluded: list[tuple[int, int]]) -> None:
         p0, p1, radius, start = [], [], [], [0]
@@ -150,10 +156,10 @@ class SegmentContactGuard:
         self._w0 = np.zeros_like(self.cap_p0)
         self._w1 = np.zeros_like(self.cap_p1)
 
-    def gap_and_reach_cm(self, qpos: np.ndarray, qvel: np.ndarray, interval_s: float) -> tuple[float, float]:
-        """(gap, reach) of a segment pair that could touch within interval_s (see first_close_pair), or
-        (inf, 0): no contact can form before the next check."""
+    def free_time_s(self, qpos: np.ndarray, qvel: np.ndarray, horizon_s: float) -> tuple[float, float]:
+        """(seconds, at most horizon_s, during which no two segments can touch; the gap in cm of the pair
+        that limits it, inf if none does): see contact_free_time."""
         if self.pair_a.size == 0:
-            return math.inf, 0.0
-        return first_close_pair(qpos, qvel, interval_s, self.cap_start, self.cap_p0, self.cap_p1, self.cap_radius,
-                                self.cap_reach, self.body_radius, self.pair_a, self.pair_b, self._w0, self._w1)
+            return horizon_s, math.inf
+        return contact_free_time(qpos, qvel, horizon_s, self.cap_start, self.cap_p0, self.cap_p1, self.cap_radius,
+                                 self.cap_reach, self.body_radius, self.pair_a, self.pair_b, self._w0, self._w1)

@@ -335,15 +335,15 @@ class MujocoPhysics(BasePhysics):
         self.qvel[index, :3] = linear_cm_s
         self.qvel[index, 3:] = rot.T @ np.asarray(angular_rad_s, dtype=float)
 
-    def unmodelled_contact(self, interval_s: float) -> str:
-        """Why the segment-segment contacts this model leaves out ("auto") could matter before the next
-        check in interval_s, or "" (always "" when they are modelled or switched off)."""
+    def contact_free_steps(self, max_steps: int) -> tuple[int, str]:
+        """(steps, at most max_steps, before which none of the segment-segment contacts this model leaves
+        out ("auto") can form; why not even one step is safe, or ""). Always max_steps when they are
+        modelled or switched off."""
         if self.guard is None:
-            return ""
-        gap, reach = self.guard.gap_and_reach_cm(self.qpos, self.qvel, interval_s)
-        if gap > reach:
-            return ""
-        return f"gap {gap:.3g} < {reach:.3g} cm"
+            return max_steps, ""
+        t_free, gap = self.guard.free_time_s(self.qpos, self.qvel, max_steps * self.dt_s)
+        steps = min(max_steps, int(t_free / self.dt_s * (1.0 + 1e-12)))
+        return steps, "" if steps else f"gap {gap:.3g} cm could close within one {self.dt_s * 1e3:g} ms step"
 
     def contact_count(self) -> int:
         return int(self.data.ncon)
