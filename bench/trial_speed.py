@@ -15,6 +15,7 @@ rest = CPG, strings and the fused loop); `engine_step_ratio`, Bullet's stepSimul
 set-up built fresh (as before set-up reuse) against reused from the worker's SetupCache, per engine.
 
     python bench/trial_speed.py [--morphology tetraspine] [--steps 3000] [--repeats 3] [--tier-seconds 10]
+                                [--moving RUN.h5]
 """
 
 from __future__ import annotations
@@ -83,11 +84,14 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
             "n_cpg_nodes": net.n_nodes, "n_couplings": net.n_couplings, "dt_s": dt}
 
 
-def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict) -> dict:
+def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
+          gaits: list[np.ndarray] | None = None, controller: str | None = None) -> dict:
     """CPU s per simulated second of whole trials, interleaved: both engines at their default steps, and for
     context MuJoCo with segment-segment contacts modelled throughout ("scene"; the default "auto" leaves
     them out while no segment comes near, same bits), without them, MuJoCo as a screen (2 ms, no
-    segment-segment contacts) and Bullet at 0.25 ms (about MuJoCo's default-step accuracy, docs/accuracy.md)."""
+    segment-segment contacts) and Bullet at 0.25 ms (about MuJoCo's default-step accuracy, docs/accuracy.md).
+    gaits: unit parameter vectors (of `controller`'s space) to run, one per round after a warm-up round;
+    default: seeded random ones."""
     import mujoco
 
     from worker.setup import SetupCache
@@ -106,17 +110,20 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict) -
     caches = {e: SetupCache() for e in configs}
     cpu: dict[str, list[float]] = {e: [] for e in configs}
     mj_step_us, dts, contacts, fallbacks = [], {}, [], []
-    for r in range(repeats + 1):  # the first round warms caches and compiled code
-        u = random_unit_params(morph, 7 + r)
+    distances: dict[str, list[float]] = {e: [] for e in configs}
+    rounds = repeats + 1 if gaits is None else len(gaits) + 1
+    for r in range(rounds):  # the first round warms caches and compiled code
+        u = random_unit_params(morph, 7 + r, controller) if gaits is None else gaits[max(0, r - 1)]
         for name, cfg in configs.items():
             t0 = time.process_time()
-            res = simulate(morph, u, cfg, 7 + r, setup=caches[name]).result
+            res = simulate(morph, u, cfg, 7 + r, controller=controller, setup=caches[name]).result
             el = time.process_time() - t0
             dts[name] = res.extras["dt_s"]
             if name == "mujoco" and r:
                 fallbacks.append(res.extras.get("segment_contacts", "left out"))
             if r:
                 cpu[name].append(el / res.sim_time_s)
+                distances[name].append(res.distance_m)
             if name == "mujoco" and r:
                 # bare mj_step from the trial's last state with its last string wrenches held (CPU time;
                 # MuJoCo's own timers count wall time, which a shared machine inflates)
@@ -137,7 +144,20 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict) -
             "mujoco_segment_contacts_auto": fallbacks,
             "mujoco_screen_speedup": med["bullet"] / med["mujoco_screen_2ms"],
             "speedup_at_equal_accuracy": med["bullet_0.25ms"] / med["mujoco"],
-            "cpu_s_per_sim_s_all": {e: [round(x, 4) for x in v] for e, v in cpu.items()}}
+            "cpu_s_per_sim_s_all": {e: [round(x, 4) for x in v] for e, v in cpu.items()},
+            "distance_m": {e: [round(x, 4) for x in v] for e, v in distances.items()}}
+
+
+def best_gaits(path: str, count: int) -> tuple[list[np.ndarray], str | None]:
+    """The unit parameter vectors of a run file's `count` farthest complete trials, and its controller."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        t = f["trials"]
+        distance = np.where(t["status"][:] == b"complete", t["distance_m"][:], -np.inf)
+        best = np.argsort(-distance)[:count]
+        controller = str(f.attrs["controller"]) if f.attrs.get("controller") else None
+        return [t["params_unit"][i] for i in best], controller
 
 
 def setup_cost(morph_name: str, repeats: int) -> dict:
@@ -173,6 +193,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--tier-seconds", type=float, default=10.0, help="simulated seconds per tier trial")
     ap.add_argument("--mujoco-options", default="{}", help="MuJoCo engine options as JSON (default: its defaults)")
+    ap.add_argument("--moving", metavar="RUN.h5", help="also the tiers on the 3 best gaits of this run file "
+                    "(gaits that move: their segments come nearer each other than random ones')")
     args = ap.parse_args()
     runs = [measure(args.morphology, args.steps, args.warmup, seed=7 + r) for r in range(args.repeats)]
     best = min(runs, key=lambda r: r["step_to_bare_ratio"])
@@ -185,6 +207,11 @@ def main() -> None:
            "engine_step_ratio": best["per_step_us"]["step"] / tier["mujoco_split_us_per_step"]["mj_step"],
            "tiers": tier,
            "setup_s_per_trial": setup_cost(args.morphology, args.repeats)}
+    if args.moving:
+        gaits, controller = best_gaits(args.moving, 3)
+        moving = tiers(args.morphology, args.tier_seconds, args.repeats, json.loads(args.mujoco_options), gaits,
+                       controller)
+        out["moving_gaits"] = {"run": args.moving, "controller": controller, **moving}
     print(json.dumps(out))
 
 
