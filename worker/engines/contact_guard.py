@@ -1,14 +1,14 @@
 """Segment-segment contacts only where a trial needs them.
 
 Segment-segment collision tests are most of a MuJoCo step on a spine (neighbouring segments' bounding
-boxes interleave, so every step runs their capsule-pair tests), and in the gaits measured no such
-contact ever forms. With `segment_contacts="auto"` the model leaves them out and this guard watches
-the gaps instead: at each of the trial's checks it measures the smallest gap between the capsules of
-every segment pair the scene lets collide. While every gap stays larger than the distance the segments
-could close before the next check (from their current speeds, with a factor of two to spare), no
-contact can have formed, and the trial is the same bits as one with the contacts modelled. The next
-look comes sooner when segments come near: the guard says how many steps are safe (up to the next check,
-fewer when a gap could close sooner), and the trial loop looks again after them. Only when a gap could
+boxes interleave, so every step runs their capsule-pair tests), and in the gaits measured such contacts
+hardly ever form. With `segment_contacts="auto"` the model leaves them out and this guard watches the
+gaps instead: at each look it measures the smallest gap between the capsules of every segment pair the
+scene lets collide. While every gap stays larger than the distance the segments could close before the
+next look (from their current speeds, with a factor of two to spare), no contact can have formed, and
+the trial is the same bits as one with the contacts modelled. The guard says how many steps are safe (up
+to the trial's next check, fewer when a gap could close sooner), and the trial loop looks again after
+them. Only when a gap could
 close within a single step is the trial run again from the start with the contacts (worker.trial).
 """
 
