@@ -18,13 +18,19 @@ from protocol.errors import ParameterError
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("trial", help="run one trial and print its metrics",
                        description="Run one trial of a morphology under CPG + impedance control.")
-    p.add_argument("morphology", help="built-in name (e.g. tetraspine) or a .yaml spec file")
+    p.add_argument("morphology", nargs="?", default=None,
+                   help="built-in name (e.g. tetraspine) or a .yaml spec file; omit with --run")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--random-seed", type=int, default=None,
                      help="draw the parameters uniformly from the unit cube with this seed")
     src.add_argument("--params", type=Path, default=None,
                      help="JSON file of named physical parameter values ({name: value} or "
                           "{\"controller\": ..., \"params\": {name: value}})")
+    src.add_argument("--run", type=Path, default=None, metavar="RUN.h5",
+                     help="re-run a trial of this run file (its robot, controller, parameters, seed, length, "
+                          "settle and trial settings; the flags below override them), e.g. its best in "
+                          "another engine or at a finer step")
+    p.add_argument("--trial-id", type=int, default=None, help="with --run: which trial (default: the run's best)")
     p.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the morphology's)")
     p.add_argument("--dt", default=None,
                    help="physics step in seconds (default: the engine's, 0.001 for Bullet; see docs/engines.md), "
@@ -32,6 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--controller", default=None, help="controller space (e.g. ntrt, sidewinding)")
     p.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
     p.add_argument("--seed", type=int, default=None, help="trial seed (default: the random seed or 0)")
+    p.add_argument("--settle", type=float, default=None, metavar="S",
+                   help="settle this long with the CPG at rest and score locomotion from there (default 0)")
     p.add_argument("--scene", default=None,
                    help="flat (default), slope, rough or obstacles, optionally with ,field=value pairs, e.g. "
                         "'rough,rough_amplitude_cm=3' or 'flat,collision_filter=neighbours' (see docs/model.md)")
@@ -160,17 +168,36 @@ def cmd_trial(args: argparse.Namespace) -> int:
 
     if args.record is not None:
         checks.output_path("--record", args.record, (".npz",))
-    morph = load_morphology(args.morphology)
-    controller = args.controller
-    if args.params is not None:
-        params, file_controller = load_params_file(args.params)
-        controller = controller or file_controller
+    if args.trial_id is not None and args.run is None:
+        raise ParameterError("--trial-id needs --run", received=args.trial_id, expected="--run RUN.h5 --trial-id N")
+    base: dict[str, Any] = {}
+    if args.run is not None:
+        morphology, controller, params, seed, base = _stored_trial(args.run, args.trial_id)
+        if args.morphology is not None:
+            raise ParameterError("--run names its own robot", received=args.morphology,
+                                 expected="no morphology with --run")
+        morph = load_morphology(morphology)
+        controller = args.controller or controller
+        seed = args.seed if args.seed is not None else seed
     else:
-        rseed = 0 if args.random_seed is None else args.random_seed
-        params = random_unit_params(morph, rseed, controller)
-    seed = args.seed if args.seed is not None else (args.random_seed or 0)
-    overrides: dict[str, Any] = {"duration_s": args.duration, "controller": controller}
-    overrides.update(trial_overrides(args))
+        if args.morphology is None:
+            raise ParameterError("no robot to run", received="nothing", expected="a morphology or --run RUN.h5")
+        morph = load_morphology(args.morphology)
+        controller = args.controller
+        if args.params is not None:
+            params, file_controller = load_params_file(args.params)
+            controller = controller or file_controller
+        else:
+            rseed = 0 if args.random_seed is None else args.random_seed
+            params = random_unit_params(morph, rseed, controller)
+        seed = args.seed if args.seed is not None else (args.random_seed or 0)
+    overrides = trial_overrides(args)
+    if "engine" in overrides and overrides["engine"] != base.get("engine", "bullet"):
+        base.pop("engine_options", None)  # the run's options belong to its own engine
+        base.pop("dt_s", None)  # and so does its step: the new engine's default unless --dt says
+    overrides = {**base, **overrides, "controller": controller}
+    if args.duration is not None:
+        overrides["duration_s"] = args.duration
     if args.record is not None:
         overrides["record_every_s"] = args.record_every
     cfg = TrialConfig.from_dict(overrides)
@@ -198,6 +225,40 @@ def cmd_trial(args: argparse.Namespace) -> int:
         if args.record is not None:
             print(f"  trajectory -> {args.record}")
     return 0 if r.ok else 1
+
+
+def _stored_trial(path: Path, trial_id: int | None) -> tuple[Any, str | None, np.ndarray, int, dict[str, Any]]:
+    """(morphology spec, controller, unit parameters, seed, trial config) of a run file's trial, or of its
+    best; the config carries the trial's own length and settle (a rung's, in a multi-fidelity run)."""
+    from storage.hdf5 import Hdf5Storage
+
+    store = Hdf5Storage.open_read(path)
+    try:
+        meta = store.run_meta()
+        if trial_id is None:
+            best = store.best(1)
+            if not best:
+                raise ParameterError("run file has no finished trial", received=str(path),
+                                     expected="a run with results, or --trial-id")
+            rec = best[0]
+        else:
+            rec = store.trial(trial_id)
+    finally:
+        store.close()
+    if rec.status == "waiting":
+        raise ParameterError("that trial was sampled but never run", received=rec.trial_id,
+                             expected="a trial with a result")
+    config = {k: v for k, v in meta.trial_config.items() if k not in ("record_every_s",)}
+    if math.isfinite(rec.duration_s):
+        config["duration_s"] = rec.duration_s
+    if math.isfinite(rec.settle_s):
+        config["settle_s"] = rec.settle_s
+    if rec.engine:
+        config["engine"] = rec.engine
+    if math.isfinite(rec.dt_s):
+        config["dt_s"] = rec.dt_s
+    return (meta.morphology_spec or meta.morphology, meta.controller, np.asarray(rec.params_unit), rec.seed,
+            config)
 
 
 def _physical(morph, params, controller) -> np.ndarray:

@@ -171,3 +171,16 @@ def test_ctrl_c_while_the_best_is_re_simulated(tmp_path):
 
     _, cols = read_run(out)
     assert cols["status"].tolist() == [b"complete"]
+
+
+@pytest.mark.parametrize(("args", "needles"), [
+    (("trial",), ("no robot to run", "--run")),
+    (("trial", "tetraspine", "--trial-id", "3"), ("--trial-id needs --run",)),
+    (("trial", "--run", "missing.h5"), ("missing.h5",)),
+])
+def test_a_trial_without_a_robot_or_with_a_stray_trial_id(args, needles):
+    one_line_error(run(*args, timeout=30), *needles)
+
+
+def test_a_trial_of_a_run_names_no_robot_of_its_own(sphere_run):
+    one_line_error(run("trial", "tetraspine", "--run", str(sphere_run), timeout=30), "--run names its own robot")
