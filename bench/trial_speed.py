@@ -148,16 +148,24 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
             "distance_m": {e: [round(x, 4) for x in v] for e, v in distances.items()}}
 
 
-def best_gaits(path: str, count: int) -> tuple[list[np.ndarray], str | None]:
-    """The unit parameter vectors of a run file's `count` farthest complete trials, and its controller."""
+def best_gaits(path: str, count: int, apart: float = 0.1) -> tuple[list[np.ndarray], str | None]:
+    """The unit parameter vectors of a run file's `count` farthest complete trials that differ from each
+    other by more than `apart` in some parameter (a converged search's best are one gait many times), and
+    the run's controller."""
     import h5py
 
     with h5py.File(path, "r") as f:
         t = f["trials"]
         distance = np.where(t["status"][:] == b"complete", t["distance_m"][:], -np.inf)
-        best = np.argsort(-distance)[:count]
+        units = t["params_unit"][:]
         controller = str(f.attrs["controller"]) if f.attrs.get("controller") else None
-        return [t["params_unit"][i] for i in best], controller
+    chosen: list[np.ndarray] = []
+    for i in np.argsort(-distance):
+        if not np.isfinite(distance[i]) or len(chosen) == count:
+            break
+        if all(np.max(np.abs(units[i] - u)) > apart for u in chosen):
+            chosen.append(units[i])
+    return chosen, controller
 
 
 def setup_cost(morph_name: str, repeats: int) -> dict:
@@ -193,8 +201,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--tier-seconds", type=float, default=10.0, help="simulated seconds per tier trial")
     ap.add_argument("--mujoco-options", default="{}", help="MuJoCo engine options as JSON (default: its defaults)")
-    ap.add_argument("--moving", metavar="RUN.h5", help="also the tiers on the 3 best gaits of this run file "
-                    "(gaits that move: their segments come nearer each other than random ones')")
+    ap.add_argument("--moving", metavar="RUN.h5", help="also the tiers on 3 of the best gaits of this run file, "
+                    "all different (gaits that move: their segments come nearer each other than random ones')")
     args = ap.parse_args()
     runs = [measure(args.morphology, args.steps, args.warmup, seed=7 + r) for r in range(args.repeats)]
     best = min(runs, key=lambda r: r["step_to_bare_ratio"])
