@@ -245,9 +245,17 @@ class CoordinatorCore:
         return len(done)
 
     def finish_verifications(self, timeout_s: float) -> bool:
-        """Wait (up to timeout_s) until the best is verified; True if nothing is left pending."""
+        """Once the search is over: wait (up to timeout_s) until the best is verified; True if nothing is
+        left pending. A check of a best since overtaken, running or queued, is stopped first: during the
+        search it may run on, since the best may yet fall back to it, but now it only delays the best's."""
         if self.verifier is None:
             return True
+        with self.lock:
+            best = self.study.storage.best_ids(1)
+            if best:
+                for tid in self.verifier.stop_all_but(best[0]):
+                    self.study.storage.set_verification(tid, Verification.NOT_CHECKED)
+                self._verify_best()
         end = time.monotonic() + timeout_s
         while self.verifier.pending and time.monotonic() < end:
             self.collect_verifications(wait_s=min(1.0, max(0.0, end - time.monotonic())))

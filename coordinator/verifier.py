@@ -145,6 +145,21 @@ class Verifier:
             del self._futures[tid]
         return out
 
+    def stop_all_but(self, keep: int) -> list[int]:
+        """Drop every check but keep's, a running one included (its process is ended; the next submit
+        starts another). The trial ids whose checks were dropped: keep's own too if it was queued behind a
+        running one, so the caller submits it again."""
+        stale = [tid for tid in self._futures if tid != keep]
+        if any(self._futures[tid].running() for tid in stale):
+            dropped = list(self._futures)
+            self.close()
+            self._futures.clear()
+            return dropped
+        dropped = [tid for tid in stale if self._futures[tid].cancel()]
+        for tid in dropped:
+            del self._futures[tid]
+        return dropped
+
     def collect(self, wait_s: float = 0.0) -> list[tuple[int, dict[str, Any]]]:
         """(trial id, verification dict) of every finished job; an error becomes a not-reproduced verdict."""
         from concurrent.futures import FIRST_COMPLETED

@@ -69,3 +69,36 @@ def test_the_judge_runs_below_the_workers_priority(tmp_path):
     finally:
         core.verifier.close()
         storage.close()
+
+
+def test_once_the_search_is_over_a_check_of_an_overtaken_best_is_stopped(tmp_path):
+    """The check of an earlier best is still running when a better result arrives and the budget is done:
+    it is stopped (its trial left unchecked) so the best's own check starts at once."""
+    import time
+
+    config = build_run_config("overtaken", "tetraspine-ntrt", seed=3, duration_s=1.0)
+    settings = SearchSettings(trials=2, startup_trials=2, verify=VerifyPolicy(refine=16))
+    core, storage = new_run(config, settings, tmp_path / "run.h5", FakeClock())
+    try:
+        grant = decode_message(core.handle_work(enc(WorkRequest("w1", 2))), WorkGrant)
+        done = []
+        for a in grant.assignments:
+            r = run_trial(config.morphology, np.array(a.params_unit), TrialConfig.from_dict(config.trial_config),
+                          a.seed)
+            done.append(SubmittedResult(a.lease_id, dataclasses.replace(r, trial_id=a.trial_id, worker_id="w1")))
+        first, better = sorted(done, key=lambda s: s.result.distance_m)
+        decode_message(core.handle_results(enc(ResultSubmission("w1", (first,)))), ResultAck)
+        earlier = first.result.trial_id
+        deadline = time.monotonic() + 60.0
+        while not core.verifier._futures[earlier].running():  # the earlier best's check has started
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        decode_message(core.handle_results(enc(ResultSubmission("w1", (better,)))), ResultAck)
+        assert core.done
+        assert core.finish_verifications(timeout_s=120.0)
+        cols = storage.columns()
+        assert cols["verification"][better.result.trial_id] == b"holds"
+        assert cols["verification"][earlier] == b""  # stopped, not judged
+    finally:
+        core.verifier.close()
+        storage.close()
