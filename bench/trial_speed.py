@@ -21,6 +21,7 @@ set-up built fresh (as before set-up reuse) against reused from the worker's Set
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 
@@ -127,7 +128,9 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
             if name == "mujoco" and r:
                 # bare mj_step from the trial's last state with its last string wrenches held (CPU time;
                 # MuJoCo's own timers count wall time, which a shared machine inflates)
-                scene = caches[name].get(morph, cfg, None)._scene
+                ran = cfg if "segment_contacts" not in res.extras else dataclasses.replace(  # re-run with them
+                    cfg, engine_options={**cfg.engine_options, "segment_contacts": "scene"})
+                scene = caches[name].get(morph, ran, controller)._scene
                 contacts.append(int(scene.data.ncon))
                 t1 = time.process_time()
                 for _ in range(200):
