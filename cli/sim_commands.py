@@ -172,7 +172,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
         raise ParameterError("--trial-id needs --run", received=args.trial_id, expected="--run RUN.h5 --trial-id N")
     base: dict[str, Any] = {}
     if args.run is not None:
-        morphology, controller, params, seed, base = _stored_trial(args.run, args.trial_id)
+        morphology, controller, params, seed, base, stored_id = _stored_trial(args.run, args.trial_id)
         if args.morphology is not None:
             raise ParameterError("--run names its own robot", received=args.morphology,
                                  expected="no morphology with --run")
@@ -211,9 +211,14 @@ def cmd_trial(args: argparse.Namespace) -> int:
                                 space.to_named(_physical(morph, params, controller))),
                             trial_config_json=json.dumps(cfg.to_dict()))
     summary = result_summary(r, morph.name, controller or morph.controllers[0])
+    if args.run is not None:
+        summary["rerun_of"] = {"run": str(args.run), "trial_id": stored_id}
     if args.json:
         print(json.dumps(summary))
     else:
+        if args.run is not None:
+            length = "the robot's trial length" if cfg.duration_s is None else f"{cfg.duration_s:g} s"
+            print(f"trial {stored_id} of {args.run}: {length} after a {cfg.settle_s:g} s settle")
         print(f"{morph.name}: {r.status}{' (' + r.reason + ')' if r.reason else ''}")
         print(f"  distance      {r.distance_m * 100:9.2f} cm  (robot centre of mass, ground plane)")
         print(f"  NTRT distance {r.ntrt_distance_cm:9.2f} cm  (segment {morph.scored_segment})")
@@ -227,9 +232,10 @@ def cmd_trial(args: argparse.Namespace) -> int:
     return 0 if r.ok else 1
 
 
-def _stored_trial(path: Path, trial_id: int | None) -> tuple[Any, str | None, np.ndarray, int, dict[str, Any]]:
-    """(morphology spec, controller, unit parameters, seed, trial config) of a run file's trial, or of its
-    best; the config carries the trial's own length and settle (a rung's, in a multi-fidelity run)."""
+def _stored_trial(path: Path, trial_id: int | None
+                  ) -> tuple[Any, str | None, np.ndarray, int, dict[str, Any], int]:
+    """(morphology spec, controller, unit parameters, seed, trial config, trial id) of a run file's trial, or
+    of its best; the config carries the trial's own length and settle (a rung's, in a multi-fidelity run)."""
     from storage.hdf5 import Hdf5Storage
 
     store = Hdf5Storage.open_read(path)
@@ -258,7 +264,7 @@ def _stored_trial(path: Path, trial_id: int | None) -> tuple[Any, str | None, np
     if math.isfinite(rec.dt_s):
         config["dt_s"] = rec.dt_s
     return (meta.morphology_spec or meta.morphology, meta.controller, np.asarray(rec.params_unit), rec.seed,
-            config)
+            config, rec.trial_id)
 
 
 def _physical(morph, params, controller) -> np.ndarray:

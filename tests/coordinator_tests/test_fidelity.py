@@ -142,6 +142,7 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
 
     again = rerun()
     assert again["distance_m"] == best.distance_m and again["extras"]["engine"] == "mujoco"
+    assert again["rerun_of"] == {"run": str(out), "trial_id": best.trial_id}
     assert rerun("--engine", "bullet", "--dt", "0.00025")["distance_m"] == best.verify_distance_m
     first = rerun("--trial-id", "0")
     with Hdf5Storage.open_read(out) as s:
