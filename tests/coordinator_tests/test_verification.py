@@ -17,21 +17,25 @@ from tests.coordinator_tests.helpers import FakeClock
 from worker.trial import TrialConfig, run_trial
 
 
+def _run_grant(core, config, n: int) -> list[SubmittedResult]:
+    """Ask for n trials as worker w1 and run them: the submissions, not yet sent."""
+    grant = decode_message(core.handle_work(enc(WorkRequest("w1", n))), WorkGrant)
+    out = []
+    for a in grant.assignments:
+        r = run_trial(config.morphology, np.array(a.params_unit), TrialConfig.from_dict(config.trial_config), a.seed)
+        out.append(SubmittedResult(a.lease_id, dataclasses.replace(r, trial_id=a.trial_id, worker_id="w1")))
+    return out
+
+
 def test_a_bogus_best_is_not_reproduced_and_the_next_best_is_checked(tmp_path):
     config = build_run_config("verify-run", "tetraspine-ntrt", seed=1, duration_s=1.0)
     settings = SearchSettings(trials=2, startup_trials=2, verify=VerifyPolicy(tolerance=0.2))
     core, storage = new_run(config, settings, tmp_path / "run.h5", FakeClock())
     try:
-        grant = decode_message(core.handle_work(enc(WorkRequest("w1", 2))), WorkGrant)
-        results = []
-        for a in grant.assignments:
-            r = run_trial(config.morphology, np.array(a.params_unit), TrialConfig.from_dict(config.trial_config),
-                          a.seed)
-            results.append(dataclasses.replace(r, trial_id=a.trial_id, worker_id="w1"))
+        real, honest = _run_grant(core, config, 2)
         # trial 0 claims 5 m, as an exploded simulation would; trial 1 reports what it really did
-        bogus = dataclasses.replace(results[0], distance_m=5.0, ntrt_distance_cm=500.0)
-        items = (SubmittedResult(grant.assignments[0].lease_id, bogus),
-                 SubmittedResult(grant.assignments[1].lease_id, results[1]))
+        bogus = dataclasses.replace(real.result, distance_m=5.0, ntrt_distance_cm=500.0)
+        items = (dataclasses.replace(real, result=bogus), honest)
         decode_message(core.handle_results(enc(ResultSubmission("w1", items))), ResultAck)
         assert storage.columns()["verification"][0] == b"pending"
         assert core.finish_verifications(timeout_s=120.0)
@@ -80,13 +84,7 @@ def test_once_the_search_is_over_a_check_of_an_overtaken_best_is_stopped(tmp_pat
     settings = SearchSettings(trials=2, startup_trials=2, verify=VerifyPolicy(refine=16))
     core, storage = new_run(config, settings, tmp_path / "run.h5", FakeClock())
     try:
-        grant = decode_message(core.handle_work(enc(WorkRequest("w1", 2))), WorkGrant)
-        done = []
-        for a in grant.assignments:
-            r = run_trial(config.morphology, np.array(a.params_unit), TrialConfig.from_dict(config.trial_config),
-                          a.seed)
-            done.append(SubmittedResult(a.lease_id, dataclasses.replace(r, trial_id=a.trial_id, worker_id="w1")))
-        first, better = sorted(done, key=lambda s: s.result.distance_m)
+        first, better = sorted(_run_grant(core, config, 2), key=lambda s: s.result.distance_m)
         decode_message(core.handle_results(enc(ResultSubmission("w1", (first,)))), ResultAck)
         earlier = first.result.trial_id
         deadline = time.monotonic() + 60.0
