@@ -11,8 +11,11 @@ default step, interleaved: CPU seconds per simulated second of each and `mujoco_
 over MuJoCo's (also without segment-segment contacts, as a 2 ms screen, and against Bullet at 0.25 ms,
 the step where Bullet is about as accurate as MuJoCo at its default); MuJoCo's split (a bare mj_step; the
 rest = CPG, strings and the fused loop); `engine_step_ratio`, Bullet's stepSimulation over a bare mj_step
-(the ceiling of mujoco_speedup at equal steps, were CPG, strings and loop free); and `setup_s_per_trial`: a trial's
-set-up built fresh (as before set-up reuse) against reused from the worker's SetupCache, per engine.
+(the ceiling of mujoco_speedup at equal steps, were CPG, strings and loop free); `engine_step_ratio_2ms`,
+the same against a bare 2 ms mj_step per simulated millisecond; `mujoco_speedup_bound_2ms`, the most a 2 ms
+default step could give (a bare 2 ms mj_step plus the CPG at one RK4 step per 2 ms, `cpg_us_per_sim_ms`;
+strings and loop free); and `setup_s_per_trial`: a trial's set-up built fresh (as before set-up reuse)
+against reused from the worker's SetupCache, per engine.
 
     python bench/trial_speed.py [--morphology tetraspine] [--steps 3000] [--repeats 3] [--tier-seconds 10]
                                 [--moving RUN.h5]
@@ -110,7 +113,7 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
                "bullet_0.25ms": TrialConfig(duration_s=seconds, engine="bullet", dt_s=2.5e-4)}
     caches = {e: SetupCache() for e in configs}
     cpu: dict[str, list[float]] = {e: [] for e in configs}
-    mj_step_us, dts, contacts, fallbacks = [], {}, [], []
+    mj_step_us, mj_step_2ms_us, dts, contacts, fallbacks = [], [], {}, [], []
     distances: dict[str, list[float]] = {e: [] for e in configs}
     rounds = repeats + 1 if gaits is None else len(gaits) + 1
     for r in range(rounds):  # the first round warms caches and compiled code
@@ -125,22 +128,24 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
             if r:
                 cpu[name].append(el / res.sim_time_s)
                 distances[name].append(res.distance_m)
-            if name == "mujoco" and r:
+            if name in ("mujoco", "mujoco_screen_2ms") and r:
                 # bare mj_step from the trial's last state with its last string wrenches held (CPU time;
                 # MuJoCo's own timers count wall time, which a shared machine inflates)
                 ran = cfg if "segment_contacts" not in res.extras else dataclasses.replace(  # re-run with them
                     cfg, engine_options={**cfg.engine_options, "segment_contacts": "scene"})
                 scene = caches[name].get(morph, ran, controller)._scene
-                contacts.append(int(scene.data.ncon))
+                if name == "mujoco":
+                    contacts.append(int(scene.data.ncon))
                 t1 = time.process_time()
                 for _ in range(200):
                     mujoco.mj_step(scene.model, scene.data)
-                mj_step_us.append((time.process_time() - t1) / 200 * 1e6)
+                (mj_step_us if name == "mujoco" else mj_step_2ms_us).append((time.process_time() - t1) / 200 * 1e6)
     med = {e: float(np.median(v)) for e, v in cpu.items()}
     mj = float(np.median(mj_step_us))
     return {"tier_seconds": seconds, "cpu_s_per_sim_s": med, "dt_s": dts, "mujoco_options": mujoco_options,
             "mujoco_split_us_per_step": {"whole": med["mujoco"] * 1e6 * dts["mujoco"], "mj_step": mj,
                                          "rest_cpg_strings_loop": med["mujoco"] * 1e6 * dts["mujoco"] - mj},
+            "mj_step_2ms_screen_us": float(np.median(mj_step_2ms_us)),
             "mujoco_contacts_at_end": contacts, "mujoco_speedup": med["bullet"] / med["mujoco"],
             "mujoco_speedup_segment_contacts_off": med["bullet"] / med["mujoco_segment_contacts_off"],
             "mujoco_speedup_segment_contacts_modelled": med["bullet"] / med["mujoco_segment_contacts_modelled"],
@@ -149,6 +154,30 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
             "speedup_at_equal_accuracy": med["bullet_0.25ms"] / med["mujoco"],
             "cpu_s_per_sim_s_all": {e: [round(x, 4) for x in v] for e, v in cpu.items()},
             "distance_m": {e: [round(x, 4) for x in v] for e, v in distances.items()}}
+
+
+def cpg_cost(morph_name: str, seed: int, updates: int = 5000) -> dict:
+    """CPU µs of the compiled CPG kernel per simulated millisecond: at the morphology's control period with
+    RK4 sub-steps of at most 1 ms (as trials run it), and as one RK4 step per 2 ms (the least a 2 ms physics
+    step could spend on it)."""
+    from worker.control.cpg import rk4_advance
+
+    morph = load_morphology(morph_name)
+    space = morph.controller_space()
+    net = space.network(space.param_space.from_unit(random_unit_params(morph, seed)))
+    out = {}
+    plans = (("as_run", morph.control.cpg_update_period_s, TrialConfig().cpg_max_step_s),
+             ("one_rk4_per_2ms", 2e-3, 2e-3))
+    for label, period, max_step in plans:
+        cpg = CpgIntegrator(net, max_step)
+        h, n = cpg.plan(period)
+        kernel = cpg.kernel_arrays()
+        rk4_advance(cpg.state, *kernel, h, n, cpg.work, cpg.output_cm_s)  # compiled before timing
+        t0 = time.process_time()
+        for _ in range(updates):
+            rk4_advance(cpg.state, *kernel, h, n, cpg.work, cpg.output_cm_s)
+        out[label] = (time.process_time() - t0) / updates * 1e6 / (period * 1e3)
+    return out
 
 
 def best_gaits(path: str, count: int, apart: float = 0.1) -> tuple[list[np.ndarray], str | None]:
@@ -217,7 +246,14 @@ def main() -> None:
            # stepSimulation in the controlled scene over a bare mj_step
            "engine_step_ratio": best["per_step_us"]["step"] / tier["mujoco_split_us_per_step"]["mj_step"],
            "tiers": tier,
+           # a 2 ms default step at its cheapest: bare mj_step (segment-segment contacts off) and one RK4 CPG
+           # step per 2 ms, strings and loop free; an upper bound of mujoco_speedup had 2 ms met the 1 % bar
+           "cpg_us_per_sim_ms": cpg_cost(args.morphology, seed=7),
+           "engine_step_ratio_2ms": best["per_step_us"]["step"] / (tier["mj_step_2ms_screen_us"] / 2),
            "setup_s_per_trial": setup_cost(args.morphology, args.repeats)}
+    cpg_2ms = out["cpg_us_per_sim_ms"]["one_rk4_per_2ms"]
+    out["mujoco_speedup_bound_2ms"] = tier["cpu_s_per_sim_s"]["bullet"] * 1e3 / (tier["mj_step_2ms_screen_us"] / 2
+                                                                              + cpg_2ms)
     if args.moving:
         gaits, controller = best_gaits(args.moving, 3)
         moving = tiers(args.morphology, args.tier_seconds, args.repeats, json.loads(args.mujoco_options), gaits,
