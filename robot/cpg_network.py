@@ -31,5 +31,14 @@ class CpgNetwork:
     def n_couplings(self) -> int:
         return int(self.source.shape[0])
 
+    def fastest_rate_per_s(self) -> float:
+        """A bound on how fast any part of the state moves (1/s): the largest |omega_i| plus the coupling
+        gain sum_j |w_ij| R_j a node can feel, or the amplitude rate if larger. RK4 steps of h with
+        rate * h <= 0.1 err by ~1e-7 rad per step."""
+        gain = np.zeros(self.n_nodes)
+        rows = np.repeat(np.arange(self.n_nodes), np.diff(self.indptr))
+        np.add.at(gain, rows, np.abs(self.weight) * np.abs(self.amplitude_cm_s[self.source]))
+        return float(max(np.max(np.abs(self.omega_rad_s) + gain, initial=0.0), self.amplitude_rate_per_s))
+
     def complex_weights(self) -> np.ndarray:
         return (self.weight * np.exp(-1j * self.phase_rad)).astype(np.complex128)

@@ -30,6 +30,8 @@ class TrialConfig:
     motor_model: "physical" (limits in cm/s and cm/s^2, independent of dt) or "ntrt2014" (NTRT's
     per-step caps, only faithful at dt = 1 ms, for replaying published gaits).
     cpg_update_period_s: NTRT's controlTime (CPG output held in between).
+    cpg_max_step_s: the CPG's RK4 sub-step cap; None: 1 ms, longer for a network slow enough
+    (worker.control.cpg.CpgIntegrator).
     settle_s: seconds simulated before locomotion with the CPG held at rest (zero output, the impedance
     reflex holding the posture); distance, speed, work and COT count from the pose at its end,
     NTRT's distance (ntrt_distance_cm) still from the start. 0: scored from the start.
@@ -49,7 +51,7 @@ class TrialConfig:
     motor_model: str = "physical"
     controller: str | None = None
     cpg_update_period_s: float | None = None
-    cpg_max_step_s: float = 1e-3
+    cpg_max_step_s: float | None = None
     relocate_anchors: bool = True
     pose_jitter_cm: float = 0.0
     ground_friction: float | None = None
@@ -81,7 +83,8 @@ class TrialConfig:
             raise ConfigError("unknown motor_model", received=self.motor_model, expected=sorted(MOTOR_MODEL_NAMES))
         if self.cpg_update_period_s is not None:
             check_range("cpg_update_period_s", self.cpg_update_period_s, 1e-6, 10.0)
-        check_range("cpg_max_step_s", self.cpg_max_step_s, 1e-6, 0.1)
+        if self.cpg_max_step_s is not None:
+            check_range("cpg_max_step_s", self.cpg_max_step_s, 1e-6, 0.1)
         check_range("pose_jitter_cm", self.pose_jitter_cm, 0.0, 10.0)
         if self.ground_friction is not None:
             check_range("ground_friction", self.ground_friction, 0.0, 10.0)

@@ -49,3 +49,31 @@ def test_rk4_at_physics_rate_agrees_with_a_fine_reference():
         coarse.advance(1e-3)
         fine.advance(1e-3)
     assert np.max(np.abs(coarse.output_cm_s - fine.output_cm_s)) < 1e-3 * 60.0
+
+
+def test_fastest_rate_counts_frequency_coupling_gain_and_amplitude_rate():
+    net = pair(0.3, weight=2.0, omega=2 * math.pi, amp=10.0)
+    assert math.isclose(net.fastest_rate_per_s(), 2 * math.pi + 2.0 * 10.0)
+    assert net.fastest_rate_per_s() > net.amplitude_rate_per_s
+    still = pair(0.0, weight=0.0, omega=1.0)
+    assert still.fastest_rate_per_s() == still.amplitude_rate_per_s
+
+
+def test_default_sub_step_lengthens_only_for_slow_networks_and_an_explicit_cap_holds():
+    slow, fast = pair(0.5), pair(0.5, omega=2 * math.pi * 30.0)
+    assert CpgIntegrator(slow).plan(2e-3) == (2e-3, 1)  # 0.1 / 26.3 per s allows 3.8 ms
+    assert CpgIntegrator(slow).plan(1e-3) == (1e-3, 1)
+    assert CpgIntegrator(fast).plan(2e-3) == (1e-3, 2)  # 30 Hz: the 1 ms sub-step
+    assert CpgIntegrator(slow, 1e-3).plan(2e-3) == (1e-3, 2)
+    assert CpgIntegrator(slow).plan(0.1)[1] == math.ceil(0.1 / (0.1 / slow.fastest_rate_per_s()))
+
+
+def test_one_long_step_on_a_slow_network_agrees_with_a_fine_reference():
+    net = pair(0.8, weight=1.0, amp=10.0)
+    long, fine = CpgIntegrator(net), CpgIntegrator(net, 1e-3 / 16)
+    long.state[1, 0] = fine.state[1, 0] = 1.3
+    assert long.plan(2e-3)[1] == 1
+    for _ in range(5000):  # 10 s of 2 ms updates
+        long.advance(2e-3)
+        fine.advance(2e-3)
+    assert np.max(np.abs(long.output_cm_s - fine.output_cm_s)) < 1e-6 * 10.0

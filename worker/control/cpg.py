@@ -65,17 +65,25 @@ def rk4_advance(state, omega, amp, indptr, source, wc, a, h, n_steps, work, out)
         out[i] = state[i, 1] * np.cos(state[i, 0])
 
 
+DEFAULT_MAX_STEP_S = 1e-3
+# an RK4 step of h is taken as exact when h times the network's fastest rate stays below this (~1e-7 per step)
+SLOW_RATE_STEP = 0.1
+
+
 class CpgIntegrator:
     """Holds the CPG state and advances it by an update period with RK4 sub-steps of at most max_step_s.
 
+    max_step_s None: 1 ms, or as long as 0.1 / the network's fastest rate (up to the whole update) for a
+    slow network, e.g. one step per 2 ms update of a sidewinding Tetraspine screened at a 2 ms step.
     All state starts at zero (spec 4.1). output_cm_s (n,) is held between updates.
     """
 
-    def __init__(self, network: CpgNetwork, max_step_s: float = 1e-3) -> None:
+    def __init__(self, network: CpgNetwork, max_step_s: float | None = None) -> None:
         self.network = network
         self.state = np.zeros((network.n_nodes, 3))
         self.output_cm_s = np.zeros(network.n_nodes)
-        self.max_step_s = max_step_s
+        self.max_step_s = max_step_s if max_step_s is not None else \
+            max(DEFAULT_MAX_STEP_S, SLOW_RATE_STEP / network.fastest_rate_per_s())
         self._wc = network.complex_weights()
         self._indptr = network.indptr.astype(np.int64)
         self._source = network.source.astype(np.int64)
