@@ -33,8 +33,8 @@ class CpgNetwork:
 
     def fastest_rate_per_s(self) -> float:
         """A bound on how fast any part of the state moves (1/s): the largest |omega_i| plus the coupling
-        gain sum_j |w_ij| R_j a node can feel, or the amplitude rate if larger. RK4 steps of h with
-        rate * h <= 0.1 err by ~1e-7 rad per step."""
+        gain sum_j |w_ij| R_j a node can feel, or the amplitude rate if larger (worker.control.cpg uses it
+        to size RK4 sub-steps)."""
         gain = np.zeros(self.n_nodes)
         rows = np.repeat(np.arange(self.n_nodes), np.diff(self.indptr))
         np.add.at(gain, rows, np.abs(self.weight) * np.abs(self.amplitude_cm_s[self.source]))

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from worker.control.cpg import CpgIntegrator, CpgNetwork
+from worker.control.cpg import SLOW_RATE_STEP, CpgIntegrator, CpgNetwork
 
 
 def pair(psi: float, weight: float = 2.0, omega: float = 2 * math.pi, amp: float = 10.0) -> CpgNetwork:
@@ -60,20 +60,20 @@ def test_fastest_rate_counts_frequency_coupling_gain_and_amplitude_rate():
 
 
 def test_default_sub_step_lengthens_only_for_slow_networks_and_an_explicit_cap_holds():
-    slow, fast = pair(0.5), pair(0.5, omega=2 * math.pi * 30.0)
-    assert CpgIntegrator(slow).plan(2e-3) == (2e-3, 1)  # 0.1 / 26.3 per s allows 3.8 ms
+    slow, fast = pair(0.5), pair(0.5, omega=2 * math.pi * 60.0)
+    assert CpgIntegrator(slow).plan(2e-3) == (2e-3, 1)  # 0.25 / 26.3 per s allows 9.5 ms
     assert CpgIntegrator(slow).plan(1e-3) == (1e-3, 1)
-    assert CpgIntegrator(fast).plan(2e-3) == (1e-3, 2)  # 30 Hz: the 1 ms sub-step
+    assert CpgIntegrator(fast).plan(2e-3) == (1e-3, 2)  # 60 Hz: the 1 ms sub-step
     assert CpgIntegrator(slow, 1e-3).plan(2e-3) == (1e-3, 2)
-    assert CpgIntegrator(slow).plan(0.1)[1] == math.ceil(0.1 / (0.1 / slow.fastest_rate_per_s()))
+    assert CpgIntegrator(slow).plan(0.1)[1] == math.ceil(0.1 / (SLOW_RATE_STEP / slow.fastest_rate_per_s()))
 
 
 def test_one_long_step_on_a_slow_network_agrees_with_a_fine_reference():
-    net = pair(0.8, weight=1.0, amp=10.0)
+    net = pair(0.8, weight=2.0, amp=40.0)  # rate 86 per s: one 2 ms step is 0.17 of it
     long, fine = CpgIntegrator(net), CpgIntegrator(net, 1e-3 / 16)
     long.state[1, 0] = fine.state[1, 0] = 1.3
     assert long.plan(2e-3)[1] == 1
     for _ in range(5000):  # 10 s of 2 ms updates
         long.advance(2e-3)
         fine.advance(2e-3)
-    assert np.max(np.abs(long.output_cm_s - fine.output_cm_s)) < 1e-6 * 10.0
+    assert np.max(np.abs(long.output_cm_s - fine.output_cm_s)) < 1e-6 * 40.0

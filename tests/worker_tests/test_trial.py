@@ -124,10 +124,15 @@ def test_cpg_integration_error_is_small_against_substepping():
 
 @pytest.mark.parametrize("name", ["tetraspine", "octahedral-complex"])
 def test_default_cpg_sub_step_keeps_the_bits_of_1ms_sub_steps_on_ntrt_networks(name):
-    """NTRT's networks are fast: the default sub-step stays 1 ms, at a 1 ms and at a 0.1 s update period."""
+    """A fast network (most of NTRT's space) keeps 1 ms sub-steps, at a 1 ms and at a 0.1 s update period."""
+    from worker.control.cpg import CpgIntegrator
+
     morph = load_morphology(name)
-    u = random_unit_params(morph, 3)
-    auto, fixed = (run_trial(morph, u, TrialConfig(duration_s=0.5, cpg_max_step_s=cap), 3) for cap in (None, 1e-3))
+    u = random_unit_params(morph, 4)
+    space = morph.controller_space()
+    period = morph.control.cpg_update_period_s
+    assert CpgIntegrator(space.network(space.param_space.from_unit(u))).plan(period) == (1e-3, round(period / 1e-3))
+    auto, fixed = (run_trial(morph, u, TrialConfig(duration_s=0.5, cpg_max_step_s=cap), 4) for cap in (None, 1e-3))
     assert (auto.distance_m, auto.work_j) == (fixed.distance_m, fixed.work_j)
 
 
