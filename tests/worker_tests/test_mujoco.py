@@ -15,7 +15,7 @@ from protocol.errors import ConfigError
 from protocol.messages import TrialStatus
 from robot.bodies import build_bodies
 from robot.morphology.registry import load_morphology
-from robot.scene import SceneConfig, build_terrain, surface_height_cm
+from robot.scene import GroundSpec, SceneConfig, build_terrain, surface_height_cm
 from tests.worker_tests.helpers import ENGINES, PassiveRig, two_rod_structure
 from worker.engines.mujoco import MujocoPhysics, MujocoSettings
 from worker.setup import SetupCache
@@ -253,6 +253,35 @@ def test_proxies_rest_like_capsules_on_flat_ground():
                                            engine_options={"contact_geometry": g}), 1).trajectory.arrays()["poses"][-1]
             for g in ("ends", "capsules")]
     assert np.abs(ends[0][:, 1] - ends[1][:, 1]).max() < 0.05  # heights within 0.5 mm
+
+
+def test_cylinder_rods_are_bullets_shape_and_rest_at_its_heights():
+    """contact_geometry "cylinders": one MuJoCo cylinder per rod (no end proxies), resting where Bullet's rest."""
+    morph = load_morphology("tetraspine-ntrt")
+    bodies = build_bodies(morph.structure)
+    physics = MujocoPhysics(bodies, GroundSpec(friction=morph.ground_friction),
+                            settings=MujocoSettings(contact_geometry="cylinders"))
+    types = physics.model.geom_type[physics.model.geom_bodyid > 0]
+    assert np.count_nonzero(types == mujoco.mjtGeom.mjGEOM_CYLINDER) == sum(len(b.rods) for b in bodies) == len(types)
+    physics.close()
+    u = random_unit_params(morph, 1)
+    u[1] = 0.0
+    heights = {name: simulate(morph, u, TrialConfig(duration_s=1.0, engine=engine, record_every_s=1.0,
+                                                    engine_options=options), 1).trajectory.arrays()["poses"][-1][:, 1]
+               for name, engine, options in (("bullet", "bullet", {}),
+                                             ("cylinders", "mujoco", {"contact_geometry": "cylinders"}))}
+    assert np.abs(heights["cylinders"] - heights["bullet"]).max() < 0.1  # within 1 mm
+
+
+def test_noslip_pass_is_an_option():
+    with pytest.raises(ConfigError, match="noslip_iterations"):
+        MujocoSettings(noslip_iterations=-1)
+    morph = load_morphology("tetraspine-ntrt")
+    cfg = TrialConfig(duration_s=0.3, engine="mujoco", engine_options={"noslip_iterations": 20})
+    scene = SetupCache().get(morph, cfg, None)
+    r = simulate(morph, random_unit_params(morph, 2), cfg, 2, setup=scene).result
+    assert r.ok, r.reason
+    assert scene._scene.model.opt.noslip_iterations == 20
 
 
 def test_bad_engine_options_are_named():

@@ -40,7 +40,7 @@ INTEGRATORS = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "implicit": mujoco.mjt
 CONES = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}
 SOLVERS = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG,
            "pgs": mujoco.mjtSolver.mjSOL_PGS}
-CONTACT_GEOMETRIES = ("auto", "ends", "capsules")
+CONTACT_GEOMETRIES = ("auto", "ends", "capsules", "cylinders")
 SEGMENT_CONTACTS = ("auto", "scene", "off")
 # contype/conaffinity bits: terrain, terrain-only proxies, capsules (segment-segment, and terrain in
 # "capsules" mode). Two geoms collide if (contype1 & conaffinity2) or (contype2 & conaffinity1).
@@ -58,11 +58,13 @@ class MujocoSettings:
     solref_time_s, solref_damping_ratio: contact stiffness as a time constant and damping ratio
     (0.005 s converges best on the Tetraspine; MuJoCo clamps it to >= 2 dt). solimp: MuJoCo's
     impedance (d0, dwidth, width_cm, midpoint, power). contact_geometry: "auto" (rod-end spheres on
-    plane terrains, capsules otherwise), "ends" or "capsules". segment_contacts: "auto" (modelled
-    only if a trial needs them: left out while a guard sees every gap stay open, see
-    worker.engines.contact_guard; the same bits as "scene"), "scene" (segments collide as the scene's
-    collision filter says) or "off" (segments touch only the terrain).
+    plane terrains, capsules otherwise), "ends", "capsules" or "cylinders" (Bullet's rod shape).
+    segment_contacts: "auto" (modelled only if a trial needs them: left out while a guard sees every gap
+    stay open, see worker.engines.contact_guard; the same bits as "scene"), "scene" (segments collide as
+    the scene's collision filter says) or "off" (segments touch only the terrain).
     islands: MuJoCo's constraint island discovery (slower here: every segment is its own island).
+    noslip_iterations: MuJoCo's no-slip pass after the solve (0: off), which removes the slow sliding of
+    loaded contacts that soft friction allows.
     """
 
     integrator: str = "implicitfast"
@@ -77,6 +79,7 @@ class MujocoSettings:
     contact_geometry: str = "auto"
     segment_contacts: str = "auto"
     islands: bool = False
+    noslip_iterations: int = 0
     margin_cm: float = 0.0
     gravity_cm_s2: float = GRAVITY_CM_S2
 
@@ -92,10 +95,10 @@ class MujocoSettings:
                               expected=list(SEGMENT_CONTACTS))
         if not isinstance(self.islands, bool):
             raise ConfigError("islands is not a boolean", received=self.islands, expected="true or false")
-        for name in ("iterations", "ls_iterations"):
+        for name, low in (("iterations", 1), ("ls_iterations", 1), ("noslip_iterations", 0)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 10_000:
-                raise ConfigError(f"{name} out of range", received=v, expected="an integer in [1, 10000]")
+            if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= 10_000:
+                raise ConfigError(f"{name} out of range", received=v, expected=f"an integer in [{low}, 10000]")
         check_range("tolerance", self.tolerance, 0.0, 1.0)
         check_range("solref_time_s", self.solref_time_s, 0.0, 1.0, low_inclusive=False)
         check_range("solref_damping_ratio", self.solref_damping_ratio, 0.0, 100.0, low_inclusive=False)
@@ -199,13 +202,14 @@ def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: 
     if s.segment_contacts != "scene":  # "auto": left out while the guard sees no segment come near
         capsule_bits = (0, 0) if geometry == "ends" else _END_PROXY  # capsules touch the terrain only
     rgeom = f'friction="{_f(mu_rod * mu_rod)} 0 0" {common}'
+    rod_type = "cylinder" if geometry == "cylinders" else "capsule"
     for i, body in enumerate(bodies):
         pos = (rot @ body.com_cm) + (0.0 if start_offsets_cm is None else start_offsets_cm[i])
         parts = [f'<body name="s{i}" pos="{_vec(pos)}" quat="{quat}"><freejoint/>',
                  f'<inertial pos="0 0 0" mass="{_f(body.mass_kg)}" diaginertia="{_vec(body.inertia_kg_cm2)}"/>']
         for rod in body.rods:
             half = rod.rotation[:, 1] * (rod.length_cm / 2)
-            parts.append(f'<geom type="capsule" fromto="{_vec(rod.centre_cm - half)} {_vec(rod.centre_cm + half)}" '
+            parts.append(f'<geom type="{rod_type}" fromto="{_vec(rod.centre_cm - half)} {_vec(rod.centre_cm + half)}" '
                          f'size="{_f(rod.radius_cm)}" contype="{capsule_bits[0]}" conaffinity="{capsule_bits[1]}" '
                          f'{rgeom}/>')
         if geometry == "ends":
@@ -221,7 +225,8 @@ def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: 
     return (f'<mujoco model="spinefarm"><compiler angle="radian" inertiafromgeom="false"/>'
             f'<option timestep="{_f(dt_s)}" gravity="0 {_f(-s.gravity_cm_s2)} 0" '
             f'integrator="{integrator[s.integrator]}" cone="{s.cone}" solver="{solver[s.solver]}" '
-            f'iterations="{s.iterations}" ls_iterations="{s.ls_iterations}" tolerance="{_f(s.tolerance)}">'
+            f'iterations="{s.iterations}" ls_iterations="{s.ls_iterations}" tolerance="{_f(s.tolerance)}" '
+            f'noslip_iterations="{s.noslip_iterations}">'
             # a NaN must reach the divergence guard, not silently reset the world to its start
             f'<flag autoreset="disable" island="{"enable" if s.islands else "disable"}"/></option>'
             f'<asset>{"".join(assets)}</asset><worldbody>{"".join(world)}</worldbody>'
