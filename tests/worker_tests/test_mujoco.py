@@ -102,14 +102,16 @@ def test_reused_setup_gives_the_same_bits_as_a_fresh_one():
     cache.close()
 
 
-def test_absurd_stiffness_fails_as_diverged_on_mujoco():
+def test_absurd_stiffness_fails_as_diverged_on_mujoco(tmp_path, monkeypatch):
     from robot.morphology.variants import with_strings
 
+    monkeypatch.chdir(tmp_path)
     morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=1e8)
     cfg = TrialConfig(duration_s=1.0, refuse_unstable_dt=False, engine="mujoco")
     r = run_trial(morph, random_unit_params(morph, 1), cfg, seed=1)
     assert r.status == TrialStatus.FAILED and r.reason.startswith("diverged"), r.reason
     assert r.sim_time_s < 1.0 and np.isfinite(r.distance_m) and r.distance_m < 100.0
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()  # MuJoCo's warnings go to logging, not a file
 
 
 def test_spec_file_robot_runs_on_mujoco(tmp_path, capsys):

@@ -23,6 +23,7 @@ friction is the product with the ground's 0, its spinning friction 0.
 from __future__ import annotations
 
 import ctypes
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +35,12 @@ from protocol.errors import ConfigError, check_range
 from robot.bodies import BodyModel
 from robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
 from worker.engines.base import GRAVITY_CM_S2, BasePhysics
+
+log = logging.getLogger("spinefarm.mujoco")
+# MuJoCo's own warnings (e.g. "Nan, Inf or huge value in QACC" of a diverging trial) would go to stdout and
+# a MUJOCO_LOG.TXT in the user's working directory; the divergence guard reports the trial, so they are
+# debug detail here
+mujoco.set_mju_user_warning(lambda message: log.debug("mujoco: %s", message))
 
 INTEGRATORS = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
                "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "rk4": mujoco.mjtIntegrator.mjINT_RK4}
