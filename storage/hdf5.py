@@ -217,7 +217,7 @@ class Hdf5Storage(InMemoryStorage):
                seed_of: Callable[[int, np.ndarray], np.ndarray] | None = None) -> Hdf5Storage:
         """Reopen a run for writing, whether it was closed cleanly or its writer was killed.
 
-        trials_budget: a new budget (not below the trials already sampled), else the stored one.
+        trials_budget: a new budget (not below the parameter sets already sampled), else the stored one.
         Every stored row is validated first (storage.validate; `seed_of(run_seed, trial_ids)` gives the
         seeds the run derives); a file that fails is left untouched.
         """
@@ -231,10 +231,12 @@ class Hdf5Storage(InMemoryStorage):
             meta, cols = read_run(path)
             validate_rows(path, meta, cols, seed_of)
             if trials_budget is not None:
-                n = len(cols["trial_id"])
+                # the budget counts parameter sets: a multi-fidelity run's promotions re-run rung-0 rows
+                n = int(np.count_nonzero(cols["rung"] == 0))
                 if trials_budget < max(n, 1):
-                    raise StorageError("new trial budget is below the trials already sampled",
-                                       received=trials_budget, expected=f"at least {max(n, 1)}")
+                    raise StorageError("new trial budget is below the trials already sampled (parameter sets; "
+                                       "promoted re-runs do not count)", received=trials_budget,
+                                       expected=f"at least {max(n, 1)}")
                 meta = replace(meta, trials_budget=trials_budget)
             tmp = path.with_name(path.name + ".resume-tmp")
             write_run(tmp, meta, cols)

@@ -185,6 +185,20 @@ def test_resume_can_raise_the_budget_but_not_below_what_was_sampled(tmp_path):
     assert read_meta(path).trials_budget == 50
 
 
+def test_resume_budget_counts_parameter_sets_not_promoted_re_runs(tmp_path):
+    """A multi-fidelity run of 6 parameter sets, 3 promoted once and 1 twice: 10 rows, budget in sets."""
+    path = tmp_path / "run.h5"
+    with Hdf5Storage.create(path, make_meta(budget=6)) as s:
+        fill(s, 6, 6)
+        for tid, parent, rung in ((6, 0, 1), (7, 1, 1), (8, 2, 1), (9, 6, 2)):
+            s.add_trial(tid, np.full(3, 0.5), np.zeros(3), "promoted", parent, parent, rung=rung)
+    with pytest.raises(StorageError, match="at least 6") as err:
+        Hdf5Storage.resume(path, trials_budget=5)
+    assert "received 5" in str(err.value)
+    with Hdf5Storage.resume(path, trials_budget=8) as s:  # more sets than done, fewer than rows
+        assert s.run_meta().trials_budget == 8 and s.n_trials() == 10
+
+
 def test_lazy_reader_agrees_with_the_writer_on_a_live_file(tmp_path):
     from storage.hdf5_reader import Hdf5Reader
 
