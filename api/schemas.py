@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from pydantic import BaseModel
+from pydantic import BaseModel, Field
 
 
 class Verification(BaseModel):
@@ -50,8 +50,11 @@ class RunStatus(BaseModel):
     morphology: str
     objective: str
     state: str
-    trials_budget: int
-    trials_done: int
+    trials_budget: int = Field(description="parameter sets the run samples")
+    trials_planned: int = Field(description="evaluations it expects: the budget, plus a multi-fidelity run's "
+                                "promotions to longer trials")
+    parameter_sets_sampled: int
+    trials_done: int = Field(description="evaluations finished (complete or failed)")
     trials_complete: int
     trials_failed: int
     trials_leased: int | None

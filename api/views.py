@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from storage.base import BaseStorage
-from storage.schema import SCORE_COLUMNS, TrialRecord
+from storage.schema import SCORE_COLUMNS, TrialRecord, planned_evaluations
 from storage.status import read_status
 
 # A status file not rewritten for this long means its coordinator is gone.
@@ -61,6 +61,8 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     return {
         "run_id": meta.run_id, "file": path.name, "morphology": meta.morphology,
         "objective": meta.objective, "state": state, "trials_budget": meta.trials_budget,
+        "trials_planned": planned_evaluations(meta.trials_budget, (meta.extra or {}).get("fidelity")),
+        "parameter_sets_sampled": storage.count_rung(0),
         "trials_done": finished, "trials_complete": counts["complete"], "trials_failed": counts["failed"],
         "trials_leased": live.get("trials_leased"), "trials_queued": live.get("trials_queued"),
         "rate_trials_s": live.get("rate_trials_s"), "eta_s": live.get("eta_s"),

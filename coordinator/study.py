@@ -13,6 +13,7 @@ from coordinator.samplers.base import BaseSampler
 from protocol.messages import TrialResult
 from protocol.params import ParamSpace
 from storage.base import BaseStorage
+from storage.schema import planned_evaluations
 
 PROMOTED = "promoted"
 
@@ -59,9 +60,7 @@ class Study:
     @property
     def planned(self) -> int:
         """Evaluations the run expects: the budget, plus about budget / eta^k promotions to rung k."""
-        if self.rungs is None:
-            return self.budget
-        return sum(self.budget // self.rungs.eta**k for k in range(len(self.rungs.durations_s)))
+        return planned_evaluations(self.budget, None if self.rungs is None else self.rungs.to_dict())
 
     @property
     def done(self) -> bool:

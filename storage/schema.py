@@ -60,6 +60,15 @@ SCORE_COLUMNS = SCORE_NAMES
 EXTRA_COLUMNS = tuple(e.name for e in RECORDED_EXTRAS)
 
 
+def planned_evaluations(trials_budget: int, fidelity: dict[str, Any] | None) -> int:
+    """Evaluations a run expects: its budget of parameter sets, plus in a multi-fidelity run (fidelity:
+    {"durations_s": [...], "eta": k}) about budget / eta^r promotions to each rung r."""
+    if not fidelity:
+        return trials_budget
+    eta = int(fidelity["eta"])
+    return sum(trials_budget // eta**r for r in range(len(fidelity["durations_s"])))
+
+
 @dataclass(frozen=True)
 class RunMeta:
     """Run-level metadata, stored as file attributes. JSON-able dicts stay dicts here."""

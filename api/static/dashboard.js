@@ -41,12 +41,12 @@ async function showRuns(gen) {
   const runs = await api("/runs");
   if (gen !== generation) return;
   const rows = runs.map((r) => {
-    const pct = Math.min(100, 100 * r.trials_done / Math.max(1, r.trials_budget));
+    const pct = Math.min(100, 100 * r.trials_done / Math.max(1, r.trials_planned));
     const best = r.best;
     const alive = r.workers.filter((w) => w.alive).length;
     return `<tr class="row" data-run="${esc(r.run_id)}"><td class="l">${esc(r.run_id)}</td>
       <td class="l">${esc(r.morphology)}</td><td class="l">${stateBadge(r.state)}</td>
-      <td><span class="bar"><span style="width:${pct}%"></span></span> ${r.trials_done}/${r.trials_budget}</td>
+      <td><span class="bar"><span style="width:${pct}%"></span></span> ${r.trials_done}/${r.trials_planned}</td>
       <td>${r.trials_failed}</td><td>${fmt(r.rate_trials_s, 3)}</td><td>${alive}</td>
       <td>${best ? fmt(best.scores.speed_cm_s) : "–"}</td><td>${best ? fmt(best.scores.cot) : "–"}</td>
       <td class="l verdict ${best ? esc(best.verification.verdict) : ""}">${best ? esc(best.verification.verdict) : "–"}</td>
@@ -268,7 +268,9 @@ async function showRun(runId, gen, first) {
   const best = status.best;
   const alive = status.workers.filter((w) => w.alive).length;
   document.getElementById("cards").innerHTML = [
-    card("robot", esc(status.morphology)), card("trials done", `${status.trials_done} / ${status.trials_budget}`),
+    card("robot", esc(status.morphology)), card("trials done", `${status.trials_done} / ${status.trials_planned}`),
+    ...(status.trials_planned > status.trials_budget
+      ? [card("parameter sets", `${status.parameter_sets_sampled} / ${status.trials_budget}`)] : []),
     card("failed", status.trials_failed), card("trials per second", fmt(status.rate_trials_s, 3)),
     card("workers", `${alive}${status.workers.length > alive ? " (+" + (status.workers.length - alive) + " gone)" : ""}`),
     card("best " + esc(meta.objective), best ? `<a href="#/run/${r}/trial/${best.trial_id}">${fmt(best.objective)}</a>` : "–"),

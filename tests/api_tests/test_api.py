@@ -52,6 +52,8 @@ def test_runs_list_and_status(client):
     assert (st["trials_done"], st["trials_complete"], st["trials_leased"], st["trials_queued"]) == (4, 4, 2, 94)
     assert st["state"] == "running" and st["rate_trials_s"] == 3.5 and st["eta_s"] == 27.0
     assert st["best"]["trial_id"] == 2 and st["workers"][0]["worker_id"] == "w-1"
+    # one evaluation per parameter set: all three counts speak of the same trials
+    assert (st["trials_budget"], st["trials_planned"], st["parameter_sets_sampled"]) == (100, 100, 6)
 
 
 def test_best_trials_have_named_parameters_and_every_score_part(client):

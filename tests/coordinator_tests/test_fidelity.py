@@ -82,6 +82,16 @@ def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(
         _check_fidelity(out, 27, rungs)
     finally:
         stop(coord, *workers)
+    # the API counts evaluations against the evaluations planned, parameter sets against the budget
+    from fastapi.testclient import TestClient
+
+    from api.app import create_app
+
+    with TestClient(create_app(runs_dir=tmp_path)) as client:
+        st = client.get("/runs/mf").json()
+    rows = len(read_run(out)[1]["trial_id"])
+    assert (st["trials_budget"], st["parameter_sets_sampled"], st["trials_planned"]) == (27, 27, 27 + 9 + 3)
+    assert st["trials_done"] == rows and rows >= 27 + 9 + 3
 
 
 def test_a_multi_fidelity_search_killed_mid_rung_resumes_to_its_exact_budget(tmp_path):
