@@ -11,7 +11,8 @@ Contacts: rods are capsules. On plane terrains (flat ground, slope) a plane touc
 an end cap, so `contact_geometry="ends"` (the default there) replaces each segment's rods by one
 sphere per distinct rod end for terrain contact (a Tetraspine segment: 4 spheres instead of 6 rods
 giving 6 nearly redundant contacts); segment-segment contacts stay capsule-capsule. Rough ground and
-obstacles touch rods anywhere: capsules.
+obstacles touch rods anywhere: capsules. "cylinders" gives every rod Bullet's shape instead (for
+comparisons: on flat ground it stands where Bullet's spine stands).
 
 Friction: MuJoCo takes the larger of two geoms' coefficients (or the one of higher priority); Bullet
 multiplies them. Terrain geoms get priority and the coefficient mu_terrain * mu_rod, rod geoms mu_rod^2,
