@@ -3,8 +3,9 @@
 For each of the four paper spines, seeded random parameter sets (and optionally the best trials of a run
 file) run on both engines, at each engine's default step and at a converged step. Per spine and pair of
 tiers it reports the Spearman rank correlation of the distance, the median distance ratio (MuJoCo / Bullet,
-over gaits that move at least 1 cm in Bullet) and how many of MuJoCo's top 10 are in Bullet's top 10. NTRT's
-published gaits are replayed on both engines with the ratio to NTRT's own figures. Prints one JSON object.
+over gaits that move at least 1 cm in Bullet; `_far`: over those that move 10 cm or more) and how many of
+MuJoCo's top 10 are in Bullet's top 10. NTRT's published gaits are replayed on both engines with the ratio
+to NTRT's own figures. Prints one JSON object.
 
     python bench/tier_agreement.py                  # >= 100 sets per spine, 10 s trials (hours on 2 cores)
     python bench/tier_agreement.py --quick          # 12 sets per spine, 3 s trials, no converged steps
@@ -34,6 +35,7 @@ REPLAYS = {"octahedral-complex": "OctahedralComplex/paper-2014-06-07",
            "tetrahedral-complex": "TetrahedralComplex/paper-2014-06-07",
            "tetraspine-ntrt": "TetraSpine/paper-2014-06-07", "ribbed": "Ribbed/paper-2014-06-07"}
 MOVING_M = 0.01
+FAR_M = 0.1  # gaits that clearly move: the ratio over these alone, apart from those that barely do
 _CACHE = None  # one SetupCache per pool process: set-up reused as a worker does
 
 
@@ -99,8 +101,11 @@ def agreement(bullet: np.ndarray, mujoco: np.ndarray, top: int = 10) -> dict:
     idx = np.flatnonzero(ok)
     top_b = set(idx[np.argsort(-bullet[ok])[:k]])
     top_m = set(idx[np.argsort(-mujoco[ok])[:k]])
+    far = ok & (np.abs(bullet) >= FAR_M)
     return {"n": int(ok.sum()), "spearman": spearman(bullet, mujoco),
             "median_distance_ratio": float(np.median(mujoco[moving] / bullet[moving])) if moving.any() else None,
+            "n_far": int(far.sum()),
+            "median_distance_ratio_far": float(np.median(mujoco[far] / bullet[far])) if far.any() else None,
             "top_overlap": len(top_b & top_m), "top_k": k,
             "failed": {"bullet": int((~np.isfinite(bullet)).sum()), "mujoco": int((~np.isfinite(mujoco)).sum())}}
 
