@@ -158,8 +158,8 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
 
 def cpg_cost(morph_name: str, seed: int, updates: int = 5000) -> dict:
     """CPU µs of the compiled CPG kernel per simulated millisecond: at the morphology's control period with
-    RK4 sub-steps of at most 1 ms (as trials run it), and as one RK4 step per 2 ms (the least a 2 ms physics
-    step could spend on it)."""
+    the default sub-steps (as trials run it: 1 ms on NTRT's networks), and as one RK4 step per 2 ms (the
+    least a 2 ms physics step could spend on it)."""
     from worker.control.cpg import rk4_advance
 
     morph = load_morphology(morph_name)
