@@ -29,19 +29,24 @@ def index() -> Response:
     return _local_only(FileResponse(STATIC_DIR / "index.html", media_type="text/html"))
 
 
+@router.get("/favicon.ico")
+def favicon() -> Response:
+    return FileResponse(STATIC_DIR / "favicon.svg", media_type="image/svg+xml")
+
+
 @router.get("/docs")
 def swagger() -> Response:
     return _local_only(get_swagger_ui_html(openapi_url="/openapi.json", title="spinefarm API",
                                swagger_js_url="/static/vendor/swagger/swagger-ui-bundle.js",
                                swagger_css_url="/static/vendor/swagger/swagger-ui.css",
-                               swagger_favicon_url="/static/vendor/swagger/favicon-32x32.png"))
+                               swagger_favicon_url="/favicon.ico"))
 
 
 @router.get("/redoc")
 def redoc() -> Response:
     return _local_only(get_redoc_html(openapi_url="/openapi.json", title="spinefarm API",
                           redoc_js_url="/static/vendor/redoc.standalone.js",
-                          redoc_favicon_url="/static/vendor/swagger/favicon-32x32.png", with_google_fonts=False))
+                          redoc_favicon_url="/favicon.ico", with_google_fonts=False))
 
 
 def install(app: FastAPI) -> None:

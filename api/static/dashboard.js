@@ -316,10 +316,18 @@ async function showTrial(runId, trialId, gen) {
       <div class="panel"><h2>Parameters</h2><div class="tablewrap"><table id="params"><thead><tr><th class="l">name</th>
         <th>value</th><th class="l">unit</th><th>in range (0–1)</th></tr></thead><tbody>${paramRows}</tbody></table></div></div>
     </div>
-    <div class="panel picture" style="margin-top:1em"><h2>The gait</h2><div id="picture"></div></div>`;
+    <div class="panel" style="margin-top:1em"><h2>The gait, moving</h2><div id="motion-area"></div></div>
+    <div class="panel picture" style="margin-top:1em"><h2>The gait in six frames</h2><div id="picture"></div></div>`;
   const pic = document.getElementById("picture");
-  if (!meta.physical) { pic.innerHTML = "<p class='muted'>a test objective: there is no robot to draw</p>"; return; }
-  if (t.status === "waiting") { pic.innerHTML = "<p class='muted'>not run yet</p>"; return; }
+  const area = document.getElementById("motion-area");
+  if (!meta.physical) {
+    pic.innerHTML = area.innerHTML = "<p class='muted'>a test objective: there is no robot to draw</p>";
+    return;
+  }
+  if (t.status === "waiting") { pic.innerHTML = area.innerHTML = "<p class='muted'>not run yet</p>"; return; }
+  pic.innerHTML = "<p class='muted'>drawn after the motion</p>";
+  await showMotion(area, runId, [t.trial_id], gen);
+  if (gen !== generation) return;
   pic.innerHTML = "<p class='muted' id='picture-wait'>drawing the gait (the trial is simulated again; this can take a while)…</p>";
   const url = `/runs/${r}/trials/${t.trial_id}/picture.png`;
   const resp = await fetch(url);
@@ -338,6 +346,64 @@ async function showTrial(runId, trialId, gen) {
   pic.replaceChildren(img);
 }
 
+// ---------------------------------------------------------------- the gait, moving (3D, gait3d.js)
+let motionViews = [];
+
+async function fetchMotion(runId, trialId) {
+  const resp = await fetch(`/runs/${enc(runId)}/trials/${trialId}/motion.json`);
+  const body = await resp.json().catch(() => null);
+  if (!resp.ok) throw new Error((body && body.detail && body.detail.message) || resp.statusText);
+  return body;
+}
+
+function motionCaption(trialId, m) {
+  const r = m.result;
+  return `trial ${trialId}: ${fmt(r.distance_m)} m, ${fmt(r.speed_cm_s)} cm/s, COT ${fmt(r.cot)}` +
+    (r.reason ? ` (${esc(r.reason)})` : "");
+}
+
+/** Play the motions of trials of one run side by side, in step (one clock). */
+async function showMotion(area, runId, trialIds, gen) {
+  area.innerHTML = `<p class="muted" id="motion-wait">re-simulating ${trialIds.length > 1 ? "the trials" : "the trial"}
+    to record its motion (the first time can take a while)…</p>`;
+  let motions;
+  try {
+    motions = await Promise.all(trialIds.map((id) => fetchMotion(runId, id)));
+  } catch (e) {
+    if (gen === generation) area.innerHTML = `<p class="error" id="motion-error">${esc(e.message || e)}</p>`;
+    return;
+  }
+  if (gen !== generation) return;
+  const {MotionView, Player} = await import("/static/gait3d.js");
+  if (gen !== generation) return;
+  motionViews.forEach((v) => v.dispose());
+  const r = enc(runId);
+  area.innerHTML = `<div class="motion-row">${trialIds.map((id, k) => `<figure class="motion-fig">
+      <div class="motion" id="motion-${k}" data-trial="${id}"></div>
+      <figcaption>${motionCaption(id, motions[k])}</figcaption></figure>`).join("")}</div>
+    <div class="motion-bar" id="motion-bar"></div>
+    <p class="muted small">drag to orbit, scroll to zoom; strings coloured by tension (blue none, red
+    ${fmt(Math.max(...motions.map((m) => m.tension_max_n)))} N), green: the path of the centre of mass ·
+    <label>beside trial <input id="compare-id" type="number" min="0" style="width:6em"></label>
+    <button id="compare-go" type="button">watch both</button></p>`;
+  motionViews = trialIds.map((_, k) => new MotionView(document.getElementById(`motion-${k}`), motions[k]));
+  window.spinefarmPlayer = new Player(motionViews, document.getElementById("motion-bar"));
+  document.getElementById("compare-go").onclick = () => {
+    const other = document.getElementById("compare-id").value;
+    if (other !== "") location.hash = `#/run/${r}/watch/${trialIds[0]},${Number(other)}`;
+  };
+  area.dataset.ready = "1";
+}
+
+async function showWatch(runId, ids, gen) {
+  const r = enc(runId);
+  setCrumbs([["#/", "runs"], [`#/run/${r}`, runId], [`#/run/${r}/watch/${ids.join(",")}`,
+    `trials ${ids.join(" and ")}, moving`]]);
+  view.innerHTML = `<h1>Trials ${ids.map((id) => `<a href="#/run/${r}/trial/${id}">${id}</a>`).join(" and ")}
+    in step</h1><div class="panel"><div id="motion-area"></div></div>`;
+  await showMotion(document.getElementById("motion-area"), runId, ids, gen);
+}
+
 // ---------------------------------------------------------------- routing
 function showError(e) {
   view.innerHTML = `<p class="error" id="page-error">${esc(e.message || e)}</p>`;
@@ -346,11 +412,16 @@ function showError(e) {
 function route() {
   generation++;
   clearTimeout(timer);
+  if (window.spinefarmPlayer) window.spinefarmPlayer.pause();
+  motionViews.forEach((v) => v.dispose());
+  motionViews = [];
   liveBadge.hidden = true;
   const gen = generation;
   const parts = location.hash.replace(/^#\/?/, "").split("/").map(decodeURIComponent);
   let p;
-  if (parts[0] === "run" && parts[1] && parts[2] === "trial" && parts[3] !== undefined) {
+  if (parts[0] === "run" && parts[1] && parts[2] === "watch" && parts[3]) {
+    p = showWatch(parts[1], parts[3].split(",").map(Number).filter((x) => Number.isInteger(x) && x >= 0), gen);
+  } else if (parts[0] === "run" && parts[1] && parts[2] === "trial" && parts[3] !== undefined) {
     p = showTrial(parts[1], Number(parts[3]), gen);
   } else if (parts[0] === "run" && parts[1]) {
     runState.page = 0;
