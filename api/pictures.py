@@ -1,8 +1,9 @@
 """Gait pictures and motions of stored trials, re-simulated on demand in a subprocess and cached on disk.
 
 The API process never imports the simulator: `python -m spinefarm.worker.picture` re-simulates the trial and
-draws the `render` strip, `python -m spinefarm.worker.motion` records its motion for the 3D view. A picture is keyed by what determines it (run config, parameters, seed), so
-it is rendered once; requests for one being drawn wait for it instead of starting another.
+draws the `render` strip, `python -m spinefarm.worker.motion` records its motion for the 3D view. Each is
+keyed by what determines it (run config, parameters, seed, the trial's length, engine and step), so it is
+made once; requests for one being made wait for it instead of starting another.
 """
 
 from __future__ import annotations
