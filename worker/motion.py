@@ -57,7 +57,8 @@ def geometry(morph: Any) -> dict[str, Any]:
 
 
 def motion_document(morph: Any, record: dict[str, np.ndarray], result: Any, title: str) -> dict[str, Any]:
-    """The JSON-ready motion of one recorded trajectory (Trajectory.arrays() layout)."""
+    """The JSON-ready motion of one recorded trajectory (Trajectory.arrays() layout); result: its TrialResult
+    (None for a trajectory read from a file)."""
     from spinefarm.protocol.errors import ConfigError
 
     geo = geometry(morph)
@@ -79,10 +80,18 @@ def motion_document(morph: Any, record: dict[str, np.ndarray], result: Any, titl
         "up": "y", "ground_top_cm": GROUND_TOP_CM, **geo,
         "time_s": _round(t, 4), "poses": _round(poses.reshape(len(t), -1)), "tension_n": _round(tension, 2),
         "com_cm": _round(com), "tension_max_n": round(float(np.max(tension)) if tension.size else 0.0, 2),
-        "result": {"distance_m": finite(result.distance_m), "speed_cm_s": finite(result.speed_cm_s),
-                   "cot": finite(result.cot), "status": str(getattr(result.status, "value", result.status)),
-                   "reason": result.reason or None},
+        "result": None if result is None else {
+            "distance_m": finite(result.distance_m), "speed_cm_s": finite(result.speed_cm_s),
+            "cot": finite(result.cot), "status": str(getattr(result.status, "value", result.status)),
+            "reason": result.reason or None},
     }
+
+
+def motion_record(motion: dict[str, Any]) -> dict[str, np.ndarray]:
+    """A motion document back as Trajectory.arrays() arrays (time_s, poses (n, n_bodies, 7), tension_n)."""
+    t = np.asarray(motion["time_s"], dtype=float)
+    return {"time_s": t, "poses": np.asarray(motion["poses"], dtype=float).reshape(len(t), motion["n_bodies"], 7),
+            "tension_n": np.asarray(motion["tension_n"], dtype=float)}
 
 
 def simulate_motion(job: dict[str, Any]) -> dict[str, Any]:
