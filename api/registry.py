@@ -33,6 +33,7 @@ class RunRegistry:
         self.runs_dir = Path(runs_dir) if runs_dir is not None else None
         self._ids: dict[Path, tuple[tuple[int, int], str]] = {}   # path -> (file identity, run id)
         self._bad: dict[Path, tuple[int, int, int, int]] = {}     # path -> (identity, size, mtime) it failed with
+        self._why: dict[Path, str] = {}                           # path -> why it was left out
 
     def paths(self) -> list[Path]:
         found = list(self.files)
@@ -58,15 +59,22 @@ class RunRegistry:
                 if error is not None:
                     log.warning("leaving out %s: %s", p, error)
                     self._bad[p] = mark
+                    self._why[p] = str(error)
                     self._ids.pop(p, None)
                 else:
                     self._ids[p] = (ident, run_id)
                     self._bad.pop(p, None)
+                    self._why.pop(p, None)
         out: dict[str, Path] = {}
         for p, _, _ in seen:
             if p in self._ids and p not in self._bad:
                 out.setdefault(self._ids[p][1], p)
         return out
+
+    def damaged(self) -> list[tuple[Path, str]]:
+        """Files left out (as of the last runs() call) and why, in path order."""
+        present = set(self.paths())
+        return sorted((p, why) for p, why in self._why.items() if p in self._bad and p in present)
 
     def path_of(self, run_id: str) -> Path:
         runs = self.runs()

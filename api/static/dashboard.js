@@ -32,35 +32,103 @@ function schedule(fn, live) {
   if (live) timer = setTimeout(fn, REFRESH_MS);
 }
 
+const fmtDuration = (s) => (s === null || s === undefined) ? "–" : s < 90 ? `${Math.round(s)} s`
+  : s < 5400 ? `${Math.round(s / 60)} min` : `${(s / 3600).toFixed(1)} h`;
+const fmtDate = (t) => t ? new Date(t * 1000).toLocaleString(undefined, {dateStyle: "medium", timeStyle: "short"}) : "–";
+
+/** A live page whose server went away (the search ended): keep what it shows, say how to reopen it. */
+function serverGone(e, gen, reopen) {
+  if (gen !== generation) return;
+  clearTimeout(timer);
+  liveBadge.hidden = true;
+  if (!document.getElementById("cards") && !document.getElementById("runs-table")) { showError(e); return; }
+  let box = document.getElementById("ended");
+  if (!box) {
+    box = document.createElement("div");
+    box.id = "ended";
+    box.className = "notice";
+    view.prepend(box);
+  }
+  box.innerHTML = `<b>This dashboard's server has stopped</b> (the search ended or was stopped): the page keeps
+    what it last showed. Reopen the run with <code id="reopen">${esc(reopen || "spinefarm api runs/RUN.h5")}</code>.`;
+  document.querySelectorAll(".state.running").forEach((b) => { b.textContent = "ended"; b.className = "state stopped"; });
+}
+
 function card(k, v) { return `<div class="card"><div class="v">${v}</div><div class="k">${esc(k)}</div></div>`; }
 function stateBadge(s) { return `<span class="state ${esc(s)}">${esc(s)}</span>`; }
 
 // ---------------------------------------------------------------- runs
+const RUN_COLUMNS = [  // [key, label, value of a run for sorting, left-aligned]
+  ["run_id", "run", (r) => r.run_id, true], ["morphology", "robot", (r) => r.morphology, true],
+  ["state", "state", (r) => r.state, true], ["started", "started", (r) => r.started_at_unix_s, false],
+  ["controller", "controller", (r) => r.controller, true], ["engine", "engine", (r) => r.engine, true],
+  ["sampler", "sampler", (r) => r.sampler, true], ["objective", "objective", (r) => r.objective, true],
+  ["progress", "progress", (r) => r.trials_done / Math.max(1, r.trials_planned), false],
+  ["failed", "failed", (r) => r.trials_failed, false], ["eta", "ETA", (r) => r.eta_s, false],
+  ["speed", "best speed (cm/s)", (r) => r.best && r.best.scores.speed_cm_s, false],
+  ["cot", "best COT", (r) => r.best && r.best.scores.cot, false],
+  ["verified", "best verified", (r) => r.best && r.best.verification.verdict, true],
+];
+const runsSort = {key: "started", dir: -1};
+
+function runCell(key, r) {
+  const best = r.best;
+  switch (key) {
+    case "run_id": return esc(r.run_id);
+    case "morphology": return esc(r.morphology);
+    case "state": return stateBadge(r.state);
+    case "started": return fmtDate(r.started_at_unix_s);
+    case "controller": return esc(r.controller || (r.engine ? "default" : "–"));
+    case "engine": return esc(r.engine || "–") + (r.rungs_s ? ` <span class="muted">rungs ${r.rungs_s.join(", ")} s</span>` : "");
+    case "sampler": return esc(r.sampler || "–");
+    case "objective": return esc(r.objective);
+    case "progress": {
+      const pct = Math.min(100, 100 * r.trials_done / Math.max(1, r.trials_planned));
+      return `<span class="bar"><span style="width:${pct}%"></span></span> ${r.trials_done}/${r.trials_planned}`;
+    }
+    case "failed": return String(r.trials_failed);
+    case "eta": return r.state === "running" ? fmtDuration(r.eta_s) : "–";
+    case "speed": return best ? fmt(best.scores.speed_cm_s) : "–";
+    case "cot": return best ? fmt(best.scores.cot) : "–";
+    case "verified": return best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.verdict)}</span>` : "–";
+  }
+  return "";
+}
+
+function damagedList(bad) {
+  if (!bad.length) return "";
+  return `<div class="notice warn" id="damaged"><b>${bad.length} file${bad.length > 1 ? "s" : ""} left out</b>
+    (damaged or not a run file): <ul>${bad.map((b) => `<li><code>${esc(b.file)}</code>: ${esc(b.reason)}</li>`).join("")}</ul></div>`;
+}
+
 async function showRuns(gen) {
   setCrumbs([["#/", "runs"]]);
-  const runs = await api("/runs");
+  const [runs, bad] = await Promise.all([api("/runs"), api("/damaged-files").catch(() => [])]);
   if (gen !== generation) return;
-  const rows = runs.map((r) => {
-    const pct = Math.min(100, 100 * r.trials_done / Math.max(1, r.trials_planned));
-    const best = r.best;
-    const alive = r.workers.filter((w) => w.alive).length;
-    return `<tr class="row" data-run="${esc(r.run_id)}"><td class="l">${esc(r.run_id)}</td>
-      <td class="l">${esc(r.morphology)}</td><td class="l">${stateBadge(r.state)}</td>
-      <td><span class="bar"><span style="width:${pct}%"></span></span> ${r.trials_done}/${r.trials_planned}</td>
-      <td>${r.trials_failed}</td><td>${fmt(r.rate_trials_s, 3)}</td><td>${alive}</td>
-      <td>${best ? fmt(best.scores.speed_cm_s) : "–"}</td><td>${best ? fmt(best.scores.cot) : "–"}</td>
-      <td class="l verdict ${best ? esc(best.verification.verdict) : ""}">${best ? esc(best.verification.verdict) : "–"}</td>
-    </tr>`;
-  }).join("");
-  view.innerHTML = `<h1>Runs</h1>${runs.length ? "" : "<p class='muted'>no run files found</p>"}
-    <div class="tablewrap"><table id="runs-table"><thead><tr><th class="l">run</th><th class="l">robot</th>
-    <th class="l">state</th><th>progress</th><th>failed</th><th>trials/s</th><th>workers</th>
-    <th>best speed (cm/s)</th><th>best COT</th><th class="l">best verified</th></tr></thead>
-    <tbody>${rows}</tbody></table></div>`;
+  const col = RUN_COLUMNS.find((c) => c[0] === runsSort.key);
+  runs.sort((a, b) => {
+    const x = col[2](a), y = col[2](b);
+    if (x === y) return a.run_id < b.run_id ? -1 : 1;
+    if (x === null || x === undefined) return 1;
+    if (y === null || y === undefined) return -1;
+    return (x < y ? -1 : 1) * runsSort.dir;
+  });
+  const rows = runs.map((r) => `<tr class="row" data-run="${esc(r.run_id)}">` + RUN_COLUMNS.map(([key, , , left]) =>
+    `<td${left ? " class=\"l\"" : ""}>${runCell(key, r)}</td>`).join("") + "</tr>").join("");
+  const head = RUN_COLUMNS.map(([key, label, , left]) => `<th data-key="${key}" class="${left ? "l " : ""}${
+    key === runsSort.key ? (runsSort.dir > 0 ? "sorted-asc" : "sorted-desc") : ""}">${label}</th>`).join("");
+  view.innerHTML = `<h1>Runs</h1>${damagedList(bad)}${runs.length ? "" : "<p class='muted' id='no-runs'>no run files found</p>"}
+    <div class="tablewrap"><table id="runs-table"><thead><tr>${head}</tr></thead><tbody>${rows}</tbody></table></div>`;
+  view.querySelectorAll("#runs-table th").forEach((th) => th.addEventListener("click", () => {
+    if (runsSort.key === th.dataset.key) runsSort.dir *= -1;
+    else { runsSort.key = th.dataset.key; runsSort.dir = th.classList.contains("l") ? 1 : -1; }
+    showRuns(gen).catch(showError);
+  }));
   view.querySelectorAll("tr.row").forEach((tr) => tr.addEventListener("click", () => {
     location.hash = `#/run/${enc(tr.dataset.run)}`;
   }));
-  schedule(() => showRuns(gen).catch(showError), runs.some((r) => r.state === "running"));
+  const reopen = runs.length === 1 ? runs[0].reopen_command : "spinefarm api runs/*.h5";
+  schedule(() => showRuns(gen).catch((e) => serverGone(e, gen, reopen)), runs.some((r) => r.state === "running"));
 }
 
 // ---------------------------------------------------------------- one run
@@ -237,9 +305,28 @@ function drawTable(runId, cols) {
   document.getElementById("next").onclick = () => { runState.page++; drawTable(runId, cols); };
 }
 
+function runNotice(status, r) {
+  const best = status.best;
+  if (status.state === "stopped") {
+    return `<div class="notice" id="stopped">This run stopped before its budget (${status.trials_done} of
+      ${status.trials_planned} trials). Continue it with <code>${esc(status.resume_command)}</code>.</div>`;
+  }
+  if (status.state === "stalled") {
+    return `<div class="notice warn">Its coordinator holds the file but has not reported for
+      ${fmtDuration(status.status_age_s)}.</div>`;
+  }
+  if (status.state === "done" && best) {
+    return `<div class="notice" id="finished">Finished. <a href="#/run/${r}/trial/${best.trial_id}">Watch the best gait
+      (trial ${best.trial_id})</a>, or as a video: <code>spinefarm render --run ${esc(status.reopen_command.replace(/^spinefarm api /, ""))}
+      --video best.mp4</code>.</div>`;
+  }
+  return "";
+}
+
 function runSkeleton(runId) {
   const r = enc(runId);
-  view.innerHTML = `<h1 id="run-title"></h1><div class="cards" id="cards"></div>
+  view.innerHTML = `<h1 id="run-title"></h1><div class="cards" id="cards"></div><div id="run-notice"></div>
+    <div class="notice" id="empty" hidden></div><div id="run-body">
     <div class="buttons"><a class="button" id="dl-file" href="/runs/${r}/file">download run file (.h5)</a>
     <a class="button" id="dl-csv" href="/runs/${r}/trials.csv">download CSV</a></div>
     <div class="grid">
@@ -254,7 +341,7 @@ function runSkeleton(runId) {
       <div class="panel"><h2>Parameter importance <span class="muted" id="importance-note"></span></h2>
         <div id="plot-importance"></div></div>
     </div>
-    <h2 style="margin-top:1em">Trials</h2><div id="trials"></div>`;
+    <h2 style="margin-top:1em">Trials</h2><div id="trials"></div></div>`;
 }
 
 async function showRun(runId, gen, first) {
@@ -267,21 +354,40 @@ async function showRun(runId, gen, first) {
   document.getElementById("run-title").innerHTML = `${esc(runId)} ${stateBadge(status.state)}`;
   const best = status.best;
   const alive = status.workers.filter((w) => w.alive).length;
+  const step = status.step_s || meta.trial_config.dt_s;
   document.getElementById("cards").innerHTML = [
-    card("robot", esc(status.morphology)), card("trials done", `${status.trials_done} / ${status.trials_planned}`),
+    card("robot", esc(status.morphology)), card("state", stateBadge(status.state)),
+    card("trials done", `${status.trials_done} / ${status.trials_planned}`),
     ...(status.trials_planned > status.trials_budget
       ? [card("parameter sets", `${status.parameter_sets_sampled} / ${status.trials_budget}`)] : []),
+    ...(status.state === "running" ? [card("ETA", `<span id="eta">${fmtDuration(status.eta_s)}</span>`)] : []),
     card("failed", status.trials_failed), card("trials per second", fmt(status.rate_trials_s, 3)),
-    card("workers", `${alive}${status.workers.length > alive ? " (+" + (status.workers.length - alive) + " gone)" : ""}`),
+    ...(status.state === "running" || status.workers.length ? [card("workers", `${alive}${status.workers.length > alive
+      ? " (+" + (status.workers.length - alive) + " gone)" : ""}`)] : []),
     card("best " + esc(meta.objective), best ? `<a href="#/run/${r}/trial/${best.trial_id}">${fmt(best.objective)}</a>` : "–"),
     card("best speed (cm/s)", best ? fmt(best.scores.speed_cm_s) : "–"), card("best COT", best ? fmt(best.scores.cot) : "–"),
     card("best verified", best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.verdict)}</span>` : "–"),
-    meta.physical ? card("engine, step", `${esc(meta.trial_config.engine || "bullet")}, ${meta.trial_config.dt_s ? fmt(meta.trial_config.dt_s * 1000) + " ms" : "–"}`) : "",
+    meta.physical ? card("engine, step", `${esc(status.engine || "bullet")}, ${step ? fmt(step * 1000) + " ms" : "not run yet"}`) : "",
+    card("sampler", esc(status.sampler || "–")), card("started", fmtDate(status.started_at_unix_s)),
   ].join("");
+  document.getElementById("run-notice").innerHTML = runNotice(status, r);
+  const empty = !cols.columns.status.some((x) => x === "complete" || x === "failed");
+  document.getElementById("run-body").hidden = empty;
+  document.getElementById("empty").hidden = !empty;
+  if (empty) {
+    document.getElementById("empty").innerHTML = `<b>No finished trial yet.</b> ${cols.n_trials
+      ? `${cols.n_trials} trial(s) sampled, none has come back.` : "This run file holds no trial."} ${
+      status.state === "running" ? "This page fills in as results arrive." : status.resume_command
+        ? `Start its workers with <code>${esc(status.resume_command)}</code>.` : ""}`;
+    schedule(() => showRun(runId, gen, false).catch((e) => serverGone(e, gen, status.reopen_command)),
+      status.state === "running");
+    return;
+  }
   drawRunPlots(runId, cols, analysis, meta);
   drawTable(runId, cols);
   document.body.dataset.trialsShown = String(cols.n_trials);
-  schedule(() => showRun(runId, gen, false).catch(showError), status.state === "running");
+  schedule(() => showRun(runId, gen, false).catch((e) => serverGone(e, gen, status.reopen_command)),
+    status.state === "running");
 }
 
 // ---------------------------------------------------------------- one trial
