@@ -104,6 +104,10 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
                                                                else "default off; ") + "-1 = off)")
     p.add_argument("--api-host", default="127.0.0.1")
     p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.add_argument("--verbose", action="store_true", help="the final report lists the best's parameters")
+    if local:
+        p.add_argument("--serve", action="store_true",
+                       help="keep the dashboard up after the search ends, until Ctrl-C")
     p.add_argument("--no-verify", action="store_true",
                    help="do not re-simulate new bests at a finer step before they count")
     p.add_argument("--verify-tolerance", type=float, default=0.05,
@@ -278,26 +282,11 @@ def _progress(core: Any) -> tuple[int, int, str, str]:
                                 f"failed)  {st['rate_trials_s']:.1f}/s  best {best_s}  ETA {eta}")
 
 
-def _describe_best(core: Any, path: Path) -> str:
-    storage = core.study.storage
-    best = storage.best(1)
-    if not best:
-        return f"no complete trial yet; file {path}"
-    b = best[0]
-    names = storage.run_meta().param_names
-    units = storage.run_meta().param_units
-    params = ", ".join(f"{n}={v:.4g}{(' ' + u) if u and u != '1' else ''}"
-                       for n, v, u in zip(names, b.params, units, strict=True))
+def _describe_best(core: Any, path: Path, verbose: bool) -> str:
+    from spinefarm.cli.report import final_report
+
     judge = core.verifier.policy.engine if core.verifier is not None else None
-    holds = (f"verified in {judge}: {b.verify_distance_m:.4g} m, {100 * b.verify_distance_m / b.sim_time_s:.4g} "
-             f"cm/s (the distance that counts)" if judge else f"holds at a finer step ({b.verify_distance_m:.4g} m)")
-    check = {"holds": holds, "pending": "verification pending", "": "not verified"}.get(b.verification,
-                                                                                        b.verification)
-    engine = f" in {b.engine} at {b.dt_s * 1e3:g} ms" if b.engine else ""
-    return (f"best trial {b.trial_id} ({b.phase}, {b.sim_time_s:g} s{engine}): objective {b.objective:.4g}, "
-            f"distance {b.distance_m:.4g} m, speed {b.speed_cm_s:.4g} cm/s, work {b.work_j:.4g} J, "
-            f"COT {b.cot:.4g}; {check}\n"
-            f"  params: {params}\nfile: {path}")
+    return final_report(core.study.storage, path, judge=judge, done=core.done, verbose=verbose)
 
 
 def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: list[str]) -> int:
@@ -377,7 +366,8 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
         service.close()
         if core.verifier is not None:
             core.verifier.close()
-        if api is not None:
+        serve = api is not None and getattr(args, "serve", False) and not stopped.is_set()
+        if api is not None and not serve:
             api[0].should_exit = True
             api[1].join(5)
         progress.close(_progress(core)[3])
@@ -398,7 +388,11 @@ def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: l
         print(f"stopped with everything stored; continue with: spinefarm search --resume {path}",
               file=sys.stderr)
         code = 130
-    print(_describe_best(core, path))
+    print(_describe_best(core, path, args.verbose), flush=True)
+    if serve:
+        from spinefarm.cli.report import serve_until_stopped
+
+        serve_until_stopped(api, args.api_host, stopped)
     return code
 
 

@@ -52,6 +52,8 @@ function serverGone(e, gen, reopen) {
   box.innerHTML = `<b>This dashboard's server has stopped</b> (the search ended or was stopped): the page keeps
     what it last showed. Reopen the run with <code id="reopen">${esc(reopen || "spinefarm api runs/RUN.h5")}</code>.`;
   document.querySelectorAll(".state.running").forEach((b) => { b.textContent = "ended"; b.className = "state stopped"; });
+  const eta = document.getElementById("eta");
+  if (eta) eta.textContent = "–";
 }
 
 function card(k, v) { return `<div class="card"><div class="v">${v}</div><div class="k">${esc(k)}</div></div>`; }

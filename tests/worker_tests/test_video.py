@@ -41,6 +41,9 @@ def test_gif_of_a_stored_trial(tmp_path: Path, capsys):
                         "--duration", "0.5", "--out", str(run), "--api-port", "-1", "--quiet", "--no-verify"],
                        cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
+    # the search's report names the command this test runs next
+    assert f"spinefarm render --run {run} --video best.mp4" in r.stdout
+    assert f"spinefarm export {run} --gait best.json" in r.stdout
     out = tmp_path / "best.gif"
     assert main(["render", "--run", str(run), "--video", str(out), "--out", str(tmp_path / "strip.png")]) == 0
     with Image.open(out) as im:
