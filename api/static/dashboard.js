@@ -134,7 +134,7 @@ async function showRuns(gen) {
 }
 
 // ---------------------------------------------------------------- one run
-const runState = {sortKey: "trial_id", sortDir: 1, page: 0, param: null};
+const runState = {sortKey: "trial_id", sortDir: 1, page: 0, param: null, filters: {}};
 
 function runningMax(xs, ys) {
   const out = []; let best = -Infinity;
@@ -202,6 +202,8 @@ function drawRunPlots(runId, cols, analysis, meta) {
   document.getElementById("pareto-note").textContent = complete > sc.length
     ? `${complete - sc.length} without a finite COT not shown` : "";
   drawParamPlots(runId, cols, analysis, ok);
+  drawTimeline(cols);
+  if (analysis.rungs) drawRungs(runId, cols, analysis.rungs);
   // failures by reason
   const reasons = Object.entries(analysis.failed_by_reason);
   el = plot("plot-failed", [{type: "bar", x: reasons.map((r) => r[0]), y: reasons.map((r) => r[1]),
@@ -224,6 +226,18 @@ function drawParamPlots(runId, cols, analysis, ok) {
     showlegend: false, height: Math.max(320, 18 * top.length + 60)}, top.length);
   document.getElementById("importance-note").textContent = names.length > 30
     ? `the 30 strongest of ${names.length} parameters` : `all ${names.length} parameters`;
+  const warn = document.getElementById("importance-warning");
+  const nUsed = analysis.importance_trials;
+  warn.hidden = nUsed >= analysis.importance_min_trials;
+  warn.innerHTML = warn.hidden ? "" : `<b>Read with care:</b> ranked from ${nUsed} finished trial${nUsed === 1 ? "" : "s"}
+    of ${names.length} parameters; below ${analysis.importance_min_trials} the ranking is mostly noise${
+    analysis.importance_noise ? ` (a parameter unrelated to the objective reaches |ρ| ≈ ${fmt(analysis.importance_noise, 2)}
+    by chance: the dashed line)` : ""}.`;
+  const impEl = document.getElementById("plot-importance");
+  if (analysis.importance_noise && analysis.importance_noise < 1) {
+    Plotly.relayout(impEl, {shapes: [{type: "line", x0: analysis.importance_noise, x1: analysis.importance_noise,
+      yref: "paper", y0: 0, y1: 1, line: {dash: "dash", color: "#c27b12", width: 1.5}}]});
+  }
   // parallel coordinates of the strongest parameters, lines coloured by objective quantile
   const axes = order.slice(0, Math.min(12, names.length));
   const c = cols.columns;
@@ -264,13 +278,109 @@ function drawParamPlots(runId, cols, analysis, ok) {
   el.dataset.run = runId; onPointClick(el);
 }
 
+// trials per worker over time: a bar from each trial's start (finish − wall time) to its finish
+function drawTimeline(cols) {
+  const c = cols.columns;
+  const rows = [];
+  for (let i = 0; i < cols.n_trials; i++) {
+    if (c.finished_at_unix_s[i] !== null && c.wall_time_s[i] !== null) rows.push(i);
+  }
+  const t0 = rows.length ? Math.min(...rows.map((i) => c.finished_at_unix_s[i] - c.wall_time_s[i])) : 0;
+  const workers = [...new Set(rows.map((i) => c.worker_id[i] || "unknown"))].sort();
+  const colours = ["#3461c1", "#2e9e5b", "#c27b12", "#8e44ad", "#c0392b", "#16a085"];
+  const traces = workers.map((w, k) => {
+    const x = [], y = [], ids = [];
+    for (const i of rows) {
+      if ((c.worker_id[i] || "unknown") !== w) continue;
+      const end = c.finished_at_unix_s[i] - t0;
+      x.push(end - c.wall_time_s[i], end, null); y.push(w, w, null); ids.push(c.trial_id[i], c.trial_id[i], null);
+    }
+    return {x, y, customdata: ids, mode: "lines", type: "scatter", name: w, line: {width: 10, color: colours[k % colours.length]},
+      hovertemplate: "trial %{customdata}<extra>%{y}</extra>"};
+  });
+  const el = plot("plot-timeline", traces, {xaxis: {title: {text: "time since the first trial started (s)"}},
+    yaxis: {type: "category", automargin: true}, showlegend: false,
+    margin: {l: 20, r: 20, t: 10, b: 45}}, rows.length);
+  el.dataset.workers = String(workers.length);
+}
+
+// a multi-fidelity run: each parameter set's distance per rung, promotions as lines, and the rung table
+function drawRungs(runId, cols, rungs) {
+  const c = cols.columns;
+  const dur = (i) => c.duration_s[i] !== null ? c.duration_s[i] : rungs[c.rung[i]].duration_s;
+  const done = [];
+  for (let i = 0; i < cols.n_trials; i++) if (c.status[i] === "complete" && c.distance_m[i] !== null) done.push(i);
+  const lx = [], ly = [];
+  for (const i of done) {
+    const p = c.parent[i];
+    if (c.rung[i] > 0 && p !== null && p >= 0 && c.distance_m[p] !== null) {
+      lx.push(dur(p), dur(i), null); ly.push(c.distance_m[p], c.distance_m[i], null);
+    }
+  }
+  const el = plot("plot-rungs", [
+    {x: lx, y: ly, mode: "lines", type: "scatter", name: "promoted", line: {color: "#c0392b", width: 1}, hoverinfo: "skip"},
+    {x: done.map(dur), y: done.map((i) => c.distance_m[i]), customdata: done.map((i) => c.trial_id[i]), mode: "markers",
+      type: "scatter", name: "trial", marker: {size: 5, color: "#3461c1", opacity: 0.7},
+      hovertemplate: "trial %{customdata}<br>%{x} s: %{y:.4g} m<extra></extra>"},
+  ], {xaxis: {title: {text: "trial length (s), one rung each"}, tickvals: rungs.map((r) => r.duration_s)},
+    yaxis: {title: {text: "distance (m)"}}}, done.length);
+  el.dataset.run = runId; el.dataset.promotions = String(lx.length / 3); onPointClick(el);
+  document.getElementById("rungs-table").innerHTML = `<thead><tr><th class="l">rung</th><th>length (s)</th>
+    <th>trials</th><th>complete</th><th>promoted</th><th>best (m)</th><th>median (m)</th><th>judged</th>
+    <th>judge / screen distance</th></tr></thead><tbody>${rungs.map((r) => `<tr><td class="l">${r.rung}</td>
+    <td>${fmt(r.duration_s)}</td><td>${r.trials}</td><td>${r.complete}</td><td>${r.promoted}</td>
+    <td>${fmt(r.best_distance_m)}</td><td>${fmt(r.median_distance_m)}</td><td>${r.judged}</td>
+    <td>${fmt(r.judge_ratio_median, 3)}</td></tr>`).join("")}</tbody>`;
+}
+
 const TABLE = [["trial_id", "trial"], ["status", "status"], ["phase", "phase"], ["objective", "objective"],
   ["distance_m", "distance (m)"], ["speed_cm_s", "speed (cm/s)"], ["cot", "COT"], ["work_j", "work (J)"],
   ["verification", "verified"], ["wall_time_s", "wall (s)"], ["worker_id", "worker"], ["reason", "reason"]];
 
+const FILTERS = [["status", "status"], ["phase", "phase"], ["worker_id", "worker"], ["rung", "rung"],
+  ["verification", "verified"]];
+
+/** The filter bar over the trials table: a choice per categorical column, a minimum objective, a reason text. */
+function drawFilters(runId, cols) {
+  const c = cols.columns;
+  const bar = document.getElementById("trial-filters");
+  const f = runState.filters;
+  const choices = FILTERS.map(([key, label]) => {
+    const values = [...new Set(c[key].map((v) => (v === null || v === "" ? "" : String(v))))].sort();
+    if (values.length < 2 && !f[key]) return "";
+    return `<label>${label} <select data-filter="${key}"><option value="">all</option>${values.map((v) =>
+      `<option value="${esc(v)}"${f[key] === v ? " selected" : ""}>${esc(v || "–")}</option>`).join("")}</select></label>`;
+  }).join("");
+  const sig = choices;
+  if (bar.dataset.sig === sig) return;  // a live refresh with the same choices keeps what is typed
+  bar.dataset.sig = sig;
+  bar.innerHTML = `${choices}<label>objective ≥ <input data-filter="min_objective" type="number" step="any"
+    value="${esc(f.min_objective ?? "")}" style="width:7em"></label><label>reason contains <input data-filter="reason"
+    type="text" value="${esc(f.reason ?? "")}" style="width:10em"></label><span class="muted" id="filter-count"></span>`;
+  bar.querySelectorAll("[data-filter]").forEach((el) => {
+    el.addEventListener(el.tagName === "SELECT" ? "change" : "input", () => {
+      f[el.dataset.filter] = el.value;
+      runState.page = 0;
+      drawTable(runId, cols);
+    });
+  });
+}
+
+function passes(c, i) {
+  const f = runState.filters;
+  for (const [key] of FILTERS) {
+    if (f[key] && String(c[key][i] ?? "") !== f[key]) return false;
+  }
+  if (f.min_objective !== undefined && f.min_objective !== "" && !(c.objective[i] >= Number(f.min_objective))) return false;
+  if (f.reason && !String(c.reason[i] || "").toLowerCase().includes(f.reason.toLowerCase())) return false;
+  return true;
+}
+
 function drawTable(runId, cols) {
   const c = cols.columns;
-  const idx = [...Array(cols.n_trials).keys()];
+  const idx = [...Array(cols.n_trials).keys()].filter((i) => passes(c, i));
+  const count = document.getElementById("filter-count");
+  if (count) count.textContent = idx.length < cols.n_trials ? `${idx.length} of ${cols.n_trials} trials` : "";
   const k = runState.sortKey, d = runState.sortDir;
   idx.sort((a, b) => {
     const x = c[k][a], y = c[k][b];
@@ -341,9 +451,13 @@ function runSkeleton(runId) {
       <div class="panel"><h2>One parameter against the objective <select id="param-select"></select></h2>
         <div class="plot" id="plot-param"></div></div>
       <div class="panel"><h2>Parameter importance <span class="muted" id="importance-note"></span></h2>
-        <div id="plot-importance"></div></div>
+        <div class="notice warn" id="importance-warning" hidden></div><div id="plot-importance"></div></div>
+      <div class="panel"><h2>Trials per worker over time</h2><div class="plot" id="plot-timeline"></div></div>
+      <div class="panel" id="rungs-panel" hidden><h2>Rungs <span class="muted">(multi-fidelity: each parameter set
+        per trial length)</span></h2><div class="plot" id="plot-rungs"></div>
+        <div class="tablewrap"><table id="rungs-table"></table></div></div>
     </div>
-    <h2 style="margin-top:1em">Trials</h2><div id="trials"></div></div>`;
+    <h2 style="margin-top:1em">Trials</h2><div class="filters" id="trial-filters"></div><div id="trials"></div></div>`;
 }
 
 async function showRun(runId, gen, first) {
@@ -385,7 +499,9 @@ async function showRun(runId, gen, first) {
       status.state === "running");
     return;
   }
+  document.getElementById("rungs-panel").hidden = !analysis.rungs;
   drawRunPlots(runId, cols, analysis, meta);
+  drawFilters(runId, cols);
   drawTable(runId, cols);
   document.body.dataset.trialsShown = String(cols.n_trials);
   schedule(() => showRun(runId, gen, false).catch((e) => serverGone(e, gen, status.reopen_command)),
@@ -533,6 +649,7 @@ function route() {
     p = showTrial(parts[1], Number(parts[3]), gen);
   } else if (parts[0] === "run" && parts[1]) {
     runState.page = 0;
+    runState.filters = {};
     p = showRun(parts[1], gen, true);
   } else {
     p = showRuns(gen);
