@@ -86,5 +86,5 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "sampler": (meta.sampler or {}).get("name"),
         "rungs_s": list(fidelity["durations_s"]) if fidelity and fidelity.get("durations_s") else None,
         "reopen_command": f"spinefarm api {shown}",
-        "resume_command": f"spinefarm search --resume {shown}" if state in ("stopped", "failed") else None,
+        "resume_command": f"spinefarm search --resume {shown}" if state in ("stopped", "failed", "empty") else None,
     }

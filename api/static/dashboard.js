@@ -494,7 +494,7 @@ async function showRun(runId, gen, first) {
     document.getElementById("empty").innerHTML = `<b>No finished trial yet.</b> ${cols.n_trials
       ? `${cols.n_trials} trial(s) sampled, none has come back.` : "This run file holds no trial."} ${
       status.state === "running" ? "This page fills in as results arrive." : status.resume_command
-        ? `Start its workers with <code>${esc(status.resume_command)}</code>.` : ""}`;
+        ? `Continue it, with workers, by <code>${esc(status.resume_command)}</code>.` : ""}`;
     schedule(() => showRun(runId, gen, false).catch((e) => serverGone(e, gen, status.reopen_command)),
       status.state === "running");
     return;
