@@ -82,14 +82,15 @@ class PictureCache:
             return self._locks.setdefault(key, threading.Lock())
 
     def picture(self, meta: RunMeta, rec: TrialRecord) -> Path:
-        """The gait strip (PNG) of a stored trial."""
-        return self._cached(meta, rec, "picture")
+        """The gait strip (PNG) of a stored trial, drawn from its recorded motion (one re-simulation for both)."""
+        motion = self._cached(meta, rec, "motion")
+        return self._cached(meta, rec, "picture", {"motion_file": str(motion)})
 
     def motion(self, meta: RunMeta, rec: TrialRecord) -> Path:
         """The trial's recorded motion (JSON, worker/motion.py's format) for the 3D view."""
         return self._cached(meta, rec, "motion")
 
-    def _cached(self, meta: RunMeta, rec: TrialRecord, kind: str) -> Path:
+    def _cached(self, meta: RunMeta, rec: TrialRecord, kind: str, inputs: dict[str, Any] | None = None) -> Path:
         job = trial_job(meta, rec)
         key = hashlib.sha256(json.dumps({"kind": kind, **{k: v for k, v in job.items() if k != "title"}},
                                         sort_keys=True).encode()).hexdigest()[:32]
@@ -97,7 +98,7 @@ class PictureCache:
         with self._lock(key):
             if out.is_file():
                 return out
-            self._render(job, out, KINDS[kind][0])
+            self._render({**job, **(inputs or {})}, out, KINDS[kind][0])
         return out
 
     def _render(self, job: dict, out: Path, module: str) -> None:
