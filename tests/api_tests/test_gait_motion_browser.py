@@ -123,6 +123,9 @@ def test_the_3d_view_plays_from_local_assets_and_shows_the_recorded_frame(page, 
     assert np.abs(np.array(shown["strings"]) - expected_strings).max() < 0.02
     assert np.abs(expected_rods - rod_segments(bodies, np.array(m["poses"][0]).reshape(-1, 7)).reshape(-1, 6)
                   ).max() > 0.1  # and the robot did move between frame 0 and then
+    # the strip of six frames below is drawn from the same recorded motion (no second re-simulation)
+    page.wait_for_selector("#gait", timeout=MOTION_TIMEOUT_MS)
+    assert page.evaluate("document.getElementById('gait').naturalWidth") > 400
     page.screenshot(path=ARTIFACTS / "trial-motion.png", full_page=True)
     assert not foreign(page, server), foreign(page, server)
 
