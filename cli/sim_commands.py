@@ -67,8 +67,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def add_engine_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--engine", choices=("bullet", "mujoco"), default=None,
-                   help="physics engine (default bullet): bullet, or mujoco (the fast tier, soft contacts)")
+    from spinefarm.robot.engines import ENGINES, engine_names
+
+    p.add_argument("--engine", choices=engine_names(), default=None,
+                   help="physics engine (default bullet): "
+                   + "; ".join(f"{name}: {spec.summary}" for name, spec in ENGINES.items()))
 
 
 def add_engine_option_argument(p: argparse.ArgumentParser) -> None:

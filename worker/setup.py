@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.cpg_network import CpgNetwork
+from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.scene import build_terrain
 from spinefarm.robot.trial_config import TrialConfig
@@ -68,7 +69,7 @@ class TrialSetup:
 
     def scene(self, offsets: np.ndarray | None, factory: EngineFactory | None = None) -> tuple[BasePhysics, bool]:
         """(engine world at the start pose, whether the caller owns it and must close it)."""
-        if factory is not None or not hasattr(self.engine_cls, "reset"):
+        if factory is not None or not engine_spec(self.cfg.engine).can("reset"):
             self.scenes_built += 1
             return (factory or self.engine_cls)(self.bodies, self.terrain, self.dt, self.settings, offsets,
                                                 self.rotation), True

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 from spinefarm.robot.bodies import build_bodies, build_strings
+from spinefarm.robot.engines import engine_names
 from spinefarm.robot.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec
 from spinefarm.robot.scene import GroundSpec
 from spinefarm.worker.engines.base import engine_class
 from spinefarm.worker.sim import strings as sk
 
-ENGINES = ("bullet", "mujoco")
+ENGINES = tuple(engine_names())
 
 
 def two_rod_structure(gap_cm: float, *, heavy_density: float = 0.014, light_density: float = 0.014,

@@ -288,9 +288,8 @@ def test_noslip_pass_is_an_option():
 
 
 def test_bad_engine_options_are_named():
-    with pytest.raises(ConfigError, match="unknown mujoco engine options"):
-        run_trial(load_morphology("tetraspine-ntrt"), random_unit_params(load_morphology("tetraspine-ntrt"), 1),
-                  TrialConfig(duration_s=0.01, engine="mujoco", engine_options={"friction_anchor": False}))
+    with pytest.raises(ConfigError, match="unknown mujoco engine option 'friction_anchor'"):
+        TrialConfig(duration_s=0.01, engine="mujoco", engine_options={"friction_anchor": False})
     with pytest.raises(ConfigError, match="integrator"):
         MujocoSettings(integrator="verlet")
     with pytest.raises(ConfigError, match="solimp"):

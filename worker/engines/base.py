@@ -25,12 +25,12 @@ dataclass, built from TrialConfig.engine_options by `settings_from_options`, nev
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import fields
 from typing import Any, ClassVar
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.bodies import BodyModel
+from spinefarm.robot.engines import check_engine_options, engine_spec
 from spinefarm.robot.scene import Terrain
 
 GRAVITY_CM_S2 = 981.0
@@ -60,6 +60,19 @@ class BasePhysics:
     def close(self) -> None:
         raise NotImplementedError
 
+    # optional abilities: a backend overrides these only if its registry entry declares them
+    def reset(self, start_offsets_cm: np.ndarray | None = None) -> None:
+        """ability "reset": back to the start pose at rest, the same state as a fresh world."""
+        raise NotImplementedError(f"engine {self.name} has no reset")
+
+    def velocities(self) -> np.ndarray:
+        """ability "velocities": world-frame body velocities, linear cm/s and angular rad/s."""
+        raise NotImplementedError(f"engine {self.name} has no velocities")
+
+    def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0)) -> None:
+        """ability "velocities": set one body's world-frame velocity."""
+        raise NotImplementedError(f"engine {self.name} has no set_velocity")
+
     def __enter__(self) -> BasePhysics:
         return self
 
@@ -68,38 +81,20 @@ class BasePhysics:
 
     @classmethod
     def settings_from_options(cls, options: Mapping[str, Any] | None) -> Any:
-        """The backend's frozen settings from {field: value}; unknown fields name the allowed ones."""
-        known = {f.name for f in fields(cls.settings_type)}
-        unknown = sorted(set(options or {}) - known)
-        if unknown:
-            raise ConfigError(f"unknown {cls.name} engine options", received=unknown, expected=sorted(known))
+        """The backend's frozen settings from {field: value}, checked against the registry first (unknown
+        options name the allowed ones)."""
+        check_engine_options(cls.name, options)
         return cls.settings_type(**dict(options or {}))
 
 
-# name -> (module, class name): backends are imported only when used, so one engine's package
-# need not be installed to run another
-_ENGINES: dict[str, tuple[str, str]] = {
-    "bullet": ("spinefarm.worker.engines.bullet", "BulletPhysics"),
-    "mujoco": ("spinefarm.worker.engines.mujoco", "MujocoPhysics"),
-}
-
-
-def register_engine(name: str, module: str, class_name: str) -> None:
-    _ENGINES[name] = (module, class_name)
-
-
-def engine_names() -> list[str]:
-    return sorted(_ENGINES)
-
-
 def engine_class(name: str) -> type[BasePhysics]:
-    if name not in _ENGINES:
-        raise ConfigError("unknown engine", received=name, expected=engine_names())
+    """The backend class of a registered engine (spinefarm.robot.engines), imported only when used, so one
+    engine's package need not be installed to run another."""
     import importlib
 
-    module, cls = _ENGINES[name]
+    spec = engine_spec(name)
     try:
-        return getattr(importlib.import_module(module), cls)
+        return getattr(importlib.import_module(spec.module), spec.class_name)
     except ImportError as exc:
         raise ConfigError(f"engine {name!r} is not installed", received=str(exc),
                           expected=f"the package {name} needs (pip install 'spinefarm[worker]')") from exc
