@@ -133,7 +133,7 @@ ENGINES: dict[str, EngineSpec] = {spec.name: spec for spec in (
         EngineOption("noslip_iterations", _I, 0, low=0, high=10_000),
         EngineOption("margin_cm", _F, 0.0, low=0.0, high=10.0),
         _GRAVITY,
-    ), frozenset({"reset", "velocities"}), "MuJoCo, the fast screen: soft contacts"),
+    ), frozenset({"reset", "velocities", "compiled_step"}), "MuJoCo, the fast screen: soft contacts"),
 )}
 
 

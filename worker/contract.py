@@ -47,7 +47,7 @@ def _step_config(morph: Morphology, engine: str, **kw) -> TrialConfig:
 
 
 def check_builds(morph: Morphology) -> CheckResult:
-    from spinefarm.worker.trial import string_tables
+    from spinefarm.worker.control.law import string_tables
 
     bodies = build_bodies(morph.structure)
     geom = build_strings(morph.structure, bodies)

@@ -68,10 +68,10 @@ class PassiveRig:
         self.no_cpg = np.zeros(0)
 
     def step(self) -> np.ndarray:
-        poses = self.scene.read_poses()
+        poses = self.scene.read_poses()[0]  # one world
         status = self.bank.step(poses, self.no_cpg, self.dt, sk.MOTOR_PHYSICAL)
         assert status == sk.STATUS_OK
-        self.scene.apply_wrenches(self.bank.force, self.bank.torque)
+        self.scene.apply_wrenches(self.bank.force[None], self.bank.torque[None])
         self.scene.step()
         return poses
 
