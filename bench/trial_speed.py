@@ -170,10 +170,10 @@ def cpg_cost(morph_name: str, seed: int, updates: int = 5000) -> dict:
         cpg = CpgIntegrator(net, max_step)
         h, n = cpg.plan(period)
         kernel = cpg.kernel_arrays()
-        rk4_advance(cpg.state, *kernel, h, n, cpg.work, cpg.output_cm_s)  # compiled before timing
+        rk4_advance(cpg.state, kernel, h, n, cpg.work, cpg.output_cm_s)  # compiled before timing
         t0 = time.process_time()
         for _ in range(updates):
-            rk4_advance(cpg.state, *kernel, h, n, cpg.work, cpg.output_cm_s)
+            rk4_advance(cpg.state, kernel, h, n, cpg.work, cpg.output_cm_s)
         out[label] = (time.process_time() - t0) / updates * 1e6 / (period * 1e3)
     return out
 

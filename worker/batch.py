@@ -16,7 +16,7 @@ from spinefarm.worker import scoring
 from spinefarm.worker.control.law import ControlLaw
 from spinefarm.worker.engines.base import BasePhysics
 from spinefarm.worker.episode import check_state
-from spinefarm.worker.loop import advance
+from spinefarm.worker.loop import advance, stepper
 from spinefarm.worker.sim import strings as sk
 
 
@@ -92,6 +92,8 @@ class Batch:
                 w.trajectory = Trajectory()
         self.active = np.ones(engine.n_worlds, dtype=bool)
         self.done = 0  # steps since the start, settle included, of every world still running
+        self._recorded = self.done  # the index of the step the recorder sees next
+        self.run_steps = stepper(engine, law, self._record if timing.record_every else None)
 
     def run(self) -> list[World]:
         t = self.timing
@@ -102,8 +104,10 @@ class Batch:
             while n < phase_steps and self.active.any():
                 k = min(phase_steps - n, t.check_every - self.done % t.check_every)
                 running = self.active.copy()
-                advance(self.engine, self.law, k, self.active, t.check_every, self._recorder())
-                self._dropped(running & ~self.active, start)
+                self._recorded = self.done
+                advance(self.engine, self.run_steps, k, self.active, t.check_every)
+                if (running != self.active).any():
+                    self._dropped(running & ~self.active, start)
                 self.done += k
                 n += k
                 if self.done % t.check_every == 0:
@@ -116,18 +120,12 @@ class Batch:
         self._finish()
         return self.worlds
 
-    def _recorder(self):
-        every = self.timing.record_every
-        if not every:
-            return None
-        dt, step = self.timing.dt_s, [self.done]
-
-        def on_step(poses: np.ndarray, active: np.ndarray) -> None:
-            if step[0] % every == 0:
-                for b in np.flatnonzero(active):
-                    self.worlds[b].trajectory.add(step[0] * dt, poses[b], self.law, b)
-            step[0] += 1
-        return on_step
+    def _record(self, poses: np.ndarray, active: np.ndarray) -> None:
+        step = self._recorded
+        if step % self.timing.record_every == 0:
+            for b in np.flatnonzero(active):
+                self.worlds[b].trajectory.add(step * self.timing.dt_s, poses[b], self.law, b)
+        self._recorded = step + 1
 
     def _dropped(self, worlds: np.ndarray, phase_start: int) -> None:
         for b in np.flatnonzero(worlds):

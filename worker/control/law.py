@@ -40,10 +40,10 @@ def law_step_world(cpg, strings, clock, b, poses):
     steps, every, dt, motor = clock
     n = steps[b]
     if every > 0 and (n + 1) % every == 0:
-        rk4_advance(state[b], omega[b], amp[b], indptr[b], source[b], wc[b], rate[b], h[b], n_sub[b], scratch[b],
+        rk4_advance(state[b], (omega[b], amp[b], indptr[b], source[b], wc[b], rate[b]), h[b], n_sub[b], scratch[b],
                     out[b])
-    status = sk.string_step(poses, body_a, body_b, anc_a, anc_b, params[b], sstate[b], out[b], dt, motor,
-                            force[b], torque[b], tension[b], work[b], wa[b], wb[b], sforce[b])
+    status = sk.string_step(poses, (body_a, body_b, anc_a, anc_b), params[b], sstate[b], out[b], dt, motor,
+                            (force[b], torque[b], tension[b], work[b], wa[b], wb[b], sforce[b]))
     if status == STATUS_OK:
         steps[b] = n + 1
     return status
@@ -51,10 +51,14 @@ def law_step_world(cpg, strings, clock, b, poses):
 
 @njit(cache=True)
 def law_step(cpg, strings, clock, poses, active, status):
-    """One step of every active world: poses (B, nb, 7); status (B,) receives each world's status."""
+    """One step of every active world: poses (B, nb, 7); status (B,) receives each world's status. Returns
+    how many active worlds failed."""
+    failed = 0
     for b in range(poses.shape[0]):
         if active[b]:
             status[b] = law_step_world(cpg, strings, clock, b, poses[b])
+            failed += status[b] != STATUS_OK
+    return failed
 
 
 def string_tables(morph: Morphology, start_length_cm: np.ndarray, node_of_string: dict[int, int]
@@ -151,11 +155,11 @@ class ControlLaw:
         self.steps[:] = 0
         self.clock = (self.steps, int(cpg_every), float(dt_s), int(self.motor))
 
-    def step(self, poses: np.ndarray, active: np.ndarray) -> np.ndarray:
-        """One step of every active world: poses (B, nb, 7) -> self.force, self.torque (B, nb, 3); returns
-        the status of each world (B,) (STATUS_OK, or STATUS_NONFINITE: that world's step was not taken)."""
-        law_step(self.cpg, self.strings, self.clock, poses, active, self.status)
-        return self.status
+    def step(self, poses: np.ndarray, active: np.ndarray) -> int:
+        """One step of every active world: poses (B, nb, 7) -> self.force, self.torque (B, nb, 3). Returns how
+        many active worlds failed; self.status (B,) says which (STATUS_NONFINITE: that world's step was not
+        taken)."""
+        return law_step(self.cpg, self.strings, self.clock, poses, active, self.status)
 
     def work_internal(self, world: int) -> float:
         """Reel-in work of world `world` so far, internal units (kg cm^2/s^2)."""

@@ -20,9 +20,9 @@ trial loop (worker.loop) calls, per batch of trials:
 Optional abilities, declared in the engine's registry entry (spinefarm.robot.engines), never guessed:
   reset(start_offsets_cm)         "reset": back to the start pose at rest, the same state as fresh worlds
   velocities(), set_velocity()    "velocities": world-frame body velocities, for checks and tests
-  compiled_worlds()               "compiled_step": ([per world (model address, data address, state (nb, k),
-                                  pose_columns (7,) int64, wrench (nb, 6))], C step function of the two
-                                  addresses), for the compiled loop of worker.loop
+  compiled_worlds()               "compiled_step": per world (address of a C function void step(uint64 model,
+                                  uint64 data), model address, data address, state (nb, k), pose_columns (7,)
+                                  int64, wrench (nb, 6)), for the compiled loop of worker.loop
 
 Engine knobs (solver, contacts, friction combination, workarounds) live in each backend's settings
 dataclass, built from TrialConfig.engine_options by `settings_from_options`, never in morphology data.
@@ -88,9 +88,9 @@ class BasePhysics:
         """ability "velocities": set one body's world-frame velocity."""
         raise NotImplementedError(f"engine {self.name} has no set_velocity")
 
-    def compiled_worlds(self) -> tuple[list[tuple], Any]:
-        """ability "compiled_step": each world's (model address, data address, state, pose_columns, wrench)
-        and the C step function; see the module docstring."""
+    def compiled_worlds(self) -> list[tuple]:
+        """ability "compiled_step": each world's (step function address, model address, data address, state,
+        pose_columns, wrench); see the module docstring."""
         raise NotImplementedError(f"engine {self.name} has no compiled step")
 
     def __enter__(self) -> BasePhysics:

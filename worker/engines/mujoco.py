@@ -10,14 +10,13 @@ from pathlib import Path
 import mujoco
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.robot.bodies import BodyModel
+from spinefarm.robot.bodies import BodyModel, quaternion_matrix
 from spinefarm.robot.scene import GroundSpec, Terrain, pairs_off
 from spinefarm.worker.engines.base import BasePhysics, world_offsets
 from spinefarm.worker.engines.mujoco_model import (
     POSE_COLUMNS,
     MujocoSettings,
-    _fill_heightfield,
-    _matrix,
+    fill_heightfield,
     model_xml,
 )
 
@@ -65,9 +64,9 @@ class MujocoPhysics(BasePhysics):
         off = collision_pairs_off if collision_pairs_off is not None else pairs_off(terrain, len(bodies))
         self.xml = model_xml(bodies, terrain, dt_s, self.settings, offsets[0], start_rotation, off)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
-        _fill_heightfield(self.model, terrain)
+        fill_heightfield(self.model, terrain)
         self.dt_s, self.n_bodies, self.n_worlds = dt_s, len(bodies), len(offsets)
-        rot = np.eye(3) if start_rotation is None else _matrix(start_rotation)
+        rot = np.eye(3) if start_rotation is None else quaternion_matrix(start_rotation)
         self.base_pos = np.array([rot @ b.com_cm for b in bodies])  # start COMs before offsets
         self.guard = None
         if self.settings.segment_contacts == "auto":
@@ -90,8 +89,8 @@ class MujocoPhysics(BasePhysics):
 
     def _start_trial(self) -> None:
         self.retries = {}
-        self._steps = np.zeros(self.n_worlds, dtype=np.int64)  # since the start, for the contact guard
-        self._safe_until = np.zeros(self.n_worlds, dtype=np.int64)
+        self._steps = [0] * self.n_worlds  # since the start, for the contact guard
+        self._safe_until = [0] * self.n_worlds
 
     def _place(self, b: int, offsets: np.ndarray | None) -> None:
         mujoco.mj_resetData(self.model, self.data[b])
@@ -122,12 +121,12 @@ class MujocoPhysics(BasePhysics):
             if active is None or active[b]:
                 mujoco.mj_step(self.model, data)
 
-    def compiled_worlds(self) -> tuple[list[tuple], object]:
-        """Per world (model address, data address, qpos (nb, 7), POSE_COLUMNS, xfrc (nb, 6)) and mj_step as
-        a C function of the two addresses; see worker.loop."""
-        worlds = [(self.model._address, d._address, q, self._order, x) for d, q, x in
-                  zip(self.data, self.qpos, self.xfrc, strict=True)]
-        return worlds, mj_step_cfunc()
+    def compiled_worlds(self) -> list[tuple]:
+        """Per world (address of mj_step, model address, data address, qpos (nb, 7), POSE_COLUMNS, xfrc (nb, 6));
+        see worker.loop."""
+        step = ctypes.cast(mj_step_cfunc(), ctypes.c_void_p).value
+        return [(step, self.model._address, d._address, q, self._order, x) for d, q, x in
+                zip(self.data, self.qpos, self.xfrc, strict=True)]
 
     def advance(self, run, n_steps: int, active: np.ndarray, horizon_steps: int) -> None:
         """With segment_contacts "auto", the steps are run in pieces no longer than the contact guard finds
@@ -137,22 +136,28 @@ class MujocoPhysics(BasePhysics):
         if self.guard is None:
             run(n_steps, active)
             return
+        steps, safe = self._steps, self._safe_until
         done = 0
         self._look(active, horizon_steps)
-        while done < n_steps and active.any():
-            k = min(n_steps - done, int((self._safe_until - self._steps)[active].min()))
-            moving = active.copy()
+        while done < n_steps:
+            live = [b for b in range(self.n_worlds) if active[b]]
+            if not live:
+                return
+            k = min(n_steps - done, min(safe[b] - steps[b] for b in live))
             run(k, active)
-            self._steps[moving] += k
+            for b in live:
+                steps[b] += k
             done += k
             self._look(active, horizon_steps)
 
     def _look(self, active: np.ndarray, horizon_steps: int) -> None:
-        for b in np.flatnonzero(active & (self._steps == self._safe_until)):
-            steps, why = self.contact_free_steps(horizon_steps, int(b))
+        for b in range(self.n_worlds):
+            if not active[b] or self._steps[b] != self._safe_until[b]:
+                continue
+            steps, why = self.contact_free_steps(horizon_steps, b)
             if steps == 0:
                 why = f"{why} at t={self._steps[b] * self.dt_s:.3f} s"
-                self.retries[int(b)] = ({"segment_contacts": "scene"}, {"segment_contacts": f"modelled: {why}"})
+                self.retries[b] = ({"segment_contacts": "scene"}, {"segment_contacts": f"modelled: {why}"})
                 active[b] = False
             self._safe_until[b] = self._steps[b] + steps
 
@@ -173,12 +178,13 @@ class MujocoPhysics(BasePhysics):
         for w in range(self.n_worlds):
             for b in range(self.n_bodies):
                 out[w, b, :3] = self.qvel[w][b, :3]
-                out[w, b, 3:] = _matrix(poses[w, b, 3:]) @ self.qvel[w][b, 3:]  # free joints: body-frame omega
+                # a free joint's angular velocity is in the body frame
+                out[w, b, 3:] = quaternion_matrix(poses[w, b, 3:]) @ self.qvel[w][b, 3:]
         return out
 
     def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0), world: int = 0) -> None:
         """Set one body's world-frame velocity; for checks and tests."""
-        rot = _matrix(self.read_poses()[world, index, 3:])
+        rot = quaternion_matrix(self.read_poses()[world, index, 3:])
         self.qvel[world][index, :3] = linear_cm_s
         self.qvel[world][index, 3:] = rot.T @ np.asarray(angular_rad_s, dtype=float)
 

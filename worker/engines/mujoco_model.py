@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, check_range
-from spinefarm.robot.bodies import BodyModel
+from spinefarm.robot.bodies import BodyModel, quaternion_matrix
 from spinefarm.robot.scene import GROUND_TOP_CM, Terrain
 from spinefarm.worker.engines.base import GRAVITY_CM_S2
 
@@ -134,13 +134,6 @@ def _wxyz(q_xyzw) -> tuple[float, float, float, float]:
     return (w, x, y, z)
 
 
-def _matrix(q_xyzw) -> np.ndarray:
-    x, y, z, w = q_xyzw
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
 # MuJoCo planes and heightfields face +z of their frame; this turns +z into world +y (local y -> world -z)
 _Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 _Z_UP_TO_Y_UP_WXYZ = (math.sqrt(0.5), -math.sqrt(0.5), 0.0, 0.0)
@@ -164,6 +157,32 @@ def rod_ends(body: BodyModel) -> list[tuple[np.ndarray, float]]:
     return list(ends.values())
 
 
+def _terrain_xml(terrain: Terrain, attributes: str) -> tuple[list[str], list[str]]:
+    """(worldbody geoms, assets) of the terrain; `attributes`: friction, contact bits and solver settings."""
+    world, assets = [], []
+    for i, box in enumerate(terrain.boxes):
+        rot = quaternion_matrix(box.quaternion)
+        if _is_plane(box):
+            top = np.asarray(box.centre_cm) + rot @ np.array([0.0, box.half_extents_cm[1], 0.0])
+            hx, _, hz = box.half_extents_cm
+            world.append(f'<geom name="terrain{i}" type="plane" pos="{_vec(top)}" '
+                         f'quat="{_vec(_quat_wxyz_from_matrix(rot @ _Z_UP_TO_Y_UP))}" size="{_f(hx)} {_f(hz)} 1" '
+                         f'{attributes}/>')
+        else:
+            world.append(f'<geom name="terrain{i}" type="box" pos="{_vec(box.centre_cm)}" '
+                         f'quat="{_vec(_wxyz(box.quaternion))}" size="{_vec(box.half_extents_cm)}" {attributes}/>')
+    if terrain.heightfield is not None:
+        hf = terrain.heightfield
+        rows, cols = hf.heights_cm.shape
+        lo, hi = float(hf.heights_cm.min()), float(hf.heights_cm.max())
+        rx, rz = (cols - 1) * hf.spacing_cm / 2, (rows - 1) * hf.spacing_cm / 2
+        assets.append(f'<hfield name="rough" nrow="{rows}" ncol="{cols}" '
+                      f'size="{_f(rx)} {_f(rz)} {_f(max(hi - lo, 1e-6))} 1"/>')
+        world.append(f'<geom name="heightfield" type="hfield" hfield="rough" pos="0 {_f(GROUND_TOP_CM + lo)} 0" '
+                     f'quat="{_vec(_Z_UP_TO_Y_UP_WXYZ)}" {attributes}/>')
+    return world, assets
+
+
 def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: MujocoSettings,
               start_offsets_cm: np.ndarray | None, start_rotation, excluded: list[tuple[int, int]]) -> str:
     """The MJCF of the world; heightfield elevations are filled in after compiling."""
@@ -181,28 +200,8 @@ def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: 
     common = f'condim="3" {solref} margin="{_f(s.margin_cm)}"'
     mu_terrain = terrain.friction * mu_rod
     tgeom = f'friction="{_f(mu_terrain)} 0 0" priority="1" contype="{_TERRAIN[0]}" conaffinity="{_TERRAIN[1]}"'
-    world, assets = [], []
-    for i, box in enumerate(terrain.boxes):
-        rot = _matrix(box.quaternion)
-        if _is_plane(box):
-            top = np.asarray(box.centre_cm) + rot @ np.array([0.0, box.half_extents_cm[1], 0.0])
-            hx, _, hz = box.half_extents_cm
-            world.append(f'<geom name="terrain{i}" type="plane" pos="{_vec(top)}" '
-                         f'quat="{_vec(_quat_wxyz_from_matrix(rot @ _Z_UP_TO_Y_UP))}" size="{_f(hx)} {_f(hz)} 1" '
-                         f'{tgeom} {common}/>')
-        else:
-            world.append(f'<geom name="terrain{i}" type="box" pos="{_vec(box.centre_cm)}" '
-                         f'quat="{_vec(_wxyz(box.quaternion))}" size="{_vec(box.half_extents_cm)}" {tgeom} {common}/>')
-    if terrain.heightfield is not None:
-        hf = terrain.heightfield
-        rows, cols = hf.heights_cm.shape
-        lo, hi = float(hf.heights_cm.min()), float(hf.heights_cm.max())
-        rx, rz = (cols - 1) * hf.spacing_cm / 2, (rows - 1) * hf.spacing_cm / 2
-        assets.append(f'<hfield name="rough" nrow="{rows}" ncol="{cols}" '
-                      f'size="{_f(rx)} {_f(rz)} {_f(max(hi - lo, 1e-6))} 1"/>')
-        world.append(f'<geom name="heightfield" type="hfield" hfield="rough" pos="0 {_f(GROUND_TOP_CM + lo)} 0" '
-                     f'quat="{_vec(_Z_UP_TO_Y_UP_WXYZ)}" {tgeom} {common}/>')
-    rot = np.eye(3) if start_rotation is None else _matrix(start_rotation)
+    world, assets = _terrain_xml(terrain, f"{tgeom} {common}")
+    rot = np.eye(3) if start_rotation is None else quaternion_matrix(start_rotation)
     quat = "1 0 0 0" if start_rotation is None else _vec(_wxyz(start_rotation))
     capsule_bits = _CAPSULE_SELF if geometry == "ends" else _CAPSULE_ALL
     if s.segment_contacts != "scene":  # "auto": left out while the guard sees no segment come near
@@ -244,7 +243,7 @@ def _is_plane(box) -> bool:
     return min(hx, hz) >= PLANE_ASPECT * hy
 
 
-def _fill_heightfield(model: mujoco.MjModel, terrain: Terrain) -> None:
+def fill_heightfield(model: mujoco.MjModel, terrain: Terrain) -> None:
     if terrain.heightfield is None:
         return
     h = terrain.heightfield.heights_cm
