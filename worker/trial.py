@@ -13,6 +13,7 @@ step, guards and score are worker.episode.
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from collections.abc import Mapping, Sequence
 
@@ -74,12 +75,17 @@ def simulate_batch(morphology: Morphology | str | Mapping, params: Sequence, con
         raise ParameterError("one seed per parameter set", received=f"{len(params)} sets, {len(seeds)} seeds",
                              expected="as many seeds as parameter sets, at least one")
     outcomes, retries = _simulate(morphology, list(params), cfg, list(seeds), controller, scene_factory, setup)
-    for b, (options, extras) in retries.items():  # the engine's policy: again from the start, other settings
-        again = dataclasses.replace(cfg, engine_options={**cfg.engine_options, **options})
-        out = simulate_batch(morphology, [params[b]], again, [seeds[b]], controller=controller,
-                             scene_factory=scene_factory, setup=None if isinstance(setup, TrialSetup) else setup)[0]
-        out.result.extras.update(extras)
-        outcomes[b] = out
+    groups: dict[str, list[int]] = {}
+    for b, (options, _) in retries.items():  # the engine's policy: again from the start, in other settings
+        groups.setdefault(json.dumps(options, sort_keys=True), []).append(b)
+    for options, worlds in groups.items():
+        again = dataclasses.replace(cfg, engine_options={**cfg.engine_options, **json.loads(options)})
+        rerun = simulate_batch(morphology, [params[b] for b in worlds], again, [seeds[b] for b in worlds],
+                               controller=controller, scene_factory=scene_factory,
+                               setup=None if isinstance(setup, TrialSetup) else setup)
+        for b, out in zip(worlds, rerun, strict=True):
+            out.result.extras.update(retries[b][1])
+            outcomes[b] = out
     return outcomes
 
 

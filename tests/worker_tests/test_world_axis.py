@@ -83,3 +83,18 @@ def test_one_seed_per_parameter_set():
     m = load_morphology("tetraspine-ntrt")
     with pytest.raises(ValueError, match="one seed per parameter set"):
         simulate_batch(m, [random_unit_params(m, 1)] * 2, TrialConfig(duration_s=0.1), [1])
+
+
+def test_worlds_handed_back_are_run_again_with_the_engines_settings():
+    """The ribbed spine's ribs start 2 mm apart: with segment_contacts "auto" MuJoCo hands every world back,
+    and the batch runs them again with the contacts: the bits of modelling them throughout."""
+    m = load_morphology("ribbed")
+    us = [random_unit_params(m, s) for s in SEEDS[:2]]
+    auto = TrialConfig(duration_s=0.2, engine="mujoco", pose_jitter_cm=0.01)
+    scene = TrialConfig(duration_s=0.2, engine="mujoco", pose_jitter_cm=0.01,
+                        engine_options={"segment_contacts": "scene"})
+    batch = simulate_batch(m, us, auto, SEEDS[:2])
+    singles = [simulate(m, u, scene, s) for u, s in zip(us, SEEDS[:2], strict=True)]
+    for one, alone in zip(batch, singles, strict=True):
+        assert one.result.distance_m == alone.result.distance_m and one.result.work_j == alone.result.work_j
+        assert one.result.extras["segment_contacts"].startswith("modelled: gap")

@@ -115,6 +115,9 @@ class ControlLaw:
     def __init__(self, networks: list[CpgNetwork], tables: list[tuple[np.ndarray, np.ndarray]], geom,
                  n_bodies: int, cpg_max_step_s: float | None, motor_model: str) -> None:
         n_worlds = len(networks)
+        if len({n.n_nodes for n in networks}) != 1 or len(tables) != n_worlds:
+            raise ConfigError("the worlds of a batch need one controller space", received=[n.n_nodes for n in networks],
+                              expected="as many CPG nodes in every world, and one string table per world")
         self.n_worlds = n_worlds
         self.motor = MOTOR_MODELS[motor_model]
         self._cpgs = [CpgIntegrator(net, cpg_max_step_s) for net in networks]  # each world's RK4 plan
