@@ -23,6 +23,7 @@ from typing import Any
 from spinefarm.protocol.errors import ConfigError
 
 ABILITIES = frozenset({"reset", "velocities", "compiled_step"})
+DEFAULT_ENGINE = "bullet"  # the judge: a trial config without an engine runs here
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from spinefarm.protocol.errors import ConfigError, check_range
-from spinefarm.robot.engines import check_engine_options, engine_spec
+from spinefarm.robot.engines import DEFAULT_ENGINE, check_engine_options, engine_spec
 from spinefarm.robot.scene import SceneConfig
 
 MOTOR_MODEL_NAMES = ("physical", "ntrt2014")
@@ -44,7 +44,7 @@ class TrialConfig:
     auto_dt: bool = False
     dt_safety_factor: float = 0.5
     refuse_unstable_dt: bool = True
-    engine: str = "bullet"
+    engine: str = DEFAULT_ENGINE
     engine_options: dict[str, Any] = field(default_factory=dict)
     motor_model: str = "physical"
     controller: str | None = None
