@@ -44,11 +44,11 @@ def search(*args: str) -> subprocess.Popen:
 def test_the_page_keeps_its_data_after_the_search_exits(browser, tmp_path):
     port = free_port()
     out = tmp_path / "ends.h5"
-    proc = search("--trials", "150", "--duration", "0.1", "--out", str(out), "--run-id", "ends-view",
+    proc = search("--trials", "300", "--duration", "0.1", "--out", str(out), "--run-id", "ends-view",
                   "--api-port", str(port))
     try:
         url = f"http://127.0.0.1:{port}"
-        wait_for(lambda: _answers(url), timeout_s=60, poll_s=0.1, what="the search's dashboard")
+        wait_for(lambda: _answers(url + "/runs/ends-view"), timeout_s=60, poll_s=0.2, what="the search's dashboard")
         page = browser.new_page(viewport={"width": 1400, "height": 900})
         page.goto(url + "/#/run/ends-view")
         page.wait_for_selector("#trial-table tr.row", timeout=60_000)
@@ -71,7 +71,7 @@ def test_the_page_keeps_its_data_after_the_search_exits(browser, tmp_path):
 
 def _answers(url: str) -> bool:
     try:
-        get(url + "/health")
+        get(url if "/runs/" in url else url + "/health")
         return True
     except OSError:
         return False
