@@ -10,7 +10,6 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 from spinefarm.protocol.messages import AuditState
 from spinefarm.storage.base import BaseStorage
 

@@ -7,7 +7,6 @@ import time
 from typing import Any
 
 
-
 def live_status(core: Any) -> dict[str, Any]:
     """JSON-able status of a CoordinatorCore (its lock held)."""
     study, scheduler = core.study, core.scheduler

@@ -4,9 +4,9 @@ import time
 
 import pytest
 from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.protocol.settings import RunSettings
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.memory import InMemoryStorage
-from spinefarm.protocol.settings import RunSettings
 from spinefarm.storage.schema import RunMeta
 
 
