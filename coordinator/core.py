@@ -26,7 +26,7 @@ from typing import Any
 from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
-from spinefarm.coordinator.tasks import AUDIT, JUDGE, TaskBook, split_key, task_key
+from spinefarm.coordinator.tasks import AUDIT, JUDGE, REFEREE, TaskBook, split_key, task_key
 from spinefarm.protocol.errors import MessageError
 from spinefarm.protocol.messages import (
     ResultAck,
@@ -173,7 +173,7 @@ class CoordinatorCore:
         tid = result.trial_id
         if not 0 <= tid < storage.n_trials():
             return Verdict.UNKNOWN
-        for kind in (JUDGE, AUDIT):  # a result for a task quotes the task's lease and the row it checks
+        for kind in (JUDGE, AUDIT, REFEREE):  # a task's result quotes the task's lease and the row it checks
             key = task_key(kind, tid)
             if self.scheduler.is_current(key, lease_id, worker_id):
                 return self._settle_task(key, worker_id, result)
@@ -187,6 +187,9 @@ class CoordinatorCore:
                 log.warning("result for trial %d from %s quotes a lease it was never given: dropped", tid,
                             worker_id)
             return Verdict.STALE
+        refused = self._refuse_quarantined(tid, worker_id)
+        if refused is not None:
+            return refused
         if result.seed != int(storage.columns()["seed"][tid]):
             log.warning("result for trial %d has seed %d, expected %d: dropped", tid, result.seed,
                         int(storage.columns()["seed"][tid]))
@@ -198,17 +201,36 @@ class CoordinatorCore:
         self.scheduler.release(tid)
         self.scheduler.observe_trial(result.wall_time_s)
         if result.ok:
-            self._judge_best()
             audit = self.tasks.audit_due(tid)
             if audit is not None:
                 self.scheduler.push_front(audit)
+            self._judge_best()
         return Verdict.STORED
+
+    def _refuse_quarantined(self, key: int, worker_id: str) -> Verdict | None:
+        """A quarantined worker's results are not taken: the task goes to another worker (lock held)."""
+        if not self.peers.is_quarantined(worker_id):
+            return None
+        self.scheduler.withdraw(key)
+        self.scheduler.push_front(key)
+        return Verdict.STALE
+
+    def _quarantine(self, worker_id: str) -> None:
+        """Take back everything a worker just quarantined holds (lock held)."""
+        w = self.scheduler.workers.get(worker_id)
+        for key in sorted(w.leases) if w is not None else []:
+            self.scheduler.withdraw(key)
+            self.scheduler.push_front(key)
+        log.warning("worker %s quarantined: its audited results disagree with other workers'", worker_id)
 
     def _settle_task(self, key: int, worker_id: str, result: TrialResult) -> Verdict:
         """A judge's or an audit's result (lock held)."""
         kind, tid = split_key(key)
         if result.seed != int(self.study.storage.columns()["seed"][tid]):
             return Verdict.INVALID
+        refused = self._refuse_quarantined(key, worker_id)
+        if refused is not None:
+            return refused
         self.scheduler.release(key)
         self.tasks.pending.discard(key)
         result = self._finite_or_failed(result)
@@ -219,8 +241,14 @@ class CoordinatorCore:
                 log.warning("the judge no longer trusts the screen (%s): raising the screen's fidelity", drift)
             self.drift = drift
         else:
-            audited, agrees = self.tasks.settle_audit(tid, result, worker_id)
-            self.peers.audited(audited, agrees)
+            settle = self.tasks.settle_audit if kind == "audit" else self.tasks.settle_referee
+            for wid, agrees in (settle(tid, result, worker_id) if kind == "audit" else settle(tid, result)):
+                was = self.peers.is_quarantined(wid)
+                self.peers.audited(wid, agrees)
+                if self.peers.is_quarantined(wid) and not was:
+                    self._quarantine(wid)
+            if kind == "audit" and task_key(REFEREE, tid) in self.tasks.pending:
+                self.scheduler.push_front(task_key(REFEREE, tid))
         self._judge_best()
         return Verdict.STORED
 
@@ -257,8 +285,7 @@ class CoordinatorCore:
 
     def _eligible(self, key: int, worker_id: str) -> bool:
         """May `worker_id` run `key`: it runs that engine, and an audit goes to another worker."""
-        kind, tid = split_key(key)
-        if kind == "audit" and self.study.storage.trial(tid).worker_id == worker_id:
+        if worker_id in self.tasks.excluded(key) or self.peers.is_quarantined(worker_id):
             return False
         return self.peers.runs(worker_id, self._fidelity(key).engine or self.tasks.run_engine)
 
@@ -278,6 +305,9 @@ class CoordinatorCore:
     def _judge_best(self) -> None:
         """Issue the judge of the current best unless it is judged or being judged; drop queued judges of
         bests since overtaken (lock held)."""
+        audit = self.tasks.best_audit_due()
+        if audit is not None:
+            self.scheduler.push_front(audit)
         key, stale = self.tasks.judge_due(self.study.trial_scheduler.top)
         if key is None:
             return

@@ -60,9 +60,15 @@ class PeerBook:
     def rebuild(self, storage: BaseStorage) -> None:
         """Audit figures (and so quarantines) from the stored rows."""
         cols = storage.columns()
-        for state, agrees in ((AuditState.AGREES, True), (AuditState.DISAGREES, False)):
-            for w in cols["worker_id"][cols["audit"] == state.stored].tolist():
-                self.audited(w.decode("utf-8", "replace"), agrees)
+        # (state, did the result's worker agree, did the auditor agree); a disputed one blames nobody yet
+        outcomes = ((AuditState.AGREES, True, True), (AuditState.DISAGREES, False, True),
+                    (AuditState.OVERRULED, True, False))
+        for state, worker_ok, auditor_ok in outcomes:
+            rows = cols["audit"] == state.stored
+            for w in cols["worker_id"][rows].tolist():
+                self.audited(w.decode("utf-8", "replace"), worker_ok)
+            for w in cols["audit_worker_id"][rows].tolist():
+                self.audited(w.decode("utf-8", "replace"), auditor_ok)
 
     def describe(self, worker_id: str) -> dict[str, Any]:
         p = self.peers.get(worker_id) or Peer()

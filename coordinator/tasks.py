@@ -26,20 +26,21 @@ from spinefarm.protocol.settings import RunSettings, TaskFidelity
 from spinefarm.storage.base import BaseStorage
 
 log = logging.getLogger("spinefarm.coordinator")
-JUDGE, AUDIT = 1, 2
-_KINDS = {JUDGE: "judge", AUDIT: "audit"}
+JUDGE, AUDIT, REFEREE = 1, 2, 3
+_KINDS = {JUDGE: "judge", AUDIT: "audit", REFEREE: "referee"}
+_KEY_STRIDE = 4
 _DRIFT_WINDOW = 3
 
 
 def task_key(kind: int, trial_id: int) -> int:
-    return -(3 * trial_id + kind)
+    return -(_KEY_STRIDE * trial_id + kind)
 
 
 def split_key(key: int) -> tuple[str, int]:
-    """("trial", id) for a row, ("judge" | "audit", id of the row it checks) for a task."""
+    """("trial", id) for a row, ("judge" | "audit" | "referee", id of the row it checks) for a task."""
     if key >= 0:
         return "trial", key
-    return _KINDS[-key % 3], -key // 3
+    return _KINDS[-key % _KEY_STRIDE], -key // _KEY_STRIDE
 
 
 def relative_change(a: float, b: float) -> float:
@@ -107,10 +108,19 @@ class TaskBook:
         kind, tid = split_key(key)
         if kind == "judge":
             return TaskFidelity.of("judge", self.settings.judge.rung, self.settings.judge.perturb)
-        row = self.storage.trial(tid)  # an audit re-runs the row exactly as it ran
+        row = self.storage.trial(tid)  # an audit (and its referee) re-runs the row exactly as it ran
         dt = row.dt_s if math.isfinite(row.dt_s) else None
         settle = row.settle_s if math.isfinite(row.settle_s) else None
         return TaskFidelity("audit", row.engine or None, dt, settle)
+
+    def excluded(self, key: int) -> set[str]:
+        """Workers that may not run task `key`: an audit goes to another worker than the result's, a
+        referee to a third one."""
+        kind, tid = split_key(key)
+        if kind not in ("audit", "referee"):
+            return set()
+        row = self.storage.trial(tid)
+        return {row.worker_id, row.audit_worker_id} if kind == "referee" else {row.worker_id}
 
     # --- issuing ------------------------------------------------------------------------------------
     def restart(self) -> list[int]:
@@ -118,6 +128,7 @@ class TaskBook:
         cols = self.storage.columns()
         keys = [task_key(JUDGE, int(t)) for t in np.flatnonzero(cols["verification"] == Verification.PENDING.stored)]
         keys += [task_key(AUDIT, int(t)) for t in np.flatnonzero(cols["audit"] == AuditState.PENDING.stored)]
+        keys += [task_key(REFEREE, int(t)) for t in np.flatnonzero(cols["audit"] == AuditState.DISPUTED.stored)]
         self.pending.update(keys)
         return keys
 
@@ -145,6 +156,7 @@ class TaskBook:
             self.storage.set_verification(tid, Verification.NOT_CHECKED)
         elif kind == "audit":
             self.storage.set_audit(tid, AuditState.NOT_AUDITED)
+        # a referee nobody can run leaves the result disputed (it does not count as best)
 
     def audit_due(self, tid: int) -> int | None:
         """The audit task of a just stored result, if it is to be audited: a fraction of them and
@@ -161,6 +173,19 @@ class TaskBook:
         self.pending.add(key)
         return key
 
+    def best_audit_due(self) -> int | None:
+        """The audit of the current best if it has none: a result that becomes best later (the one before
+        it fell) is audited too."""
+        best = self.storage.best_ids(1)
+        if not (self.settings.audit.enabled and best):
+            return None
+        if self.storage.columns()["audit"][best[0]] != AuditState.NOT_AUDITED.stored:
+            return None
+        key = task_key(AUDIT, best[0])
+        self.storage.set_audit(best[0], AuditState.PENDING)
+        self.pending.add(key)
+        return key
+
     # --- results --------------------------------------------------------------------------------------
     def settle_judge(self, tid: int, r: TrialResult) -> None:
         row = self.storage.trial(tid)
@@ -172,14 +197,32 @@ class TaskBook:
         if verdict == Verification.NOT_REPRODUCED:
             log.warning("best trial %d not reproduced: %s", tid, reason)
 
-    def settle_audit(self, tid: int, r: TrialResult, worker_id: str) -> tuple[str, bool]:
-        """Store the audit; (the audited result's worker, whether the two agree)."""
+    def settle_audit(self, tid: int, r: TrialResult, worker_id: str) -> list[tuple[str, bool]]:
+        """Store an audit; (worker, agreed) for each worker it judged. A disagreement is refereed by a
+        third worker before anybody is blamed (the referee task is returned by `referee_due`)."""
         row = self.storage.trial(tid)
-        ok = row.status == "complete"
-        agrees = (r.ok == ok) and (not ok or relative_change(r.distance_m, row.distance_m)
-                                   <= self.settings.audit.tolerance)
-        self.storage.set_audit(tid, AuditState.AGREES if agrees else AuditState.DISAGREES, r.distance_m, worker_id)
-        if not agrees:
-            log.warning("audit of trial %d disagrees: worker %s measured %.6g m, worker %s %.6g m", tid,
-                        row.worker_id, row.distance_m, worker_id, r.distance_m)
-        return row.worker_id, agrees
+        if _same(r, row.status == "complete", row.distance_m, self.settings.audit.tolerance):
+            self.storage.set_audit(tid, AuditState.AGREES, r.distance_m, worker_id)
+            return [(row.worker_id, True), (worker_id, True)]
+        self.storage.set_audit(tid, AuditState.DISPUTED, r.distance_m, worker_id)
+        self.pending.add(task_key(REFEREE, tid))
+        log.warning("audit of trial %d disputed: worker %s measured %.6g m, worker %s %.6g m; a third worker "
+                    "referees", tid, row.worker_id, row.distance_m, worker_id, r.distance_m)
+        return []
+
+    def settle_referee(self, tid: int, r: TrialResult) -> list[tuple[str, bool]]:
+        """The third worker's run decides a disputed audit: whoever it contradicts is wrong (the result's
+        worker when it matches neither)."""
+        row = self.storage.trial(tid)
+        tol = self.settings.audit.tolerance
+        if _same(r, row.status == "complete", row.distance_m, tol):
+            self.storage.set_audit(tid, AuditState.OVERRULED, row.audit_distance_m, row.audit_worker_id)
+            return [(row.audit_worker_id, False), (row.worker_id, True)]
+        self.storage.set_audit(tid, AuditState.DISAGREES, row.audit_distance_m, row.audit_worker_id)
+        log.warning("result of trial %d from worker %s not reproduced by two other workers", tid, row.worker_id)
+        return [(row.worker_id, False)]
+
+
+def _same(r: TrialResult, ok: bool, distance_m: float, tolerance: float) -> bool:
+    """`r` reproduces a stored outcome (both failed, or both complete within the relative tolerance)."""
+    return r.ok == ok and (not ok or relative_change(r.distance_m, distance_m) <= tolerance)

@@ -56,8 +56,10 @@ class AuditState(StrEnum):
 
     NOT_AUDITED = ""
     PENDING = "pending"
-    AGREES = "agrees"
-    DISAGREES = "disagrees"
+    AGREES = "agrees"            # the auditor measured the same
+    DISPUTED = "disputed"        # they differ: a third worker referees
+    DISAGREES = "disagrees"      # the referee sided with the auditor: the result (and its worker) is wrong
+    OVERRULED = "overruled"      # the referee sided with the result: the auditor is wrong
 
     @property
     def stored(self) -> bytes:

@@ -161,7 +161,8 @@ class BaseStorage:
         # a result a finer re-simulation did not reproduce never counts as best
         valid = (cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(obj) & \
             (cols["verification"] != Verification.NOT_REPRODUCED.stored) & \
-            (cols["audit"] != AuditState.DISAGREES.stored)  # nor one another worker did not reproduce
+            ~np.isin(cols["audit"], [AuditState.DISAGREES.stored, AuditState.DISPUTED.stored])  # nor one other
+        # workers did not reproduce (or are still refereeing)
         ids = np.flatnonzero(valid)
         if k <= 0 or ids.size == 0:
             return []
