@@ -9,7 +9,6 @@ retry, never exit. The only worker module that imports zenoh.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 import os
@@ -41,7 +40,7 @@ from spinefarm.protocol.messages import (
 )
 from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.run import RunConfig, WorkerProblem
-from spinefarm.worker.tasks import available_engines, environment, perturbed, task_config, with_fault
+from spinefarm.worker.tasks import available_engines, environment, physics_evaluator, with_fault
 
 log = logging.getLogger("spinefarm.worker")
 Evaluator = Callable[[TrialAssignment], TrialResult]
@@ -111,8 +110,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
         delay_s = float(config.trial_config.get("duration_s") or 0.0)
         return lambda a: with_fault(sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s))
     from spinefarm.robot.morphology.model import Morphology
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import TrialConfig, run_trial
+    from spinefarm.worker.trial import TrialConfig
 
     morphology = Morphology.from_dict(config.morphology_spec)
     trial_config = TrialConfig.from_dict(config.trial_config)
@@ -123,27 +121,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
         if getattr(config, name) != value:
             raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
                                    "version?)", received=value, expected=getattr(config, name))
-    from spinefarm.worker.engines.base import engine_class
-
-    # a missing engine package or an option the engine does not have fails here, not in every trial (a
-    # worker without the run's engine says so in its requests and is only given tasks in its engines)
-    if trial_config.engine in available_engines():
-        engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
-    setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
-
-    def evaluate(a: TrialAssignment) -> TrialResult:
-        # a rung, the judge or an audit asks for its own fidelity; everything else is the run's
-        cfg = task_config(trial_config, a)
-        params = np.asarray(a.params_unit, dtype=float)
-        r = run_trial(morphology, params, cfg, a.seed, controller=config.controller, setup=setup)
-        if a.fidelity is not None and a.fidelity.perturb:
-            friction = cfg.ground_friction if cfg.ground_friction is not None else morphology.ground_friction
-            p = run_trial(morphology, params, perturbed(cfg, friction), a.seed, controller=config.controller)
-            r = dataclasses.replace(r, extras={**r.extras, "perturbed_distance_m": p.distance_m if p.ok else
-                                               float("nan")})
-        return with_fault(r)
-
-    return evaluate
+    return physics_evaluator(morphology, trial_config, config.controller)
 
 
 def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:

@@ -13,6 +13,7 @@ import dataclasses
 import importlib.util
 import os
 import platform
+from collections.abc import Callable
 from typing import Any
 
 from spinefarm.protocol.errors import ConfigError
@@ -103,3 +104,32 @@ def with_fault(result: TrialResult) -> TrialResult:
     k = float(scale)
     return dataclasses.replace(result, distance_m=result.distance_m * k, ntrt_distance_cm=result.ntrt_distance_cm * k,
                                speed_cm_s=result.speed_cm_s * k)
+
+
+def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None) -> Callable[[TrialAssignment],
+                                                                                              TrialResult]:
+    """A function of one assignment: the trial at its fidelity (a rung, the judge, an audit), with the
+    judge's perturbed run when asked. A missing engine package or an option the engine does not have fails
+    here, not in every trial (a worker without the run's engine says so in its requests and is only given
+    tasks in its engines)."""
+    import numpy as np
+    from spinefarm.worker.engines.base import engine_class
+    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial import run_trial
+
+    if trial_config.engine in available_engines():
+        engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
+    setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
+
+    def evaluate(a: TrialAssignment) -> TrialResult:
+        cfg = task_config(trial_config, a)
+        params = np.asarray(a.params_unit, dtype=float)
+        r = run_trial(morphology, params, cfg, a.seed, controller=controller, setup=setup)
+        if a.fidelity is not None and a.fidelity.perturb:
+            friction = cfg.ground_friction if cfg.ground_friction is not None else morphology.ground_friction
+            p = run_trial(morphology, params, perturbed(cfg, friction), a.seed, controller=controller)
+            r = dataclasses.replace(r, extras={**r.extras, "perturbed_distance_m": p.distance_m if p.ok else
+                                               float("nan")})
+        return with_fault(r)
+
+    return evaluate
