@@ -20,6 +20,9 @@ from spinefarm.protocol.messages import (
 from spinefarm.storage import pareto
 from spinefarm.storage.schema import RunMeta, TrialRecord
 
+# A result whose audit found it wrong, or is still refereeing it, never counts as best.
+DISQUALIFYING_AUDITS = (AuditState.DISAGREES.stored, AuditState.DISPUTED.stored)
+
 
 class BaseStorage:
     """One run's metadata and trial table.
@@ -161,8 +164,7 @@ class BaseStorage:
         # a result a finer re-simulation did not reproduce never counts as best
         valid = (cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(obj) & \
             (cols["verification"] != Verification.NOT_REPRODUCED.stored) & \
-            ~np.isin(cols["audit"], [AuditState.DISAGREES.stored, AuditState.DISPUTED.stored])  # nor one other
-        # workers did not reproduce (or are still refereeing)
+            ~np.isin(cols["audit"], DISQUALIFYING_AUDITS)  # nor one other workers did not reproduce (or dispute)
         ids = np.flatnonzero(valid)
         if k <= 0 or ids.size == 0:
             return []
