@@ -115,3 +115,32 @@ def test_drifting_judged_ratios_raise_the_screens_fidelity_and_a_resumed_run_kee
         assert (f.engine, f.dt_s) == ("bullet", pytest.approx(1e-3)) and not math.isnan(f.dt_s)
     finally:
         storage.close()
+
+
+def _r(distance: float, ok: bool = True) -> TrialResult:
+    status = TrialStatus.COMPLETE if ok else TrialStatus.FAILED
+    return TrialResult(status, "" if ok else "diverged: x", distance, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 0)
+
+
+def test_a_verdict_says_holds_only_within_tolerance_at_the_same_engine():
+    from spinefarm.coordinator.tasks import judge_verdict
+
+    assert judge_verdict(1.0, False, "bullet", _r(1.04), 0.05)[0] == "holds"
+    verdict, reason = judge_verdict(1.0, False, "bullet", _r(0.5), 0.05)
+    assert verdict == "not_reproduced" and "finer step run moved 0.5 m against 1 m" in reason
+    assert judge_verdict(0.0229, True, "bullet", _r(0.0411), 0.05)[0] == "judged"  # never "holds" across engines
+    assert judge_verdict(1.0, True, "bullet", _r(1.0, ok=False), 0.05)[0] == "not_reproduced"
+
+
+def test_a_cross_engine_judgement_is_reported_as_judged_in_bullet_with_both_distances_and_their_ratio():
+    from spinefarm.cli.report import verdict_text
+    from spinefarm.storage.schema import TrialRecord
+
+    fields = dict.fromkeys(("objective", "distance_m", "ntrt_distance_cm", "speed_cm_s", "work_j", "cot",
+                            "mass_kg", "sim_time_s", "wall_time_s", "finished_at_unix_s"), 1.0)
+    rec = TrialRecord(0, (0.5,), (0.5,), "cmaes", -1, 0, "complete", "", worker_id="w", **{
+        **fields, "distance_m": 0.0229, "sim_time_s": 10.0}, verification="judged", verify_distance_m=0.0411,
+        judge_ratio=0.0229 / 0.0411)
+    text = verdict_text(rec, "bullet")
+    assert text.startswith("judged in bullet: 0.0411 m") and "screen 0.0229 m" in text and "ratio 0.557" in text
+    assert "holds" not in text
