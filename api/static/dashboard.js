@@ -313,7 +313,7 @@ async function showTrial(runId, trialId, gen) {
         <tr><td class="l">verdict</td><td class="l verdict ${esc(v.verdict)}" id="verdict-label">${esc(v.label || v.verdict)}</td></tr>
         <tr><td class="l">distance at the search's step (m)</td><td>${fmt(t.scores.distance_m, 6)}</td></tr>
         <tr><td class="l">distance re-simulated in ${esc(v.judge || "a finer step")} (m)</td><td>${fmt(v.fine_step_distance_m, 6)}</td></tr>
-        ${v.screen_to_judge_ratio != null ? `<tr><td class="l">screen / judge distance ratio</td><td>${fmt(v.screen_to_judge_ratio, 4)}</td></tr>` : ""}
+        ${v.verdict === "judged" && v.screen_to_judge_ratio != null ? `<tr><td class="l">screen / judge ratio</td><td>${fmt(v.screen_to_judge_ratio, 4)}</td></tr>` : ""}
         ${t.audit && t.audit.state !== "not_audited" ? `<tr><td class="l">audit by ${esc(t.audit.worker_id || "another worker")}</td>
           <td class="l">${esc(t.audit.state)} (${fmt(t.audit.distance_m, 6)} m)</td></tr>` : ""}
         ${v.reason ? `<tr><td class="l">reason</td><td class="l">${esc(v.reason)}</td></tr>` : ""}</tbody></table>
