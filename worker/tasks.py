@@ -29,7 +29,7 @@ FRICTION_CHANGE = 0.1
 
 def available_engines(only: tuple[str, ...] | None = None) -> tuple[str, ...]:
     """Engines this worker can run: their package is installed (and, given `only`, they are in it)."""
-    from spinefarm.worker.engines.base import engine_names
+    from spinefarm.robot.engines import engine_names
 
     names = [n for n in engine_names() if only is None or n in only]
     return tuple(n for n in names if importlib.util.find_spec(_ENGINE_PACKAGES.get(n, n)) is not None)
@@ -39,7 +39,7 @@ def parse_engines(text: str | None) -> tuple[str, ...] | None:
     """`--engines bullet,mujoco`: the engines a worker offers (None: every installed one)."""
     if text is None:
         return None
-    from spinefarm.worker.engines.base import engine_names
+    from spinefarm.robot.engines import engine_names
 
     names = tuple(x.strip() for x in text.split(",") if x.strip())
     unknown = [n for n in names if n not in engine_names()]
