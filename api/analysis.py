@@ -7,6 +7,7 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
+from spinefarm.api.views import rung_lengths_s
 from spinefarm.storage.base import BaseStorage
 
 # Columns the dashboard plots and tabulates (parameters come separately, by name).
@@ -89,14 +90,14 @@ def analysis_view(storage: BaseStorage) -> dict[str, Any]:
         # |rho| a parameter unrelated to the objective reaches by chance (about 2 standard errors)
         "importance_noise": 2.0 / math.sqrt(n_used - 1) if n_used > 1 else None,
         "failed_by_reason": dict(reasons.most_common()),
-        "rungs": rungs_view(cols, (meta.extra or {}).get("fidelity")),
+        "rungs": rungs_view(cols, rung_lengths_s(meta.settings)),
     }
 
 
-def rungs_view(cols: Any, fidelity: dict[str, Any] | None) -> list[dict[str, Any]] | None:
+def rungs_view(cols: Any, durations_s: list[float] | None) -> list[dict[str, Any]] | None:
     """Per rung of a multi-fidelity run: its trial length, trials, complete, promoted to the next rung,
     best and median distance, and for verified trials the median judge-to-screen distance ratio."""
-    if not fidelity or not fidelity.get("durations_s"):
+    if not durations_s:
         return None
     rung = np.asarray(cols["rung"])
     parent = np.asarray(cols["parent"])
@@ -104,7 +105,7 @@ def rungs_view(cols: Any, fidelity: dict[str, Any] | None) -> list[dict[str, Any
     dist = np.asarray(cols["distance_m"], dtype=float)
     judged = np.asarray(cols["verify_distance_m"], dtype=float)
     out = []
-    for r, duration in enumerate(fidelity["durations_s"]):
+    for r, duration in enumerate(durations_s):
         here = rung == r
         done = here & (status == b"complete")
         promoted = int(np.isin(parent[rung == r + 1], np.flatnonzero(here)).sum())

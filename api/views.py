@@ -20,10 +20,17 @@ def _num(x: float) -> float | None:
 
 def judge_of(meta: Any) -> str:
     """How the run re-simulates its bests: in another engine at its step, or at a finer step."""
-    policy = (meta.extra or {}).get("verify") or {}
-    if policy.get("engine"):
-        return f"{policy['engine']} at {1e3 * float(policy.get('dt_s', 2.5e-4)):g} ms"
-    return f"the search's engine at a {int(policy.get('refine', 4))}x finer step"
+    rung = meta.settings.judge.rung
+    if rung.engine:
+        return f"{rung.engine} at {1e3 * (rung.dt_s or 2.5e-4):g} ms"
+    return "the search's engine at a finer step" + (f" ({1e3 * rung.dt_s:g} ms)" if rung.dt_s else "")
+
+
+def verdict_label(rec: TrialRecord, meta: Any) -> str:
+    """"holds" only within tolerance at the same engine; a cross-engine judgement: "judged in ENGINE"."""
+    if rec.verification == "judged":
+        return f"judged in {meta.settings.judge.rung.engine or 'the judge engine'}"
+    return rec.verification or "not_checked"
 
 
 def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
@@ -38,13 +45,24 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
         "params_unit": dict(zip(names, rec.params_unit, strict=True)),
         "worker_id": rec.worker_id or None,
         "finished_at_unix_s": _num(rec.finished_at_unix_s),
-        "verification": {"verdict": rec.verification or "not_checked",
+        "verification": {"verdict": rec.verification or "not_checked", "label": verdict_label(rec, meta),
                          "fine_step_distance_m": _num(rec.verify_distance_m),
+                         "screen_distance_m": _num(rec.distance_m), "judge_distance_m": _num(rec.verify_distance_m),
+                         "screen_to_judge_ratio": _num(rec.judge_ratio),
                          "reason": rec.verify_reason or None, "judge": judge_of(meta)},
+        "audit": {"state": rec.audit or "not_audited", "distance_m": _num(rec.audit_distance_m),
+                  "worker_id": rec.audit_worker_id or None},
         "pareto_front": bool(rec.pareto_front),
         "engine": rec.engine or None, "dt_s": _num(rec.dt_s), "settle_s": _num(rec.settle_s),
         "rung": rec.rung, "duration_s": _num(rec.duration_s),
     }
+
+
+def rung_lengths_s(settings: Any) -> list[float] | None:
+    """A multi-fidelity run's trial lengths, short to full (None for a run of one length)."""
+    if settings.scheduler != "halving" or len(settings.ladder) < 2:
+        return None
+    return [float(d) for d in settings.durations_s()]
 
 
 def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
@@ -56,8 +74,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     live = read_status(path) or {}
     age = time.time() - live.get("updated_at_unix_s", 0.0)
     finished = counts["complete"] + counts["failed"]
-    fidelity = (meta.extra or {}).get("fidelity")
-    planned = planned_evaluations(meta.trials_budget, fidelity)
+    planned = planned_evaluations(meta.trials_budget, meta.settings)
     n_trials = storage.n_trials()
     state = derive_state(path, n_trials, finished, planned, live, age)
     cols = storage.columns() if n_trials else {}
@@ -78,13 +95,17 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         **live_figures(state, live, age, finished_at, max(0, planned - finished)),
         "best": trial_view(storage, best[0]) if best else None,
         "workers": live.get("workers", []) if state in ("running", "stalled") else [],
+        "audit": {**storage.audit_counts(), "fraction": meta.settings.audit.fraction,
+                  "tolerance": meta.settings.audit.tolerance,
+                  "environments": (live.get("audit") or {}).get("environments", [])},
+        "fidelity_raised": live.get("fidelity_raised"),
         "status_age_s": age if live else None,
         "started_at_unix_s": _num(meta.created_at_unix_s),
         "controller": meta.controller or (tc.get("controller") if tc else None),
         "engine": (tc.get("engine") or "bullet") if meta.morphology_spec else None,
         "step_s": float(np.median(steps)) if steps.size else None,
         "sampler": (meta.sampler or {}).get("name"),
-        "rungs_s": list(fidelity["durations_s"]) if fidelity and fidelity.get("durations_s") else None,
+        "rungs_s": rung_lengths_s(meta.settings),
         "reopen_command": f"spinefarm api {shown}",
         "resume_command": f"spinefarm search --resume {shown}" if state in ("stopped", "failed", "empty") else None,
     }

@@ -1,4 +1,5 @@
-"""The report a search prints when it ends: what it found, whether it holds, where it is, what to run next.
+"""The search's progress line and the report it prints when it ends: what it found, whether it holds, where
+it is, what to run next.
 
 Parameters are left to `--verbose` and to the gait file (`spinefarm export RUN.h5 --gait best.json`): a
 controller has up to a few hundred of them, which no one reads on a terminal.
@@ -14,22 +15,36 @@ from pathlib import Path
 from typing import Any
 
 
+def progress(core: Any) -> tuple[int, int, str, str]:
+    """(trials done, budget, what follows a progress bar, the whole line for a log)."""
+    with core.lock:  # the transport threads write the table concurrently
+        st = core.status()
+        best = core.study.storage.best(1)
+    done = st["trials_complete"] + st["trials_failed"]
+    budget = st.get("trials_planned", st["trials_budget"])
+    width = 24
+    fill = int(width * done / max(budget, 1))
+    best_s = f"{best[0].distance_m:.3f} m" if best else "-"
+    eta = "-" if st["eta_s"] is None else f"{st['eta_s']:.0f}s"
+    text = f"{st['trials_failed']} failed, {st['rate_trials_s']:.1f}/s, best {best_s}"
+    return done, budget, text, (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{budget} trials ({st['trials_failed']} "
+                                f"failed)  {st['rate_trials_s']:.1f}/s  best {best_s}  ETA {eta}")
+
+
+def verdict_text(b: Any, judge_engine: str | None) -> str:
+    """What the judge found, in words: "holds" only within tolerance at the same engine; a cross-engine
+    judgement says "judged in ENGINE" with both distances and their ratio."""
+    if b.verification == "judged":
+        speed = 100 * b.verify_distance_m / b.sim_time_s if b.sim_time_s else math.nan
+        return (f"judged in {judge_engine or 'the judge engine'}: {b.verify_distance_m:.4g} m, {speed:.4g} cm/s "
+                f"(the distance that counts; screen {b.distance_m:.4g} m, screen/judge ratio {b.judge_ratio:.3g})")
+    if b.verification == "holds":
+        return f"holds at a finer step ({b.verify_distance_m:.4g} m)"
+    return {"pending": "verification pending", "": "not verified"}.get(b.verification, b.verification)
+
+
 def _g(x: float, digits: int = 4) -> str:
     return f"{x:.{digits}g}" if math.isfinite(x) else "–"
-
-
-def verdict_line(b: Any, judge: str | None) -> str:
-    """How the best's re-simulation came out, in words."""
-    if b.verification == "holds":
-        speed = 100 * b.verify_distance_m / b.sim_time_s if b.sim_time_s > 0 else math.nan
-        if judge:
-            return f"verified in {judge}: {_g(b.verify_distance_m)} m, {_g(speed)} cm/s (the distance that counts)"
-        return f"holds when re-simulated at a finer step: {_g(b.verify_distance_m)} m, {_g(speed)} cm/s"
-    if b.verification == "not_reproduced":
-        return f"NOT reproduced when re-simulated ({b.verify_reason or 'it moved differently'})"
-    if b.verification == "pending":
-        return "re-simulation pending (stopped before it finished)"
-    return "not re-simulated"
 
 
 def next_commands(path: Path, physical: bool, resumable: bool, best_id: int | None) -> list[tuple[str, str]]:
@@ -45,14 +60,31 @@ def next_commands(path: Path, physical: bool, resumable: bool, best_id: int | No
     return out
 
 
-def final_report(storage: Any, path: Path, *, judge: str | None, done: bool, verbose: bool = False) -> str:
-    """The whole report as text (ends without a newline)."""
+def describe_best(core: Any, path: Path, verbose: bool = False) -> str:
+    """The final report of a search's coordinator core."""
+    storage = core.study.storage
+    notes = []
+    if core.drift:
+        notes.append(f"the judge raised the screen's fidelity: {core.drift}")
+    audit = core.status()["audit"]
+    if any(v for k, v in audit.items() if k.startswith("audits_")):
+        notes.append("audits: " + ", ".join(f"{k[7:]} {v}" for k, v in audit.items() if k.startswith("audits_")))
+    best = storage.best(1)
+    verdict = verdict_text(best[0], storage.run_meta().settings.judge.rung.engine) if best else ""
+    return final_report(storage, path, verdict=verdict, done=core.done, verbose=verbose, notes=tuple(notes))
+
+
+def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose: bool = False,
+                 notes: tuple[str, ...] = ()) -> str:
+    """The whole report as text (ends without a newline); verdict: the judge's word on the best, notes: lines
+    on how the search went (drift, audits)."""
     meta = storage.run_meta()
     counts = storage.counts()
     finished = counts["complete"] + counts["failed"]
     physical = bool(meta.morphology_spec)
     lines = [f"{'search done' if done else 'search stopped'}: {finished} trials of {meta.morphology} "
              f"({counts['failed']} failed), run {meta.run_id}"]
+    lines += list(notes)
     best = storage.best(1)
     if not best:
         lines.append("no complete trial yet")
@@ -63,7 +95,7 @@ def final_report(storage: Any, path: Path, *, judge: str | None, done: bool, ver
                   "  " + ("" if meta.objective == "distance" else f"{meta.objective} {_g(b.objective)} · ")
                   + f"distance {_g(b.distance_m)} m · speed {_g(b.speed_cm_s)} cm/s · COT {_g(b.cot)} · "
                   f"work {_g(b.work_j)} J",
-                  f"  verdict: {verdict_line(b, judge)}"]
+                  f"  verdict: {verdict}"]
         if verbose:
             lines.append(f"  parameters ({meta.n_params}):")
             width = max(len(n) for n in meta.param_names) if meta.param_names else 0
