@@ -19,6 +19,7 @@ from typing import Any
 from spinefarm.cli import checks
 from spinefarm.cli.local_workers import LocalWorkers, worker_command
 from spinefarm.cli.progress import ProgressLine
+from spinefarm.cli.robust_args import add_robust_args, robust_settings
 from spinefarm.protocol.errors import ConfigError
 
 
@@ -110,6 +111,7 @@ def _search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
                    help="relative distance change a re-simulated best may show (default 0.05)")
     p.add_argument("--verify-perturb", action="store_true",
                    help="also re-simulate with a jittered start pose and 10 %% more friction")
+    add_robust_args(p)
     g = p.add_argument_group("multi-fidelity screening")
     g.add_argument("--rungs", metavar="S,S,...", default=None,
                    help="screen every parameter set with a short trial and promote the best 1/eta to each longer "
@@ -175,8 +177,9 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
 
     if args.resume:
-        if args.morphology or args.out:
-            raise ConfigError("--resume continues a stored run", received="a morphology or --out too",
+        if args.morphology or args.out or robust_settings(args):
+            raise ConfigError("--resume continues a stored run (robust settings included)",
+                              received="a morphology, --out or --episodes/--randomize/--robust too",
                               expected="only --resume RUN.h5")
         core, storage = resume_run(args.resume, trials_budget=args.trials)
         return core, storage, Path(args.resume)
@@ -196,7 +199,8 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
                               expected=f"--rungs ending at the full length ({rungs.durations_s[-1]:g} s) alone")
         args.duration = rungs.durations_s[-1]
     config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
-                              controller=args.controller, duration_s=args.duration, trial_overrides=overrides)
+                              controller=args.controller, duration_s=args.duration, trial_overrides=overrides,
+                              robust=robust_settings(args))
     _check_step(config)
     lease = args.lease
     if lease is None:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from spinefarm.coordinator.core import CoordinatorCore
 from spinefarm.coordinator.fidelity import Rungs
-from spinefarm.coordinator.objectives import objective_fn
+from spinefarm.coordinator.objectives import objective_fn, robust_objective
 from spinefarm.coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sampler_class, sampler_from_dict
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
@@ -71,7 +71,10 @@ def build_core(storage: BaseStorage, clock=time.monotonic) -> CoordinatorCore:
     config = RunConfig.from_dict(meta.run)
     space = config.space()
     sampler = sampler_from_dict(meta.sampler, len(space))
-    study = Study(storage, sampler, space, meta.trials_budget, objective_fn(meta.objective), meta.seed,
+    objective = objective_fn(meta.objective)
+    if config.robust:  # K episodes per parameter set, scored by a statistic over them
+        objective = robust_objective(objective, config.robust["statistic"])
+    study = Study(storage, sampler, space, meta.trials_budget, objective, meta.seed,
                   Rungs.from_dict(meta.extra.get("fidelity")))
     scheduler = Scheduler(clock, float(meta.extra.get("lease_s", 60.0)))
     policy = VerifyPolicy.from_dict(meta.extra.get("verify"))

@@ -127,12 +127,19 @@ def build_evaluator(config: RunConfig) -> Evaluator:
     # a missing engine package or an option the engine does not have fails here, not in every trial
     engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
     setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
+    from spinefarm.protocol.robust import RobustSpec
+
+    robust = RobustSpec.from_dict(config.robust)
 
     def evaluate(a: TrialAssignment) -> TrialResult:
         # a multi-fidelity rung asks for its own duration; everything else is the run's
         cfg = trial_config if a.duration_s is None else dataclasses.replace(trial_config, duration_s=a.duration_s)
-        return run_trial(morphology, np.asarray(a.params_unit, dtype=float), cfg, a.seed,
-                         controller=config.controller, setup=setup)
+        params = np.asarray(a.params_unit, dtype=float)
+        if robust.active:  # K randomised episodes of this parameter set (worker.robust)
+            from spinefarm.worker.robust import run_episodes
+
+            return run_episodes(morphology, params, cfg, a.seed, robust, controller=config.controller, setup=setup)
+        return run_trial(morphology, params, cfg, a.seed, controller=config.controller, setup=setup)
 
     return evaluate
 
