@@ -225,8 +225,11 @@ class CoordinatorCore:
         for old in self.verifier.cancel_queued():
             storage.set_verification(old, Verification.NOT_CHECKED)
         storage.set_verification(tid, Verification.PENDING)
-        self.verifier.submit(tid, cols["params_unit"][tid].tolist(), int(cols["seed"][tid]),
-                             float(cols["distance_m"][tid]), _duration(cols["duration_s"][tid]))
+        distance = float(cols["distance_m"][tid])
+        if self.run_config.robust:  # a robust trial's verification re-runs its episode 0
+            distance = float(storage.episodes(tid)["distance_m"][0])
+        self.verifier.submit(tid, cols["params_unit"][tid].tolist(), int(cols["seed"][tid]), distance,
+                             _duration(cols["duration_s"][tid]))
 
     def collect_verifications(self, wait_s: float = 0.0) -> int:
         """Store finished verdicts; a best that did not hold hands the check to the next best."""

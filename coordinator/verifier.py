@@ -60,9 +60,10 @@ class VerifyPolicy:
 
 
 def _verify_job(morphology: Any, controller: str | None, trial_config: dict[str, Any], params_unit: list[float],
-                seed: int, distance_m: float, policy: dict[str, Any], duration_s: float | None = None
-                ) -> dict[str, Any]:
-    """Runs in the verifier process."""
+                seed: int, distance_m: float, policy: dict[str, Any], duration_s: float | None = None,
+                robust: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Runs in the verifier process. robust: a robust run's settings; its episode 0 (world and distance)
+    is what is re-simulated."""
     import dataclasses
 
     import numpy as np
@@ -72,6 +73,10 @@ def _verify_job(morphology: Any, controller: str | None, trial_config: dict[str,
     cfg = TrialConfig.from_dict(trial_config)
     if duration_s is not None:
         cfg = dataclasses.replace(cfg, duration_s=duration_s)
+    if robust:
+        from spinefarm.worker.robust import first_episode
+
+        morphology, cfg, seed = first_episode(morphology, cfg, seed, robust)
     settings = VerifySettings(refine=policy["refine"], tolerance=policy["tolerance"], perturb=policy["perturb"])
     if policy.get("engine") and policy["engine"] != cfg.engine:
         v = verify_in_engine(morphology, np.asarray(params_unit), cfg, seed, distance_m, policy["engine"],
@@ -135,7 +140,7 @@ class Verifier:
         morphology = self.config.morphology_spec or self.config.morphology
         self._futures[trial_id] = self._pool.submit(
             _verify_job, morphology, self.config.controller, self.config.trial_config, params_unit, seed,
-            distance_m, self.policy.to_dict(), duration_s)
+            distance_m, self.policy.to_dict(), duration_s, self.config.robust or None)
 
     def cancel_queued(self) -> list[int]:
         """Cancel checks that have not started yet; their trial ids."""

@@ -76,3 +76,11 @@ def _episode(r: TrialResult, d: EpisodeDraw) -> EpisodeResult:
     return EpisodeResult(d.episode, d.seed, "complete" if r.ok else "failed", r.reason[:160], r.distance_m,
                          r.ntrt_distance_cm, r.speed_cm_s, r.work_j, r.cot, r.sim_time_s, r.wall_time_s,
                          d.friction_scale, d.mass_scale, d.start_jitter_cm, d.rough_seed)
+
+
+def first_episode(morphology: Morphology | Mapping, cfg: TrialConfig, trial_seed: int, robust: Mapping
+                  ) -> tuple[Morphology, TrialConfig, int]:
+    """(morphology, trial config, seed) of a robust trial's episode 0, for re-simulating it elsewhere."""
+    morph = morphology if isinstance(morphology, Morphology) else Morphology.from_dict(dict(morphology))
+    world = episode_world(morph, cfg, draw_episode(RobustSpec.from_dict(dict(robust)), trial_seed, 0))
+    return world.morph, world.config, world.draw.seed
