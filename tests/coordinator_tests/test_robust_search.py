@@ -6,7 +6,8 @@ import subprocess
 import sys
 
 import numpy as np
-import spinefarm
+from fastapi.testclient import TestClient
+from spinefarm.api.app import create_app
 from spinefarm.protocol.robust import RobustSpec
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.storage.hdf5 import read_episodes, read_meta, read_run
@@ -14,6 +15,7 @@ from spinefarm.storage.hdf5_reader import Hdf5Reader
 from spinefarm.worker.robust import run_episodes
 from spinefarm.worker.trial import TrialConfig
 
+import spinefarm
 from tests.coordinator_tests.procs import ROOT
 
 RANDOMIZE = "friction=0.1,mass=0.05,start_jitter_cm=0.5"
@@ -67,3 +69,13 @@ def test_episodes_are_stored_and_resumed_exactly(tmp_path):
     with Hdf5Reader(out) as reader:
         assert reader.episodes(2)["episode"].tolist() == [0, 1]
     assert len(spinefarm.load_run(out)) == 5
+
+    with TestClient(create_app([out])) as client:  # the API gives each trial's episodes and spread
+        body = client.get(f"/runs/{meta.run_id}/trials/4/episodes").json()
+        assert body["robust"]["statistic"] == "q25" and [e["episode"] for e in body["episodes"]] == [0, 1]
+        assert [e["distance_m"] for e in body["episodes"]] == after["distance_m"][mine].tolist()
+        speeds = after["speed_cm_s"][mine]
+        assert body["spread"]["speed_cm_s"]["median"] == np.median(speeds)
+        assert body["spread"]["speed_cm_s"]["min"] == speeds.min()
+        missing = client.get(f"/runs/{meta.run_id}/trials/99/episodes")
+        assert missing.status_code == 404 and "no such trial" in missing.json()["detail"]["message"]
