@@ -30,6 +30,8 @@ PAPER = {"tetraspine": (9.46, 3.2), "tetrahedral-complex": (6.13, 2.13), "octahe
          "ribbed": (5.37, 6.0)}
 CONFIGS = {"bullet": {"engine": "bullet"}, "bullet_converged": {"engine": "bullet", "dt_s": 2.5e-4},
            "mujoco": {"engine": "mujoco"}}
+CONFIG_NAMES = {"bullet": "Bullet, 1 ms (default)", "bullet_converged": "Bullet, 0.25 ms (converged)",
+                "mujoco": "MuJoCo, 1 ms (default)"}
 DEFAULT_RANDOMIZE = "friction=0.1,start_jitter_cm=0.5"
 
 
@@ -69,36 +71,56 @@ def summarise(rows: list[dict]) -> dict:
             "median_cot": c50, "iqr_cot": c75 - c25}
 
 
-def table(result: dict) -> str:
-    """The markdown table of a result (one row per spine and engine configuration)."""
-    lines = ["| spine | paper: speed, COT | engine, step | median speed (IQR) | q25 - q75 speed | "
-             "median COT (IQR) | failed |", "|---|---|---|---|---|---|---|"]
+def table(result: dict, tolerance: float | None = None) -> str:
+    """The markdown table of a result (one row per spine and engine configuration); with a tolerance, the
+    speed and COT ranges a check accepts (median x (1 -/+ tolerance))."""
+    extra = " accepted speed, cm/s | accepted COT |" if tolerance else ""
+    lines = ["| spine | paper: speed, COT | engine, step | median speed, cm/s (IQR) | q25 - q75 speed | "
+             "median COT (IQR) | failed |" + extra, "|---|---|---|---|---|---|---|" + ("---|---|" if tolerance else "")]
     for gait, s in result["spines"].items():
         for config, c in s["configs"].items():
+            head = f"| {gait} | {s['paper_speed_cm_s']} cm/s, {s['paper_cot']} | {CONFIG_NAMES[config]} |"
             if "median_speed_cm_s" not in c:
-                lines.append(f"| {gait} | {s['paper_speed_cm_s']} cm/s, {s['paper_cot']} | {config} | - | - | - | "
-                             f"{c['failed']} of {c['episodes']} |")
+                lines.append(f"{head} - | - | - | {c['failed']} of {c['episodes']} |")
                 continue
-            lines.append(
-                f"| {gait} | {s['paper_speed_cm_s']} cm/s, {s['paper_cot']} | {config} | "
-                f"**{c['median_speed_cm_s']:.2f} cm/s** ({c['iqr_speed_cm_s']:.2f}) | "
-                f"{c['q25_speed_cm_s']:.2f} - {c['q75_speed_cm_s']:.2f} | {c['median_cot']:.2f} ({c['iqr_cot']:.2f}) | "
-                f"{c['failed']} of {c['episodes']} |")
+            row = (f"{head} **{c['median_speed_cm_s']:.2f}** ({c['iqr_speed_cm_s']:.2f}) | "
+                   f"{c['q25_speed_cm_s']:.2f} - {c['q75_speed_cm_s']:.2f} | "
+                   f"{c['median_cot']:.2f} ({c['iqr_cot']:.2f}) | {c['failed']} of {c['episodes']} |")
+            if tolerance:
+                v, cot = c["median_speed_cm_s"], c["median_cot"]
+                row += (f" [{v * (1 - tolerance):.3f}, {v * (1 + tolerance):.3f}] |"
+                        f" [{cot * (1 - tolerance):.3f}, {cot * (1 + tolerance):.3f}] |")
+            lines.append(row)
     return "\n".join(lines)
 
 
-def write_docs(result: dict, command: str, configs: str) -> None:
+def write_docs(result: dict, command: str, configs: str, tolerance: float | None) -> None:
     """The table into docs/results.md between markers named by the configs (one block per set of them)."""
-    mark_begin, mark_end = f"<!-- paper_table {configs}: begin -->", f"<!-- paper_table {configs}: end -->"
+    key = configs + ("" if result["duration"] is None else f" {result['duration']:g} s")
+    mark_begin, mark_end = f"<!-- paper_table {key}: begin -->", f"<!-- paper_table {key}: end -->"
     text = DOCS.read_text()
     block = (f"{mark_begin}\n{result['episodes']} episodes per spine and engine ({result['randomize']}, seed "
              f"{result['seed']}, {result['duration'] or 'each morphology’s'} trial length), re-created by\n\n"
-             f"    {command}\n\n{table(result)}\n{mark_end}")
+             f"    {command}\n\n{table(result, tolerance)}\n{mark_end}")
     if mark_begin in text:
         text = re.sub(re.escape(mark_begin) + ".*?" + re.escape(mark_end), lambda _: block, text, flags=re.S)
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
     DOCS.write_text(text)
+
+
+def command(result: dict) -> str:
+    """The command that re-creates a result."""
+    configs = ",".join(next(iter(result["spines"].values()))["configs"])
+    parts = ["python bench/paper_table.py", f"--episodes {result['episodes']}", f"--configs {configs}",
+             f"--gaits {','.join(result['spines'])}"]
+    if result["duration"] is not None:
+        parts.append(f"--duration {result['duration']:g}")
+    if result["randomize"] != DEFAULT_RANDOMIZE:
+        parts.append(f"--randomize {result['randomize']}")
+    if result["seed"]:
+        parts.append(f"--seed {result['seed']}")
+    return " ".join(parts)
 
 
 def main() -> None:
@@ -111,7 +133,14 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=None, help="trial length (default: each morphology's)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--write-docs", action="store_true", help="put the table into docs/results.md")
+    ap.add_argument("--tolerance", type=float, default=None,
+                    help="with --write-docs: also write the ranges a check accepts, median x (1 -/+ this)")
+    ap.add_argument("--from-json", metavar="FILE", help="write the docs table of an earlier run's JSON (no simulation)")
     args = ap.parse_args()
+    if args.from_json:
+        result = json.loads(Path(args.from_json).read_text().strip().splitlines()[-1])
+        write_docs(result, command(result), ",".join(next(iter(result["spines"].values()))["configs"]), args.tolerance)
+        return
     configs, gaits = args.configs.split(","), args.gaits.split(",")
     bad = [c for c in configs if c not in CONFIGS] + [g for g in gaits if not (GAITS / f"{g}.json").is_file()]
     if bad or args.episodes < 1:
@@ -132,8 +161,7 @@ def main() -> None:
     result = {"episodes": args.episodes, "randomize": args.randomize, "seed": args.seed, "duration": args.duration,
               "spines": spines, "wall_time_s": time.perf_counter() - t0, "rows": rows}
     if args.write_docs:
-        write_docs(result, "python bench/paper_table.py " + " ".join(sys.argv[1:]).replace(" --write-docs", "")
-                   + " --write-docs", args.configs)
+        write_docs(result, command(result), args.configs, args.tolerance)
     print(json.dumps(result))
 
 
