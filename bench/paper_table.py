@@ -99,8 +99,9 @@ def write_docs(result: dict, command: str, configs: str, tolerance: float | None
     key = configs + ("" if result["duration"] is None else f" {result['duration']:g} s")
     mark_begin, mark_end = f"<!-- paper_table {key}: begin -->", f"<!-- paper_table {key}: end -->"
     text = DOCS.read_text()
+    length = "each morphology's" if result["duration"] is None else f"{result['duration']:g} s"
     block = (f"{mark_begin}\n{result['episodes']} episodes per spine and engine ({result['randomize']}, seed "
-             f"{result['seed']}, {result['duration'] or 'each morphology’s'} trial length), re-created by\n\n"
+             f"{result['seed']}, {length} trial length), re-created by\n\n"
              f"    {command}\n\n{table(result, tolerance)}\n{mark_end}")
     if mark_begin in text:
         text = re.sub(re.escape(mark_begin) + ".*?" + re.escape(mark_end), lambda _: block, text, flags=re.S)
@@ -109,8 +110,8 @@ def write_docs(result: dict, command: str, configs: str, tolerance: float | None
     DOCS.write_text(text)
 
 
-def command(result: dict) -> str:
-    """The command that re-creates a result."""
+def command(result: dict, tolerance: float | None = None) -> str:
+    """The command that re-creates a result (and its docs table)."""
     configs = ",".join(next(iter(result["spines"].values()))["configs"])
     parts = ["python bench/paper_table.py", f"--episodes {result['episodes']}", f"--configs {configs}",
              f"--gaits {','.join(result['spines'])}"]
@@ -120,7 +121,9 @@ def command(result: dict) -> str:
         parts.append(f"--randomize {result['randomize']}")
     if result["seed"]:
         parts.append(f"--seed {result['seed']}")
-    return " ".join(parts)
+    if tolerance:
+        parts.append(f"--tolerance {tolerance:g}")
+    return " ".join([*parts, "--write-docs"])
 
 
 def main() -> None:
@@ -139,7 +142,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.from_json:
         result = json.loads(Path(args.from_json).read_text().strip().splitlines()[-1])
-        write_docs(result, command(result), ",".join(next(iter(result["spines"].values()))["configs"]), args.tolerance)
+        configs = ",".join(next(iter(result["spines"].values()))["configs"])
+        write_docs(result, command(result, args.tolerance), configs, args.tolerance)
         return
     configs, gaits = args.configs.split(","), args.gaits.split(",")
     bad = [c for c in configs if c not in CONFIGS] + [g for g in gaits if not (GAITS / f"{g}.json").is_file()]
@@ -161,7 +165,7 @@ def main() -> None:
     result = {"episodes": args.episodes, "randomize": args.randomize, "seed": args.seed, "duration": args.duration,
               "spines": spines, "wall_time_s": time.perf_counter() - t0, "rows": rows}
     if args.write_docs:
-        write_docs(result, command(result), args.configs, args.tolerance)
+        write_docs(result, command(result, args.tolerance), args.configs, args.tolerance)
     print(json.dumps(result))
 
 
