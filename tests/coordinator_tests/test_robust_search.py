@@ -79,3 +79,18 @@ def test_episodes_are_stored_and_resumed_exactly(tmp_path):
         assert body["spread"]["speed_cm_s"]["min"] == speeds.min()
         missing = client.get(f"/runs/{meta.run_id}/trials/99/episodes")
         assert missing.status_code == 404 and "no such trial" in missing.json()["detail"]["message"]
+
+
+def test_a_robust_best_is_verified_on_its_episode_0_at_a_finer_step(tmp_path):
+    out = tmp_path / "verified.h5"
+    r = run("search", "tetraspine", "--trials", "2", "--workers", "1", "--duration", "0.3", "--episodes", "3",
+            "--randomize", RANDOMIZE, "--api-port", "-1", "--quiet", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    _, cols = read_run(out)
+    best = int(np.flatnonzero(cols["verification"] != b"")[0])
+    assert cols["verification"][best] == b"holds", cols["verify_reason"][best]
+    first = read_episodes(out)
+    first = first["distance_m"][(first["trial_id"] == best) & (first["episode"] == 0)][0]
+    # the re-simulation is of episode 0's world (not of the median), within the 5 % tolerance of its distance
+    assert abs(cols["verify_distance_m"][best] - first) <= 0.05 * abs(first)
+    assert cols["verify_distance_m"][best] != first  # a finer step: not the same bits
