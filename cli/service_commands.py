@@ -19,7 +19,7 @@ from typing import Any
 from spinefarm.cli import checks
 from spinefarm.cli.local_workers import LocalWorkers, worker_command
 from spinefarm.cli.progress import ProgressLine
-from spinefarm.cli.robust_args import add_robust_args, robust_settings
+from spinefarm.cli.robust_args import add_robust_args, robust_given, robust_settings
 from spinefarm.protocol.errors import ConfigError
 
 
@@ -177,7 +177,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
 
     if args.resume:
-        if args.morphology or args.out or robust_settings(args):
+        if args.morphology or args.out or robust_given(args):
             raise ConfigError("--resume continues a stored run (robust settings included)",
                               received="a morphology, --out or --episodes/--randomize/--robust too",
                               expected="only --resume RUN.h5")
@@ -200,7 +200,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
         args.duration = rungs.durations_s[-1]
     config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
                               controller=args.controller, duration_s=args.duration, trial_overrides=overrides,
-                              robust=robust_settings(args))
+                              robust=robust_settings(args, rungs.durations_s if rungs else None))
     _check_step(config)
     lease = args.lease
     if lease is None:

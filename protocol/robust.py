@@ -79,17 +79,26 @@ def check_randomize(d: Any) -> dict[str, Any]:
 @dataclass(frozen=True)
 class RobustSpec:
     """episodes: K worlds per parameter set; randomize: what each world draws (parse_randomize);
-    statistic: how the per-episode objectives become the trial's (mean, q25: the 25th percentile, min)."""
+    statistic: how the per-episode objectives become the trial's (mean, q25: the 25th percentile, min).
+    rung_episodes, rung_durations_s: in a multi-fidelity run, K of each rung (by its duration); `episodes`
+    is then the last rung's."""
 
     episodes: int = 1
     randomize: dict[str, Any] = field(default_factory=dict)
     statistic: str = "mean"
+    rung_episodes: tuple[int, ...] = ()
+    rung_durations_s: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        if isinstance(self.episodes, bool) or not isinstance(self.episodes, int) \
-                or not 1 <= self.episodes <= MAX_EPISODES:
-            raise ConfigError("--episodes out of range", received=self.episodes,
-                              expected=f"an integer in [1, {MAX_EPISODES}]")
+        object.__setattr__(self, "rung_episodes", tuple(self.rung_episodes))
+        object.__setattr__(self, "rung_durations_s", tuple(float(d) for d in self.rung_durations_s))
+        for k in (self.episodes, *self.rung_episodes):
+            if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= MAX_EPISODES:
+                raise ConfigError("--episodes out of range", received=k, expected=f"an integer in [1, {MAX_EPISODES}]")
+        if len(self.rung_episodes) != len(self.rung_durations_s) or \
+                (self.rung_episodes and self.rung_episodes[-1] != self.episodes):
+            raise ConfigError("--episodes per rung do not match the rungs", received=self.rung_episodes,
+                              expected=f"one K per rung ({len(self.rung_durations_s)}), the last = episodes")
         object.__setattr__(self, "randomize", check_randomize(self.randomize))
         if self.statistic not in STATISTICS:
             raise ConfigError("--robust is not a statistic", received=self.statistic, expected="|".join(STATISTICS))
@@ -98,14 +107,25 @@ class RobustSpec:
     def active(self) -> bool:
         return self.episodes > 1 or bool(self.randomize)
 
+    def episodes_for(self, duration_s: float | None) -> int:
+        """K of the rung whose trials last `duration_s` (None or not a rung's: `episodes`)."""
+        if duration_s is not None and float(duration_s) in self.rung_durations_s:
+            return self.rung_episodes[self.rung_durations_s.index(float(duration_s))]
+        return self.episodes
+
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        d = asdict(self)
+        if not self.rung_episodes:  # a run without rungs stores only what it uses
+            del d["rung_episodes"], d["rung_durations_s"]
+        else:
+            d["rung_episodes"], d["rung_durations_s"] = list(self.rung_episodes), list(self.rung_durations_s)
+        return d
 
     @classmethod
     def from_dict(cls, d: Any) -> RobustSpec:
         if not d:
             return cls()
-        if not isinstance(d, dict) or not set(d) <= {"episodes", "randomize", "statistic"}:
+        if not isinstance(d, dict) or not set(d) <= set(cls.__dataclass_fields__):
             raise ConfigError("robust settings are malformed", received=d,
                               expected="{episodes, randomize, statistic}")
         return cls(**d)

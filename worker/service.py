@@ -138,7 +138,9 @@ def build_evaluator(config: RunConfig) -> Evaluator:
         if robust.active:  # K randomised episodes of this parameter set (worker.robust)
             from spinefarm.worker.robust import run_episodes
 
-            return run_episodes(morphology, params, cfg, a.seed, robust, controller=config.controller, setup=setup)
+            spec = dataclasses.replace(robust, episodes=robust.episodes_for(a.duration_s), rung_episodes=(),
+                                       rung_durations_s=())  # K of this rung
+            return run_episodes(morphology, params, cfg, a.seed, spec, controller=config.controller, setup=setup)
         return run_trial(morphology, params, cfg, a.seed, controller=config.controller, setup=setup)
 
     return evaluate

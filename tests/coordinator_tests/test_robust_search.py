@@ -94,3 +94,17 @@ def test_a_robust_best_is_verified_on_its_episode_0_at_a_finer_step(tmp_path):
     # the re-simulation is of episode 0's world (not of the median), within the 5 % tolerance of its distance
     assert abs(cols["verify_distance_m"][best] - first) <= 0.05 * abs(first)
     assert cols["verify_distance_m"][best] != first  # a finer step: not the same bits
+
+
+def test_with_rungs_each_rung_runs_its_own_number_of_episodes(tmp_path):
+    out = tmp_path / "rungs.h5"
+    r = run("search", "tetraspine", "--trials", "4", "--workers", "1", "--rungs", "0.2,0.4", "--eta", "2",
+            "--episodes", "1,3", "--randomize", RANDOMIZE, "--no-verify", "--api-port", "-1", "--quiet",
+            "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    _, cols = read_run(out)
+    eps = read_episodes(out)
+    counts = {int(t): int(np.count_nonzero(eps["trial_id"] == t)) for t in cols["trial_id"]}
+    assert {counts[t] for t in counts if cols["rung"][t] == 0} == {1}
+    promoted = [t for t in counts if cols["rung"][t] == 1]
+    assert promoted and {counts[t] for t in promoted} == {3}

@@ -116,3 +116,17 @@ def test_episodes_travel_in_a_result_and_come_back_equal():
     assert back.items[0].result == r
     plain = TrialResult(TrialStatus.COMPLETE, "", 0.25, 25.0, 2.5, 5.0, 1.0, 10.0, 4.0, 2.0, 7, trial_id=3)
     assert "episodes" not in plain.to_dict()
+
+
+def test_episodes_per_rung_must_match_the_rungs(capsys, tmp_path):
+    spec = RobustSpec(8, {}, "mean", rung_episodes=(2, 8), rung_durations_s=(3.0, 10.0))
+    assert (spec.episodes_for(3.0), spec.episodes_for(10.0), spec.episodes_for(None)) == (2, 8, 8)
+    assert RobustSpec.from_dict(spec.to_dict()) == spec
+    for args, message in ((["--episodes", "2,8"], "a list needs --rungs"),
+                          (["--episodes", "2,4,8", "--rungs", "3,10"], "one per --rungs duration"),
+                          (["--episodes", "two"], "--episodes is not an integer"),
+                          (["--episodes", "0"], "--episodes out of range")):
+        code = main(["search", "tetraspine", "--workers", "0", "--api-port", "-1", *args,
+                     "--out", str(tmp_path / "r.h5")])
+        lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+        assert code == 2 and len(lines) == 1 and message in lines[0], lines
