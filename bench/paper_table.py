@@ -17,7 +17,7 @@ import json
 import re
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -153,8 +153,12 @@ def main() -> None:
     t0 = time.perf_counter()
     jobs = [(g, c, k) for g in gaits for c in configs for k in range(args.episodes)]
     with ProcessPoolExecutor(args.workers) as pool:
-        rows = list(pool.map(episode, *zip(*jobs, strict=True), [args.randomize] * len(jobs),
-                             [args.seed] * len(jobs), [args.duration] * len(jobs)))
+        futures = [pool.submit(episode, g, c, k, args.randomize, args.seed, args.duration) for g, c, k in jobs]
+        for done, fut in enumerate(as_completed(futures), 1):  # progress on stderr, one line per episode
+            r = fut.result()
+            print(f"{done}/{len(jobs)} {r['gait']} {r['config']} episode {r['episode']}: {r['speed_cm_s']:.3f} cm/s "
+                  f"({r['status']})", file=sys.stderr, flush=True)
+        rows = [f.result() for f in futures]
     spines = {}
     for g in gaits:
         per = {c: summarise([r for r in rows if r["gait"] == g and r["config"] == c]) for c in configs}
