@@ -18,7 +18,7 @@ from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.variants import with_density_factor
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.setup import SetupCache
-from spinefarm.worker.trial import run_trial
+from spinefarm.worker.trial import simulate_batch
 
 
 @dataclass(frozen=True)
@@ -46,8 +46,20 @@ def episode_world(morph: Morphology, cfg: TrialConfig, draw: EpisodeDraw) -> Wor
 
 def run_worlds(worlds: Sequence[World], params: np.ndarray | Mapping[str, float], controller: str | None,
                setup: SetupCache | None = None) -> list[TrialResult]:
-    """One result per world, in order (each world seeded by its draw)."""
-    return [run_trial(w.morph, params, w.config, w.draw.seed, controller=controller, setup=setup) for w in worlds]
+    """One result per world, in order (each world seeded by its draw). Worlds that share a morphology and a
+    trial config (they differ only in their seeds: start jitter alone is randomised) run as one batch of
+    worlds (worker.trial.simulate_batch); a drawn friction or mass makes each world a batch of its own."""
+    groups: dict[tuple[Morphology, str], list[int]] = {}
+    for i, w in enumerate(worlds):
+        groups.setdefault((w.morph, w.config.config_hash()), []).append(i)
+    out: list[TrialResult | None] = [None] * len(worlds)
+    for members in groups.values():
+        first = worlds[members[0]]
+        batch = simulate_batch(first.morph, [params] * len(members), first.config,
+                               [worlds[i].draw.seed for i in members], controller=controller, setup=setup)
+        for i, outcome in zip(members, batch, strict=True):
+            out[i] = outcome.result
+    return out  # type: ignore[return-value]
 
 
 def run_episodes(morph: Morphology, params: np.ndarray | Mapping[str, float], cfg: TrialConfig, trial_seed: int,
