@@ -20,12 +20,14 @@ run: $(STAMP)
 test: $(STAMP)
 	sh .ci/ensure-chromium
 	sh .ci/ensure-netns-tools
+	sh .ci/ensure-qemu-user
 	$(PY) -m ruff check .
 	$(PY) -m pytest -q -ra
 
 test-all: $(STAMP)
 	sh .ci/ensure-chromium
 	sh .ci/ensure-netns-tools
+	sh .ci/ensure-qemu-user
 	$(PY) -m pytest -q -ra -m ''
 
 bench: $(STAMP)

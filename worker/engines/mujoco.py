@@ -32,6 +32,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel
 from spinefarm.robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
 from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics
@@ -186,10 +187,11 @@ def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: 
     for i, box in enumerate(terrain.boxes):
         rot = _matrix(box.quaternion)
         if _is_plane(box):
-            top = np.asarray(box.centre_cm) + rot @ np.array([0.0, box.half_extents_cm[1], 0.0])
+            top = np.asarray(box.centre_cm) + fm.matvec(rot, np.array([0.0, box.half_extents_cm[1], 0.0]))
             hx, _, hz = box.half_extents_cm
+            quat = _quat_wxyz_from_matrix(fm.matmul(rot, _Z_UP_TO_Y_UP))
             world.append(f'<geom name="terrain{i}" type="plane" pos="{_vec(top)}" '
-                         f'quat="{_vec(_quat_wxyz_from_matrix(rot @ _Z_UP_TO_Y_UP))}" size="{_f(hx)} {_f(hz)} 1" '
+                         f'quat="{_vec(quat)}" size="{_f(hx)} {_f(hz)} 1" '
                          f'{tgeom} {common}/>')
         else:
             world.append(f'<geom name="terrain{i}" type="box" pos="{_vec(box.centre_cm)}" '
@@ -211,7 +213,7 @@ def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: 
     rgeom = f'friction="{_f(mu_rod * mu_rod)} 0 0" {common}'
     rod_type = "cylinder" if geometry == "cylinders" else "capsule"
     for i, body in enumerate(bodies):
-        pos = (rot @ body.com_cm) + (0.0 if start_offsets_cm is None else start_offsets_cm[i])
+        pos = fm.matvec(rot, body.com_cm) + (0.0 if start_offsets_cm is None else start_offsets_cm[i])
         parts = [f'<body name="s{i}" pos="{_vec(pos)}" quat="{quat}"><freejoint/>',
                  f'<inertial pos="0 0 0" mass="{_f(body.mass_kg)}" diaginertia="{_vec(body.inertia_kg_cm2)}"/>']
         for rod in body.rods:
@@ -296,7 +298,7 @@ class MujocoPhysics(BasePhysics):
         self.dt_s = dt_s
         self.n_bodies = len(bodies)
         rot = np.eye(3) if start_rotation is None else _matrix(start_rotation)
-        self.base_pos = np.array([rot @ b.com_cm for b in bodies])  # start COMs before offsets
+        self.base_pos = np.array([fm.matvec(rot, b.com_cm) for b in bodies])  # start COMs before offsets
         self.guard = None
         if self.settings.segment_contacts == "auto":
             from spinefarm.worker.engines.contact_guard import SegmentContactGuard  # compiled: numba only when used
@@ -338,14 +340,14 @@ class MujocoPhysics(BasePhysics):
         for b in range(self.n_bodies):
             out[b, :3] = self.qvel[b, :3]
             rot = _matrix(self.read_poses()[b, 3:])
-            out[b, 3:] = rot @ self.qvel[b, 3:]  # a free joint's angular velocity is in the body frame
+            out[b, 3:] = fm.matvec(rot, self.qvel[b, 3:])  # a free joint's angular velocity is in the body frame
         return out
 
     def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0)) -> None:
         """Set one body's world-frame velocity; for checks and tests."""
         rot = _matrix(self.read_poses()[index, 3:])
         self.qvel[index, :3] = linear_cm_s
-        self.qvel[index, 3:] = rot.T @ np.asarray(angular_rad_s, dtype=float)
+        self.qvel[index, 3:] = fm.matvec(rot.T, angular_rad_s)
 
     def contact_free_steps(self, max_steps: int) -> tuple[int, str]:
         """(steps, at most max_steps, before which none of the segment-segment contacts this model leaves
