@@ -171,6 +171,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 # --- coordinator side ------------------------------------------------------------------------------
 def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
+    from spinefarm.cli.environment_notes import note_environment
     from spinefarm.coordinator.problem import build_run_config
     from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
 
@@ -179,6 +180,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
             raise ConfigError("--resume continues a stored run", received="a morphology or --out too",
                               expected="only --resume RUN.h5")
         core, storage = resume_run(args.resume, trials_budget=args.trials)
+        note_environment(args.resume, storage.run_meta().extra.get("environment"))
         return core, storage, Path(args.resume)
     if not args.morphology:
         raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")

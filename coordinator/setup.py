@@ -13,6 +13,7 @@ from spinefarm.coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sample
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
 from spinefarm.coordinator.verifier import Verifier, VerifyPolicy
+from spinefarm.protocol.environment import environment_record
 from spinefarm.protocol.errors import ConfigError, check_range
 from spinefarm.protocol.run import RunConfig
 from spinefarm.storage.base import BaseStorage
@@ -61,6 +62,7 @@ def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
                    sampler=sampler.describe(), software_version=software_version(),
                    created_at_unix_s=time.time(), config_hash=config.config_hash(),
                    run=config.to_dict(), extra={"lease_s": settings.lease_s, "verify": settings.verify.to_dict(),
+                                                "environment": environment_record(),
                                                 "fidelity": None if settings.rungs is None else
                                                 settings.rungs.to_dict()})
 
