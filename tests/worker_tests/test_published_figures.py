@@ -114,3 +114,26 @@ def test_a_verification_judges_its_perturbed_half():
     assert not strict["holds"] and "perturbed run moved" in strict["verdict"]
     plain = _verify_job(*args, {**policy, "perturb": False})
     assert plain["perturbed_distance_m"] is None and plain["relative_change"] == 0.0
+
+
+def test_verify_perturb_reaches_the_stored_policy(tmp_path):
+    """`search --verify-perturb` stores the policy its verifier runs with (coordinator.verifier reads it back)."""
+    import subprocess
+    import sys
+
+    from spinefarm.coordinator.verifier import VerifyPolicy
+    from spinefarm.storage.hdf5 import Hdf5Storage
+
+    policies = {}
+    for flag in ("--verify-perturb", None):
+        out = tmp_path / f"{flag or 'plain'}.h5"
+        args = ["search", "sphere:3", "--trials", "4", "--workers", "1", "--api-port", "-1", "--out", str(out)]
+        r = subprocess.run([sys.executable, "-m", "spinefarm", *args, *([flag] if flag else [])],
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+        store = Hdf5Storage.open_read(out)
+        try:
+            policies[flag] = VerifyPolicy.from_dict(store.run_meta().extra["verify"])
+        finally:
+            store.close()
+    assert policies["--verify-perturb"].perturb and not policies[None].perturb
