@@ -8,7 +8,8 @@ robot's path and final poses) and whether it equals the native one bit for bit. 
 ~20-50x slower, so keep --duration at a fraction of a second. numba compiles for the CPU it detects; its
 kernels for an emulated model are compiled natively first, for exactly the CPU name and features that model
 reports (numba's cache is keyed by them), because compiling under emulation takes minutes. MuJoCo's wheel
-needs AVX: CPU models without it (Nehalem) run the Bullet tier only.
+needs AVX: CPU models without it (Nehalem) run the Bullet tier only. `libm_differences` counts the
+`libm_calls` seeded sin, cos and exp results (glibc's, which the CPG calls) that differ between this CPU and each model.
 """
 
 from __future__ import annotations
@@ -82,11 +83,34 @@ def run_emulated(cpu: str, engine: str, duration_s: float, cache_dir: Path) -> d
     return {**_last_json(out.stdout), "llvm_cpu": name}
 
 
-def compare(cpus: list[str], engines: list[str], duration_s: float) -> dict:
+_LIBM_PROBE = """
+import math, random, struct, sys
+rng = random.Random(1)
+xs = [rng.uniform(-60.0, 60.0) for _ in range(int(sys.argv[1]))]
+sys.stdout.buffer.write(b"".join(struct.pack("d", f(x)) for f in (math.sin, math.cos, math.exp) for x in xs))
+"""
+
+
+def libm_differences(cpu: str, n: int = 200_000) -> dict[str, int]:
+    """How many of n seeded sin, cos and exp results (glibc's libm, which numba's kernels call too) differ in
+    any bit between this CPU and `cpu` emulated: glibc picks FMA variants of them on CPUs that have FMA."""
+    import numpy as np
+
+    def values(prefix: list[str]) -> np.ndarray:
+        out = subprocess.run([*prefix, sys.executable, "-c", _LIBM_PROBE, str(n)], capture_output=True, check=True,
+                             timeout=1800)
+        return np.frombuffer(out.stdout, dtype=float).reshape(3, n)
+
+    native, emulated = values([]), values(["qemu-x86_64", "-cpu", cpu])
+    return {name: int((a != b).sum()) for name, a, b in zip(("sin", "cos", "exp"), native, emulated, strict=True)}
+
+
+def compare(cpus: list[str], engines: list[str], duration_s: float, libm_n: int = 200_000) -> dict:
     """Native and emulated fingerprints side by side, with `same_bits` per CPU model and engine."""
     if shutil.which("qemu-x86_64") is None:
         raise SystemExit("cross_cpu needs qemu-user: run 'apt-get install qemu-user' (or sh .ci/ensure-qemu-user)")
-    report: dict = {"duration_s": duration_s, "gait": GAIT.name, "engines": {}}
+    report: dict = {"duration_s": duration_s, "gait": GAIT.name, "engines": {},
+                    "libm_calls": libm_n, "libm_differences": {cpu: libm_differences(cpu, libm_n) for cpu in cpus}}
     with tempfile.TemporaryDirectory(prefix="spinefarm-cross-cpu-") as tmp:
         for engine in engines:
             native = _last_json(subprocess.run(_child_cmd(engine, duration_s), capture_output=True, text=True,
