@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[2]
 # results and are left out)
 MODEL_PATH = [*sorted((ROOT / "robot").rglob("*.py")),
               *[ROOT / "worker" / f for f in ("trial.py", "episode.py", "setup.py", "scoring.py", "verify.py",
-                                              "replay.py")],
+                                              "replay.py", "loop.py", "batch.py")],
               *sorted((ROOT / "worker" / "engines").glob("*.py")), *sorted((ROOT / "worker" / "sim").glob("*.py")),
               *sorted((ROOT / "worker" / "control").glob("*.py"))]
 BLAS_CALLS = {"dot", "matmul", "einsum", "inner", "vdot", "tensordot", "outer", "kron"}
