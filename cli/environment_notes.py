@@ -14,7 +14,7 @@ def recorded_environment(path: str | Path) -> dict[str, Any] | None:
 
     store = Hdf5Storage.open_read(path)
     try:
-        return store.run_meta().extra.get("environment")
+        return store.run_meta().environment or None
     finally:
         store.close()
 

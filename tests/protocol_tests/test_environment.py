@@ -45,9 +45,9 @@ def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
 
 def _forge_numpy_version(path: Path, version: str) -> None:
     with h5py.File(path, "r+") as f:
-        extra = json.loads(f.attrs["extra"])
-        extra["environment"]["packages"]["numpy"] = version
-        f.attrs["extra"] = json.dumps(extra, sort_keys=True)
+        env = json.loads(f.attrs["environment"])
+        env["packages"]["numpy"] = version
+        f.attrs["environment"] = json.dumps(env, sort_keys=True)
 
 
 def test_a_run_file_records_it_and_trial_run_and_resume_say_what_differs(tmp_path):
@@ -56,7 +56,7 @@ def test_a_run_file_records_it_and_trial_run_and_resume_say_what_differs(tmp_pat
              "--api-port", "-1", "--no-verify")
     assert r.returncode == 0, r.stderr
     with h5py.File(out, "r") as f:
-        stored = json.loads(f.attrs["extra"])["environment"]
+        stored = json.loads(f.attrs["environment"])
     assert stored["packages"]["numpy"] == np.__version__ and stored["python"] == platform.python_version()
     same = _cli("trial", "--run", str(out), "--json")
     assert same.returncode == 0 and "environment differs" not in same.stderr, same.stderr

@@ -92,10 +92,14 @@ def test_work_is_tension_times_shortening_by_hand(recorded):
     assert out.result.work_j == pytest.approx(paper_j, rel=0.02)
 
 
-def test_a_verification_judges_its_perturbed_half():
-    """--verify-perturb: the perturbed run is run, stored and counted in the verdict (worst of both changes).
-    The claimed distance is the fine run's own, so only the perturbed half can fail it."""
-    from spinefarm.coordinator.verifier import _verify_job
+def test_the_judge_runs_and_counts_its_perturbed_half():
+    """--verify-perturb: a judge task with perturb runs the perturbed trial (start pose jittered 0.01 cm, friction
+    +10 %), returns its distance, and the verdict counts it. The stored distance is the judge's own, so only the
+    perturbed half can fail it."""
+    from spinefarm.coordinator.tasks import judge_verdict
+    from spinefarm.protocol.messages import TrialAssignment, Verification
+    from spinefarm.protocol.settings import TaskFidelity
+    from spinefarm.worker.tasks import physics_evaluator
 
     morph = load_morphology("tetraspine-ntrt")
     u = random_unit_params(morph, 4)
@@ -105,23 +109,24 @@ def test_a_verification_judges_its_perturbed_half():
     d_fine, d_pert = run_trial(morph, u, fine, 4).distance_m, run_trial(morph, u, pert, 4).distance_m
     change = abs(d_pert - d_fine) / d_fine
     assert change > 1e-3
-    policy = {"refine": 4, "tolerance": change * 2, "perturb": True}
-    v = _verify_job(morph.to_dict(), None, cfg.to_dict(), u.tolist(), 4, d_fine, policy)
-    assert v["fine_distance_m"] == d_fine and v["perturbed_distance_m"] == d_pert
-    assert v["relative_change"] == pytest.approx(change, rel=1e-12) and v["holds"]
-    args = (morph.to_dict(), None, cfg.to_dict(), u.tolist(), 4, d_fine)
-    strict = _verify_job(*args, {**policy, "tolerance": change / 2})
-    assert not strict["holds"] and "perturbed run moved" in strict["verdict"]
-    plain = _verify_job(*args, {**policy, "perturb": False})
-    assert plain["perturbed_distance_m"] is None and plain["relative_change"] == 0.0
+    evaluate = physics_evaluator(morph, cfg, None)
+    task = TrialAssignment(trial_id=0, lease_id=1, params_unit=tuple(u), seed=4, lease_s=60.0,
+                           fidelity=TaskFidelity(task="judge", dt_s=fine.dt_s, perturb=True))
+    r = evaluate(task)
+    assert r.distance_m == d_fine and r.extras["perturbed_distance_m"] == d_pert
+    holds, why = judge_verdict(d_fine, False, "bullet", r, tolerance=change * 2)
+    assert holds == Verification.HOLDS and why == ""
+    fails, why = judge_verdict(d_fine, False, "bullet", r, tolerance=change / 2)
+    assert fails == Verification.NOT_REPRODUCED and why.startswith("perturbed run moved")
+    plain = evaluate(dataclasses.replace(task, fidelity=TaskFidelity(task="judge", dt_s=fine.dt_s)))
+    assert "perturbed_distance_m" not in plain.extras
 
 
-def test_verify_perturb_reaches_the_stored_policy(tmp_path):
-    """`search --verify-perturb` stores the policy its verifier runs with (coordinator.verifier reads it back)."""
+def test_verify_perturb_reaches_the_stored_judge_policy(tmp_path):
+    """`search --verify-perturb` stores the judge policy the run's judge tasks are issued with."""
     import subprocess
     import sys
 
-    from spinefarm.coordinator.verifier import VerifyPolicy
     from spinefarm.storage.hdf5 import Hdf5Storage
 
     policies = {}
@@ -133,7 +138,7 @@ def test_verify_perturb_reaches_the_stored_policy(tmp_path):
         assert r.returncode == 0, r.stderr
         store = Hdf5Storage.open_read(out)
         try:
-            policies[flag] = VerifyPolicy.from_dict(store.run_meta().extra["verify"])
+            policies[flag] = store.run_meta().settings.judge
         finally:
             store.close()
     assert policies["--verify-perturb"].perturb and not policies[None].perturb
