@@ -20,8 +20,6 @@ from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.messages import TrialAssignment, TrialResult
 
 FAULT_SCALE_ENV = "SPINEFARM_FAULT_DISTANCE_SCALE"
-# the package each engine needs (engine_class imports it; here it is only looked for)
-_ENGINE_PACKAGES = {"bullet": "pybullet", "mujoco": "mujoco"}
 _REPORTED_PACKAGES = ("numpy", "numba", "pybullet", "mujoco", "spinefarm")
 POSE_JITTER_CM = 0.01
 FRICTION_CHANGE = 0.1
@@ -29,10 +27,10 @@ FRICTION_CHANGE = 0.1
 
 def available_engines(only: tuple[str, ...] | None = None) -> tuple[str, ...]:
     """Engines this worker can run: their package is installed (and, given `only`, they are in it)."""
-    from spinefarm.robot.engines import engine_names
+    from spinefarm.robot.engines import engine_names, engine_spec
 
     names = [n for n in engine_names() if only is None or n in only]
-    return tuple(n for n in names if importlib.util.find_spec(_ENGINE_PACKAGES.get(n, n)) is not None)
+    return tuple(n for n in names if importlib.util.find_spec(engine_spec(n).package or n) is not None)
 
 
 def parse_engines(text: str | None) -> tuple[str, ...] | None:
