@@ -84,6 +84,7 @@ def check_step(config: Any) -> None:
 
 def open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     """(core, storage, run file) of the run the arguments ask for."""
+    from spinefarm.cli.environment_notes import note_environment
     from spinefarm.coordinator.setup import new_run, resume_run
 
     trusted = bool(args.credentials)
@@ -93,6 +94,7 @@ def open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
                               received="a morphology, --out or --episodes/--randomize/--robust too",
                               expected="only --resume RUN.h5")
         core, storage = resume_run(args.resume, trials_budget=args.trials, trusted_peers=trusted)
+        note_environment(args.resume, storage.run_meta().environment or None)
         return core, storage, Path(args.resume)
     if not args.morphology:
         raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")

@@ -14,6 +14,7 @@ from spinefarm.coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sample
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
 from spinefarm.coordinator.tasks import TaskBook
+from spinefarm.protocol.environment import environment_record
 from spinefarm.protocol.errors import ConfigError, check_range
 from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung, RunSettings
@@ -90,7 +91,7 @@ def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
                    objective=config.objective, seed=config.seed, trials_budget=settings.trials,
                    sampler=sampler.describe(), software_version=software_version(),
                    created_at_unix_s=time.time(), config_hash=config.config_hash(),
-                   run=config.to_dict(), settings=settings.run_settings(config))
+                   run=config.to_dict(), settings=settings.run_settings(config), environment=environment_record())
 
 
 def build_core(storage: BaseStorage, clock=time.monotonic, trusted_peers: bool = False) -> CoordinatorCore:

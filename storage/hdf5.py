@@ -50,7 +50,7 @@ COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 # the reserve a sync only overwrites blocks the file already has. Trimmed to HDF5's end at close.
 RESERVE_B = 8 << 20      # reserved beyond HDF5's end when it is topped up
 RESERVE_LOW_B = 4 << 20  # topped up when less than this is left (one flush grows the file far less)
-_JSON_FIELDS = ("sampler", "settings", "run")
+_JSON_FIELDS = ("sampler", "settings", "run", "environment")
 _TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
 
 
@@ -81,6 +81,8 @@ def _read_meta(f: h5py.File, path: Path) -> RunMeta:
                            received=f.attrs.get("file_schema_version"), expected=FILE_SCHEMA_VERSION)
     kw: dict[str, Any] = {}
     for fld in fields(RunMeta):
+        if fld.name == "environment" and fld.name not in f.attrs:
+            continue  # written before runs recorded one
         raw = f.attrs[fld.name]
         if fld.name == "settings":
             kw[fld.name] = RunSettings.from_dict(json.loads(raw))
