@@ -129,7 +129,10 @@ async function showRuns(gen) {
     location.hash = `#/run/${enc(tr.dataset.run)}`;
   }));
   const reopen = runs.length === 1 ? runs[0].reopen_command : "spinefarm api runs/*.h5";
-  schedule(() => showRuns(gen).catch((e) => serverGone(e, gen, reopen)), runs.some((r) => r.state === "running"));
+  // a file whose first read ran out of time (a busy machine) is read again by the server: look again too
+  const pending = bad.some((b) => /did not finish within/.test(b.reason));
+  schedule(() => showRuns(gen).catch((e) => serverGone(e, gen, reopen)),
+    runs.some((r) => r.state === "running") || pending);
 }
 
 // ---------------------------------------------------------------- one run
@@ -261,14 +264,10 @@ async function showTrial(runId, trialId, gen) {
       <div class="panel"><h2>Parameters</h2><div class="tablewrap"><table id="params"><thead><tr><th class="l">name</th>
         <th>value</th><th class="l">unit</th><th>in range (0–1)</th></tr></thead><tbody>${paramRows}</tbody></table></div></div>
     </div>
-<<<<<<< HEAD
+    <div id="episodes"></div>
     <div class="panel" style="margin-top:1em"><h2>The gait, moving</h2><div id="motion-area"></div></div>
     <div class="panel picture" style="margin-top:1em"><h2>The gait in six frames</h2><div id="picture"></div></div>`;
-=======
-    <div id="episodes"></div>
-    <div class="panel picture" style="margin-top:1em"><h2>The gait</h2><div id="picture"></div></div>`;
   if (meta.robust && meta.robust.episodes) showEpisodes(r, t.trial_id, gen);
->>>>>>> main
   const pic = document.getElementById("picture");
   const area = document.getElementById("motion-area");
   if (!meta.physical) {
@@ -297,7 +296,6 @@ async function showTrial(runId, trialId, gen) {
   pic.replaceChildren(img);
 }
 
-<<<<<<< HEAD
 // ---------------------------------------------------------------- the gait, moving (3D, gait3d.js)
 let motionViews = [];
 
@@ -354,7 +352,8 @@ async function showWatch(runId, ids, gen) {
   view.innerHTML = `<h1>Trials ${ids.map((id) => `<a href="#/run/${r}/trial/${id}">${id}</a>`).join(" and ")}
     in step</h1><div class="panel"><div id="motion-area"></div></div>`;
   await showMotion(document.getElementById("motion-area"), runId, ids, gen);
-=======
+}
+
 // a robust trial's episodes: each its own randomised world, and their spread
 async function showEpisodes(r, trialId, gen) {
   const e = await api(`/runs/${r}/trials/${trialId}/episodes`);
@@ -368,7 +367,6 @@ async function showEpisodes(r, trialId, gen) {
       speed median ${fmt(s.median, 4)} cm/s, quartiles ${fmt(s.q25, 4)} – ${fmt(s.q75, 4)}, min ${fmt(s.min, 4)}, max ${fmt(s.max, 4)}</p>
     <div class="tablewrap"><table id="episode-table"><thead><tr><th>episode</th><th class="l">status</th><th>speed (cm/s)</th>
       <th>distance (m)</th><th>COT</th><th>friction ×</th><th>mass ×</th></tr></thead><tbody>${rows}</tbody></table></div></div>`;
->>>>>>> main
 }
 
 // ---------------------------------------------------------------- routing
