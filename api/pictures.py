@@ -8,6 +8,7 @@ made once; requests for one being made wait for it instead of starting another.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import json
@@ -45,6 +46,18 @@ def simulator_missing(engine: str) -> str | None:
         if not found:
             return f"the simulator is not installed here (Python module {module!r} not found)"
     return None
+
+
+@functools.lru_cache(maxsize=1)
+def code_stamp() -> str:
+    """What the simulator's code is here (its files' sizes and times): a drawing cached by an older version
+    of it is not served for a newer one."""
+    spec = importlib.util.find_spec("spinefarm.worker")
+    if spec is None or not spec.submodule_search_locations:
+        return ""
+    root = Path(next(iter(spec.submodule_search_locations)))
+    stats = sorted((str(p.relative_to(root)), p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*.py"))
+    return hashlib.sha256(repr(stats).encode()).hexdigest()[:16]
 
 
 def trial_job(meta: RunMeta, rec: TrialRecord) -> dict[str, Any]:
@@ -92,7 +105,8 @@ class PictureCache:
 
     def _cached(self, meta: RunMeta, rec: TrialRecord, kind: str, inputs: dict[str, Any] | None = None) -> Path:
         job = trial_job(meta, rec)
-        key = hashlib.sha256(json.dumps({"kind": kind, **{k: v for k, v in job.items() if k != "title"}},
+        key = hashlib.sha256(json.dumps({"kind": kind, "code": code_stamp(),
+                                         **{k: v for k, v in job.items() if k != "title"}},
                                         sort_keys=True).encode()).hexdigest()[:32]
         out = self.dir / f"{key}{KINDS[kind][1]}"
         with self._lock(key):
