@@ -433,21 +433,14 @@ def cmd_worker(args: argparse.Namespace) -> int:
 def cmd_api(args: argparse.Namespace) -> int:
     import uvicorn
     from spinefarm.api.app import create_app
-    from spinefarm.protocol.errors import StorageError
-    from spinefarm.storage.hdf5 import read_meta
+    from spinefarm.api.registry import servable
 
     checks.port("--port", args.port)
     if not args.files and args.runs_dir is None:
         raise ConfigError("nothing to serve", expected="run files (RUN.h5 ...) and/or --runs-dir DIR")
-    served = []
-    for f in args.files:
-        try:
-            if not Path(f).is_file():
-                raise StorageError("no such file", expected="an existing run file")
-            read_meta(f)
-            served.append(f)
-        except StorageError as exc:
-            print(f"spinefarm api: skipping {f}: {exc}", file=sys.stderr)
+    served, skipped = servable([Path(f) for f in args.files])
+    for f, exc in skipped:
+        print(f"spinefarm api: skipping {f}: {exc}", file=sys.stderr)
     if not served and args.runs_dir is None:
         raise ConfigError("none of the given run files can be served", received=args.files,
                           expected="spinefarm run files (.h5) written by `spinefarm search`")

@@ -83,7 +83,7 @@ def _read_meta(f: h5py.File, path: Path) -> RunMeta:
         if fld.name in _JSON_FIELDS:
             kw[fld.name] = json.loads(raw)
         elif fld.name in ("param_names", "param_units"):
-            kw[fld.name] = tuple(x.decode() if isinstance(x, bytes) else str(x) for x in raw)
+            kw[fld.name] = tuple(x.decode("utf-8", "replace") if isinstance(x, bytes) else str(x) for x in raw)
         elif fld.name in ("param_lows", "param_highs"):
             kw[fld.name] = tuple(float(x) for x in raw)
         elif fld.name == "controller":
@@ -93,7 +93,7 @@ def _read_meta(f: h5py.File, path: Path) -> RunMeta:
         elif fld.name == "created_at_unix_s":
             kw[fld.name] = float(raw)
         else:
-            kw[fld.name] = raw.decode() if isinstance(raw, bytes) else str(raw)
+            kw[fld.name] = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else str(raw)
     return RunMeta(**kw)
 
 
@@ -205,6 +205,7 @@ class Hdf5Storage(InMemoryStorage):
             path.unlink(missing_ok=True)
             status_path(path).unlink(missing_ok=True)
             write_run(path, meta, TrialTable(meta.n_params).columns())
+            lock.bind(path)  # the new file's identity: a link to it is refused too
             _fsync_dir(path)  # the new name too must survive a power cut
             return cls._open_writer(path, meta, TrialTable(meta.n_params), lock)
         except BaseException:
@@ -237,12 +238,18 @@ class Hdf5Storage(InMemoryStorage):
                                        "promoted re-runs do not count)", received=trials_budget,
                                        expected=f"at least {max(n, 1)}")
                 meta = replace(meta, trials_budget=trials_budget)
-            tmp = path.with_name(path.name + ".resume-tmp")
-            write_run(tmp, meta, cols)
-            with open(tmp, "rb") as fh:
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)  # atomic: the old file stays intact until the new one is complete
-            _fsync_dir(path)
+            real = path.resolve()  # a symlink stays a symlink: its target is what gets replaced
+            tmp = real.with_name(real.name + ".resume-tmp")
+            try:
+                write_run(tmp, meta, cols)
+                with open(tmp, "rb") as fh:
+                    os.fsync(fh.fileno())
+                lock.bind(tmp)  # held on the new file before it takes the name
+                os.replace(tmp, real)  # atomic: the old file stays intact until the new one is complete
+            except BaseException:
+                tmp.unlink(missing_ok=True)
+                raise
+            _fsync_dir(real)
             table = TrialTable(meta.n_params, capacity=max(1024, len(cols["trial_id"])))
             table.load(cols)
             return cls._open_writer(path, meta, table, lock)

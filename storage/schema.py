@@ -143,7 +143,7 @@ class TrialRecord:
             if c.name in VECTOR_COLUMNS:
                 kw[c.name] = tuple(float(x) for x in v)
             elif c.dtype.startswith("S"):
-                kw[c.name] = v.decode() if isinstance(v, bytes) else str(v)
+                kw[c.name] = v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
             elif c.dtype.startswith("i"):
                 kw[c.name] = int(v)
             else:
