@@ -51,6 +51,18 @@ WORKER_LEASE_MS = 2000
 COORDINATOR_TIMEOUT_S = 30.0
 # A worker still without its coordinator after this long says so (then keeps trying).
 UNREACHABLE_WARN_S = 3.0
+READY_ENV = "SPINEFARM_READY_FILE"   # as cli.local_workers names it
+
+
+def _mark_ready(worker_id: str) -> None:
+    """Tell a supervising `search` (cli.local_workers) that this worker has started: a later exit is a
+    death, not a start failure."""
+    path = os.environ.get(READY_ENV)
+    if path:
+        try:
+            Path(path).write_text(worker_id + "\n")
+        except OSError as exc:
+            log.warning("cannot write the ready file %s: %s", path, exc.strerror)
 
 
 def default_worker_id() -> str:
@@ -320,6 +332,7 @@ class WorkerService:
         if session is None:
             return 0
         token = session.liveliness().declare_token(keys.worker_token(self.worker_id))
+        _mark_ready(self.worker_id)
         try:
             self._loop(session)
         finally:
