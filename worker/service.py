@@ -9,23 +9,17 @@ retry, never exit. The only worker module that imports zenoh.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
-import os
-import re
-import socket
 import threading
 import time
-import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 import zenoh
 from spinefarm.protocol import keys
-from spinefarm.protocol.errors import ConfigError, MessageError, RunMismatchError, SpinefarmError
+from spinefarm.protocol.errors import ConfigError, MessageError, SpinefarmError
 from spinefarm.protocol.messages import (
     ResultAck,
     ResultSubmission,
@@ -33,17 +27,25 @@ from spinefarm.protocol.messages import (
     SubmittedResult,
     TrialAssignment,
     TrialResult,
-    TrialStatus,
     WorkGrant,
     WorkRequest,
     decode_message,
     encode_message,
 )
-from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.run import RunConfig, WorkerProblem
+from spinefarm.worker.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
+from spinefarm.worker.pacing import (
+    EXIT_REFUSED,
+    Backoff,
+    BatchSizer,
+    default_worker_id,
+    listening_endpoints,
+    mark_ready,
+)
 
+__all__ = ["Backoff", "BatchSizer", "WorkerService", "build_evaluator", "default_worker_id", "sphere_result",
+           "zenoh_config"]
 log = logging.getLogger("spinefarm.worker")
-Evaluator = Callable[[TrialAssignment], TrialResult]
 # A 2 s transport lease lets the coordinator notice a frozen (SIGSTOPped) worker in ~2 s, not 10 s.
 WORKER_LEASE_MS = 2000
 # With --exit-when-done: a run whose coordinator stays silent this long has ended (it may have ended
@@ -51,25 +53,6 @@ WORKER_LEASE_MS = 2000
 COORDINATOR_TIMEOUT_S = 30.0
 # A worker still without its coordinator after this long says so (then keeps trying).
 UNREACHABLE_WARN_S = 3.0
-READY_ENV = "SPINEFARM_READY_FILE"   # as cli.local_workers names it
-
-
-def _mark_ready(worker_id: str) -> None:
-    """Tell a supervising `search` (cli.local_workers) that this worker has started: a later exit is a
-    death, not a start failure."""
-    path = os.environ.get(READY_ENV)
-    if path:
-        try:
-            Path(path).write_text(worker_id + "\n")
-        except OSError as exc:
-            log.warning("cannot write the ready file %s: %s", path, exc.strerror)
-
-
-def default_worker_id() -> str:
-    host = "".join(ch if ch.isalnum() or ch in "-_." else "-" for ch in socket.gethostname())[:32]
-    return f"{host or 'worker'}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
-
-
 def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
                  config_file: str | Path | None = None, credentials_file: str | Path | None = None) -> zenoh.Config:
     """Client of the coordinator/router at `connect`; multicast scouting off; short transport lease;
@@ -91,104 +74,6 @@ def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
         for key, value in load_credentials(credentials_file).zenoh_settings(accept=bool(listen)).items():
             conf.insert_json5(key, value)
     return conf
-
-
-# --- evaluators ------------------------------------------------------------------------------------
-def sphere_result(space: ParamSpace, a: TrialAssignment, delay_s: float = 0.0) -> TrialResult:
-    """The built-in test objective: no physics, a smooth bowl with its top at x_i = 0.3.
-
-    delay_s: wall time the trial takes (sleeping), to stand in for a physics trial in fault tests.
-    """
-    t0 = time.perf_counter()
-    x = space.from_unit(np.asarray(a.params_unit))
-    if delay_s > 0:
-        time.sleep(delay_s)
-    distance_m = float(len(x) - np.sum((x - 0.3) ** 2))
-    work_j = float(np.sum(x**2))
-    return TrialResult(TrialStatus.COMPLETE, "", distance_m, 100.0 * distance_m, 10.0 * distance_m, work_j,
-                       work_j / (9.81 * distance_m) if distance_m > 0 else float("inf"), 10.0,
-                       time.perf_counter() - t0, 1.0, a.seed)
-
-
-def build_evaluator(config: RunConfig) -> Evaluator:
-    """Turn a run object into a function of one assignment. The robot, its parameter space and the
-    trial config are built from the run's own data (never looked up by name) and must reproduce the
-    run's hashes; otherwise RunMismatchError says which part differs."""
-    space = config.space()
-    if config.is_test_objective:  # the test objective, see coordinator.problem
-        if re.fullmatch(r"sphere(:\d+)?", config.morphology) is None:
-            raise RunMismatchError("run has no morphology spec", received=config.morphology,
-                                   expected="a morphology spec, or the test objective sphere[:N]")
-        delay_s = float(config.trial_config.get("duration_s") or 0.0)
-        return lambda a: sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s)
-    from spinefarm.robot.morphology.model import Morphology
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import TrialConfig, run_trial
-
-    morphology = Morphology.from_dict(config.morphology_spec)
-    trial_config = TrialConfig.from_dict(config.trial_config)
-    built = {"spec_hash": morphology.spec_hash(),
-             "space_hash": morphology.param_space(config.controller).space_hash(),
-             "trial_config_hash": trial_config.config_hash()}
-    for name, value in built.items():
-        if getattr(config, name) != value:
-            raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
-                                   "version?)", received=value, expected=getattr(config, name))
-    from spinefarm.worker.engines.base import engine_class
-
-    # a missing engine package or an option the engine does not have fails here, not in every trial
-    engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
-    setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
-
-    def evaluate(a: TrialAssignment) -> TrialResult:
-        # a multi-fidelity rung asks for its own duration; everything else is the run's
-        cfg = trial_config if a.duration_s is None else dataclasses.replace(trial_config, duration_s=a.duration_s)
-        return run_trial(morphology, np.asarray(a.params_unit, dtype=float), cfg, a.seed,
-                         controller=config.controller, setup=setup)
-
-    return evaluate
-
-
-def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:
-    nan = float("nan")
-    return TrialResult(TrialStatus.FAILED, reason[:150], nan, nan, nan, nan, nan, 0.0, wall_time_s, nan,
-                       a.seed)
-
-
-class Backoff:
-    """Exponential wait between retries while the coordinator is absent."""
-
-    def __init__(self, first_s: float = 0.05, max_s: float = 2.0) -> None:
-        self.first_s, self.max_s, self._next = first_s, max_s, first_s
-
-    def next(self) -> float:
-        wait, self._next = self._next, min(self._next * 2, self.max_s)
-        return wait
-
-    def reset(self) -> None:
-        self._next = self.first_s
-
-
-class BatchSizer:
-    """Trials to ask for: a fixed number, or (auto) about `target_s` of work by the mean trial time.
-
-    Slow physics trials go one at a time (a lost worker strands little work); microsecond test trials
-    go in large batches, so round trips do not dominate.
-    """
-
-    def __init__(self, fixed: int | None, target_s: float = 0.5, max_batch: int = 64) -> None:
-        self.fixed, self.target_s, self.max_batch = fixed, target_s, max_batch
-        self._mean_s: float | None = None
-
-    def observe(self, wall_time_s: float) -> None:
-        self._mean_s = wall_time_s if self._mean_s is None else 0.8 * self._mean_s + 0.2 * wall_time_s
-
-    def size(self) -> int:
-        if self.fixed is not None:
-            return self.fixed
-        if self._mean_s is None:
-            return 1
-        return max(1, min(self.max_batch, int(self.target_s / max(self._mean_s, 1e-6))))
 
 
 class WorkerService:
@@ -292,12 +177,25 @@ class WorkerService:
             acks, refused = self._query(session, keys.results(run_id), encode_message(sub), ResultAck)
             for ack in acks:
                 self._apply(run_id, ack.verdicts)
-            if refused and not acks:
+            if acks and run_id == self._current_run():
+                self._last_heard = time.monotonic()
+            if not acks and self.exit_when_done and run_id in self._done_runs:
+                # Its coordinator said done or fell silent for --coordinator-timeout: nobody will take them.
+                log.warning("run %s is over; %d results it never acknowledged are dropped", run_id, len(pending))
+                pending.clear()
+            elif refused and not acks:
                 # The coordinator answered but refused the batch: resending it would loop forever.
                 log.error("run %s refused %d results; dropping them (their leases will expire)",
                           run_id, len(pending))
                 pending.clear()
         return not any(pending for run_id, pending in self._pending.items() if run_id != skip)
+
+    def _current_run(self) -> str | None:
+        return self.run_id if self.run_id is not None else self._current
+
+    def _silent(self) -> bool:
+        """With --exit-when-done: the current run's coordinator has not answered for the timeout."""
+        return self.exit_when_done and time.monotonic() - self._last_heard >= self.coordinator_timeout_s
 
     def _run_one(self, evaluate: Evaluator, a: TrialAssignment) -> TrialResult:
         t0 = time.perf_counter()
@@ -314,25 +212,35 @@ class WorkerService:
     def _open(self) -> zenoh.Session | None:
         """A client session opens only once its router is reachable: retry with back-off until stopped."""
         backoff = Backoff(0.1, 2.0)
-        since, told = time.monotonic(), False
+        since, told = time.monotonic(), ""
+        where = ", ".join(self._conf_args[0]) or "the configured endpoints"
         while not self.stop.is_set():
             try:
                 return zenoh.open(zenoh_config(*self._conf_args))  # a config is used up by open
             except zenoh.ZError as exc:
                 log.info("coordinator not reachable yet (%s); retrying", exc)
-                if not told and time.monotonic() - since >= UNREACHABLE_WARN_S:
-                    where = ", ".join(self._conf_args[0]) or "the configured endpoints"
-                    log.warning("cannot reach a coordinator at %s; still trying (Ctrl-C to stop)", where)
-                    told = True
+                if time.monotonic() - since >= UNREACHABLE_WARN_S:
+                    listening = listening_endpoints(self._conf_args[0])
+                    state = "refused" if listening else "unreachable"
+                    if state == "refused" and told != state:
+                        log.error("refused by %s: it accepts connections but not this worker's Zenoh session "
+                                  "(missing or wrong --credentials, or TLS settings that do not match)",
+                                  ", ".join(listening))
+                    elif state != told:
+                        log.warning("cannot reach a coordinator at %s; still trying (Ctrl-C to stop)", where)
+                    told = state
+                    if state == "refused" and self.exit_when_done:
+                        self.exit_code = EXIT_REFUSED
+                        return None
                 self.stop.wait(backoff.next())
         return None
 
     def run(self) -> int:
         session = self._open()
         if session is None:
-            return 0
+            return self.exit_code
         token = session.liveliness().declare_token(keys.worker_token(self.worker_id))
-        _mark_ready(self.worker_id)
+        mark_ready(self.worker_id)
         try:
             self._loop(session)
         finally:
@@ -365,7 +273,7 @@ class WorkerService:
             if not grants:
                 if refused and carried:
                     self._submit(session)  # let the result path decide what to do with them
-                if self.exit_when_done and time.monotonic() - self._last_heard >= self.coordinator_timeout_s:
+                if self._silent():
                     log.warning("the coordinator of run %s has been silent for %.0f s: its run is over here",
                                 run_id, time.monotonic() - self._last_heard)
                     self._done_runs.add(run_id)
@@ -400,8 +308,8 @@ class WorkerService:
             pending = self._pending.setdefault(run_id, {})
             last_submit = time.monotonic()
             for a in grant.assignments:
-                if self.stop.is_set():
-                    break
+                if self.stop.is_set() or self._silent():
+                    break  # a coordinator silent this long is gone: its leases are void
                 t0 = time.perf_counter()
                 pending[a.trial_id] = SubmittedResult(a.lease_id, self._run_one(evaluate, a))
                 self.batch.observe(time.perf_counter() - t0)

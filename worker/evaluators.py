@@ -1,0 +1,77 @@
+"""Evaluators: a run's config turned into a function of one leased trial (physics, or the test objective)."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import time
+from collections.abc import Callable
+
+import numpy as np
+from spinefarm.protocol.errors import RunMismatchError
+from spinefarm.protocol.messages import TrialAssignment, TrialResult, TrialStatus
+from spinefarm.protocol.params import ParamSpace
+from spinefarm.protocol.run import RunConfig
+
+Evaluator = Callable[[TrialAssignment], TrialResult]
+
+
+def sphere_result(space: ParamSpace, a: TrialAssignment, delay_s: float = 0.0) -> TrialResult:
+    """The built-in test objective: no physics, a smooth bowl with its top at x_i = 0.3.
+
+    delay_s: wall time the trial takes (sleeping), to stand in for a physics trial in fault tests.
+    """
+    t0 = time.perf_counter()
+    x = space.from_unit(np.asarray(a.params_unit))
+    if delay_s > 0:
+        time.sleep(delay_s)
+    distance_m = float(len(x) - np.sum((x - 0.3) ** 2))
+    work_j = float(np.sum(x**2))
+    return TrialResult(TrialStatus.COMPLETE, "", distance_m, 100.0 * distance_m, 10.0 * distance_m, work_j,
+                       work_j / (9.81 * distance_m) if distance_m > 0 else float("inf"), 10.0,
+                       time.perf_counter() - t0, 1.0, a.seed)
+
+
+def build_evaluator(config: RunConfig) -> Evaluator:
+    """Turn a run object into a function of one assignment. The robot, its parameter space and the
+    trial config are built from the run's own data (never looked up by name) and must reproduce the
+    run's hashes; otherwise RunMismatchError says which part differs."""
+    space = config.space()
+    if config.is_test_objective:  # the test objective, see coordinator.problem
+        if re.fullmatch(r"sphere(:\d+)?", config.morphology) is None:
+            raise RunMismatchError("run has no morphology spec", received=config.morphology,
+                                   expected="a morphology spec, or the test objective sphere[:N]")
+        delay_s = float(config.trial_config.get("duration_s") or 0.0)
+        return lambda a: sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s)
+    from spinefarm.robot.morphology.model import Morphology
+    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial import TrialConfig, run_trial
+
+    morphology = Morphology.from_dict(config.morphology_spec)
+    trial_config = TrialConfig.from_dict(config.trial_config)
+    built = {"spec_hash": morphology.spec_hash(),
+             "space_hash": morphology.param_space(config.controller).space_hash(),
+             "trial_config_hash": trial_config.config_hash()}
+    for name, value in built.items():
+        if getattr(config, name) != value:
+            raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
+                                   "version?)", received=value, expected=getattr(config, name))
+    from spinefarm.worker.engines.base import engine_class
+
+    # a missing engine package or an option the engine does not have fails here, not in every trial
+    engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
+    setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
+
+    def evaluate(a: TrialAssignment) -> TrialResult:
+        # a multi-fidelity rung asks for its own duration; everything else is the run's
+        cfg = trial_config if a.duration_s is None else dataclasses.replace(trial_config, duration_s=a.duration_s)
+        return run_trial(morphology, np.asarray(a.params_unit, dtype=float), cfg, a.seed,
+                         controller=config.controller, setup=setup)
+
+    return evaluate
+
+
+def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:
+    nan = float("nan")
+    return TrialResult(TrialStatus.FAILED, reason[:150], nan, nan, nan, nan, nan, 0.0, wall_time_s, nan,
+                       a.seed)
