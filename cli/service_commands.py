@@ -144,6 +144,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "--coordinator-timeout seconds (it ended while this worker was frozen or cut off)")
     p.add_argument("--coordinator-timeout", type=float, default=30.0, metavar="S",
                    help="seconds of silence after which --exit-when-done gives a run up (default 30)")
+    p.add_argument("--min-trial-limit", type=float, default=30.0, metavar="S",
+                   help="a trial's wall-clock limit is max(S, 8 x its measured cost), 10 S before one is measured; "
+                        "past it the trial fails (timeout) and the worker goes on (default 30)")
     _zenoh_args(p, None)
     p.set_defaults(func=cmd_worker)
 
@@ -424,7 +427,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
     service = WorkerService(connect=args.connect or (), run_id=args.run_id, worker_id=args.worker_id,
                             batch=args.batch, listen=args.listen or (), zenoh_config_file=args.zenoh_config,
                             exit_when_done=args.exit_when_done, coordinator_timeout_s=args.coordinator_timeout,
-                            credentials_file=args.credentials)
+                            credentials_file=args.credentials, min_trial_limit_s=args.min_trial_limit)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: service.stop.set())
     return service.run()

@@ -86,6 +86,7 @@ RECORDED_EXTRAS: tuple[ExtraPart, ...] = (
     ExtraPart("engine", "S16", "", "physics engine that ran the trial (bullet, mujoco)"),
     ExtraPart("dt_s", "f8", "s", "physics step the trial used (the automatic choice under --dt auto)"),
     ExtraPart("settle_s", "f8", "s", "settle phase before locomotion was scored (0: scored from the start)"),
+    ExtraPart("time_limit_s", "f8", "s", "wall-clock limit the worker gave the trial (past it: failed, timeout)"),
 )
 
 
@@ -405,6 +406,7 @@ class Verdict(StrEnum):
     STALE = "stale"            # the lease expired or the trial was re-issued: dropped
     UNKNOWN = "unknown"        # no such trial in this run: dropped
     INVALID = "invalid"        # the result does not fit the trial (e.g. seed mismatch): dropped
+    REQUEUED = "requeued"      # timed out or crashed on its worker: issued again (up to 3 attempts in all)
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from spinefarm.protocol.messages import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, STORED_STATUSES, Verification
 
-FILE_SCHEMA_VERSION = 5
+FILE_SCHEMA_VERSION = 6
 
 PHASES = ("monte_carlo", "gaussian", "cmaes", "tpe", "promoted")
 STATUSES = tuple(s.value for s in STORED_STATUSES)
@@ -133,6 +133,7 @@ class TrialRecord:
     rung: int = 0
     duration_s: float = float("nan")
     settle_s: float = float("nan")
+    time_limit_s: float = float("nan")
     pareto_front: int = 0
 
     @classmethod

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import re
+import signal
 import time
 from collections.abc import Callable
 
@@ -13,7 +15,7 @@ from spinefarm.protocol.messages import TrialAssignment, TrialResult, TrialStatu
 from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.run import RunConfig
 
-Evaluator = Callable[[TrialAssignment], TrialResult]
+Evaluator = Callable[[TrialAssignment], TrialResult | None]  # None: abandoned (the worker is stopping)
 
 
 def sphere_result(space: ParamSpace, a: TrialAssignment, delay_s: float = 0.0) -> TrialResult:
@@ -32,6 +34,29 @@ def sphere_result(space: ParamSpace, a: TrialAssignment, delay_s: float = 0.0) -
                        time.perf_counter() - t0, 1.0, a.seed)
 
 
+def _poison_bands(spec: object) -> dict[str, tuple[float, float]]:
+    """The test objective's fault bands, {"hang": [lo, hi], "crash": [lo, hi]} on the first unit parameter:
+    a trial there hangs (sleeps for ever) or crashes its process (SIGSEGV), for fault tests and the soak."""
+    if spec is None:
+        return {}
+    ok = isinstance(spec, dict) and set(spec) <= {"hang", "crash"} and all(
+        isinstance(v, list | tuple) and len(v) == 2 and all(isinstance(x, int | float) for x in v)
+        for v in spec.values())
+    if not ok:
+        raise RunMismatchError("bad poison bands of the test objective", received=repr(spec)[:80],
+                               expected='{"hang": [lo, hi], "crash": [lo, hi]} on the first unit parameter')
+    return {k: (float(v[0]), float(v[1])) for k, v in spec.items()}
+
+
+def _poisoned(bands: dict[str, tuple[float, float]], a: TrialAssignment) -> None:
+    u0 = a.params_unit[0] if a.params_unit else -1.0
+    if "crash" in bands and bands["crash"][0] <= u0 < bands["crash"][1]:
+        os.kill(os.getpid(), signal.SIGSEGV)
+    if "hang" in bands and bands["hang"][0] <= u0 < bands["hang"][1]:
+        while True:
+            time.sleep(3600.0)
+
+
 def build_evaluator(config: RunConfig) -> Evaluator:
     """Turn a run object into a function of one assignment. The robot, its parameter space and the
     trial config are built from the run's own data (never looked up by name) and must reproduce the
@@ -42,7 +67,13 @@ def build_evaluator(config: RunConfig) -> Evaluator:
             raise RunMismatchError("run has no morphology spec", received=config.morphology,
                                    expected="a morphology spec, or the test objective sphere[:N]")
         delay_s = float(config.trial_config.get("duration_s") or 0.0)
-        return lambda a: sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s)
+        poison = _poison_bands(config.trial_config.get("poison"))
+
+        def sphere(a: TrialAssignment) -> TrialResult:
+            _poisoned(poison, a)
+            return sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s)
+
+        return sphere
     from spinefarm.robot.morphology.model import Morphology
     from spinefarm.worker.setup import SetupCache
     from spinefarm.worker.trial import TrialConfig, run_trial

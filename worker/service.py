@@ -42,6 +42,7 @@ from spinefarm.worker.pacing import (
     listening_endpoints,
     mark_ready,
 )
+from spinefarm.worker.sandbox import MIN_LIMIT_S, TrialLimit, TrialSandbox
 
 __all__ = ["Backoff", "BatchSizer", "WorkerService", "build_evaluator", "default_worker_id", "sphere_result",
            "zenoh_config"]
@@ -82,13 +83,19 @@ class WorkerService:
                  exit_when_done: bool = False, query_timeout_s: float = 5.0,
                  submit_interval_s: float = 1.0, idle_exit_s: float = 2.0,
                  coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S,
-                 credentials_file: str | Path | None = None) -> None:
+                 credentials_file: str | Path | None = None, isolate: bool = True,
+                 min_trial_limit_s: float = MIN_LIMIT_S) -> None:
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
         self.run_id = keys.check_run_id(run_id) if run_id else None
         if batch is not None and not 1 <= batch <= 4096:
             raise ConfigError("batch out of range", received=batch, expected="1 <= batch <= 4096, or auto")
         self.batch = BatchSizer(batch)
         self.exit_when_done = exit_when_done
+        self.isolate = isolate   # trials in a child process under a wall-clock limit (worker.sandbox)
+        if not min_trial_limit_s > 0:
+            raise ConfigError("minimum trial limit out of range", received=min_trial_limit_s, expected="seconds > 0")
+        self.min_trial_limit_s = min_trial_limit_s
+        self._sandboxes: list[TrialSandbox] = []
         self.query_timeout_s = query_timeout_s
         self.submit_interval_s = submit_interval_s
         self.idle_exit_s = idle_exit_s
@@ -148,13 +155,22 @@ class WorkerService:
             if not configs:
                 return None
             try:
-                self._evaluators[config_hash] = build_evaluator(configs[0])
+                self._evaluators[config_hash] = self._build(configs[0])
             except Exception as exc:  # a spec this worker cannot build: say so, serve nothing of it
                 reason = str(exc) if isinstance(exc, SpinefarmError) else f"{type(exc).__name__}: {exc}"
                 log.error("cannot run trials of run %s: %s", run_id, reason)
                 self._report_problem(session, run_id, reason, lease)
                 return None
         return self._evaluators[config_hash]
+
+    def _build(self, config: RunConfig) -> Evaluator:
+        """In a trial process with a wall-clock limit per trial (worker.sandbox), or in this one."""
+        if not self.isolate:
+            return build_evaluator(config)
+        sandbox = TrialSandbox(config, TrialLimit(self.min_trial_limit_s), self.stop)
+        self._sandboxes.append(sandbox)
+        sandbox.start()
+        return sandbox.run
 
     def _report_problem(self, session: zenoh.Session, run_id: str, reason: str, lease: TrialAssignment) -> None:
         self.unservable[run_id] = reason
@@ -197,10 +213,12 @@ class WorkerService:
         """With --exit-when-done: the current run's coordinator has not answered for the timeout."""
         return self.exit_when_done and time.monotonic() - self._last_heard >= self.coordinator_timeout_s
 
-    def _run_one(self, evaluate: Evaluator, a: TrialAssignment) -> TrialResult:
+    def _run_one(self, evaluate: Evaluator, a: TrialAssignment) -> TrialResult | None:
         t0 = time.perf_counter()
         try:
             result = evaluate(a)
+            if result is None:  # stopping: the trial was abandoned, its lease will expire
+                return None
         except SpinefarmError as exc:
             result = failed_result(a, f"error: {exc}", time.perf_counter() - t0)
         except Exception as exc:  # a bug in one trial must not take the worker down
@@ -245,6 +263,8 @@ class WorkerService:
             self._loop(session)
         finally:
             self._submit(session)
+            for sandbox in self._sandboxes:
+                sandbox.close()
             token.undeclare()
             session.close()
         return self.exit_code
@@ -311,7 +331,10 @@ class WorkerService:
                 if self.stop.is_set() or self._silent():
                     break  # a coordinator silent this long is gone: its leases are void
                 t0 = time.perf_counter()
-                pending[a.trial_id] = SubmittedResult(a.lease_id, self._run_one(evaluate, a))
+                result = self._run_one(evaluate, a)
+                if result is None:
+                    break
+                pending[a.trial_id] = SubmittedResult(a.lease_id, result)
                 self.batch.observe(time.perf_counter() - t0)
                 self.trials_run += 1
                 if time.monotonic() - last_submit >= self.submit_interval_s:
