@@ -107,3 +107,16 @@ def test_export_of_a_damaged_file_gives_one_line(files, tmp_path):
     r = subprocess.run([sys.executable, "-m", "spinefarm", "export", str(bad), "--csv", str(tmp_path / "x.csv")],
                        cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert r.returncode != 0 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_a_405_names_what_is_allowed_and_trials_csv_is_documented_as_csv(files):
+    from fastapi.testclient import TestClient
+    from spinefarm.api.app import create_app
+
+    good, _ = files
+    with TestClient(create_app([good])) as c:
+        r = c.post("/runs")
+        assert r.status_code == 405 and r.headers.get("allow") == "GET", dict(r.headers)
+        spec = c.get("/openapi.json").json()
+        content = spec["paths"]["/runs/{run_id}/trials.csv"]["get"]["responses"]["200"]["content"]
+        assert list(content) == ["text/csv"], content
