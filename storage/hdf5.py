@@ -20,6 +20,7 @@ import json
 import os
 import re
 import stat
+import sys
 from collections.abc import Callable
 from dataclasses import fields, replace
 from pathlib import Path
@@ -246,8 +247,11 @@ class Hdf5Storage(InMemoryStorage):
                     os.fsync(fh.fileno())
                 lock.bind(tmp)  # held on the new file before it takes the name
                 os.replace(tmp, real)  # atomic: the old file stays intact until the new one is complete
-            except BaseException:
+            except BaseException as exc:
                 tmp.unlink(missing_ok=True)
+                if isinstance(exc, OSError):
+                    raise StorageError(f"cannot write the resumed copy of {path}: {_reason(exc)}",
+                                       expected="room for a copy of the run file beside it") from exc
                 raise
             _fsync_dir(real)
             table = TrialTable(meta.n_params, capacity=max(1024, len(cols["trial_id"])))
@@ -305,6 +309,7 @@ class Hdf5Storage(InMemoryStorage):
             self._write_dirty()
         except Exception as exc:
             self.write_error = f"cannot write run file {self.path}: {_reason(exc)}"
+            _quiet_failed_deallocs()
             raise StorageError(self.write_error, expected="a working, writable file system with free space") from exc
 
     def _write_dirty(self) -> None:
@@ -400,6 +405,29 @@ def _fsync_dir(path: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+def _quiet_failed_deallocs() -> None:
+    """After a failed write HDF5 retries the write whenever h5py frees an object of the file, and h5py
+    prints each failure as a 'Can't decrement id ref count' traceback (through sys.excepthook, then as
+    'Exception ignored'). The error is reported once (write_error); these repeats of it are dropped,
+    every other exception still printed."""
+    if getattr(sys.unraisablehook, "__name__", "") == "quiet_h5py_deallocs":
+        return
+    unraisable_hook, except_hook = sys.unraisablehook, sys.excepthook
+
+    def _repeat(exc: BaseException | None) -> bool:
+        return isinstance(exc, RuntimeError) and "decrement id ref count" in str(exc)
+
+    def quiet_h5py_deallocs(unraisable: Any) -> None:
+        if not _repeat(unraisable.exc_value):
+            unraisable_hook(unraisable)
+
+    def quiet_h5py_tracebacks(kind: type[BaseException], value: BaseException, tb: Any) -> None:
+        if not _repeat(value):
+            except_hook(kind, value, tb)
+
+    sys.unraisablehook, sys.excepthook = quiet_h5py_deallocs, quiet_h5py_tracebacks
 
 
 def _refuse_read_only(path: Path) -> None:

@@ -17,6 +17,7 @@ The sidecar stays in place: deleting a lock file races with its next taker.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import struct
@@ -86,8 +87,9 @@ class RunLock:
         except BaseException:
             self.release()
             raise
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        with contextlib.suppress(OSError):  # the holder's pid is for messages only (a full disk may refuse it)
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         return self
 
     def bind(self, file_path: str | Path) -> None:
