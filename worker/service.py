@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import threading
 import time
 from collections.abc import Sequence
@@ -96,6 +97,10 @@ class WorkerService:
             raise ConfigError("minimum trial limit out of range", received=min_trial_limit_s, expected="seconds > 0")
         self.min_trial_limit_s = min_trial_limit_s
         self._sandboxes: list[TrialSandbox] = []
+        # SPINEFARM_ACK_LOG: one line per verdict received (run, trial, verdict, status, distance), for the
+        # fault benches to count lost and duplicated results against what the coordinator acknowledged
+        ack_log = os.environ.get("SPINEFARM_ACK_LOG")
+        self._ack_log = open(ack_log, "a", buffering=1) if ack_log else None  # noqa: SIM115 (lives with the worker)
         self.query_timeout_s = query_timeout_s
         self.submit_interval_s = submit_interval_s
         self.idle_exit_s = idle_exit_s
@@ -182,8 +187,13 @@ class WorkerService:
     def _apply(self, run_id: str, verdicts: tuple) -> None:
         pending = self._pending.get(run_id, {})
         for trial_id, verdict in verdicts:
-            if pending.pop(trial_id, None) is not None and verdict.value != "stored":
+            item = pending.pop(trial_id, None)
+            if item is not None and verdict.value != "stored":
                 log.info("trial %d of run %s not stored: %s", trial_id, run_id, verdict.value)
+            if item is not None and self._ack_log is not None:
+                self._ack_log.write(f"{run_id} {trial_id} {verdict.value} {item.result.status} "
+                                    f"{item.result.distance_m!r}\n")
+                self._ack_log.flush()
 
     def _submit(self, session: zenoh.Session, skip: str | None = None) -> bool:
         """Send every unacknowledged result (but those of run `skip`); True if nothing is left pending."""
@@ -231,7 +241,7 @@ class WorkerService:
     def _open(self) -> zenoh.Session | None:
         """A client session opens only once its router is reachable: retry with back-off until stopped."""
         backoff = Backoff(0.1, 2.0)
-        since, told = time.monotonic(), ""
+        since, told, refused_since = time.monotonic(), "", time.monotonic()
         where = ", ".join(self._conf_args[0]) or "the configured endpoints"
         while not self.stop.is_set():
             try:
@@ -242,13 +252,18 @@ class WorkerService:
                     listening = listening_endpoints(self._conf_args[0])
                     state = "refused" if listening else "unreachable"
                     if state == "refused" and told != state:
+                        refused_since = time.monotonic()
                         log.error("refused by %s: it accepts connections but not this worker's Zenoh session "
                                   "(missing or wrong --credentials, or TLS settings that do not match)",
                                   ", ".join(listening))
                     elif state != told:
                         log.warning("cannot reach a coordinator at %s; still trying (Ctrl-C to stop)", where)
                     told = state
-                    if state == "refused" and self.exit_when_done:
+                    # a proxy in front of a restarting coordinator refuses for a few seconds too: give up only
+                    # after --coordinator-timeout of refusals
+                    if (state == "refused" and self.exit_when_done
+                            and time.monotonic() - refused_since >= self.coordinator_timeout_s):
+                        log.error("giving up (--exit-when-done): refused for %.0f s", time.monotonic() - refused_since)
                         self.exit_code = EXIT_REFUSED
                         return None
                 self.stop.wait(backoff.next())

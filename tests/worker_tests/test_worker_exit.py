@@ -54,7 +54,7 @@ def test_a_refused_worker_says_so_and_exit_when_done_stops_it(tmp_path):
     try:
         wait_status(out, lambda st: st["state"] == "running", "the coordinator")
         exits = spinefarm_err("worker", "--connect", ep, "--run", "locked", "--credentials", str(wrong),
-                              "--exit-when-done")
+                              "--exit-when-done", "--coordinator-timeout", "4")
         stays = spinefarm_err("worker", "--connect", ep, "--run", "locked")
         _, err = exits.communicate(timeout=30)
         assert exits.returncode == 4 and "refused by" in err and "credentials" in err, err
