@@ -120,3 +120,29 @@ def test_a_405_names_what_is_allowed_and_trials_csv_is_documented_as_csv(files):
         spec = c.get("/openapi.json").json()
         content = spec["paths"]["/runs/{run_id}/trials.csv"]["get"]["responses"]["200"]["content"]
         assert list(content) == ["text/csv"], content
+
+
+_KILLED_WRITER = """
+import os, sys
+from tests.coordinator_tests.helpers import sphere_core
+from tests.coordinator_tests.test_core import ask, res, submit
+core, storage, _ = sphere_core(trials=12, out=sys.argv[1])
+grant = ask(core, n=12)
+submit(core, [(a.lease_id, res(a)) for a in grant.assignments])
+assert core.done
+os._exit(0)  # as a SIGKILL after the last result: the file is never closed
+"""
+
+
+def test_a_finished_file_of_a_killed_coordinator_opens_plain_once_spinefarm_has_read_it(tmp_path):
+    path = tmp_path / "run.h5"
+    r = subprocess.run([sys.executable, "-c", _KILLED_WRITER, str(path)], cwd=ROOT, capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0, r.stderr
+    with pytest.raises(OSError):
+        h5py.File(path, "r").close()  # "already open for write": HDF5's flags of the killed writer
+    import spinefarm
+
+    assert len(spinefarm.load_run(path)) == 12
+    with h5py.File(path, "r") as f:
+        assert f["trials"]["status"].shape[0] >= 12
