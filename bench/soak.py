@@ -2,8 +2,8 @@
 
 --minutes sizes the budget (about 3.5 parameter sets a second on 2 shared cores); faults go on until the
 run is over: worker SIGKILLs and SIGSTOPs (3-8 s), coordinator SIGKILLs, each
-process restarted automatically when it fails (as compose's `restart: on-failure` does; a worker that
-exits 0 was told the run is done; nothing is restarted by hand), hang- and crash-poison trials (the
+process restarted automatically whenever it exits before the run is over (as compose's restart policies
+do; nothing is restarted by hand), hang- and crash-poison trials (the
 test objective's fault bands: a trial there sleeps for ever or segfaults its trial process), a forging
 peer (results for leases it was never given, also under other workers' ids) and a 10 s network
 partition of two workers (network namespaces, tests/netns.py; without root the workers share loopback
@@ -45,6 +45,7 @@ FORGED_M = 1234.5
 RUNGS_S = (0.1, 0.3)        # test-objective trials take their duration in wall time
 PARTITION_S = 10.0
 N_WORKERS = 4
+COORDINATOR_TIMEOUT_S = 60   # a restarted coordinator validates and rewrites its file: slow under load
 
 
 def make_run(path: Path, run_id: str, trials: int, seed: int) -> None:
@@ -133,7 +134,8 @@ def start_processes(net: Net, path: Path, run_id: str, tmp: Path) -> tuple[Proc,
         wenv = dict(env, SPINEFARM_ACK_LOG=str(tmp / f"acks-w{i}.log"))
         workers.append(Proc(f"w{i}", [*prefix, sys.executable, "-m", "spinefarm", "worker", "--connect", ep,
                                       "--run", run_id, "--worker-id", f"w{i}", "--exit-when-done",
-                                      "--coordinator-timeout", "20", "--min-trial-limit", "0.5"],
+                                      "--coordinator-timeout", str(COORDINATOR_TIMEOUT_S), "--min-trial-limit",
+                                      "0.5"],
                             wenv, tmp / f"w{i}.log"))
     return coord, workers
 
@@ -187,7 +189,13 @@ def inject(kind: str, rng: random.Random, coord: Proc, workers: list[Proc], net:
     return None
 
 
-def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int) -> dict:
+def run_done(path: Path) -> bool:
+    from spinefarm.storage.status import read_status
+
+    return (read_status(path) or {}).get("state") == "done"
+
+
+def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int, path: Path) -> dict:
     """Run the fault schedule until the coordinator exits 0 (the run is done), restarting whatever dies."""
     rng = random.Random(seed)
     t0 = time.monotonic()
@@ -206,9 +214,10 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int)
         if code is not None:
             counts["unexpected_coordinator_exits"] += coord.restart()
             coordinator_restarts += 1
+        done = run_done(path)
         for w in workers:
-            w.resume_if_due(now)
-            if w.proc.poll() not in (None, 0):  # restart on failure; 0: it was told the run is done
+            w.resume_if_due(now, force=done)  # frozen workers hear "done" before the coordinator leaves
+            if w.proc.poll() is not None and not done:  # restarted unless the run is over
                 counts["unexpected_worker_exits"] += w.restart()
                 worker_restarts += 1
         if heal_at is not None and now >= heal_at:
@@ -219,9 +228,9 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int)
                 heal_at = inject(kind, rng, coord, workers, net, now, counts, forger) or heal_at
                 del once[kind]
         if now >= next_fault:  # faults until the run is over
-            kind = rng.choices(["worker_kill", "worker_stop", "coordinator_kill"], [3, 3, 2])[0]
+            kind = rng.choices(["worker_kill", "worker_stop", "coordinator_kill"], [3, 3, 1])[0]
             inject(kind, rng, coord, workers, net, now, counts, forger)
-            next_fault = now + rng.uniform(3.0, 9.0)
+            next_fault = now + rng.uniform(4.0, 10.0)
         if now > hard_end:
             return {"timed_out": True, "faults": dict(counts)}
         time.sleep(0.05)
@@ -233,7 +242,7 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int)
             "coordinator_restarts": coordinator_restarts, "worker_restarts": worker_restarts}
 
 
-def finish(workers: list[Proc], timeout_s: float = 60.0) -> list[str]:
+def finish(workers: list[Proc], timeout_s: float = COORDINATOR_TIMEOUT_S + 30.0) -> list[str]:
     """Once the run is over every worker must exit by itself; the names of those that did not."""
     for w in workers:
         w.resume_if_due(0.0, force=True)
@@ -285,7 +294,7 @@ def soak(minutes: float, seed: int, workdir: Path, netns: bool = True) -> dict:
     try:
         coord, workers = start_processes(net, path, run_id, workdir)
         try:
-            out = drive(coord, workers, net, minutes, seed)
+            out = drive(coord, workers, net, minutes, seed, path)
         finally:
             hung = finish(workers)
             if coord.proc.poll() is None:
@@ -308,6 +317,7 @@ def main() -> None:
     ap.add_argument("--no-netns", action="store_true", help="all on loopback, no partition")
     ap.add_argument("--forge", nargs=2, metavar=("ENDPOINT", "RUN_ID"), help=argparse.SUPPRESS)
     args = ap.parse_args()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # a stopped soak still deletes its namespaces
     if args.forge:
         forge(args.forge[0], args.forge[1], 300)
         return
