@@ -341,18 +341,23 @@ class WorkerService:
                 self.stop.wait(backoff.next())
                 continue
             backoff.reset()
-            pending = self._pending.setdefault(run_id, {})
-            last_submit = time.monotonic()
-            for a in grant.assignments:
-                if self.stop.is_set() or self._silent():
-                    break  # a coordinator silent this long is gone: its leases are void
-                t0 = time.perf_counter()
-                result = self._run_one(evaluate, a)
-                if result is None:
-                    break
-                pending[a.trial_id] = SubmittedResult(a.lease_id, result)
-                self.batch.observe(time.perf_counter() - t0)
-                self.trials_run += 1
-                if time.monotonic() - last_submit >= self.submit_interval_s:
-                    self._submit(session)
-                    last_submit = time.monotonic()
+            self._run_batch(session, run_id, evaluate, grant.assignments)
+
+    def _run_batch(self, session: zenoh.Session, run_id: str, evaluate: Evaluator,
+                   assignments: tuple[TrialAssignment, ...]) -> None:
+        """Run a grant's trials in order, handing results in every submit_interval_s."""
+        pending = self._pending.setdefault(run_id, {})
+        last_submit = time.monotonic()
+        for a in assignments:
+            if self.stop.is_set() or self._silent():
+                break  # a coordinator silent this long is gone: its leases are void
+            t0 = time.perf_counter()
+            result = self._run_one(evaluate, a)
+            if result is None:
+                break
+            pending[a.trial_id] = SubmittedResult(a.lease_id, result)
+            self.batch.observe(time.perf_counter() - t0)
+            self.trials_run += 1
+            if time.monotonic() - last_submit >= self.submit_interval_s:
+                self._submit(session)
+                last_submit = time.monotonic()
