@@ -15,6 +15,8 @@ PARALLEL_PROBES = 4
 
 
 def _probe_or_error(path: Path) -> tuple[str, StorageError | None]:
+    if not path.is_file():
+        return "", StorageError("no such file", received=str(path), expected="an existing run file")
     try:
         return probe(path, PROBE_TIMEOUT_S), None
     except StorageError as exc:
