@@ -281,6 +281,8 @@ def audit(path: Path, tmp: Path, budget: int) -> dict:
             "failed_timeout": sum(r.startswith("timeout:") for r in reasons),
             "failed_crashed": sum(r.startswith("crashed:") for r in reasons),
             "failed_lost_worker": sum(r.startswith("lost its worker") for r in reasons),
+            "failed_outside_bands": sum(1 for i, s in enumerate(status)
+                                        if s == "failed" and cols["params_unit"][i, 0] >= POISON["crash"][1]),
             "acknowledged": sum(stored.values()), "lost": lost,
             "duplicated": sum(c - 1 for c in stored.values() if c > 1), "forged_complete": forged,
             "exact_budget": int((cols["rung"] == 0).sum()) == budget and "waiting" not in status}
@@ -303,7 +305,7 @@ def soak(minutes: float, seed: int, workdir: Path, netns: bool = True) -> dict:
     finally:
         net.close()
     out.update(audit(path, workdir, budget))
-    out.update({"minutes_of_faults": minutes, "seed": seed, "workers": N_WORKERS, "rungs_s": list(RUNGS_S),
+    out.update({"minutes": minutes, "seed": seed, "workers": N_WORKERS, "rungs_s": list(RUNGS_S),
                 "poison_bands": POISON, "hung_processes": hung,
                 "network": "namespaces" if net.hosts is not None else f"loopback (partition skipped: {net.why_not})"})
     return out

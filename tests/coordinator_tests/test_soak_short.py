@@ -25,5 +25,6 @@ def test_a_short_soak_reaches_its_exact_budget_through_every_fault(tmp_path):
     assert faults["unexpected_coordinator_exits"] == 0 and faults["unexpected_worker_exits"] == 0, out
     assert faults.get("coordinator_kill", 0) >= 1 and faults.get("forge") == 1, out
     assert out["failed_timeout"] >= 1 and out["failed_crashed"] >= 1, out  # the poison bands were hit
+    assert out["failed_outside_bands"] == 0, out
     if netns:
         assert faults.get("partition") == 1, out
