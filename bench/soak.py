@@ -97,6 +97,7 @@ class Proc:
         self.stopped_until: float | None = None
         self.run_id = ""
         self.killed = False   # by the schedule: its next exit is expected
+        self.exited_at = 0.0  # when it exited 0 (it was told the run is over)
         self.start()
 
     def start(self) -> None:
@@ -200,7 +201,8 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
     rng = random.Random(seed)
     t0 = time.monotonic()
     hard_end = t0 + 60.0 * minutes * 4 + 300.0
-    once = {"forge": t0 + 0.2 * 60.0 * minutes, "partition": t0 + 0.5 * 60.0 * minutes}
+    once = {"forge": t0 + 0.2 * 60.0 * minutes, "coordinator_kill": t0 + 0.35 * 60.0 * minutes,
+            "partition": t0 + 0.5 * 60.0 * minutes}   # each at least once, also in a short soak
     next_fault = t0 + rng.uniform(2.0, 5.0)
     counts: Counter = Counter(unexpected_coordinator_exits=0, unexpected_worker_exits=0)
     forger: list = []
@@ -217,9 +219,13 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
         done = run_done(path)
         for w in workers:
             w.resume_if_due(now, force=done)  # frozen workers hear "done" before the coordinator leaves
-            if w.proc.poll() is not None and not done:  # restarted unless the run is over
+            code = w.proc.poll()
+            if code == 0 and not w.killed:  # told the run is over: restarted only if it is not, 10 s on
+                w.exited_at = w.exited_at or now
+            if code is not None and not done and (code != 0 or w.killed or now - w.exited_at > 10.0):
                 counts["unexpected_worker_exits"] += w.restart()
                 worker_restarts += 1
+                w.exited_at = 0.0
         if heal_at is not None and now >= heal_at:
             net.cut(False)
             heal_at = None
