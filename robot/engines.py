@@ -84,6 +84,7 @@ class EngineSpec:
     options: tuple[EngineOption, ...]
     abilities: frozenset[str] = field(default_factory=frozenset)
     summary: str = ""
+    package: str = ""  # the Python package the backend needs (looked for without importing it)
 
     def option(self, name: str) -> EngineOption:
         for o in self.options:
@@ -117,7 +118,7 @@ ENGINES: dict[str, EngineSpec] = {spec.name: spec for spec in (
         EngineOption("cone_friction", _B, False),
         _GRAVITY,
         EngineOption("friction_anchor", _B, True),
-    ), frozenset({"velocities"}), "pybullet, the judge: hard contacts, 1 ms default step"),
+    ), frozenset({"velocities"}), "pybullet, the judge: hard contacts, 1 ms default step", "pybullet"),
     EngineSpec("mujoco", "spinefarm.worker.engines.mujoco", "MujocoPhysics", 1e-3, (
         EngineOption("integrator", _S, "implicitfast", choices=("euler", "implicit", "implicitfast", "rk4")),
         EngineOption("cone", _S, "pyramidal", choices=("pyramidal", "elliptic")),
@@ -134,7 +135,7 @@ ENGINES: dict[str, EngineSpec] = {spec.name: spec for spec in (
         EngineOption("noslip_iterations", _I, 0, low=0, high=10_000),
         EngineOption("margin_cm", _F, 0.0, low=0.0, high=10.0),
         _GRAVITY,
-    ), frozenset({"reset", "velocities", "compiled_step"}), "MuJoCo, the fast screen: soft contacts"),
+    ), frozenset({"reset", "velocities", "compiled_step"}), "MuJoCo, the fast screen: soft contacts", "mujoco"),
 )}
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import re
 import signal
@@ -14,6 +13,7 @@ from spinefarm.protocol.errors import RunMismatchError
 from spinefarm.protocol.messages import TrialAssignment, TrialResult, TrialStatus
 from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.run import RunConfig
+from spinefarm.worker.tasks import physics_evaluator, with_fault
 
 Evaluator = Callable[[TrialAssignment], TrialResult | None]  # None: abandoned (the worker is stopping)
 
@@ -71,12 +71,11 @@ def build_evaluator(config: RunConfig) -> Evaluator:
 
         def sphere(a: TrialAssignment) -> TrialResult:
             _poisoned(poison, a)
-            return sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s)
+            return with_fault(sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s))
 
         return sphere
     from spinefarm.robot.morphology.model import Morphology
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import TrialConfig, run_trial
+    from spinefarm.worker.trial import TrialConfig
 
     morphology = Morphology.from_dict(config.morphology_spec)
     trial_config = TrialConfig.from_dict(config.trial_config)
@@ -87,19 +86,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
         if getattr(config, name) != value:
             raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
                                    "version?)", received=value, expected=getattr(config, name))
-    from spinefarm.worker.engines.base import engine_class
-
-    # a missing engine package or an option the engine does not have fails here, not in every trial
-    engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
-    setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
-
-    def evaluate(a: TrialAssignment) -> TrialResult:
-        # a multi-fidelity rung asks for its own duration; everything else is the run's
-        cfg = trial_config if a.duration_s is None else dataclasses.replace(trial_config, duration_s=a.duration_s)
-        return run_trial(morphology, np.asarray(a.params_unit, dtype=float), cfg, a.seed,
-                         controller=config.controller, setup=setup)
-
-    return evaluate
+    return physics_evaluator(morphology, trial_config, config.controller)
 
 
 def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:

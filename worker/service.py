@@ -44,6 +44,7 @@ from spinefarm.worker.pacing import (
     mark_ready,
 )
 from spinefarm.worker.sandbox import MIN_LIMIT_S, TrialLimit, TrialSandbox
+from spinefarm.worker.tasks import available_engines, environment
 
 __all__ = ["Backoff", "BatchSizer", "WorkerService", "build_evaluator", "default_worker_id", "sphere_result",
            "zenoh_config"]
@@ -84,9 +85,12 @@ class WorkerService:
                  exit_when_done: bool = False, query_timeout_s: float = 5.0,
                  submit_interval_s: float = 1.0, idle_exit_s: float = 2.0,
                  coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S,
-                 credentials_file: str | Path | None = None, isolate: bool = True,
-                 min_trial_limit_s: float = MIN_LIMIT_S) -> None:
+                 credentials_file: str | Path | None = None, engines: tuple[str, ...] | None = None,
+                 isolate: bool = True, min_trial_limit_s: float = MIN_LIMIT_S) -> None:
+        """engines: the engines this worker offers (default: every installed one)."""
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
+        self.engines = available_engines(engines)
+        self.environment = environment()
         self.run_id = keys.check_run_id(run_id) if run_id else None
         if batch is not None and not 1 <= batch <= 4096:
             raise ConfigError("batch out of range", received=batch, expected="1 <= batch <= 4096, or auto")
@@ -304,7 +308,8 @@ class WorkerService:
                 continue
             idle_since = None
             carried = tuple(self._pending.get(run_id, {}).values())
-            req = encode_message(WorkRequest(self.worker_id, self.batch.size(), carried))
+            req = encode_message(WorkRequest(self.worker_id, self.batch.size(), carried, self.engines,
+                                             self.environment))
             grants, refused = self._query(session, keys.work(run_id), req, WorkGrant)
             if not grants:
                 if refused and carried:

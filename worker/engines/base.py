@@ -16,6 +16,8 @@ trial loop (worker.loop) calls, per batch of trials:
                                   engine may split the run, or take a world out of `active` and put it in
                                   `retries` with the settings it must be run again in (from its start)
   close()                         free the worlds (also via `with`)
+Attributes every backend sets in __init__: n_worlds, n_bodies, dt_s, and retries = {} (world -> (engine options,
+result extras) of a world to run again; emptied by reset()).
 
 Optional abilities, declared in the engine's registry entry (spinefarm.robot.engines), never guessed:
   reset(start_offsets_cm)         "reset": back to the start pose at rest, the same state as fresh worlds
