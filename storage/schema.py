@@ -20,7 +20,7 @@ from spinefarm.protocol.messages import (
 )
 from spinefarm.protocol.settings import RunSettings
 
-FILE_SCHEMA_VERSION = 6
+FILE_SCHEMA_VERSION = 7
 
 # A sampler names its own phases: any short lower-case name is a valid phase (no list to extend here).
 PHASE_PATTERN = rb"^[a-z][a-z0-9_]{0,15}$"
