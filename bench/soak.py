@@ -35,7 +35,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from spinefarm.coordinator.fidelity import Rungs  # noqa: E402
 from spinefarm.coordinator.problem import build_run_config  # noqa: E402
 from spinefarm.coordinator.setup import SearchSettings, new_run  # noqa: E402
 from spinefarm.storage.hdf5 import read_run  # noqa: E402
@@ -52,7 +51,7 @@ def make_run(path: Path, run_id: str, trials: int, seed: int) -> None:
     cfg = build_run_config(run_id, "sphere:4", seed=seed, duration_s=RUNGS_S[-1])
     cfg = replace(cfg, trial_config={"duration_s": RUNGS_S[-1], "poison": POISON})
     _, storage = new_run(cfg, SearchSettings(trials=trials, sampler="random", lease_s=20.0,
-                                             rungs=Rungs(RUNGS_S)), path)
+                                             rungs=RUNGS_S), path)
     storage.close()
 
 
