@@ -8,7 +8,7 @@ from pathlib import Path
 
 from spinefarm.coordinator.core import CoordinatorCore
 from spinefarm.coordinator.fidelity import trial_scheduler
-from spinefarm.coordinator.objectives import objective_fn
+from spinefarm.coordinator.objectives import objective_fn, robust_objective
 from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sampler_class, sampler_from_dict
 from spinefarm.coordinator.scheduler import Scheduler
@@ -102,7 +102,10 @@ def build_core(storage: BaseStorage, clock=time.monotonic, trusted_peers: bool =
     space = config.space()
     settings = meta.settings
     sampler = sampler_from_dict(meta.sampler, len(space))
-    study = Study(storage, sampler, space, meta.trials_budget, objective_fn(meta.objective), meta.seed,
+    objective = objective_fn(meta.objective)
+    if config.robust:  # K episodes per parameter set, scored by a statistic over them
+        objective = robust_objective(objective, config.robust["statistic"])
+    study = Study(storage, sampler, space, meta.trials_budget, objective, meta.seed,
                   trial_scheduler(settings))
     scheduler = Scheduler(clock, settings.lease_s)
     judged = settings.judge.enabled and (not config.is_test_objective or settings.judge.rung.engine is not None)
