@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install run test test-all lint bench clean
+.PHONY: install run test test-all test-deploy lint bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -27,6 +27,10 @@ test-all: $(STAMP)
 	sh .ci/ensure-chromium
 	sh .ci/ensure-netns-tools
 	$(PY) -m pytest -q -ra -m ''
+
+# The compose and SLURM deployments end to end (root only: apt, dockerd, munge, SLURM); docs/deploy.md.
+test-deploy: $(STAMP)
+	$(PY) -m tests.deploy.main
 
 bench: $(STAMP)
 	$(PY) bench/trial_speed.py

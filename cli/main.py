@@ -11,7 +11,7 @@ from protocol.errors import SpinefarmError
 
 # Each module exposes register(subparsers); a sub-command sets `func(args) -> int`.
 COMMAND_MODULES = ("cli.sim_commands", "cli.morph_commands", "cli.robot_commands", "cli.service_commands",
-                   "cli.docs_command")
+                   "cli.router_command", "cli.docs_command")
 
 
 def build_parser() -> argparse.ArgumentParser:
