@@ -24,10 +24,18 @@ RUN pip install -q ${OFFLINE:+--no-index} --find-links /wheels --upgrade pip \
  && python3 /src/requirements.py /src/pyproject.toml "$EXTRAS" > /src/requirements.txt \
  && pip install -q ${OFFLINE:+--no-index} --find-links /wheels -r /src/requirements.txt
 
-# The package itself, into a folder of its own. .dockerignore lets in only its folders (spinefarm,
-# protocol, robot, worker, coordinator, storage, api, cli), docs, the project files and the wheelhouse.
+# The package itself, into a folder of its own: only what it is built from.
 FROM deps AS code
-COPY . /src
+COPY pyproject.toml setup.py README.md /src/
+COPY docs /src/docs
+COPY spinefarm /src/spinefarm
+COPY protocol /src/protocol
+COPY robot /src/robot
+COPY worker /src/worker
+COPY coordinator /src/coordinator
+COPY storage /src/storage
+COPY api /src/api
+COPY cli /src/cli
 RUN pip install -q --no-deps ${OFFLINE:+--no-index} --find-links /wheels --target /pkg /src \
  && mv /pkg/bin /pkg-bin
 

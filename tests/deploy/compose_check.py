@@ -186,7 +186,6 @@ def run() -> dict[str, Any]:
         raise
     finally:
         compose("down", "-v", "--remove-orphans", timeout_s=300, check=False)
-        docker("image", "prune", "-f", check=False)
     return figures
 
 

@@ -82,16 +82,34 @@ def docker(*args: str | Path, timeout_s: float = 300.0, check: bool = True) -> s
     return sh(DOCKER, *args, timeout_s=timeout_s, check=check, env=docker_env())
 
 
-def start_dockerd() -> subprocess.Popen[bytes]:
-    """A dockerd of our own (vfs storage, its own socket and state under CACHE_DIR), ready to take commands."""
+def storage_driver() -> str:
+    """overlay2 where the kernel mounts overlays (each layer holds only its changes), else vfs (every layer
+    a full copy: slow and large, but it works everywhere); SPINEFARM_DOCKER_STORAGE picks one."""
+    chosen = os.environ.get("SPINEFARM_DOCKER_STORAGE")
+    if chosen:
+        return chosen
+    probe = RUN_DIR / "overlay-probe"
+    for sub in ("lower", "upper", "work", "merged"):
+        (probe / sub).mkdir(parents=True, exist_ok=True)
+    opts = f"lowerdir={probe / 'lower'},upperdir={probe / 'upper'},workdir={probe / 'work'}"
+    mounted = sh("mount", "-t", "overlay", "overlay", "-o", opts, probe / "merged", check=False).returncode == 0
+    if mounted:
+        sh("umount", probe / "merged", check=False)
+    shutil.rmtree(probe, ignore_errors=True)
+    return "overlay2" if mounted else "vfs"
+
+
+def start_dockerd(driver: str) -> subprocess.Popen[bytes]:
+    """A dockerd of our own (its own socket, and state under CACHE_DIR per storage driver), ready to take
+    commands."""
     RUN_DIR.mkdir(parents=True, exist_ok=True)
-    data_root = CACHE_DIR / "docker"
+    data_root = CACHE_DIR / f"docker-{driver}"
     data_root.mkdir(parents=True, exist_ok=True)
     pidfile = RUN_DIR / "dockerd.pid"
     if pidfile.exists():  # a dockerd of an earlier run that was killed: it must not hold our socket
         _stop_stale(pidfile)
     log_file = open(CACHE_DIR / "dockerd.log", "wb")  # noqa: SIM115 (lives as long as the daemon)
-    proc = subprocess.Popen(["dockerd", "--storage-driver=vfs", f"--data-root={data_root}",
+    proc = subprocess.Popen(["dockerd", f"--storage-driver={driver}", f"--data-root={data_root}",
                              f"--exec-root={RUN_DIR / 'exec'}", f"--pidfile={pidfile}",
                              f"--host=unix://{DOCKER_SOCKET}"], stdout=log_file, stderr=subprocess.STDOUT)
 

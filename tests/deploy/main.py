@@ -45,7 +45,8 @@ def run(only: str | None) -> dict[str, Any]:
         if only in (None, "compose"):
             from tests.deploy import compose_check
 
-            dockerd = host.start_dockerd()
+            report["docker_storage"] = driver = host.storage_driver()
+            dockerd = host.start_dockerd(driver)
             stack.callback(host.stop_dockerd, dockerd)
             report["base_image"] = host.base_image()
             wheels = host.ROOT / "deploy" / "wheels"

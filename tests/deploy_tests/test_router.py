@@ -51,7 +51,10 @@ def refused(ep: str, config_file=None, creds=None) -> bool:
 def test_the_offline_router_runs_with_the_official_routers_config_and_endpoint(tmp_path):
     """deploy/compose.offline.yml starts `spinefarm router` with what docker-compose.yml gives zenohd."""
     main = yaml.safe_load((ROOT / "docker-compose.yml").read_text())["services"]["router"]
-    offline = yaml.safe_load((ROOT / "deploy" / "compose.offline.yml").read_text())["services"]["router"]
+    services = yaml.safe_load((ROOT / "deploy" / "compose.offline.yml").read_text())["services"]
+    offline = services["router"]
+    # the router runs as the images' user (uid 1000), so its files must be made for that user
+    assert services["credentials"]["environment"]["ROUTER_OWNER"] == "1000"
     official, ours = main["command"], offline["command"]
     assert ours[0] == "router"
     for flag in ("--config", "--listen"):
