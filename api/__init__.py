@@ -1,1 +1,1 @@
-"""Read-only HTTP status API: `from api.app import create_app`."""
+"""Read-only HTTP status API: `from spinefarm.api.app import create_app`."""

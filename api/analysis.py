@@ -7,8 +7,7 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
-
-from storage.base import BaseStorage
+from spinefarm.storage.base import BaseStorage
 
 # Columns the dashboard plots and tabulates (parameters come separately, by name).
 TABLE_COLUMNS = ("trial_id", "status", "reason", "phase", "parent", "objective", "distance_m", "speed_cm_s",

@@ -7,13 +7,12 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 
 from fastapi import FastAPI
-
-from api import errors
-from api.pictures import PictureCache
-from api.registry import RunRegistry
-from api.routers import dashboard, files, runs, trials
-from api.schemas import ErrorResponse
-from protocol.errors import ConfigError
+from spinefarm.api import errors
+from spinefarm.api.pictures import PictureCache
+from spinefarm.api.registry import RunRegistry
+from spinefarm.api.routers import dashboard, files, runs, trials
+from spinefarm.api.schemas import ErrorResponse
+from spinefarm.protocol.errors import ConfigError
 
 
 def create_app(run_files: Sequence[str | Path] = (), runs_dir: str | Path | None = None,

@@ -8,9 +8,8 @@ from typing import Annotated
 
 from fastapi import Depends, Request
 from fastapi import Path as PathParam
-
-from api.registry import RunRegistry
-from storage.hdf5_reader import Hdf5Reader
+from spinefarm.api.registry import RunRegistry
+from spinefarm.storage.hdf5_reader import Hdf5Reader
 
 RunId = Annotated[str, PathParam(pattern=r"^[A-Za-z0-9_.\-]{1,64}$", description="run id")]
 

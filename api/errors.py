@@ -5,9 +5,8 @@ from __future__ import annotations
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from spinefarm.protocol.errors import SpinefarmError, StorageError
 from starlette.exceptions import HTTPException as StarletteHTTPException
-
-from protocol.errors import SpinefarmError, StorageError
 
 
 class NotFound(SpinefarmError):

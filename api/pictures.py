@@ -1,6 +1,6 @@
 """Gait pictures of stored trials, rendered on demand in a subprocess and cached on disk.
 
-The API process never imports the simulator: `python -m worker.picture` re-simulates the trial and
+The API process never imports the simulator: `python -m spinefarm.worker.picture` re-simulates the trial and
 draws the `render` strip. A picture is keyed by what determines it (run config, parameters, seed), so
 it is rendered once; requests for one being drawn wait for it instead of starting another.
 """
@@ -18,8 +18,8 @@ import tempfile
 import threading
 from pathlib import Path
 
-from api.errors import NotFound, RenderFailed, SimulatorUnavailable
-from storage.schema import RunMeta, TrialRecord
+from spinefarm.api.errors import NotFound, RenderFailed, SimulatorUnavailable
+from spinefarm.storage.schema import RunMeta, TrialRecord
 
 FRAMES = 6
 RENDER_TIMEOUT_S = 900.0
@@ -33,7 +33,7 @@ def default_cache_dir() -> Path:
 
 def simulator_missing(engine: str) -> str | None:
     """Why this process cannot draw a trial of `engine`, or None when it can."""
-    for module in ("worker.trial", ENGINE_MODULES.get(engine, engine)):
+    for module in ("spinefarm.worker.trial", ENGINE_MODULES.get(engine, engine)):
         try:
             found = importlib.util.find_spec(module) is not None
         except (ImportError, ValueError):
@@ -86,8 +86,9 @@ class PictureCache:
             json.dump(job, fh)
         tmp = out.with_name(out.stem + f".{os.getpid()}.tmp.png")
         try:
-            r = subprocess.run([sys.executable, "-m", "worker.picture", job_path, str(tmp)], capture_output=True,
-                               text=True, timeout=RENDER_TIMEOUT_S, stdin=subprocess.DEVNULL)
+            # -P: the user's current folder never shadows the installed package in the drawing process
+            r = subprocess.run([sys.executable, "-P", "-m", "spinefarm.worker.picture", job_path, str(tmp)],
+                               capture_output=True, text=True, timeout=RENDER_TIMEOUT_S, stdin=subprocess.DEVNULL)
             if r.returncode != 0 or not tmp.is_file():
                 last = (r.stderr.strip().splitlines() or ["no output"])[-1]
                 raise RenderFailed("drawing the trial failed", received=last[:300], expected="a picture")

@@ -6,9 +6,9 @@ import logging
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from api.errors import NotFound
-from protocol.errors import StorageError
-from storage.probe import probe
+from spinefarm.api.errors import NotFound
+from spinefarm.protocol.errors import StorageError
+from spinefarm.storage.probe import probe
 
 PROBE_TIMEOUT_S = 5.0
 PARALLEL_PROBES = 4

@@ -7,9 +7,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from storage.base import BaseStorage
-from storage.schema import SCORE_COLUMNS, TrialRecord, planned_evaluations
-from storage.status import read_status
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, planned_evaluations
+from spinefarm.storage.status import read_status
 
 # A status file not rewritten for this long means its coordinator is gone.
 STALE_STATUS_S = 10.0

@@ -24,10 +24,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 def run(variant: str, gait_path: str, duration_s: float | None) -> dict:
     import dataclasses
 
-    from cli.sim_commands import load_params_file
-    from robot.morphology.registry import load_morphology
-    from robot.morphology.variants import with_gains, with_strings
-    from worker.trial import TrialConfig, run_trial
+    from spinefarm.cli.sim_commands import load_params_file
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.morphology.variants import with_gains, with_strings
+    from spinefarm.worker.trial import TrialConfig, run_trial
 
     params, controller = load_params_file(Path(gait_path))
     morph = load_morphology(json.loads(Path(gait_path).read_text())["morphology"])

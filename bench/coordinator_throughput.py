@@ -29,17 +29,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cli.service_commands import free_port  # noqa: E402
-from coordinator.problem import build_run_config  # noqa: E402
-from coordinator.service import CoordinatorService  # noqa: E402
-from coordinator.setup import SearchSettings, new_run  # noqa: E402
-from protocol.errors import MessageError  # noqa: E402
-from protocol.messages import WorkGrant, WorkRequest, decode_message, encode_message  # noqa: E402
+from spinefarm.cli.service_commands import free_port  # noqa: E402
+from spinefarm.coordinator.problem import build_run_config  # noqa: E402
+from spinefarm.coordinator.service import CoordinatorService  # noqa: E402
+from spinefarm.coordinator.setup import SearchSettings, new_run  # noqa: E402
+from spinefarm.protocol.errors import MessageError  # noqa: E402
+from spinefarm.protocol.messages import WorkGrant, WorkRequest, decode_message, encode_message  # noqa: E402
 
 
 def spawn_workers(endpoint: str, run_id: str, n: int, batch: int) -> list[subprocess.Popen]:
     batch_args = ["--batch", str(batch)] if batch > 0 else []  # 0: the worker sizes its batches itself
-    return [subprocess.Popen([sys.executable, "-m", "cli.main", "worker", "--connect", endpoint, "--run", run_id,
+    return [subprocess.Popen([sys.executable, "-m", "spinefarm", "worker", "--connect", endpoint, "--run", run_id,
                               *batch_args, "--exit-when-done", "--worker-id", f"bench-{i}"],
                              cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(n)]
 
@@ -115,9 +115,8 @@ def fsync_cost(workers: list[int], batches: list[int], trials: int, tmp: Path) -
 def resume_cost(tmp: Path, rows: int) -> dict:
     """Time to reopen a killed SWMR writer's file for writing (read via SWMR, rewrite, replace)."""
     import numpy as np
-
-    from protocol.messages import TrialResult, TrialStatus
-    from storage.hdf5 import Hdf5Storage
+    from spinefarm.protocol.messages import TrialResult, TrialStatus
+    from spinefarm.storage.hdf5 import Hdf5Storage
 
     config = build_run_config("resume-bench", "sphere:116")
     _, s = new_run(config, SearchSettings(trials=rows), tmp / "resume.h5")

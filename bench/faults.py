@@ -28,20 +28,19 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cli.service_commands import free_port  # noqa: E402
-from protocol import keys  # noqa: E402
-from storage.hdf5 import read_run  # noqa: E402
+from spinefarm.cli.service_commands import free_port  # noqa: E402
+from spinefarm.protocol import keys  # noqa: E402
+from spinefarm.storage.hdf5 import read_run  # noqa: E402
 
 
 # --- a worker that logs what was acknowledged ----------------------------------------------------------
 def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) -> int:
     """The worker protocol (pull, run, carry results with the next request) with an acknowledgement log."""
     import zenoh
-
-    from coordinator.service import zenoh_config
-    from protocol.messages import SubmittedResult, WorkGrant, WorkRequest, decode_message, encode_message
-    from protocol.run import RunConfig
-    from worker.service import build_evaluator
+    from spinefarm.coordinator.service import zenoh_config
+    from spinefarm.protocol.messages import SubmittedResult, WorkGrant, WorkRequest, decode_message, encode_message
+    from spinefarm.protocol.run import RunConfig
+    from spinefarm.worker.service import build_evaluator
 
     session = None
     while session is None:
@@ -87,7 +86,7 @@ def spawn(*args: str) -> subprocess.Popen:
 
 def coordinator(ep: str, out: Path, *args: str) -> subprocess.Popen:
     tail = ("--resume", str(out)) if not args else (*args, "--out", str(out))
-    return spawn("-m", "cli.main", "coordinator", *tail, "--listen", ep, "--api-port", "-1", "--quiet")
+    return spawn("-m", "spinefarm", "coordinator", *tail, "--listen", ep, "--api-port", "-1", "--quiet")
 
 
 def witness(ep: str, run_id: str, wid: str, log: Path) -> subprocess.Popen:
@@ -113,8 +112,7 @@ def wait(pred, timeout_s: float, what: str) -> None:
 
 def check_file(out: Path, budget: int, acks: list[tuple[int, float]]) -> dict:
     import numpy as np
-
-    from protocol.errors import StorageError
+    from spinefarm.protocol.errors import StorageError
 
     try:
         _, cols = read_run(out)
@@ -206,15 +204,15 @@ def reissue_latency(tmp: Path, repeats: int = 3) -> dict:
 
 
 def _one_reissue(run_id: str, tmp: Path) -> float:
-    from coordinator.problem import build_run_config
-    from coordinator.service import CoordinatorService
-    from coordinator.setup import SearchSettings, new_run
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.service import CoordinatorService
+    from spinefarm.coordinator.setup import SearchSettings, new_run
 
     ep = f"tcp/127.0.0.1:{free_port()}"
     core, storage = new_run(build_run_config(run_id, "sphere:4", duration_s=1.0),
                             SearchSettings(trials=50, lease_s=60.0), tmp / f"{run_id}.h5")
     service = CoordinatorService(core, storage, listen=[ep]).start()
-    w = spawn("-m", "cli.main", "worker", "--connect", ep, "--run", run_id, "--batch", "1")
+    w = spawn("-m", "spinefarm", "worker", "--connect", ep, "--run", run_id, "--batch", "1")
     try:
         wait(lambda: core.scheduler.n_leased > 0, 30, "a lease")
         w.send_signal(signal.SIGSTOP)
@@ -231,11 +229,10 @@ def _one_reissue(run_id: str, tmp: Path) -> float:
 def hostile_peer(tmp: Path, n: int = 500) -> dict:
     """A peer that knows a real worker's id sends forged results and malformed messages."""
     import zenoh
-
-    from coordinator.problem import build_run_config
-    from coordinator.service import CoordinatorService, zenoh_config
-    from coordinator.setup import SearchSettings, new_run
-    from protocol.messages import (
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.service import CoordinatorService, zenoh_config
+    from spinefarm.coordinator.setup import SearchSettings, new_run
+    from spinefarm.protocol.messages import (
         SCHEMA_VERSION,
         ResultSubmission,
         SubmittedResult,
@@ -249,7 +246,7 @@ def hostile_peer(tmp: Path, n: int = 500) -> dict:
     core, storage = new_run(build_run_config("hostile", "sphere:4", duration_s=2.0),
                             SearchSettings(trials=20, lease_s=60.0), tmp / "hostile.h5")
     service = CoordinatorService(core, storage, listen=[ep]).start()
-    honest = spawn("-m", "cli.main", "worker", "--connect", ep, "--run", "hostile", "--batch", "4",
+    honest = spawn("-m", "spinefarm", "worker", "--connect", ep, "--run", "hostile", "--batch", "4",
                    "--worker-id", "honest")
     s = None
     try:
@@ -368,7 +365,7 @@ def power_cut(tmp: Path, workers: int = 2, cut_after_acks: int = 300) -> dict:
 
 def _resumes(out: Path) -> str:
     """'yes' if the run reopens for writing as `--resume` would (every row validated), else the error."""
-    from coordinator.setup import resume_run
+    from spinefarm.coordinator.setup import resume_run
 
     try:
         _, storage = resume_run(out)
@@ -424,7 +421,7 @@ def damaged_files(tmp: Path) -> dict:
                            "print('held', flush=True); time.sleep(60)", str(p) + ".lock")
             time.sleep(0.5)
         t0 = time.monotonic()
-        r = subprocess.run([sys.executable, "-m", "cli.main", "search", "--resume", str(p), "--workers", "0",
+        r = subprocess.run([sys.executable, "-m", "spinefarm", "search", "--resume", str(p), "--workers", "0",
                             "--api-port", "-1"], cwd=ROOT, capture_output=True, text=True, timeout=120)
         out[name] = {"exit_code": r.returncode, "seconds": round(time.monotonic() - t0, 2),
                      "error": r.stderr.strip().splitlines()[-1][:160] if r.stderr.strip() else ""}

@@ -45,7 +45,7 @@ PAPER_SPEED_CM_S = {"tetraspine": 9.46, "tetrahedral-complex": 6.13, "octahedral
 
 
 def _trial(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int):
-    from worker.trial import TrialConfig, run_trial
+    from spinefarm.worker.trial import TrialConfig, run_trial
 
     return run_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
                      controller=controller)
@@ -53,8 +53,8 @@ def _trial(morphology: str, controller: str | None, trial_config: dict, params_u
 
 def _verify(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int,
             distance_m: float) -> dict:
-    from worker.trial import TrialConfig
-    from worker.verify import VerifySettings, verify_trial
+    from spinefarm.worker.trial import TrialConfig
+    from spinefarm.worker.verify import VerifySettings, verify_trial
 
     return verify_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
                         distance_m, VerifySettings(), controller=controller).to_dict()
@@ -63,7 +63,7 @@ def _verify(morphology: str, controller: str | None, trial_config: dict, params_
 def _judge(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int,
            judge_dt_s: float) -> dict:
     """The Bullet judge's run of a screened trial at its converged step."""
-    from worker.trial import TrialConfig, run_trial
+    from spinefarm.worker.trial import TrialConfig, run_trial
 
     cfg = TrialConfig.from_dict({**trial_config, "engine": "bullet", "engine_options": {}, "dt_s": judge_dt_s,
                                  "auto_dt": False})
@@ -74,10 +74,10 @@ def _judge(morphology: str, controller: str | None, trial_config: dict, params_u
 def search(pool: ProcessPoolExecutor, morphology: str, controller: str | None, sampler: str, seed: int,
            budget: int, checkpoints: list[int], duration_s: float | None, engine: str, workers: int,
            overrides: dict | None = None, judge_dt_s: float = 0.00025) -> dict:
-    from coordinator.problem import build_run_config
-    from coordinator.setup import SearchSettings, new_run
-    from coordinator.verifier import VerifyPolicy
-    from protocol.messages import TrialResult
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.setup import SearchSettings, new_run
+    from spinefarm.coordinator.verifier import VerifyPolicy
+    from spinefarm.protocol.messages import TrialResult
 
     overrides = {**(overrides or {}), **({"engine": engine} if engine != "bullet" else {})} or None
     screened = engine != "bullet"

@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def search(label: str, out: Path, args: argparse.Namespace, extra: list[str]) -> dict:
-    cmd = [sys.executable, "-m", "cli.main", "search", args.morphology, "--trials", str(args.trials),
+    cmd = [sys.executable, "-m", "spinefarm", "search", args.morphology, "--trials", str(args.trials),
            "--workers", str(args.workers), "--seed", str(args.seed), "--out", str(out), "--api-port", "-1",
            "--quiet", "--settle", str(args.settle), *extra]
     if args.controller:
@@ -35,7 +35,7 @@ def search(label: str, out: Path, args: argparse.Namespace, extra: list[str]) ->
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise SystemExit(f"{label} search failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
-    from storage.hdf5 import Hdf5Storage
+    from spinefarm.storage.hdf5 import Hdf5Storage
 
     with Hdf5Storage.open_read(out) as st:
         counts = st.counts()

@@ -34,8 +34,8 @@ def node_targets(morph, space, physical: np.ndarray) -> tuple[float, float]:
 
 
 def one(morph_name: str, controller: str, seed: int, duration_s: float, settle_s: float) -> dict:
-    from robot.morphology.registry import load_morphology
-    from worker.trial import TrialConfig, random_unit_params, simulate
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
 
     morph = load_morphology(morph_name)
     space = morph.controller_space(controller)

@@ -40,9 +40,9 @@ _CACHE = None  # one SetupCache per pool process: set-up reused as a worker does
 
 
 def _trial(args: tuple) -> dict:
-    from robot.morphology.registry import load_morphology
-    from worker.setup import SetupCache
-    from worker.trial import TrialConfig, run_trial
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial import TrialConfig, run_trial
 
     global _CACHE
     _CACHE = _CACHE or SetupCache(8)
@@ -54,7 +54,7 @@ def _trial(args: tuple) -> dict:
         cfg["dt_s"] = dt
     try:
         choose = TrialConfig(**cfg)
-        from worker.episode import choose_step
+        from spinefarm.worker.episode import choose_step
 
         choose_step(morph, choose)
     except Exception:  # a step the string network cannot take: the automatic one
@@ -66,7 +66,7 @@ def _trial(args: tuple) -> dict:
 
 
 def _replay(args: tuple) -> dict:
-    from worker.replay import replay
+    from spinefarm.worker.replay import replay
 
     spine, folder, engine = args
     rep = replay(NTRT / folder, spine, engine=engine)
@@ -164,8 +164,8 @@ def main() -> None:
                            **{k: v for k, v in extra["mujoco"].items() if k != "engine_options"}}
     controllers = dict(c.split("=", 1) for c in args.controller)
     best_of = dict(b.split("=", 1) for b in args.best_of)
-    from robot.morphology.registry import load_morphology
-    from worker.trial import random_unit_params
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.trial import random_unit_params
 
     t0 = time.time()
     jobs: list[tuple] = []

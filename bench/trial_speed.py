@@ -29,14 +29,13 @@ import json
 import time
 
 import numpy as np
-
-from robot.bodies import build_bodies, build_strings
-from robot.morphology.registry import load_morphology
-from robot.scene import GroundSpec
-from worker.control.cpg import CpgIntegrator
-from worker.engines.bullet import BulletPhysics
-from worker.sim import strings as sk
-from worker.trial import TrialConfig, random_unit_params, string_tables
+from spinefarm.robot.bodies import build_bodies, build_strings
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.scene import GroundSpec
+from spinefarm.worker.control.cpg import CpgIntegrator
+from spinefarm.worker.engines.bullet import BulletPhysics
+from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.trial import TrialConfig, random_unit_params, string_tables
 
 
 def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
@@ -97,9 +96,8 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
     gaits: unit parameter vectors (of `controller`'s space) to run, one per round after a warm-up round;
     default: seeded random ones."""
     import mujoco
-
-    from worker.setup import SetupCache
-    from worker.trial import simulate
+    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial import simulate
 
     morph = load_morphology(morph_name)
     off = {**mujoco_options, "segment_contacts": "off"}
@@ -160,7 +158,7 @@ def cpg_cost(morph_name: str, seed: int, updates: int = 5000) -> dict:
     """CPU µs of the compiled CPG kernel per simulated millisecond: at the morphology's control period with
     the default sub-steps (as trials run it: 1 ms on NTRT's networks), and as one RK4 step per 2 ms (the
     least a 2 ms physics step could spend on it)."""
-    from worker.control.cpg import rk4_advance
+    from spinefarm.worker.control.cpg import rk4_advance
 
     morph = load_morphology(morph_name)
     space = morph.controller_space()
@@ -202,8 +200,8 @@ def best_gaits(path: str, count: int, apart: float = 0.1) -> tuple[list[np.ndarr
 
 def setup_cost(morph_name: str, repeats: int) -> dict:
     """Set-up of one trial (a 1-step trial's wall time): built fresh against reused, per engine."""
-    from worker.setup import SetupCache
-    from worker.trial import simulate
+    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial import simulate
 
     morph = load_morphology(morph_name)
     out = {}

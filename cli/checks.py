@@ -11,7 +11,7 @@ import re
 from collections.abc import Iterable
 from pathlib import Path
 
-from protocol.errors import ConfigError
+from spinefarm.protocol.errors import ConfigError
 
 # Zenoh endpoint locators a user types: proto/host:port (IPv6 hosts in brackets); unix sockets take a path.
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})(#.*)?$")

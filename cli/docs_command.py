@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from protocol.errors import ConfigError
+from spinefarm.protocol.errors import ConfigError
 
 
 def docs_dir() -> Path:

@@ -1,6 +1,6 @@
 """Worker processes that `spinefarm search` starts on this machine, and keeps only as long as it lives.
 
-Each worker runs `python -P -m cli.main worker ...`: -P keeps the current directory off sys.path, so a
+Each worker runs `python -P -m spinefarm worker ...`: -P keeps the current directory off sys.path, so a
 user's own `cli/` or `worker/` package cannot shadow ours. On Linux each worker asks the kernel for
 SIGTERM when the search process dies (PR_SET_PDEATHSIG), so even a SIGKILLed search leaves no worker
 behind. A worker that exits with an error is restarted a few times at most; then the search stops and
@@ -30,7 +30,7 @@ def _die_with_parent() -> None:  # runs in the child between fork and exec
 
 def worker_command(endpoint: str, run_id: str, batch: int | None, zenoh_config: str | None,
                    credentials: str | None = None) -> list[str]:
-    cmd = [sys.executable, "-P", "-m", "cli.main", "worker", "--connect", endpoint, "--run", run_id,
+    cmd = [sys.executable, "-P", "-m", "spinefarm", "worker", "--connect", endpoint, "--run", run_id,
            "--exit-when-done"]
     if batch:
         cmd += ["--batch", str(batch)]

@@ -7,11 +7,11 @@ import importlib
 import os
 import sys
 
-from protocol.errors import SpinefarmError
+from spinefarm.protocol.errors import SpinefarmError
 
 # Each module exposes register(subparsers); a sub-command sets `func(args) -> int`.
-COMMAND_MODULES = ("cli.sim_commands", "cli.morph_commands", "cli.robot_commands", "cli.service_commands",
-                   "cli.router_command", "cli.docs_command")
+COMMAND_MODULES = tuple(f"spinefarm.cli.{name}" for name in (
+    "sim_commands", "morph_commands", "robot_commands", "service_commands", "router_command", "docs_command"))
 
 
 def build_parser() -> argparse.ArgumentParser:

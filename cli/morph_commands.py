@@ -9,10 +9,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from cli import checks
-from cli.sim_commands import add_engine_argument
-from protocol.errors import ConfigError
+from spinefarm.cli import checks
+from spinefarm.cli.sim_commands import add_engine_argument
+from spinefarm.protocol.errors import ConfigError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -90,7 +89,7 @@ def replay_summary(report: Any) -> dict[str, Any]:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from worker.replay import JITTER_CM, parameter_folder, replay, replay_spread
+    from spinefarm.worker.replay import JITTER_CM, parameter_folder, replay, replay_spread
 
     if not 0 <= args.seeds <= 100:
         raise ConfigError("--seeds out of range", received=args.seeds, expected="0 to 100 jittered replays")
@@ -155,26 +154,26 @@ def _load_record(path: Path, morph_name: str) -> dict[str, np.ndarray]:
 
 
 def _params(morph: Any, path: Path | None, seed: int) -> tuple[Any, str | None]:
-    from worker.trial import random_unit_params
+    from spinefarm.worker.trial import random_unit_params
 
     if path is None:
         return random_unit_params(morph, seed), None
-    from worker.replay import PUBLISHED, parameter_folder
+    from spinefarm.worker.replay import PUBLISHED, parameter_folder
 
     if path.is_dir() or str(path) in PUBLISHED:
-        from worker.replay import read_parameter_set, unit_params
+        from spinefarm.worker.replay import read_parameter_set, unit_params
 
         return unit_params(morph, read_parameter_set(parameter_folder(path))), "ntrt"
-    from cli.sim_commands import load_params_file
+    from spinefarm.cli.sim_commands import load_params_file
 
     return load_params_file(path)
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from robot.bodies import build_bodies
-    from robot.morphology.registry import load_morphology
-    from worker.render import frames_from_record, initial_frame, render
-    from worker.trial import TrialConfig, simulate
+    from spinefarm.robot.bodies import build_bodies
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.render import frames_from_record, initial_frame, render
+    from spinefarm.worker.trial import TrialConfig, simulate
 
     checks.output_path("--out", args.out, (".png",))
     if args.record is not None and (args.duration is not None or args.params is not None):

@@ -30,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_morphologies(args: argparse.Namespace) -> int:
-    from robot.morphology.registry import builtin_names, load_morphology
+    from spinefarm.robot.morphology.registry import builtin_names, load_morphology
 
     rows = []
     for name in builtin_names():
@@ -48,15 +48,15 @@ def cmd_morphologies(args: argparse.Namespace) -> int:
 
 
 def cmd_spec(args: argparse.Namespace) -> int:
-    from robot.morphology.registry import builtin_path
+    from spinefarm.robot.morphology.registry import builtin_path
 
     sys.stdout.write(builtin_path(args.name).read_text())
     return 0
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from robot.morphology.registry import load_morphology
-    from worker.contract import run_contract
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.contract import run_contract
 
     morph = load_morphology(args.morphology)
     results = run_contract(morph, args.engine)

@@ -17,8 +17,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from cli import checks
-from protocol.errors import ConfigError
+from spinefarm.cli import checks
+from spinefarm.protocol.errors import ConfigError
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 
@@ -50,7 +50,7 @@ def router_config(config_file: str | Path | None, listen: Sequence[str], credent
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("scouting/multicast/enabled", "false")
     if credentials_file:
-        from protocol.credentials import load_credentials
+        from spinefarm.protocol.credentials import load_credentials
 
         for key, value in load_credentials(credentials_file).zenoh_settings(accept=True).items():
             conf.insert_json5(key, value)

@@ -16,10 +16,10 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
-from cli import checks
-from cli.local_workers import LocalWorkers, worker_command
-from cli.progress import ProgressLine
-from protocol.errors import ConfigError
+from spinefarm.cli import checks
+from spinefarm.cli.local_workers import LocalWorkers, worker_command
+from spinefarm.cli.progress import ProgressLine
+from spinefarm.protocol.errors import ConfigError
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -36,11 +36,11 @@ def default_run_id(robot_name: str) -> str:
 
 def robot_name(morphology: str) -> str:
     """The name a run is known by: the robot's own name (a spec file's `name:`), never its path."""
-    from coordinator.problem import is_test_objective
+    from spinefarm.coordinator.problem import is_test_objective
 
     if is_test_objective(morphology):
         return morphology.replace(":", "-")
-    from robot.morphology.registry import load_morphology
+    from spinefarm.robot.morphology.registry import load_morphology
 
     return load_morphology(morphology).name
 
@@ -171,8 +171,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 # --- coordinator side ------------------------------------------------------------------------------
 def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
-    from coordinator.problem import build_run_config
-    from coordinator.setup import SearchSettings, new_run, resume_run
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
 
     if args.resume:
         if args.morphology or args.out:
@@ -183,12 +183,12 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     if not args.morphology:
         raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")
     run_id = args.run_id or default_run_id(robot_name(args.morphology))
-    from cli.sim_commands import trial_overrides
+    from spinefarm.cli.sim_commands import trial_overrides
 
     overrides = trial_overrides(args)
     rungs = None
     if args.rungs is not None:
-        from coordinator.fidelity import Rungs
+        from spinefarm.coordinator.fidelity import Rungs
 
         rungs = Rungs.parse(args.rungs, args.eta)
         if args.duration is not None and args.duration != rungs.durations_s[-1]:
@@ -202,13 +202,13 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     if lease is None:
         duration = config.trial_config.get("duration_s") or 0.0
         lease = max(60.0, 20.0 * float(duration))
-    from coordinator.verifier import VerifyPolicy
+    from spinefarm.coordinator.verifier import VerifyPolicy
 
     screen_engine = config.trial_config.get("engine", "bullet")
     judge = args.verify_engine or ("bullet" if screen_engine != "bullet" else None)
     verify = VerifyPolicy(enabled=not args.no_verify, tolerance=args.verify_tolerance, perturb=args.verify_perturb,
                           engine=judge if judge != screen_engine else None, dt_s=args.verify_dt)
-    from coordinator.samplers import DEFAULT_SAMPLER
+    from spinefarm.coordinator.samplers import DEFAULT_SAMPLER
 
     settings = SearchSettings(trials=2000 if args.trials is None else args.trials,
                               sampler=args.sampler or DEFAULT_SAMPLER, sigma=args.sigma, top_k=args.top_k,
@@ -221,7 +221,7 @@ def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
 def _credentials(args: argparse.Namespace) -> Any:
     if not args.credentials:
         return None
-    from protocol.credentials import load_credentials
+    from spinefarm.protocol.credentials import load_credentials
 
     creds = load_credentials(args.credentials)
     if creds.world_readable:
@@ -235,9 +235,9 @@ def _check_step(config: Any) -> None:
     if config.is_test_objective:
         return
     try:
-        from robot.morphology.model import Morphology
-        from worker.episode import choose_step
-        from worker.trial import TrialConfig
+        from spinefarm.robot.morphology.model import Morphology
+        from spinefarm.worker.episode import choose_step
+        from spinefarm.worker.trial import TrialConfig
     except ImportError:  # a coordinator without the simulator: the workers will say it
         return
     choose_step(Morphology.from_dict(config.morphology_spec), TrialConfig.from_dict(config.trial_config))
@@ -254,8 +254,7 @@ def _check_run_args(args: argparse.Namespace) -> None:
 
 def _start_api(path: Path, host: str, port: int) -> tuple[Any, threading.Thread, int]:
     import uvicorn
-
-    from api.app import create_app
+    from spinefarm.api.app import create_app
 
     server = uvicorn.Server(uvicorn.Config(create_app([path]), host=host, port=port, log_level="warning"))
     thread = threading.Thread(target=server.run, name="api", daemon=True)
@@ -302,7 +301,7 @@ def _describe_best(core: Any, path: Path) -> str:
 
 
 def _run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: list[str]) -> int:
-    from coordinator.service import CoordinatorService
+    from spinefarm.coordinator.service import CoordinatorService
 
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     _check_run_args(args)
@@ -415,7 +414,7 @@ def cmd_coordinator(args: argparse.Namespace) -> int:
 
 # --- worker, api, export ---------------------------------------------------------------------------
 def cmd_worker(args: argparse.Namespace) -> int:
-    from worker.service import WorkerService
+    from spinefarm.worker.service import WorkerService
 
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     checks.endpoints("--connect", args.connect)
@@ -433,10 +432,9 @@ def cmd_worker(args: argparse.Namespace) -> int:
 
 def cmd_api(args: argparse.Namespace) -> int:
     import uvicorn
-
-    from api.app import create_app
-    from protocol.errors import StorageError
-    from storage.hdf5 import read_meta
+    from spinefarm.api.app import create_app
+    from spinefarm.protocol.errors import StorageError
+    from spinefarm.storage.hdf5 import read_meta
 
     checks.port("--port", args.port)
     if not args.files and args.runs_dir is None:
@@ -464,8 +462,8 @@ def cmd_api(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from storage.export import best_table, write_csv
-    from storage.hdf5 import Hdf5Storage
+    from spinefarm.storage.export import best_table, write_csv
+    from spinefarm.storage.hdf5 import Hdf5Storage
 
     if all(v is None for v in (args.csv, args.best, args.pareto, args.parquet, args.gait)):
         raise ConfigError("nothing to export", expected="--csv [OUT.csv], --parquet OUT.parquet, --best K, "
@@ -504,7 +502,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     if args.gait is not None:
         import json
 
-        from storage.export import gait_params
+        from spinefarm.storage.export import gait_params
 
         Path(args.gait).parent.mkdir(parents=True, exist_ok=True)
         Path(args.gait).write_text(json.dumps(gait_params(storage, args.trial), indent=1) + "\n")

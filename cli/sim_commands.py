@@ -10,9 +10,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from cli import checks
-from protocol.errors import ParameterError
+from spinefarm.cli import checks
+from spinefarm.protocol.errors import ParameterError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -98,7 +97,7 @@ def trial_overrides(args: argparse.Namespace) -> dict[str, Any]:
     if getattr(args, "engine_option", None):
         out["engine_options"] = parse_engine_options(args.engine_option)
     if getattr(args, "scene", None) is not None:
-        from robot.scene import parse_scene
+        from spinefarm.robot.scene import parse_scene
 
         out["scene"] = parse_scene(args.scene)
     return out
@@ -125,7 +124,7 @@ def parse_engine_options(items: list[str] | None) -> dict[str, Any]:
 
 def say_if_compiling() -> None:
     """The first simulation after an install compiles the kernels (numba) for a while: say so."""
-    from worker.warmup import kernels_cached
+    from spinefarm.worker.warmup import kernels_cached
 
     if not kernels_cached():
         print("compiling the simulation kernels (first run after installing; about a minute, then cached) ...",
@@ -163,8 +162,8 @@ def result_summary(result: Any, morph_name: str, controller: str | None) -> dict
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
-    from robot.morphology.registry import load_morphology
-    from worker.trial import TrialConfig, random_unit_params, simulate
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
 
     if args.record is not None:
         checks.output_path("--record", args.record, (".npz",))
@@ -236,7 +235,7 @@ def _stored_trial(path: Path, trial_id: int | None
                   ) -> tuple[Any, str | None, np.ndarray, int, dict[str, Any], int]:
     """(morphology spec, controller, unit parameters, seed, trial config, trial id) of a run file's trial, or
     of its best; the config carries the trial's own length and settle (a rung's, in a multi-fidelity run)."""
-    from storage.hdf5 import Hdf5Storage
+    from spinefarm.storage.hdf5 import Hdf5Storage
 
     store = Hdf5Storage.open_read(path)
     try:
@@ -268,14 +267,14 @@ def _stored_trial(path: Path, trial_id: int | None
 
 
 def _physical(morph, params, controller) -> np.ndarray:
-    from worker.trial import resolve_params
+    from spinefarm.worker.trial import resolve_params
 
     return resolve_params(morph, params, controller)
 
 
 def _best_of_run(path: Path, n: int = 1):
-    from storage.hdf5 import Hdf5Storage
-    from worker.accuracy import ParamSet
+    from spinefarm.storage.hdf5 import Hdf5Storage
+    from spinefarm.worker.accuracy import ParamSet
 
     store = Hdf5Storage.open_read(path)
     try:
@@ -290,7 +289,7 @@ def _best_of_run(path: Path, n: int = 1):
 
 
 def cmd_accuracy(args: argparse.Namespace) -> int:
-    from worker.accuracy import format_table, plot, run_accuracy
+    from spinefarm.worker.accuracy import format_table, plot, run_accuracy
 
     checks.at_least("--seeds", args.seeds, 1, "random parameter sets")
     checks.at_least("--jobs", args.jobs, 1, "worker processes")

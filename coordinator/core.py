@@ -23,11 +23,11 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-from coordinator.scheduler import Scheduler
-from coordinator.study import Study
-from coordinator.verifier import Verifier
-from protocol.errors import MessageError
-from protocol.messages import (
+from spinefarm.coordinator.scheduler import Scheduler
+from spinefarm.coordinator.study import Study
+from spinefarm.coordinator.verifier import Verifier
+from spinefarm.protocol.errors import MessageError
+from spinefarm.protocol.messages import (
     ResultAck,
     ResultSubmission,
     RunInfo,
@@ -42,7 +42,7 @@ from protocol.messages import (
     encode,
     encode_message,
 )
-from protocol.run import RunConfig, WorkerProblem
+from spinefarm.protocol.run import RunConfig, WorkerProblem
 
 log = logging.getLogger("spinefarm.coordinator")
 _RATE_WINDOW_S = 30.0

@@ -23,10 +23,9 @@ from itertools import pairwise
 from typing import Any
 
 import numpy as np
-
-from protocol.errors import ConfigError
-from protocol.messages import TrialStatus
-from storage.base import BaseStorage
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.messages import TrialStatus
+from spinefarm.storage.base import BaseStorage
 
 
 @dataclass(frozen=True)

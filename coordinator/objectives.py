@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-from protocol.errors import ConfigError
-from protocol.messages import TrialResult
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.messages import TrialResult
 
 
 def _distance(r: TrialResult) -> float:

@@ -9,13 +9,13 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING, Any
 
-from protocol.errors import ConfigError
-from protocol.keys import check_run_id
-from protocol.params import ParamSpace, ParamSpec
-from protocol.run import RunConfig
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.keys import check_run_id
+from spinefarm.protocol.params import ParamSpace, ParamSpec
+from spinefarm.protocol.run import RunConfig
 
 if TYPE_CHECKING:
-    from robot.morphology.model import Morphology
+    from spinefarm.robot.morphology.model import Morphology
 
 SPHERE = re.compile(r"^sphere(?::(\d{1,3}))?$")
 
@@ -44,7 +44,7 @@ def build_run_config(run_id: str, morphology: str, *, objective: str = "distance
         space = sphere_space(morphology)
         return RunConfig(run_id, morphology, {}, None, tuple(space.describe()),
                          {"duration_s": duration_s}, objective, seed, space_hash=space.space_hash())
-    from robot.morphology.registry import load_morphology
+    from spinefarm.robot.morphology.registry import load_morphology
 
     return run_config_for(run_id, load_morphology(morphology), objective=objective, seed=seed,
                           controller=controller, duration_s=duration_s, trial_overrides=trial_overrides)
@@ -54,9 +54,9 @@ def run_config_for(run_id: str, morphology: Morphology | dict[str, Any], *, obje
                    seed: int = 0, controller: str | None = None, duration_s: float | None = None,
                    trial_overrides: dict[str, Any] | None = None) -> RunConfig:
     """The run object of a morphology, or of its to_dict() (e.g. the spec stored in a run file)."""
-    from robot.morphology.model import Morphology
-    from robot.trial_config import TrialConfig
-    from worker.engines.base import engine_names
+    from spinefarm.robot.morphology.model import Morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.engines.base import engine_names
 
     morph = morphology if isinstance(morphology, Morphology) else Morphology.from_dict(morphology)
     space = morph.param_space(controller)

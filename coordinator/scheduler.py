@@ -20,7 +20,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from protocol.errors import check_range
+from spinefarm.protocol.errors import check_range
 
 MAX_GRANT = 64       # trials per request and per worker at a time
 MAX_ATTEMPTS = 3     # lost leases before a trial is stored as failed

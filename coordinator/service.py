@@ -15,13 +15,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import zenoh
-
-from coordinator.core import CoordinatorCore
-from protocol import keys
-from protocol.credentials import Credentials, is_loopback
-from protocol.errors import ConfigError
-from storage.base import BaseStorage
-from storage.status import write_status
+from spinefarm.coordinator.core import CoordinatorCore
+from spinefarm.protocol import keys
+from spinefarm.protocol.credentials import Credentials, is_loopback
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.status import write_status
 
 log = logging.getLogger("spinefarm.coordinator")
 DEFAULT_LISTEN = ("tcp/127.0.0.1:7447",)

@@ -6,18 +6,18 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from coordinator.core import CoordinatorCore
-from coordinator.fidelity import Rungs
-from coordinator.objectives import objective_fn
-from coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sampler_class, sampler_from_dict
-from coordinator.scheduler import Scheduler
-from coordinator.study import Study
-from coordinator.verifier import Verifier, VerifyPolicy
-from protocol.errors import ConfigError, check_range
-from protocol.run import RunConfig
-from storage.base import BaseStorage
-from storage.memory import InMemoryStorage
-from storage.schema import RunMeta
+from spinefarm.coordinator.core import CoordinatorCore
+from spinefarm.coordinator.fidelity import Rungs
+from spinefarm.coordinator.objectives import objective_fn
+from spinefarm.coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sampler_class, sampler_from_dict
+from spinefarm.coordinator.scheduler import Scheduler
+from spinefarm.coordinator.study import Study
+from spinefarm.coordinator.verifier import Verifier, VerifyPolicy
+from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.protocol.run import RunConfig
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.memory import InMemoryStorage
+from spinefarm.storage.schema import RunMeta
 
 
 def software_version() -> str:
@@ -90,7 +90,7 @@ def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,
         storage: BaseStorage = InMemoryStorage()
         storage.create_run(meta)
     else:
-        from storage.hdf5 import Hdf5Storage
+        from spinefarm.storage.hdf5 import Hdf5Storage
 
         storage = Hdf5Storage.create(out, meta, overwrite=overwrite)
     return _core_or_close(storage, clock), storage
@@ -107,12 +107,12 @@ def _core_or_close(storage: BaseStorage, clock) -> CoordinatorCore:
 def resume_run(path: str | Path, clock=time.monotonic,
                trials_budget: int | None = None) -> tuple[CoordinatorCore, BaseStorage]:
     """Continue a stored run (optionally to a new budget): same numbering, same sampler state."""
-    from storage.hdf5 import Hdf5Storage
+    from spinefarm.storage.hdf5 import Hdf5Storage
 
     if not Path(path).is_file():
         raise ConfigError("cannot resume: run file does not exist", received=str(path),
                           expected="the .h5 file of an earlier run")
-    from coordinator.study import trial_seed
+    from spinefarm.coordinator.study import trial_seed
 
     storage = Hdf5Storage.resume(path, trials_budget, seed_of=trial_seed)
     return _core_or_close(storage, clock), storage

@@ -7,13 +7,12 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-
-from coordinator.fidelity import FirstRungView, Rungs
-from coordinator.samplers.base import BaseSampler
-from protocol.messages import TrialResult
-from protocol.params import ParamSpace
-from storage.base import BaseStorage
-from storage.schema import planned_evaluations
+from spinefarm.coordinator.fidelity import FirstRungView, Rungs
+from spinefarm.coordinator.samplers.base import BaseSampler
+from spinefarm.protocol.messages import TrialResult
+from spinefarm.protocol.params import ParamSpace
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.schema import planned_evaluations
 
 PROMOTED = "promoted"
 

@@ -17,8 +17,8 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from protocol.errors import check_range
-from protocol.run import RunConfig
+from spinefarm.protocol.errors import check_range
+from spinefarm.protocol.run import RunConfig
 
 log = logging.getLogger("spinefarm.verifier")
 
@@ -66,9 +66,8 @@ def _verify_job(morphology: Any, controller: str | None, trial_config: dict[str,
     import dataclasses
 
     import numpy as np
-
-    from worker.trial import TrialConfig
-    from worker.verify import VerifySettings, verify_in_engine, verify_trial
+    from spinefarm.worker.trial import TrialConfig
+    from spinefarm.worker.verify import VerifySettings, verify_in_engine, verify_trial
 
     cfg = TrialConfig.from_dict(trial_config)
     if duration_s is not None:

@@ -15,7 +15,7 @@ import stat
 from dataclasses import dataclass
 from pathlib import Path
 
-from protocol.errors import ConfigError
+from spinefarm.protocol.errors import ConfigError
 
 _USER = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 MIN_PASSWORD_CHARS = 16

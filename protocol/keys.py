@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 
-from protocol.errors import ConfigError
+from spinefarm.protocol.errors import ConfigError
 
 ROOT = "spinefarm"
 # A run id is one key-expression chunk: no '/', wildcards or verbatim markers.

@@ -12,7 +12,7 @@ import math
 import re
 from typing import Any
 
-from protocol.errors import MessageError
+from spinefarm.protocol.errors import MessageError
 
 MAX_MESSAGE_BYTES = 4 * 1024 * 1024   # a run config with a large spec, or 4096 results, fits
 MAX_DEPTH = 32                       # run configs nest spec -> structure -> tags -> ...: about 8

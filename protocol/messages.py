@@ -12,8 +12,8 @@ from dataclasses import asdict, dataclass, field, fields
 from enum import StrEnum
 from typing import Any
 
-from protocol import limits
-from protocol.errors import MessageError
+from spinefarm.protocol import limits
+from spinefarm.protocol.errors import MessageError
 
 SCHEMA_VERSION = 1
 

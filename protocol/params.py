@@ -13,8 +13,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from protocol.errors import ParameterError
+from spinefarm.protocol.errors import ParameterError
 
 
 @dataclass(frozen=True)

@@ -12,13 +12,13 @@ import json
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from protocol.errors import MessageError
-from protocol.params import ParamSpace, ParamSpec
+from spinefarm.protocol.errors import MessageError
+from spinefarm.protocol.params import ParamSpace, ParamSpec
 
 
 def json_hash(obj: Any) -> str:
     """16 hex digits of the SHA-256 of obj's canonical JSON (sorted keys, no spaces)."""
-    from protocol.messages import _finite_or_str, _json_default
+    from spinefarm.protocol.messages import _finite_or_str, _json_default
 
     blob = json.dumps(_finite_or_str(obj), sort_keys=True, separators=(",", ":"), default=_json_default)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
@@ -69,7 +69,7 @@ class RunConfig:
 
     @classmethod
     def from_dict(cls, data: Any) -> RunConfig:
-        from protocol.messages import _field
+        from spinefarm.protocol.messages import _field
 
         what = "run config"
         controller = data.get("controller") if isinstance(data, dict) else None
@@ -108,7 +108,7 @@ class WorkerProblem:
 
     @classmethod
     def from_dict(cls, data: Any) -> WorkerProblem:
-        from protocol.messages import _field
+        from spinefarm.protocol.messages import _field
 
         what = "worker problem"
         return cls(_field(data, "worker_id", str, what)[:200], _field(data, "reason", str, what)[:2000],

@@ -11,8 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from robot.morphology.structure import StructureSpec, rotation_from_y
+from spinefarm.robot.morphology.structure import StructureSpec, rotation_from_y
 
 
 @dataclass(frozen=True)

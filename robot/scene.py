@@ -12,8 +12,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-
-from protocol.errors import ConfigError, check_range
+from spinefarm.protocol.errors import ConfigError, check_range
 
 GROUND_TOP_CM = 0.5
 GROUND_HALF_EXTENT_CM = 500.0

@@ -16,13 +16,12 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-
-from protocol.errors import ConfigError, MorphologySpecError
-from protocol.params import ParamSpace, ParamSpec
-from robot.cpg_network import CpgNetwork
+from spinefarm.protocol.errors import ConfigError, MorphologySpecError
+from spinefarm.protocol.params import ParamSpace, ParamSpec
+from spinefarm.robot.cpg_network import CpgNetwork
 
 if TYPE_CHECKING:
-    from robot.morphology.model import Morphology
+    from spinefarm.robot.morphology.model import Morphology
 
 
 class BaseControllerSpace:

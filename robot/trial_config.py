@@ -10,8 +10,8 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from protocol.errors import ConfigError, check_range
-from robot.scene import SceneConfig
+from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.robot.scene import SceneConfig
 
 MOTOR_MODEL_NAMES = ("physical", "ntrt2014")
 # each engine's default physics step when dt_s is not given: the largest whose median distance error on the

@@ -32,8 +32,8 @@ def load_run(path: str | Path) -> pd.DataFrame:
     import numpy as np
     import pandas as pd
 
-    from storage.hdf5 import read_run
-    from storage.schema import COLUMNS, VECTOR_COLUMNS
+    from spinefarm.storage.hdf5 import read_run
+    from spinefarm.storage.schema import COLUMNS, VECTOR_COLUMNS
 
     meta, cols = read_run(path)
     data: dict[str, Any] = {}

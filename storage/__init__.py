@@ -3,8 +3,8 @@
 Hdf5Storage is imported lazily so that importing `storage` stays light.
 """
 
-from storage.base import BaseStorage
-from storage.memory import InMemoryStorage
-from storage.schema import FILE_SCHEMA_VERSION, RunMeta, TrialRecord
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.memory import InMemoryStorage
+from spinefarm.storage.schema import FILE_SCHEMA_VERSION, RunMeta, TrialRecord
 
 __all__ = ["FILE_SCHEMA_VERSION", "BaseStorage", "InMemoryStorage", "RunMeta", "TrialRecord"]

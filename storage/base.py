@@ -7,9 +7,8 @@ import time
 from typing import Any
 
 import numpy as np
-
-from protocol.errors import StorageError
-from protocol.messages import (
+from spinefarm.protocol.errors import StorageError
+from spinefarm.protocol.messages import (
     RECORDED_EXTRAS,
     SCORE_NAMES,
     STORED_STATUSES,
@@ -17,8 +16,8 @@ from protocol.messages import (
     TrialStatus,
     Verification,
 )
-from storage import pareto
-from storage.schema import RunMeta, TrialRecord
+from spinefarm.storage import pareto
+from spinefarm.storage.schema import RunMeta, TrialRecord
 
 
 class BaseStorage:

@@ -6,8 +6,8 @@ import csv
 from collections.abc import Sequence
 from typing import Any, TextIO
 
-from storage.base import BaseStorage
-from storage.schema import COLUMNS, VECTOR_COLUMNS
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.schema import COLUMNS, VECTOR_COLUMNS
 
 
 def write_csv(storage: BaseStorage, out: TextIO, ids: Sequence[int] | None = None) -> None:
@@ -43,7 +43,7 @@ def best_table(storage: BaseStorage, k: int) -> str:
 def gait_params(storage: BaseStorage, trial_id: int | None = None) -> dict[str, Any]:
     """The best trial (or `trial_id`) as a `spinefarm trial --params` file: controller space, named
     physical values, and where it came from (run, trial, scores, trial length) for the record."""
-    from protocol.errors import StorageError
+    from spinefarm.protocol.errors import StorageError
 
     best = storage.best(1) if trial_id is None else [storage.trial(trial_id)]
     if not best or best[0].status != "complete":

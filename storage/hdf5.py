@@ -27,14 +27,13 @@ from typing import Any
 
 import h5py
 import numpy as np
-
-from protocol.errors import StorageError
-from protocol.messages import SCHEMA_VERSION
-from storage.memory import InMemoryStorage
-from storage.probe import check_eof, probe, stored_eof
-from storage.runlock import RunLock
-from storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
-from storage.table import EMPTY_STATUS, TrialTable, empty_value
+from spinefarm.protocol.errors import StorageError
+from spinefarm.protocol.messages import SCHEMA_VERSION
+from spinefarm.storage.memory import InMemoryStorage
+from spinefarm.storage.probe import check_eof, probe, stored_eof
+from spinefarm.storage.runlock import RunLock
+from spinefarm.storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
+from spinefarm.storage.table import EMPTY_STATUS, TrialTable, empty_value
 
 CHUNK_ROWS = 1024
 # A file handle whose writes failed: closing it makes HDF5 retry the failed writes (and crash at exit),
@@ -194,7 +193,7 @@ class Hdf5Storage(InMemoryStorage):
     @classmethod
     def create(cls, path: str | Path, meta: RunMeta, overwrite: bool = False) -> Hdf5Storage:
         """A new run file; `overwrite` replaces an existing one, but never one another coordinator writes."""
-        from storage.status import status_path
+        from spinefarm.storage.status import status_path
 
         path = Path(path)
         lock = RunLock(path).acquire()  # before looking: the file may be live
@@ -221,7 +220,7 @@ class Hdf5Storage(InMemoryStorage):
         Every stored row is validated first (storage.validate; `seed_of(run_seed, trial_ids)` gives the
         seeds the run derives); a file that fails is left untouched.
         """
-        from storage.validate import validate_rows
+        from spinefarm.storage.validate import validate_rows
 
         path = Path(path)
         lock = RunLock(path).acquire()

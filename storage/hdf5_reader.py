@@ -7,13 +7,12 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-
-from protocol.errors import StorageError
-from storage.base import BaseStorage
-from storage.hdf5 import _read_meta
-from storage.probe import check_eof
-from storage.schema import COLUMNS, RunMeta, TrialRecord
-from storage.table import EMPTY_STATUS
+from spinefarm.protocol.errors import StorageError
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.hdf5 import _read_meta
+from spinefarm.storage.probe import check_eof
+from spinefarm.storage.schema import COLUMNS, RunMeta, TrialRecord
+from spinefarm.storage.table import EMPTY_STATUS
 
 
 class _LazyColumns(Mapping):

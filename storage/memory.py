@@ -7,12 +7,11 @@ import math
 from typing import Any
 
 import numpy as np
-
-from protocol.errors import StorageError
-from protocol.messages import TrialStatus, Verification
-from storage.base import BaseStorage
-from storage.schema import RunMeta
-from storage.table import TrialTable
+from spinefarm.protocol.errors import StorageError
+from spinefarm.protocol.messages import TrialStatus, Verification
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.schema import RunMeta
+from spinefarm.storage.table import TrialTable
 
 
 class InMemoryStorage(BaseStorage):

@@ -20,13 +20,13 @@ import sys
 import time
 from pathlib import Path
 
-from protocol.errors import StorageError
+from spinefarm.protocol.errors import StorageError
 
 PROBE_TIMEOUT_S = 10.0
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 _PROBE_CODE = (
     "import sys\n"
-    "from storage.hdf5 import read_run\n"
+    "from spinefarm.storage.hdf5 import read_run\n"
     "meta, cols = read_run(sys.argv[1])\n"
     "print(meta.run_id)\n"
 )
@@ -79,7 +79,7 @@ def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S) -> str:
     check_eof(path)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     try:
-        r = subprocess.run([sys.executable, "-c", _PROBE_CODE, str(path)], capture_output=True, text=True,
+        r = subprocess.run([sys.executable, "-P", "-c", _PROBE_CODE, str(path)], capture_output=True, text=True,
                            timeout=timeout_s, env=env, stdin=subprocess.DEVNULL)
     except subprocess.TimeoutExpired:
         raise StorageError(f"reading run file {path} did not finish within {timeout_s:g} s",

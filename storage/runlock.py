@@ -12,7 +12,7 @@ import fcntl
 import os
 from pathlib import Path
 
-from protocol.errors import StorageError
+from spinefarm.protocol.errors import StorageError
 
 
 def lock_path(run_path: str | Path) -> Path:

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-
-from storage.schema import COLUMNS, VECTOR_COLUMNS
+from spinefarm.storage.schema import COLUMNS, VECTOR_COLUMNS
 
 EMPTY_STATUS = b""  # a row extended in a file but not yet written
 

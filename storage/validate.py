@@ -13,9 +13,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-
-from protocol.errors import StorageError
-from storage.schema import PHASES, STATUSES, VERIFICATIONS, RunMeta
+from spinefarm.protocol.errors import StorageError
+from spinefarm.storage.schema import PHASES, STATUSES, VERIFICATIONS, RunMeta
 
 _SHOWN = 5
 _FINITE_WHEN_COMPLETE = ("objective", "distance_m", "ntrt_distance_cm", "speed_cm_s", "work_j")

@@ -10,15 +10,15 @@ import pytest
 
 HEAVY = ("pybullet", "zenoh", "h5py", "fastapi", "numba", "mujoco")
 ALLOWED = {
-    "protocol.params": set(),
-    "protocol.messages": set(),
-    "protocol.errors": set(),
-    "robot.morphology.registry": set(),
-    "worker.trial": {"numba"},
-    "worker.engines.bullet": {"pybullet", "numba"},
-    "worker.engines.mujoco": {"mujoco"},
-    "worker.setup": {"numba"},
-    "storage.hdf5": {"h5py"},
+    "spinefarm.protocol.params": set(),
+    "spinefarm.protocol.messages": set(),
+    "spinefarm.protocol.errors": set(),
+    "spinefarm.robot.morphology.registry": set(),
+    "spinefarm.worker.trial": {"numba"},
+    "spinefarm.worker.engines.bullet": {"pybullet", "numba"},
+    "spinefarm.worker.engines.mujoco": {"mujoco"},
+    "spinefarm.worker.setup": {"numba"},
+    "spinefarm.storage.hdf5": {"h5py"},
 }
 
 

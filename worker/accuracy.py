@@ -19,11 +19,10 @@ from statistics import median
 from typing import Any
 
 import numpy as np
-
-from robot.morphology.registry import load_morphology
-from robot.trial_config import ENGINE_DEFAULT_DT_S
-from worker import scoring
-from worker.trial import TrialConfig, random_unit_params, simulate
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.trial_config import ENGINE_DEFAULT_DT_S
+from spinefarm.worker import scoring
+from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
 
 
 def baseline_label(engine: str = "bullet") -> str:

@@ -10,11 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from protocol.errors import SpinefarmError
-from robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
-from robot.morphology.model import Morphology
-from robot.trial_config import TrialConfig
+from spinefarm.protocol.errors import SpinefarmError
+from spinefarm.robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.trial_config import TrialConfig
 
 
 @dataclass(frozen=True)
@@ -36,8 +35,8 @@ def passive_params(morph: Morphology, seed: int = 1) -> np.ndarray:
 
 def _step_config(morph: Morphology, engine: str, **kw) -> TrialConfig:
     """The default step, or the automatic one for a structure known to be unstable at it."""
-    from protocol.errors import ConfigError
-    from worker.episode import choose_step
+    from spinefarm.protocol.errors import ConfigError
+    from spinefarm.worker.episode import choose_step
 
     try:
         cfg = TrialConfig(engine=engine, **kw)
@@ -48,7 +47,7 @@ def _step_config(morph: Morphology, engine: str, **kw) -> TrialConfig:
 
 
 def check_builds(morph: Morphology) -> CheckResult:
-    from worker.trial import string_tables
+    from spinefarm.worker.trial import string_tables
 
     bodies = build_bodies(morph.structure)
     geom = build_strings(morph.structure, bodies)
@@ -84,7 +83,7 @@ def check_sane_numbers(morph: Morphology) -> CheckResult:
 
 def check_passive_settle(morph: Morphology, engine: str = "bullet", duration_s: float = 5.0) -> CheckResult:
     """With no CPG output the structure stays in one piece, above ground, in a steady shape, at rest."""
-    from worker.trial import simulate
+    from spinefarm.worker.trial import simulate
 
     name = "passive settle holds its shape"
     cfg = _step_config(morph, engine, duration_s=duration_s, record_every_s=duration_s / 20)
@@ -117,7 +116,7 @@ def check_passive_settle(morph: Morphology, engine: str = "bullet", duration_s: 
 
 
 def check_deterministic(morph: Morphology, engine: str = "bullet") -> CheckResult:
-    from worker.trial import simulate
+    from spinefarm.worker.trial import simulate
 
     name = "two runs agree"
     u = np.random.default_rng(7).random(len(morph.param_space()))

@@ -7,21 +7,20 @@ import math
 from functools import lru_cache
 
 import numpy as np
-
-from protocol.errors import ConfigError
-from protocol.messages import TrialResult, TrialStatus
-from robot.morphology.model import Morphology
-from robot.scene import GROUND_TOP_CM, SceneConfig, surface_height_cm
-from robot.trial_config import TrialConfig
-from worker import scoring
-from worker.sim import strings as sk
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.scene import GROUND_TOP_CM, SceneConfig, surface_height_cm
+from spinefarm.robot.trial_config import TrialConfig
+from spinefarm.worker import scoring
+from spinefarm.worker.sim import strings as sk
 
 STRETCH_BASE_MIN_CM = 2.0
 
 
 @lru_cache(maxsize=64)
 def _stable_step(morph: Morphology, relocate: bool):
-    from worker.sim.stability import estimate_stable_step
+    from spinefarm.worker.sim.stability import estimate_stable_step
 
     return estimate_stable_step(morph, relocate)
 

@@ -1,6 +1,6 @@
 """The gait picture of a stored trial: re-simulate it as the run did and draw the `render` strip.
 
-Run as `python -m worker.picture JOB.json OUT.png` (the API calls it in a subprocess, so a server
+Run as `python -m spinefarm.worker.picture JOB.json OUT.png` (the API calls it in a subprocess, so a server
 without the simulator still serves everything else). JOB holds morphology (a Morphology.to_dict()),
 controller, trial_config, params_unit, seed and frames.
 """
@@ -16,9 +16,9 @@ import numpy as np
 
 
 def render_trial(job: dict[str, Any], out: str | Path) -> Path:
-    from robot.morphology.registry import load_morphology
-    from worker.render import frames_from_record, render
-    from worker.trial import TrialConfig, simulate
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.render import frames_from_record, render
+    from spinefarm.worker.trial import TrialConfig, simulate
 
     morph = load_morphology(job["morphology"])
     base = dict(job["trial_config"])
@@ -36,10 +36,10 @@ def render_trial(job: dict[str, Any], out: str | Path) -> Path:
 
 
 def main(argv: list[str]) -> int:
-    from protocol.errors import SpinefarmError
+    from spinefarm.protocol.errors import SpinefarmError
 
     if len(argv) != 2:
-        print("usage: python -m worker.picture JOB.json OUT.png", file=sys.stderr)
+        print("usage: python -m spinefarm.worker.picture JOB.json OUT.png", file=sys.stderr)
         return 2
     try:
         render_trial(json.loads(Path(argv[0]).read_text()), argv[1])

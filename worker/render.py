@@ -10,11 +10,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from protocol.errors import ConfigError
-from robot.bodies import BodyModel, StringGeometry, build_bodies, build_strings
-from robot.morphology.model import Morphology
-from worker.sim.strings import world_anchors
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot.bodies import BodyModel, StringGeometry, build_bodies, build_strings
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.worker.sim.strings import world_anchors
 
 ROD_COLOUR = "#1f1f1f"
 GROUND_COLOUR = "#d9d4c7"

@@ -9,11 +9,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from protocol.errors import ConfigError, MorphologySpecError
-from protocol.messages import TrialResult
-from robot.morphology.model import Morphology
-from robot.spaces import NtrtTableSpace
+from spinefarm.protocol.errors import ConfigError, MorphologySpecError
+from spinefarm.protocol.messages import TrialResult
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.spaces import NtrtTableSpace
 
 # NTRT folder name -> built-in NTRT-era morphology
 ROBOT_FOLDERS = {
@@ -158,8 +157,8 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
            engine: str = "bullet") -> ReplayReport:
     """Run NTRT's published parameters on the NTRT-era morphology (2014 motor, 1 ms, one sub-step,
     no friction anchors in Bullet; `engine` "mujoco" runs the same on MuJoCo's default contacts)."""
-    from robot.morphology.registry import load_morphology
-    from worker.trial import TrialConfig, simulate
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.trial import TrialConfig, simulate
 
     morph = load_morphology(morphology or detect_morphology(folder))
     params = read_parameter_set(folder, suffix)

@@ -24,10 +24,9 @@ from pathlib import Path
 
 import numpy as np
 import zenoh
-
-from protocol import keys
-from protocol.errors import ConfigError, MessageError, RunMismatchError, SpinefarmError
-from protocol.messages import (
+from spinefarm.protocol import keys
+from spinefarm.protocol.errors import ConfigError, MessageError, RunMismatchError, SpinefarmError
+from spinefarm.protocol.messages import (
     ResultAck,
     ResultSubmission,
     RunInfo,
@@ -40,8 +39,8 @@ from protocol.messages import (
     decode_message,
     encode_message,
 )
-from protocol.params import ParamSpace
-from protocol.run import RunConfig, WorkerProblem
+from spinefarm.protocol.params import ParamSpace
+from spinefarm.protocol.run import RunConfig, WorkerProblem
 
 log = logging.getLogger("spinefarm.worker")
 Evaluator = Callable[[TrialAssignment], TrialResult]
@@ -75,7 +74,7 @@ def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("transport/link/tx/lease", str(WORKER_LEASE_MS))
     if credentials_file is not None:
-        from protocol.credentials import load_credentials
+        from spinefarm.protocol.credentials import load_credentials
 
         for key, value in load_credentials(credentials_file).zenoh_settings(accept=bool(listen)).items():
             conf.insert_json5(key, value)
@@ -110,9 +109,9 @@ def build_evaluator(config: RunConfig) -> Evaluator:
                                    expected="a morphology spec, or the test objective sphere[:N]")
         delay_s = float(config.trial_config.get("duration_s") or 0.0)
         return lambda a: sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s)
-    from robot.morphology.model import Morphology
-    from worker.setup import SetupCache
-    from worker.trial import TrialConfig, run_trial
+    from spinefarm.robot.morphology.model import Morphology
+    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial import TrialConfig, run_trial
 
     morphology = Morphology.from_dict(config.morphology_spec)
     trial_config = TrialConfig.from_dict(config.trial_config)
@@ -123,7 +122,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
         if getattr(config, name) != value:
             raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
                                    "version?)", received=value, expected=getattr(config, name))
-    from worker.engines.base import engine_class
+    from spinefarm.worker.engines.base import engine_class
 
     # a missing engine package or an option the engine does not have fails here, not in every trial
     engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)

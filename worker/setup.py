@@ -14,21 +14,20 @@ from collections import OrderedDict
 from typing import Any
 
 import numpy as np
-
-from robot.bodies import build_bodies, build_strings
-from robot.cpg_network import CpgNetwork
-from robot.morphology.model import Morphology
-from robot.scene import build_terrain
-from robot.trial_config import TrialConfig
-from worker.engines.base import BasePhysics, EngineFactory, engine_class
-from worker.episode import build_poses, choose_step, start_lift_cm, start_rotation
+from spinefarm.robot.bodies import build_bodies, build_strings
+from spinefarm.robot.cpg_network import CpgNetwork
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.scene import build_terrain
+from spinefarm.robot.trial_config import TrialConfig
+from spinefarm.worker.engines.base import BasePhysics, EngineFactory, engine_class
+from spinefarm.worker.episode import build_poses, choose_step, start_lift_cm, start_rotation
 
 
 class TrialSetup:
     """The parameter- and seed-independent part of a trial of `morph` under `cfg` (controller given)."""
 
     def __init__(self, morph: Morphology, cfg: TrialConfig, controller: str | None) -> None:
-        from worker.trial import string_tables
+        from spinefarm.worker.trial import string_tables
 
         self.morph, self.cfg, self.controller = morph, cfg, controller
         self.engine_cls = engine_class(cfg.engine)

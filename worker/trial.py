@@ -11,19 +11,18 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-
-from protocol.errors import ConfigError, ParameterError
-from protocol.messages import TrialResult
-from robot.morphology.model import Morphology
-from robot.morphology.registry import load_morphology
-from robot.morphology.structure import NEWTON
-from robot.trial_config import TrialConfig
-from worker import scoring
-from worker.control.cpg import CpgIntegrator
-from worker.engines.base import EngineFactory
-from worker.episode import check_state, choose_step, score
-from worker.setup import SetupCache, TrialSetup, setup_key
-from worker.sim import strings as sk
+from spinefarm.protocol.errors import ConfigError, ParameterError
+from spinefarm.protocol.messages import TrialResult
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.morphology.structure import NEWTON
+from spinefarm.robot.trial_config import TrialConfig
+from spinefarm.worker import scoring
+from spinefarm.worker.control.cpg import CpgIntegrator
+from spinefarm.worker.engines.base import EngineFactory
+from spinefarm.worker.episode import check_state, choose_step, score
+from spinefarm.worker.setup import SetupCache, TrialSetup, setup_key
+from spinefarm.worker.sim import strings as sk
 
 MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014}
 __all__ = ["Trajectory", "TrialConfig", "TrialOutcome", "choose_step", "random_unit_params", "run_trial", "simulate"]

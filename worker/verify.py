@@ -10,10 +10,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
-from robot.morphology.model import Morphology
-from robot.morphology.registry import load_morphology
-from worker.trial import TrialConfig, run_trial
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.worker.trial import TrialConfig, run_trial
 
 
 @dataclass(frozen=True)

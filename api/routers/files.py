@@ -10,12 +10,11 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends
 from fastapi.responses import FileResponse, Response
+from spinefarm.api.deps import run_path, run_storage
+from spinefarm.storage.export import write_csv
+from spinefarm.storage.hdf5 import snapshot
+from spinefarm.storage.hdf5_reader import Hdf5Reader
 from starlette.background import BackgroundTask
-
-from api.deps import run_path, run_storage
-from storage.export import write_csv
-from storage.hdf5 import snapshot
-from storage.hdf5_reader import Hdf5Reader
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["files"])
 

@@ -6,14 +6,13 @@ from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Query
-
-from api.analysis import analysis_view, columns_view
-from api.deps import registry, run_path, run_storage
-from api.registry import RunRegistry
-from api.schemas import RunStatus
-from api.views import run_view
-from protocol.errors import StorageError
-from storage.hdf5_reader import Hdf5Reader
+from spinefarm.api.analysis import analysis_view, columns_view
+from spinefarm.api.deps import registry, run_path, run_storage
+from spinefarm.api.registry import RunRegistry
+from spinefarm.api.schemas import RunStatus
+from spinefarm.api.views import run_view
+from spinefarm.protocol.errors import StorageError
+from spinefarm.storage.hdf5_reader import Hdf5Reader
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 

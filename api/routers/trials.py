@@ -6,13 +6,12 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Path, Query, Request
 from fastapi.responses import FileResponse, JSONResponse
-
-from api.deps import run_storage
-from api.errors import NotFound
-from api.schemas import Trial
-from api.views import trial_view
-from storage.hdf5_reader import Hdf5Reader
-from storage.schema import TrialRecord
+from spinefarm.api.deps import run_storage
+from spinefarm.api.errors import NotFound
+from spinefarm.api.schemas import Trial
+from spinefarm.api.views import trial_view
+from spinefarm.storage.hdf5_reader import Hdf5Reader
+from spinefarm.storage.schema import TrialRecord
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["trials"])
 

@@ -6,9 +6,8 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-
-from protocol.messages import TrialStatus
-from storage.base import BaseStorage
+from spinefarm.protocol.messages import TrialStatus
+from spinefarm.storage.base import BaseStorage
 
 MONTE_CARLO = "monte_carlo"
 GAUSSIAN = "gaussian"

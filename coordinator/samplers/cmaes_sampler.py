@@ -15,11 +15,10 @@ import math
 from typing import Any
 
 import numpy as np
-
-from coordinator.samplers.base import CMAES, BaseSampler, FinishedPrefix, Proposal, trial_seed32
-from protocol.errors import ConfigError, check_range
-from protocol.messages import TrialStatus
-from storage.base import BaseStorage
+from spinefarm.coordinator.samplers.base import CMAES, BaseSampler, FinishedPrefix, Proposal, trial_seed32
+from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.protocol.messages import TrialStatus
+from spinefarm.storage.base import BaseStorage
 
 _FAILED_VALUE = 1e30  # minimised: a failed trial is worse than any complete one
 

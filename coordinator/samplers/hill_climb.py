@@ -11,10 +11,9 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-
-from coordinator.samplers.base import GAUSSIAN, MONTE_CARLO, BaseSampler, Proposal, trial_rng
-from protocol.errors import check_range
-from storage.base import BaseStorage
+from spinefarm.coordinator.samplers.base import GAUSSIAN, MONTE_CARLO, BaseSampler, Proposal, trial_rng
+from spinefarm.protocol.errors import check_range
+from spinefarm.storage.base import BaseStorage
 
 
 class GaussianHillClimbSampler(BaseSampler):

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from coordinator.samplers.base import MONTE_CARLO, BaseSampler, Proposal, trial_rng
-from storage.base import BaseStorage
+from spinefarm.coordinator.samplers.base import MONTE_CARLO, BaseSampler, Proposal, trial_rng
+from spinefarm.storage.base import BaseStorage
 
 
 class RandomSampler(BaseSampler):

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from coordinator.samplers.base import BaseSampler
-from coordinator.samplers.cmaes_sampler import CmaEsSampler
-from coordinator.samplers.hill_climb import GaussianHillClimbSampler
-from coordinator.samplers.random import RandomSampler
-from coordinator.samplers.tpe import TpeSampler
-from protocol.errors import ConfigError
+from spinefarm.coordinator.samplers.base import BaseSampler
+from spinefarm.coordinator.samplers.cmaes_sampler import CmaEsSampler
+from spinefarm.coordinator.samplers.hill_climb import GaussianHillClimbSampler
+from spinefarm.coordinator.samplers.random import RandomSampler
+from spinefarm.coordinator.samplers.tpe import TpeSampler
+from spinefarm.protocol.errors import ConfigError
 
 SAMPLERS: dict[str, type[BaseSampler]] = {
     "paper": GaussianHillClimbSampler,   # the paper's Monte Carlo then sigma = 0.005 hill climbing

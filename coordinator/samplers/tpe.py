@@ -15,11 +15,10 @@ import warnings
 from typing import Any
 
 import numpy as np
-
-from coordinator.samplers.base import TPE, BaseSampler, FinishedPrefix, Proposal, trial_seed32
-from protocol.errors import check_range
-from protocol.messages import TrialStatus
-from storage.base import BaseStorage
+from spinefarm.coordinator.samplers.base import TPE, BaseSampler, FinishedPrefix, Proposal, trial_seed32
+from spinefarm.protocol.errors import check_range
+from spinefarm.protocol.messages import TrialStatus
+from spinefarm.storage.base import BaseStorage
 
 _COT_CAP = 1e6  # no motion gives COT = inf; Optuna needs finite values
 

@@ -8,12 +8,12 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING
 
-from protocol.errors import ConfigError, MorphologySpecError, check_range
-from robot.morphology.structure import StructureSpec
+from spinefarm.protocol.errors import ConfigError, MorphologySpecError, check_range
+from spinefarm.robot.morphology.structure import StructureSpec
 
 if TYPE_CHECKING:
-    from protocol.params import ParamSpace
-    from robot.spaces import BaseControllerSpace
+    from spinefarm.protocol.params import ParamSpace
+    from spinefarm.robot.spaces import BaseControllerSpace
 
 
 @dataclass(frozen=True)
@@ -93,7 +93,7 @@ class Morphology:
                                       received=unknown, expected=f"tags among {sorted(tags)}")
 
     def controller_space(self, controller: str | None = None) -> BaseControllerSpace:
-        from robot.spaces import make_controller_space, space_base
+        from spinefarm.robot.spaces import make_controller_space, space_base
 
         name = controller or self.controllers[0]
         if name not in self.controllers and space_base(name) not in self.controllers:

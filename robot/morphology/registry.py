@@ -7,9 +7,9 @@ from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
 
-from protocol.errors import UnknownMorphologyError
-from robot.morphology.model import Morphology
-from robot.morphology.specfile import SPEC_DIR, load_spec_file
+from spinefarm.protocol.errors import UnknownMorphologyError
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.morphology.specfile import SPEC_DIR, load_spec_file
 
 
 def builtin_names() -> list[str]:

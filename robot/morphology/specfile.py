@@ -12,10 +12,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from protocol.errors import ConfigError, MorphologySpecError
-from robot.morphology.model import ControlSpec, ImpedanceGains, Morphology
-from robot.morphology.specyaml import (
+from spinefarm.protocol.errors import ConfigError, MorphologySpecError
+from spinefarm.robot.morphology.model import ControlSpec, ImpedanceGains, Morphology
+from spinefarm.robot.morphology.specyaml import (
     LineDict,
     SpecSource,
     applies,
@@ -26,7 +25,7 @@ from robot.morphology.specyaml import (
     number,
     vector,
 )
-from robot.morphology.structure import (
+from spinefarm.robot.morphology.structure import (
     Rod,
     RodMaterial,
     String,

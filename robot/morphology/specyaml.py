@@ -8,9 +8,8 @@ from typing import Any
 
 import numpy as np
 import yaml
-
-from protocol.errors import MorphologySpecError
-from robot.morphology.specexpr import ExpressionError, evaluate
+from spinefarm.protocol.errors import MorphologySpecError
+from spinefarm.robot.morphology.specexpr import ExpressionError, evaluate
 
 WHEN = ("all", "even", "odd")
 

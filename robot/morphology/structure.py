@@ -15,8 +15,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-
-from protocol.errors import ConfigError, MorphologySpecError, check_range
+from spinefarm.protocol.errors import ConfigError, MorphologySpecError, check_range
 
 NEWTON = 100.0  # kg*cm/s^2 per N
 

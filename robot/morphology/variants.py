@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from robot.morphology.model import Morphology
+from spinefarm.robot.morphology.model import Morphology
 
 
 def with_strings(morph: Morphology, **changes: float) -> Morphology:

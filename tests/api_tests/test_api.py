@@ -12,11 +12,11 @@ import httpx
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
+from spinefarm.api.app import create_app
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.storage.hdf5 import Hdf5Storage
+from spinefarm.storage.status import write_status
 
-from api.app import create_app
-from protocol.errors import ConfigError
-from storage.hdf5 import Hdf5Storage
-from storage.status import write_status
 from tests.coordinator_tests.helpers import wait_for
 from tests.storage_tests.conftest import make_meta, result
 
@@ -134,7 +134,7 @@ def test_real_server_reads_a_live_run_and_serves_snapshots(tmp_path):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     writer = write_run(tmp_path / "live.h5", run_id="live", n=10, finished=2, keep_open=True)
-    proc = subprocess.Popen([sys.executable, "-m", "cli.main", "api", "--runs-dir", str(tmp_path),
+    proc = subprocess.Popen([sys.executable, "-m", "spinefarm", "api", "--runs-dir", str(tmp_path),
                              "--port", str(port)], stderr=subprocess.DEVNULL)
     base = f"http://127.0.0.1:{port}"
     try:

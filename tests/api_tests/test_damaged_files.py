@@ -42,11 +42,11 @@ def runs_dir(tmp_path):
 
 
 def test_damaged_files_are_left_out_and_sigterm_stops_the_server(runs_dir):
-    from cli.service_commands import free_port
+    from spinefarm.cli.service_commands import free_port
 
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "cli.main", "api", "--runs-dir", str(runs_dir), "--port", str(port)],
-                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "spinefarm", "api", "--runs-dir", str(runs_dir), "--port",
+                             str(port)], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         url = f"http://127.0.0.1:{port}"
         wait_for(lambda: _ok(url + "/health"), timeout_s=30, what="the API")
@@ -80,9 +80,8 @@ def _ok(url):
 def test_a_status_file_with_a_lone_surrogate_is_served(tmp_path):
     """An old status file holding a worker id like "\\ud800" must not turn /runs into 500 for good."""
     from fastapi.testclient import TestClient
-
-    from api.app import create_app
-    from storage.status import status_path
+    from spinefarm.api.app import create_app
+    from spinefarm.storage.status import status_path
 
     run_file(tmp_path / "run.h5", "odd")
     status_path(tmp_path / "run.h5").write_text(

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from spinefarm.storage.hdf5 import read_run
 
-from storage.hdf5 import read_run
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
 
@@ -41,7 +41,7 @@ def free_port() -> int:
 
 
 def spinefarm(*args: str) -> subprocess.CompletedProcess:
-    r = subprocess.run([sys.executable, "-m", "cli.main", *args], cwd=ROOT, capture_output=True, text=True,
+    r = subprocess.run([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stderr
     return r
@@ -51,8 +51,8 @@ class Server:
     """`spinefarm api` (or `spinefarm search`) as a real process; `url` once it answers."""
 
     def __init__(self, args: list[str], port: int, prelude: str | None = None) -> None:
-        cmd = [sys.executable, "-m", "cli.main", *args] if prelude is None else [
-            sys.executable, "-c", prelude + f"; from cli.main import main; sys.exit(main({args!r}))"]
+        cmd = [sys.executable, "-m", "spinefarm", *args] if prelude is None else [
+            sys.executable, "-c", prelude + f"; from spinefarm.cli.main import main; sys.exit(main({args!r}))"]
         self.proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         self.url = f"http://127.0.0.1:{port}"
 
@@ -77,8 +77,9 @@ FAILURES = {"diverged": 3, "error": 1}  # reasons are grouped by what precedes t
 
 def write_failing_run(path: Path) -> None:
     """A run file with failed trials (what a real search writes when trials diverge or raise)."""
-    from protocol.messages import TrialStatus
-    from storage.hdf5 import Hdf5Storage
+    from spinefarm.protocol.messages import TrialStatus
+    from spinefarm.storage.hdf5 import Hdf5Storage
+
     from tests.storage_tests.conftest import make_meta, result
 
     s = Hdf5Storage.create(path, make_meta("failing-view", n_params=3))

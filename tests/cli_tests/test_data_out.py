@@ -8,14 +8,14 @@ import sys
 import numpy as np
 import pandas as pd
 import pytest
+from spinefarm.storage.hdf5 import read_run
 
 import spinefarm
-from storage.hdf5 import read_run
 from tests.coordinator_tests.procs import ROOT
 
 
 def run(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cli.main", *args], cwd=ROOT, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, capture_output=True, text=True,
                           timeout=120)
 
 

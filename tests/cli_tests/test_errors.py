@@ -14,7 +14,7 @@ from tests.coordinator_tests.procs import ROOT
 
 
 def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cli.main", *args], cwd=ROOT, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, capture_output=True, text=True,
                           timeout=timeout)
 
 
@@ -65,7 +65,7 @@ def test_an_output_path_that_cannot_be_written_or_has_the_wrong_extension(case, 
 
 
 def test_export_csv_into_a_pipe_closed_early_is_quiet(sphere_run):
-    p = subprocess.Popen([sys.executable, "-m", "cli.main", "export", str(sphere_run), "--csv"], cwd=ROOT,
+    p = subprocess.Popen([sys.executable, "-m", "spinefarm", "export", str(sphere_run), "--csv"], cwd=ROOT,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert p.stdout.readline().startswith("trial_id,")
     p.stdout.close()  # as `| head -1` does
@@ -106,7 +106,7 @@ def test_accuracy_with_zero_seeds():
 
 def test_search_without_workers_says_how_to_attach_them(tmp_path):
     out = tmp_path / "r.h5"
-    p = subprocess.Popen([sys.executable, "-m", "cli.main", "search", "sphere:3", "--trials", "5", "--workers", "0",
+    p = subprocess.Popen([sys.executable, "-m", "spinefarm", "search", "sphere:3", "--trials", "5", "--workers", "0",
                           "--out", str(out), "--api-port", "-1", "--quiet"], cwd=ROOT, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
     try:
@@ -119,7 +119,7 @@ def test_search_without_workers_says_how_to_attach_them(tmp_path):
 
 
 def test_a_worker_that_cannot_reach_its_coordinator_says_so_within_seconds():
-    p = subprocess.Popen([sys.executable, "-m", "cli.main", "worker", "--connect", "tcp/127.0.0.1:9"], cwd=ROOT,
+    p = subprocess.Popen([sys.executable, "-m", "spinefarm", "worker", "--connect", "tcp/127.0.0.1:9"], cwd=ROOT,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     t0 = time.monotonic()
     try:
@@ -132,7 +132,7 @@ def test_a_worker_that_cannot_reach_its_coordinator_says_so_within_seconds():
 
 
 def test_api_says_which_files_it_skips_and_why(sphere_run, tmp_path, a_file):
-    p = subprocess.Popen([sys.executable, "-m", "cli.main", "api", str(sphere_run), str(tmp_path / "gone.h5"),
+    p = subprocess.Popen([sys.executable, "-m", "spinefarm", "api", str(sphere_run), str(tmp_path / "gone.h5"),
                           str(a_file), "--port", "18731"], cwd=ROOT, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
     try:
@@ -149,7 +149,7 @@ def test_api_says_which_files_it_skips_and_why(sphere_run, tmp_path, a_file):
 @pytest.mark.integration
 def test_ctrl_c_while_the_best_is_re_simulated(tmp_path):
     out = tmp_path / "r.h5"
-    p = subprocess.Popen([sys.executable, "-m", "cli.main", "search", "tetraspine", "--trials", "1", "--workers",
+    p = subprocess.Popen([sys.executable, "-m", "spinefarm", "search", "tetraspine", "--trials", "1", "--workers",
                           "1", "--duration", "3", "--out", str(out), "--api-port", "-1"], cwd=ROOT,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     err = []
@@ -167,7 +167,7 @@ def test_ctrl_c_while_the_best_is_re_simulated(tmp_path):
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
     assert "stopped; the best is reported unverified" in stderr
     assert "best trial 0" in stdout
-    from storage.hdf5 import read_run
+    from spinefarm.storage.hdf5 import read_run
 
     _, cols = read_run(out)
     assert cols["status"].tolist() == [b"complete"]

@@ -20,7 +20,7 @@ pytestmark = pytest.mark.integration
 
 def run_on_a_terminal(args: list[str], timeout_s: float = 240.0) -> tuple[int, str]:
     leader, follower = pty.openpty()
-    p = subprocess.Popen([sys.executable, "-m", "cli.main", *args], cwd=ROOT, stdin=subprocess.DEVNULL,
+    p = subprocess.Popen([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, stdin=subprocess.DEVNULL,
                          stdout=follower, stderr=follower, env={**os.environ, "COLUMNS": "160"})
     os.close(follower)
     out = b""

@@ -8,11 +8,14 @@ import json
 import os
 import subprocess
 import sys
+import urllib.request
 import zipfile
 from pathlib import Path
 
 import pytest
 
+from tests.api_tests.test_dashboard_browser import free_port
+from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
 
 pytestmark = pytest.mark.integration
@@ -34,18 +37,19 @@ def wheel_tree(tmp_path_factory):
 
 def spinefarm(tree: Path, *args: str, cwd: Path) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    return subprocess.run([sys.executable, "-P", "-m", "cli.main", *args], cwd=cwd, env=env, capture_output=True,
+    return subprocess.run([sys.executable, "-P", "-m", "spinefarm", *args], cwd=cwd, env=env, capture_output=True,
                           text=True, timeout=600)
 
 
 def test_the_wheel_carries_docs_data_and_browser_assets(wheel_tree):
     _, names = wheel_tree
     for needed in ("spinefarm/__init__.py", "spinefarm/docs/replay.md", "spinefarm/docs/README.md",
-                   "api/static/index.html", "api/static/vendor/plotly-basic.min.js",
-                   "api/static/vendor/LICENSE-plotly.js.txt", "api/static/vendor/redoc.standalone.js",
-                   "api/static/vendor/swagger/swagger-ui-bundle.js", "worker/replay_data/LICENSE",
-                   "worker/replay_data/NOTICE",
-                   "worker/replay_data/OctahedralComplex/paper-2014-06-07/logs/bestParameters-default_node-0.nnw"):
+                   "spinefarm/api/static/index.html", "spinefarm/api/static/vendor/plotly-basic.min.js",
+                   "spinefarm/api/static/vendor/LICENSE-plotly.js.txt",
+                   "spinefarm/api/static/vendor/redoc.standalone.js",
+                   "spinefarm/api/static/vendor/swagger/swagger-ui-bundle.js", "spinefarm/worker/replay_data/LICENSE",
+                   "spinefarm/worker/replay_data/NOTICE",
+                   "spinefarm/worker/replay_data/OctahedralComplex/paper-2014-06-07/logs/bestParameters-default_node-0.nnw"):
         assert needed in names, needed
 
 
@@ -72,3 +76,51 @@ def test_replay_by_name_and_a_first_trial_says_it_compiles(wheel_tree, tmp_path)
     assert str(tree) in out["path"]
     again = spinefarm(tree, "trial", "tetraspine-ntrt", "--duration", "0.1", cwd=tmp_path)
     assert again.returncode == 0 and "compiling" not in again.stderr
+
+
+def test_installed_code_lives_under_the_spinefarm_namespace_only(wheel_tree):
+    _, names = wheel_tree
+    tops = {n.split("/", 1)[0] for n in names}
+    assert {t for t in tops if not t.endswith(".dist-info")} == {"spinefarm"}, tops
+
+
+def test_a_folder_with_its_own_cli_worker_api_and_storage_packages_shadows_nothing(wheel_tree, tmp_path):
+    """The user's folder comes first on sys.path (`python -m`, `python -c`): generic names there must not matter."""
+    tree, _ = wheel_tree
+    for pkg in ("cli", "worker", "api", "storage", "protocol", "robot", "coordinator"):
+        (tmp_path / pkg).mkdir()
+        (tmp_path / pkg / "__init__.py").write_text("raise ImportError('the user\\'s own package was imported')\n")
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+
+    def run(*cmd: str) -> subprocess.CompletedProcess:
+        r = subprocess.run([sys.executable, *cmd], cwd=tmp_path, env=env, capture_output=True, text=True,
+                           timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+        return r
+
+    run("-m", "spinefarm", "search", "tetraspine-ntrt", "--trials", "1", "--workers", "1", "--duration", "0.3",
+        "--out", "run.h5", "--api-port", "-1", "--quiet")
+    rows = run("-c", "import spinefarm; print(len(spinefarm.load_run('run.h5')))")
+    assert int(rows.stdout) >= 1
+    port = free_port()
+    api = subprocess.Popen([sys.executable, "-m", "spinefarm", "api", "run.h5", "--port", str(port)], cwd=tmp_path,
+                           env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        url = f"http://127.0.0.1:{port}"
+        wait_for(lambda: _answers(url + "/health", api), timeout_s=60, poll_s=0.2, what="the API to answer")
+        with urllib.request.urlopen(url + "/runs", timeout=10) as resp:
+            run_id = json.load(resp)[0]["run_id"]
+        with urllib.request.urlopen(f"{url}/runs/{run_id}/trials/0/picture.png", timeout=300) as resp:
+            assert resp.headers["content-type"] == "image/png" and resp.read(8) == b"\x89PNG\r\n\x1a\n"
+    finally:
+        api.terminate()
+        api.wait(30)
+
+
+def _answers(url: str, proc: subprocess.Popen) -> bool:
+    assert proc.poll() is None, proc.stderr.read()
+    try:
+        with urllib.request.urlopen(url, timeout=1):
+            return True
+    except OSError:
+        return False

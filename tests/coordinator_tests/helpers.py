@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from coordinator.problem import build_run_config
-from coordinator.setup import SearchSettings, new_run
+from spinefarm.coordinator.problem import build_run_config
+from spinefarm.coordinator.setup import SearchSettings, new_run
 
 
 class FakeClock:

@@ -6,14 +6,15 @@ import subprocess
 import sys
 from pathlib import Path
 
-from storage.status import read_status
+from spinefarm.storage.status import read_status
+
 from tests.coordinator_tests.helpers import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def spinefarm(*args: str, quiet: bool = True) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "cli.main", *args], cwd=ROOT,
+    return subprocess.Popen([sys.executable, "-m", "spinefarm", *args], cwd=ROOT,
                             stdout=subprocess.PIPE if quiet else None,
                             stderr=subprocess.DEVNULL if quiet else None, text=True)
 

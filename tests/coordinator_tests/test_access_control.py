@@ -7,11 +7,11 @@ import time
 
 import pytest
 import zenoh
+from spinefarm.coordinator.service import zenoh_config
+from spinefarm.protocol import keys
+from spinefarm.protocol.credentials import load_credentials
+from spinefarm.protocol.errors import ConfigError
 
-from coordinator.service import zenoh_config
-from protocol import keys
-from protocol.credentials import load_credentials
-from protocol.errors import ConfigError
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, spinefarm, status, stop, wait_status
 
@@ -128,7 +128,7 @@ def test_the_compose_deployment_tls_and_passwords_let_its_services_in_and_nobody
 
 def open_session(ep, config_file, creds):
     """A client session as the coordinator's zenoh_config builds it; ConfigError when refused."""
-    from coordinator.service import zenoh_config
+    from spinefarm.coordinator.service import zenoh_config
 
     try:
         zenoh.open(zenoh_config("client", connect=[ep], config_file=config_file, credentials=creds)).close()

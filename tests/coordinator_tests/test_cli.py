@@ -11,7 +11,7 @@ from tests.coordinator_tests.procs import ROOT
 
 
 def run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cli.main", *args], cwd=ROOT, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, capture_output=True, text=True,
                           timeout=timeout)
 
 
@@ -60,7 +60,7 @@ def test_a_short_search_then_export(tmp_path):
     assert run("export", str(out), "--gait", str(gait)).returncode == 0
     import json
 
-    from storage.hdf5 import Hdf5Storage
+    from spinefarm.storage.hdf5 import Hdf5Storage
 
     g, top = json.loads(gait.read_text()), Hdf5Storage.open_read(out).best(1)[0]
     assert g["source"]["trial_id"] == top.trial_id and list(g["params"].values()) == list(top.params)

@@ -5,9 +5,8 @@ from __future__ import annotations
 import json
 
 import pytest
-
-from coordinator.setup import build_core
-from protocol.messages import (
+from spinefarm.coordinator.setup import build_core
+from spinefarm.protocol.messages import (
     ResultAck,
     ResultSubmission,
     RunInfo,
@@ -22,7 +21,8 @@ from protocol.messages import (
     encode,
     encode_message,
 )
-from protocol.run import RunConfig
+from spinefarm.protocol.run import RunConfig
+
 from tests.coordinator_tests.helpers import sphere_core
 
 
@@ -225,7 +225,7 @@ def test_malformed_carried_results_refuse_the_whole_request():
 
 
 def test_only_a_worker_holding_this_runs_work_can_stop_it_with_a_problem():
-    from protocol.run import WorkerProblem
+    from spinefarm.protocol.run import WorkerProblem
 
     core, _, _ = sphere_core(5)
     forged = WorkerProblem("w9", "nothing builds here", 0, 12345)

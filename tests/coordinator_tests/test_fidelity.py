@@ -8,12 +8,12 @@ import time
 
 import numpy as np
 import pytest
+from spinefarm.coordinator.fidelity import Rungs
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.storage.hdf5 import Hdf5Storage, read_run
+from spinefarm.storage.memory import InMemoryStorage
 
-from coordinator.fidelity import Rungs
-from protocol.errors import ConfigError
-from protocol.messages import TrialResult, TrialStatus
-from storage.hdf5 import Hdf5Storage, read_run
-from storage.memory import InMemoryStorage
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, stop, wait_status, worker
 
@@ -84,8 +84,7 @@ def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(
         stop(coord, *workers)
     # the API counts evaluations against the evaluations planned, parameter sets against the budget
     from fastapi.testclient import TestClient
-
-    from api.app import create_app
+    from spinefarm.api.app import create_app
 
     with TestClient(create_app(runs_dir=tmp_path)) as client:
         st = client.get("/runs/mf").json()
@@ -123,7 +122,7 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
     from tests.coordinator_tests.procs import ROOT
 
     out = tmp_path / "run.h5"
-    r = subprocess.run([sys.executable, "-m", "cli.main", "search", "tetraspine-ntrt", "--engine", "mujoco",
+    r = subprocess.run([sys.executable, "-m", "spinefarm", "search", "tetraspine-ntrt", "--engine", "mujoco",
                         "--rungs", "0.3,0.9", "--eta", "2", "--trials", "4", "--workers", "2", "--settle", "0.2",
                         "--out", str(out), "--api-port", "-1"], cwd=ROOT, capture_output=True, text=True,
                        timeout=300)
@@ -136,7 +135,7 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
         assert s.run_meta().extra["verify"]["engine"] == "bullet"
         c = s.columns()  # a screened best is provisional: only full-length trials go to the judge
         assert set(c["verification"][c["rung"] == 0].tolist()) == {b""}
-        from api.views import trial_view
+        from spinefarm.api.views import trial_view
 
         assert trial_view(s, best)["verification"]["judge"] == "bullet at 0.25 ms"
     assert f"verified in bullet: {best.verify_distance_m:.4g} m" in r.stdout
@@ -144,7 +143,7 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
     # judge's step it is the judge's distance
     import json
 
-    from cli.main import main
+    from spinefarm.cli.main import main
 
     def rerun(*flags: str) -> dict:
         assert main(["trial", "--run", str(out), "--json", *flags]) == 0
@@ -180,9 +179,10 @@ def test_a_search_that_keeps_improving_promotes_about_a_third_and_always_its_bes
 
 
 def _study(sampler_name: str, rungs: Rungs | None, budget: int = 12):
-    from coordinator.samplers import make_sampler
-    from coordinator.study import Study
-    from protocol.params import ParamSpace, ParamSpec
+    from spinefarm.coordinator.samplers import make_sampler
+    from spinefarm.coordinator.study import Study
+    from spinefarm.protocol.params import ParamSpace, ParamSpec
+
     from tests.storage_tests.conftest import make_meta
 
     st = InMemoryStorage()

@@ -7,11 +7,11 @@ import json
 import math
 
 import pytest
+from spinefarm.coordinator.scheduler import MAX_GRANT, Scheduler
+from spinefarm.protocol import limits
+from spinefarm.protocol.errors import MessageError
+from spinefarm.protocol.messages import SCHEMA_VERSION, TrialResult, TrialStatus, Verdict, decode, encode
 
-from coordinator.scheduler import MAX_GRANT, Scheduler
-from protocol import limits
-from protocol.errors import MessageError
-from protocol.messages import SCHEMA_VERSION, TrialResult, TrialStatus, Verdict, decode, encode
 from tests.coordinator_tests.helpers import FakeClock, sphere_core
 from tests.coordinator_tests.test_core import ask, assert_unchanged, res, snapshot, submit
 

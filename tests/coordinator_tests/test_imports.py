@@ -21,12 +21,13 @@ def loaded_after(statement: str) -> set[str]:
 
 
 @pytest.mark.parametrize(("statement", "forbidden"), [
-    ("import protocol.keys, protocol.messages", {"zenoh", "h5py", "pybullet", "fastapi"}),
-    ("import coordinator.core, coordinator.setup, coordinator.samplers, coordinator.problem",
+    ("import spinefarm.protocol.keys, spinefarm.protocol.messages", {"zenoh", "h5py", "pybullet", "fastapi"}),
+    ("import spinefarm.coordinator.core, spinefarm.coordinator.setup, spinefarm.coordinator.samplers, "
+     "spinefarm.coordinator.problem",
      {"zenoh", "h5py", "pybullet", "fastapi"}),
-    ("import storage", {"h5py", "zenoh", "pybullet"}),
-    ("import api.app", {"zenoh", "pybullet"}),
-    ("import cli.service_commands", {"zenoh", "h5py", "pybullet", "fastapi"}),
+    ("import spinefarm.storage", {"h5py", "zenoh", "pybullet"}),
+    ("import spinefarm.api.app", {"zenoh", "pybullet"}),
+    ("import spinefarm.cli.service_commands", {"zenoh", "h5py", "pybullet", "fastapi"}),
 ])
 def test_clean_interpreter_imports_stay_light(statement, forbidden):
     assert not loaded_after(statement) & forbidden

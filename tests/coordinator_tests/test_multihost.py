@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 import pytest
+from spinefarm.storage.hdf5 import read_run
 
-from storage.hdf5 import read_run
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT, status
 from tests.netns import ThreeHosts, netns_unavailable
@@ -31,7 +31,7 @@ def stored_by(out, worker_id: str) -> int:
 
 
 def spawn(hosts: ThreeHosts, ns: str, *args: str) -> subprocess.Popen:
-    return subprocess.Popen([*hosts.exec_args(ns), sys.executable, "-m", "cli.main", *args], cwd=ROOT,
+    return subprocess.Popen([*hosts.exec_args(ns), sys.executable, "-m", "spinefarm", *args], cwd=ROOT,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 

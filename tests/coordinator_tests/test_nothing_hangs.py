@@ -9,7 +9,8 @@ import subprocess
 import sys
 import time
 
-from storage.probe import check_eof
+from spinefarm.storage.probe import check_eof
+
 from tests.coordinator_tests.helpers import free_endpoint, wait_for
 from tests.coordinator_tests.procs import ROOT, coordinator, spinefarm, stop, wait_status
 from tests.coordinator_tests.test_run_file_faults import finished_run
@@ -18,7 +19,7 @@ _VERIFIER_PARENT = """
 import os, sys, time
 from concurrent.futures import ProcessPoolExecutor
 import multiprocessing
-from coordinator.verifier import _exit_with_parent
+from spinefarm.coordinator.verifier import _exit_with_parent
 pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=_exit_with_parent,
                            initargs=(os.getpid(),))
 pool.submit(time.sleep, 120)
@@ -77,7 +78,7 @@ def test_resuming_a_truncated_file_is_a_clear_error_within_seconds(tmp_path):
     finished_run(path)
     os.truncate(path, path.stat().st_size // 2)
     t0 = time.monotonic()
-    r = subprocess.run([sys.executable, "-m", "cli.main", "search", "--resume", str(path), "--workers", "0",
+    r = subprocess.run([sys.executable, "-m", "spinefarm", "search", "--resume", str(path), "--workers", "0",
                         "--api-port", "-1"], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "is truncated" in r.stderr, r.stderr
     assert time.monotonic() - t0 < 10
@@ -88,11 +89,11 @@ def test_resuming_a_truncated_file_is_a_clear_error_within_seconds(tmp_path):
 
 
 def test_a_startup_error_ends_the_coordinator_with_the_error(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "cli.main", "search", "sphere:3", "--trials", "20", "--workers", "1",
+    r = subprocess.run([sys.executable, "-m", "spinefarm", "search", "sphere:3", "--trials", "20", "--workers", "1",
                         "--out", str(tmp_path / "run.h5"), "--api-host", "999.1.1.1"], cwd=ROOT, capture_output=True,
                        text=True, timeout=60)
     assert r.returncode == 2 and "cannot serve the API on 999.1.1.1" in r.stderr, r.stderr
     # The file was released: the run can be continued at once.
-    r = subprocess.run([sys.executable, "-m", "cli.main", "search", "--resume", str(tmp_path / "run.h5"), "--workers",
+    r = subprocess.run([sys.executable, "-m", "spinefarm", "search", "--resume", str(tmp_path / "run.h5"), "--workers",
                         "1", "--api-port", "-1"], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr

@@ -7,8 +7,8 @@ import signal
 import httpx
 import numpy as np
 import pytest
+from spinefarm.storage.hdf5 import Hdf5Storage, read_run
 
-from storage.hdf5 import Hdf5Storage, read_run
 from tests.coordinator_tests.helpers import free_endpoint, wait_for
 from tests.coordinator_tests.procs import coordinator, spinefarm, status, stop, wait_status, worker
 
@@ -122,7 +122,7 @@ def test_late_joiner_and_a_leaver(tmp_path):
 
 
 def test_physics_search_with_two_worker_processes(tmp_path):
-    pytest.importorskip("worker.trial")
+    pytest.importorskip("spinefarm.worker.trial")
     out = tmp_path / "tetra.h5"
     proc = spinefarm("search", "tetraspine", "--trials", "4", "--workers", "2", "--duration", "0.5",
                      "--out", str(out), "--api-port", "-1", "--quiet")
@@ -207,7 +207,7 @@ def test_ctrl_c_stops_a_local_search_with_everything_stored_and_resume_extends_i
     from tests.coordinator_tests.procs import ROOT
 
     out = tmp_path / "run.h5"
-    cmd = [sys.executable, "-m", "cli.main", "search", "sphere:4", "--trials", "120", "--workers", "2",
+    cmd = [sys.executable, "-m", "spinefarm", "search", "sphere:4", "--trials", "120", "--workers", "2",
            "--duration", "0.05", "--out", str(out), "--api-port", "-1", "--quiet"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.storage.hdf5 import Hdf5Storage
 
-from protocol.errors import ConfigError
-from storage.hdf5 import Hdf5Storage
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
 
@@ -26,7 +26,7 @@ pytestmark = pytest.mark.integration
 
 def spinefarm(*args: str, cwd: Path = ROOT, timeout: float = 240, env: dict | None = None
               ) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cli.main", *args], cwd=cwd, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "spinefarm", *args], cwd=cwd, capture_output=True, text=True,
                           timeout=timeout, env=env)
 
 
@@ -79,10 +79,11 @@ def test_a_file_named_like_a_builtin_is_simulated_as_the_file(tmp_path):
 
 
 def test_a_worker_that_cannot_reproduce_the_spec_hash_stops_the_run(tmp_path):
-    from coordinator.problem import build_run_config
-    from coordinator.service import CoordinatorService
-    from coordinator.setup import SearchSettings, new_run
-    from coordinator.verifier import VerifyPolicy
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.service import CoordinatorService
+    from spinefarm.coordinator.setup import SearchSettings, new_run
+    from spinefarm.coordinator.verifier import VerifyPolicy
+
     from tests.coordinator_tests.helpers import free_endpoint
 
     config = build_run_config("forged-spec", "tetraspine-ntrt", duration_s=0.2)
@@ -92,7 +93,7 @@ def test_a_worker_that_cannot_reproduce_the_spec_hash_stops_the_run(tmp_path):
     endpoint = free_endpoint()
     service = CoordinatorService(core, storage, listen=[endpoint]).start()
     try:
-        worker = subprocess.Popen([sys.executable, "-m", "cli.main", "worker", "--connect", endpoint, "--run",
+        worker = subprocess.Popen([sys.executable, "-m", "spinefarm", "worker", "--connect", endpoint, "--run",
                                    "forged-spec", "--exit-when-done"], cwd=ROOT, stderr=subprocess.PIPE, text=True)
         assert worker.wait(60) == 3
         assert "spec_hash" in worker.stderr.read()
@@ -137,7 +138,7 @@ def _alive(pid: int) -> bool:
 
 
 def test_sigkill_of_a_search_leaves_no_worker_behind(tmp_path):
-    search = subprocess.Popen([sys.executable, "-m", "cli.main", "search", "sphere:3", "--trials", "100000",
+    search = subprocess.Popen([sys.executable, "-m", "spinefarm", "search", "sphere:3", "--trials", "100000",
                                "--workers", "2", "--out", str(tmp_path / "run.h5"), "--api-port", "-1", "--quiet"],
                               cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
@@ -155,8 +156,8 @@ def test_a_search_started_beside_its_own_cli_and_worker_packages_completes(tmp_p
     for pkg in ("cli", "worker", "api"):
         (tmp_path / pkg).mkdir()
         (tmp_path / pkg / "__init__.py").write_text("raise ImportError('the user\\'s own package')\n")
-    r = subprocess.run([sys.executable, "-P", "-m", "cli.main", "search", "sphere:2", "--trials", "4", "--workers", "2",
-                        "--out", str(tmp_path / "run.h5"), "--api-port", "-1"], cwd=tmp_path, capture_output=True,
+    r = subprocess.run([sys.executable, "-P", "-m", "spinefarm", "search", "sphere:2", "--trials", "4", "--workers",
+                        "2", "--out", str(tmp_path / "run.h5"), "--api-port", "-1"], cwd=tmp_path, capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "4/4 trials" in r.stderr
@@ -167,8 +168,8 @@ def test_a_search_started_beside_its_own_cli_and_worker_packages_completes(tmp_p
 def test_defining_a_run_loads_no_simulator(name, tmp_path):
     code = textwrap.dedent(f"""\
         import sys
-        from coordinator.problem import build_run_config
-        from coordinator.setup import SearchSettings, new_run
+        from spinefarm.coordinator.problem import build_run_config
+        from spinefarm.coordinator.setup import SearchSettings, new_run
         config = build_run_config("r", {name!r}, duration_s=1.0)
         core, storage = new_run(config, SearchSettings(trials=2), None)
         core.handle_config(core.config_hash)
@@ -180,8 +181,8 @@ def test_defining_a_run_loads_no_simulator(name, tmp_path):
 
 
 def test_a_resumed_run_is_rebuilt_from_its_stored_spec(tmp_path):
-    from coordinator.problem import build_run_config
-    from coordinator.setup import SearchSettings, new_run, resume_run
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
 
     path = spec_copy(tmp_path, "gone-soon")
     config = build_run_config("gone-soon-1", str(path), duration_s=0.2)
@@ -197,8 +198,8 @@ def test_a_resumed_run_is_rebuilt_from_its_stored_spec(tmp_path):
 
 
 def test_run_ids_come_from_the_robot_name_and_are_valid_everywhere(tmp_path):
-    from cli.service_commands import default_run_id, robot_name
-    from protocol.keys import check_run_id
+    from spinefarm.cli.service_commands import default_run_id, robot_name
+    from spinefarm.protocol.keys import check_run_id
 
     path = spec_copy(tmp_path, "stiff")
     assert robot_name(str(path.resolve())) == "stiff"

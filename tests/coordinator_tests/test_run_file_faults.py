@@ -12,11 +12,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from spinefarm.coordinator.setup import resume_run
+from spinefarm.protocol.errors import StorageError
+from spinefarm.storage.hdf5 import read_run
+from spinefarm.storage.status import read_status
 
-from coordinator.setup import resume_run
-from protocol.errors import StorageError
-from storage.hdf5 import read_run
-from storage.status import read_status
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core
 from tests.coordinator_tests.procs import ROOT, coordinator, stop, wait_status
 from tests.coordinator_tests.test_core import ask, res, submit
@@ -41,8 +41,8 @@ def test_a_second_writer_is_refused_also_with_overwrite_and_resume(tmp_path):
                         lambda: resume_run(path)):
             with pytest.raises(StorageError, match="another coordinator"):
                 attempt()
-        from coordinator.problem import build_run_config
-        from coordinator.setup import SearchSettings, new_run
+        from spinefarm.coordinator.problem import build_run_config
+        from spinefarm.coordinator.setup import SearchSettings, new_run
 
         with pytest.raises(StorageError, match=f"pid {os.getpid()}"):
             new_run(build_run_config("other", "sphere:4"), SearchSettings(trials=5), path, overwrite=True)
@@ -63,7 +63,7 @@ def test_a_live_coordinator_process_keeps_its_file_against_search_overwrite_and_
         for args in (("search", "sphere:3", "--trials", "10", "--workers", "0", "--out", str(path), "--overwrite",
                       "--api-port", "-1", "--run-id", "second"),
                      ("search", "--resume", str(path), "--workers", "0", "--api-port", "-1")):
-            r = subprocess.run([sys.executable, "-m", "cli.main", *args], cwd=ROOT, capture_output=True, text=True,
+            r = subprocess.run([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, capture_output=True, text=True,
                                timeout=60)
             assert r.returncode == 2, r.stderr
             assert "being written by another coordinator" in r.stderr and f"pid {first.pid}" in r.stderr
@@ -134,13 +134,13 @@ core, storage, clock = sphere_core(trials=10**6, out=sys.argv[1])
 acked, unanswered = [], 0
 for _ in range(10**5):
     grant = ask(core, n=64)
-    from protocol.messages import ResultSubmission, SubmittedResult, encode_message
+    from spinefarm.protocol.messages import ResultSubmission, SubmittedResult, encode_message
     items = tuple(SubmittedResult(a.lease_id, res(a)) for a in grant.assignments)
     reply = core.handle_results(encode_message(ResultSubmission("w1", items)))
     if reply is None:
         unanswered += 1
         break
-    from protocol.messages import ResultAck, decode_message
+    from spinefarm.protocol.messages import ResultAck, decode_message
     acked += [t for t, v in decode_message(reply, ResultAck).verdicts if v.value == "stored"]
 later = [core.handle_work(b"{}") is None, core.handle_results(b"{}") is None]
 print(json.dumps({"acked": acked, "failure": core.write_failure, "silent_after": later}), flush=True)
@@ -165,7 +165,7 @@ def test_a_full_disk_stops_acknowledging_and_the_file_holds_every_acknowledged_r
 
 def test_search_on_a_full_disk_exits_non_zero_saying_why(small_fs):
     path = small_fs / "run.h5"
-    r = subprocess.run([sys.executable, "-m", "cli.main", "search", "sphere:8", "--trials", "1000000", "--workers",
+    r = subprocess.run([sys.executable, "-m", "spinefarm", "search", "sphere:8", "--trials", "1000000", "--workers",
                         "1", "--batch", "64", "--out", str(path), "--api-port", "-1", "--quiet"], cwd=ROOT,
                        capture_output=True, text=True, timeout=180)
     assert r.returncode == 1, r.stderr[-2000:]

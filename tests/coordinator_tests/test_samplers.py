@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from coordinator.samplers import (
+from spinefarm.coordinator.samplers import (
     DEFAULT_SAMPLER,
     SAMPLERS,
     CmaEsSampler,
@@ -14,9 +13,10 @@ from coordinator.samplers import (
     make_sampler,
     sampler_from_dict,
 )
-from protocol.errors import ConfigError
-from storage.memory import InMemoryStorage
-from storage.schema import PHASES
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.storage.memory import InMemoryStorage
+from spinefarm.storage.schema import PHASES
+
 from tests.storage_tests.conftest import make_meta, result
 
 
@@ -84,7 +84,7 @@ def test_samples_are_clipped_to_the_cube(storage):
 
 
 def test_failed_trials_are_never_centres(storage):
-    from protocol.messages import TrialStatus
+    from spinefarm.protocol.messages import TrialStatus
 
     s = GaussianHillClimbSampler(3, seed=5, startup_trials=1)
     record(storage, s, 1.0)
@@ -212,8 +212,8 @@ def test_cmaes_needs_two_parameters():
 
 @pytest.mark.parametrize("name", ["cmaes", "tpe"])
 def test_the_sampler_is_stored_with_the_run_and_rebuilt_on_resume(tmp_path, name):
-    from coordinator.problem import build_run_config
-    from coordinator.setup import SearchSettings, new_run, resume_run
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
 
     config = build_run_config("r", "sphere:3", seed=8)
     core, storage = new_run(config, SearchSettings(trials=30, sampler=name), tmp_path / "run.h5")

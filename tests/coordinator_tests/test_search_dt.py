@@ -6,13 +6,13 @@ import subprocess
 import sys
 
 import numpy as np
+from spinefarm.storage.hdf5 import read_run
 
-from storage.hdf5 import read_run
 from tests.coordinator_tests.procs import ROOT
 
 
 def search(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "cli.main", "search", *args], cwd=ROOT, capture_output=True,
+    return subprocess.run([sys.executable, "-m", "spinefarm", "search", *args], cwd=ROOT, capture_output=True,
                           text=True, timeout=300)
 
 

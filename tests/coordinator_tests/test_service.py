@@ -8,13 +8,21 @@ import time
 
 import pytest
 import zenoh
+from spinefarm.coordinator.service import CoordinatorService, zenoh_config
+from spinefarm.protocol import keys
+from spinefarm.protocol.messages import (
+    ResultAck,
+    RunInfo,
+    WorkGrant,
+    WorkRequest,
+    decode,
+    decode_message,
+    encode_message,
+)
+from spinefarm.storage.status import read_status
+from spinefarm.worker.service import WorkerService
 
-from coordinator.service import CoordinatorService, zenoh_config
-from protocol import keys
-from protocol.messages import ResultAck, RunInfo, WorkGrant, WorkRequest, decode, decode_message, encode_message
-from storage.status import read_status
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
-from worker.service import WorkerService
 
 pytestmark = pytest.mark.integration
 
@@ -137,7 +145,7 @@ def test_worker_discovers_the_run_without_being_told(endpoint):
 
 
 def test_results_ack_over_zenoh_is_idempotent(endpoint, client):
-    from protocol.messages import ResultSubmission, SubmittedResult, TrialResult, TrialStatus
+    from spinefarm.protocol.messages import ResultSubmission, SubmittedResult, TrialResult, TrialStatus
 
     core, storage, _ = sphere_core(trials=5, clock=time.monotonic)
     service = CoordinatorService(core, storage, listen=[endpoint]).start()

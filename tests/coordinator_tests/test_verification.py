@@ -6,15 +6,22 @@ import dataclasses
 import os
 
 import numpy as np
+from spinefarm.coordinator.problem import build_run_config
+from spinefarm.coordinator.setup import SearchSettings, new_run
+from spinefarm.coordinator.verifier import JUDGE_NICENESS, VerifyPolicy
+from spinefarm.protocol.messages import (
+    ResultAck,
+    ResultSubmission,
+    SubmittedResult,
+    WorkGrant,
+    WorkRequest,
+    decode_message,
+)
+from spinefarm.protocol.messages import encode_message as enc
+from spinefarm.storage.hdf5 import Hdf5Storage
+from spinefarm.worker.trial import TrialConfig, run_trial
 
-from coordinator.problem import build_run_config
-from coordinator.setup import SearchSettings, new_run
-from coordinator.verifier import JUDGE_NICENESS, VerifyPolicy
-from protocol.messages import ResultAck, ResultSubmission, SubmittedResult, WorkGrant, WorkRequest, decode_message
-from protocol.messages import encode_message as enc
-from storage.hdf5 import Hdf5Storage
 from tests.coordinator_tests.helpers import FakeClock
-from worker.trial import TrialConfig, run_trial
 
 
 def _run_grant(core, config, n: int) -> list[SubmittedResult]:

@@ -13,10 +13,10 @@ import pytest
 import yaml
 import zenoh
 
-from cli.router_command import guarded, router_config
-from coordinator.service import zenoh_config
-from protocol import keys
-from protocol.credentials import load_credentials
+from spinefarm.cli.router_command import guarded, router_config
+from spinefarm.coordinator.service import zenoh_config
+from spinefarm.protocol import keys
+from spinefarm.protocol.credentials import load_credentials
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import ROOT, spinefarm, stop, wait_status
 
@@ -33,7 +33,7 @@ def make_secrets(tmp_path):
 
 
 def start_router(*args: str) -> subprocess.Popen:
-    proc = subprocess.Popen([sys.executable, "-m", "cli.main", "router", *args], cwd=ROOT, text=True,
+    proc = subprocess.Popen([sys.executable, "-P", "-m", "spinefarm", "router", *args], cwd=ROOT, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     line = proc.stdout.readline()
     assert line.startswith("router "), f"the router did not start: {line!r} {proc.stderr.read() if not line else ''}"

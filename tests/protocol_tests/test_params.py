@@ -4,10 +4,9 @@ import math
 
 import numpy as np
 import pytest
-
-from protocol.errors import ParameterError
-from protocol.params import ParamSpace, ParamSpec
-from robot.morphology.registry import load_morphology
+from spinefarm.protocol.errors import ParameterError
+from spinefarm.protocol.params import ParamSpace, ParamSpec
+from spinefarm.robot.morphology.registry import load_morphology
 
 
 def space() -> ParamSpace:
@@ -42,7 +41,7 @@ def test_ntrt_tetraspine_space_counts():
 
 def test_ntrt_slot_quirk():
     """rp from the index difference: a pair in adjacent joints closer than M in index uses row 1."""
-    from robot.spaces import table_slots
+    from spinefarm.robot.spaces import table_slots
 
     sp = load_morphology("tetraspine-ntrt").controller_space("ntrt")
     slots = table_slots(6)

@@ -3,11 +3,10 @@ from __future__ import annotations
 import time
 
 import pytest
-
-from protocol.messages import TrialResult, TrialStatus
-from storage.hdf5 import Hdf5Storage
-from storage.memory import InMemoryStorage
-from storage.schema import RunMeta
+from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.storage.hdf5 import Hdf5Storage
+from spinefarm.storage.memory import InMemoryStorage
+from spinefarm.storage.schema import RunMeta
 
 
 def make_meta(run_id: str = "run-a", n_params: int = 3, budget: int = 100) -> RunMeta:

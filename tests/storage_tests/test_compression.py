@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import h5py
 import numpy as np
+from spinefarm.storage.hdf5 import Hdf5Storage, read_run
 
-from storage.hdf5 import Hdf5Storage, read_run
 from tests.storage_tests.conftest import make_meta, result
 
 

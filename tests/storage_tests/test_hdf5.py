@@ -10,10 +10,10 @@ import time
 import h5py
 import numpy as np
 import pytest
+from spinefarm.protocol.errors import StorageError
+from spinefarm.storage.export import best_table, write_csv
+from spinefarm.storage.hdf5 import Hdf5Storage, read_meta, read_run, snapshot
 
-from protocol.errors import StorageError
-from storage.export import best_table, write_csv
-from storage.hdf5 import Hdf5Storage, read_meta, read_run, snapshot
 from tests.storage_tests.conftest import make_meta, result
 
 
@@ -68,8 +68,8 @@ def test_reader_sees_flushed_rows_while_the_writer_runs(tmp_path):
 def test_a_live_file_keeps_synced_room_to_grow_and_a_closed_one_is_trimmed(tmp_path):
     """While writing, the file holds written zeros beyond HDF5's end (a sync cut short by a dying disk
     then never leaves the file shorter than its header says); closed, it ends where its header says."""
-    from storage.hdf5 import RESERVE_LOW_B
-    from storage.probe import stored_eof
+    from spinefarm.storage.hdf5 import RESERVE_LOW_B
+    from spinefarm.storage.probe import stored_eof
 
     path = tmp_path / "run.h5"
     s = Hdf5Storage.create(path, make_meta())
@@ -113,7 +113,7 @@ WRITER = textwrap.dedent("""
     import sys, time, numpy as np
     sys.path.insert(0, {root!r})
     from tests.storage_tests.conftest import make_meta, result
-    from storage.hdf5 import Hdf5Storage
+    from spinefarm.storage.hdf5 import Hdf5Storage
     s = Hdf5Storage.create({path!r}, make_meta())
     for i in range(300):
         s.add_trial(i, np.full(3, 0.25), np.zeros(3), "monte_carlo", -1, i)
@@ -200,7 +200,7 @@ def test_resume_budget_counts_parameter_sets_not_promoted_re_runs(tmp_path):
 
 
 def test_lazy_reader_agrees_with_the_writer_on_a_live_file(tmp_path):
-    from storage.hdf5_reader import Hdf5Reader
+    from spinefarm.storage.hdf5_reader import Hdf5Reader
 
     path = tmp_path / "run.h5"
     s = Hdf5Storage.create(path, make_meta())

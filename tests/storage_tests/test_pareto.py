@@ -10,12 +10,12 @@ import sys
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
+from spinefarm.api.app import create_app
+from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.storage import pareto
+from spinefarm.storage.export import write_csv
+from spinefarm.storage.hdf5 import Hdf5Storage
 
-from api.app import create_app
-from protocol.messages import TrialResult, TrialStatus
-from storage import pareto
-from storage.export import write_csv
-from storage.hdf5 import Hdf5Storage
 from tests.coordinator_tests.procs import ROOT
 
 # (speed cm/s, COT, status); the front is known by construction
@@ -103,7 +103,7 @@ def test_the_file_marks_the_front_and_the_api_and_export_serve_it(tmp_path):
     header = buf.getvalue().splitlines()[0].split(",")
     assert "pareto_front" in header
     out = tmp_path / "front.csv"
-    r = subprocess.run([sys.executable, "-m", "cli.main", "export", str(path), "--pareto", str(out)], cwd=ROOT,
+    r = subprocess.run([sys.executable, "-m", "spinefarm", "export", str(path), "--pareto", str(out)], cwd=ROOT,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     rows = out.read_text().splitlines()

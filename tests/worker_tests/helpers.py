@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-
-from robot.bodies import build_bodies, build_strings
-from robot.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec
-from robot.scene import GroundSpec
-from worker.engines.base import engine_class
-from worker.sim import strings as sk
+from spinefarm.robot.bodies import build_bodies, build_strings
+from spinefarm.robot.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec
+from spinefarm.robot.scene import GroundSpec
+from spinefarm.worker.engines.base import engine_class
+from spinefarm.worker.sim import strings as sk
 
 ENGINES = ("bullet", "mujoco")
 

@@ -7,13 +7,13 @@ import math
 import subprocess
 import sys
 
-from worker.accuracy import pareto
+from spinefarm.worker.accuracy import pareto
 
 
 def test_accuracy_command_writes_table_json_and_plot(tmp_path):
     out = tmp_path / "acc"
     proc = subprocess.run(
-        [sys.executable, "-m", "cli.main", "accuracy", "tetraspine-ntrt", "--quick", "--seeds", "1",
+        [sys.executable, "-m", "spinefarm", "accuracy", "tetraspine-ntrt", "--quick", "--seeds", "1",
          "--duration", "0.2", "--jobs", "2", "--out", str(out), "--json"],
         capture_output=True, text=True, check=True)
     report = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -35,7 +35,7 @@ def test_pareto_front_keeps_only_undominated_settings():
 def test_accuracy_command_on_mujoco(tmp_path):
     out = tmp_path / "acc"
     proc = subprocess.run(
-        [sys.executable, "-m", "cli.main", "accuracy", "tetraspine-ntrt", "--quick", "--seeds", "1",
+        [sys.executable, "-m", "spinefarm", "accuracy", "tetraspine-ntrt", "--quick", "--seeds", "1",
          "--duration", "0.2", "--jobs", "2", "--out", str(out), "--engine", "mujoco", "--json"],
         capture_output=True, text=True, check=True)
     report = json.loads(proc.stdout.strip().splitlines()[-1])

@@ -5,8 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from worker.control.cpg import SLOW_RATE_STEP, CpgIntegrator, CpgNetwork
+from spinefarm.worker.control.cpg import SLOW_RATE_STEP, CpgIntegrator, CpgNetwork
 
 
 def pair(psi: float, weight: float = 2.0, omega: float = 2 * math.pi, amp: float = 10.0) -> CpgNetwork:

@@ -6,11 +6,10 @@ import math
 
 import numpy as np
 import pytest
-
-from protocol.errors import ConfigError
-from robot.morphology.registry import load_morphology
-from robot.spaces import followable_limits
-from worker.trial import TrialConfig, run_trial
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.spaces import followable_limits
+from spinefarm.worker.trial import TrialConfig, run_trial
 
 BUILT_INS = ["tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed"]
 

@@ -6,10 +6,9 @@ import json
 from pathlib import Path
 
 import pytest
-
-from cli.sim_commands import load_params_file
-from robot.morphology.registry import load_morphology
-from worker.trial import TrialConfig, run_trial
+from spinefarm.cli.sim_commands import load_params_file
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.worker.trial import TrialConfig, run_trial
 
 GAITS = sorted((Path(__file__).resolve().parents[2] / "examples" / "gaits").glob("*.json"))
 

@@ -10,20 +10,20 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-
-from robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
-from robot.morphology.registry import builtin_names, load_morphology
-from robot.spaces import NtrtTableSpace
-from tests.worker_tests.helpers import ENGINES
-from worker.contract import (
+from spinefarm.robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
+from spinefarm.robot.morphology.registry import builtin_names, load_morphology
+from spinefarm.robot.spaces import NtrtTableSpace
+from spinefarm.worker.contract import (
     check_builds,
     check_deterministic,
     check_passive_settle,
     check_sane_numbers,
     passive_params,
 )
-from worker.sim import strings as sk
-from worker.trial import TrialConfig, simulate, string_tables
+from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.trial import TrialConfig, simulate, string_tables
+
+from tests.worker_tests.helpers import ENGINES
 
 
 @dataclass(frozen=True)
@@ -178,7 +178,7 @@ def test_tetrahedral_complex_holds_its_shape_with_little_tension():
 
 
 def test_check_command_passes_a_good_file_and_names_the_failing_check(tmp_path, capsys):
-    from cli.main import main
+    from spinefarm.cli.main import main
 
     good = tmp_path / "good.yaml"
     good.write_text("base: tetraspine-ntrt\nname: good\n")
@@ -217,7 +217,7 @@ def test_octahedral_ligaments_are_driven_to_start_minus_half_a_centimetre():
 @pytest.mark.parametrize("engine", ENGINES)
 def test_octahedral_vertebrae_rest_on_one_rod_each(engine):
     """Paper, section IV-C: "When resting on the ground, only one rod from each vertebrae touches"."""
-    from worker.render import rod_segments
+    from spinefarm.worker.render import rod_segments
 
     morph = load_morphology("octahedral-complex")
     bodies = build_bodies(morph.structure)
@@ -235,7 +235,7 @@ def test_octahedral_vertebrae_rest_on_one_rod_each(engine):
 def test_trial_command_runs_each_builtin(name: str, engine: str, capsys):
     import json
 
-    from cli.main import main
+    from spinefarm.cli.main import main
 
     assert main(["trial", name, "--random-seed", "5", "--duration", "0.2", "--dt", "auto", "--engine", engine,
                  "--json"]) == 0
@@ -246,8 +246,8 @@ def test_trial_command_runs_each_builtin(name: str, engine: str, capsys):
 def test_ribbed_segment_keeps_all_33_rods_in_the_engine():
     """pybullet's shape arrays hold 16 shapes; a ribbed segment (33 rods) missing its other rib fell
     through the ground. Dropped alone, it must come to rest on its ribs."""
-    from robot.scene import GroundSpec
-    from worker.engines.bullet import BulletPhysics
+    from spinefarm.robot.scene import GroundSpec
+    from spinefarm.worker.engines.bullet import BulletPhysics
 
     body = build_bodies(load_morphology("ribbed").structure)[0]
     assert len(body.rods) == 33

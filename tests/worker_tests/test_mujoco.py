@@ -10,17 +10,17 @@ import sys
 import mujoco
 import numpy as np
 import pytest
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.messages import TrialStatus
+from spinefarm.robot.bodies import build_bodies
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.scene import GroundSpec, SceneConfig, build_terrain, surface_height_cm
+from spinefarm.worker.engines.mujoco import MujocoPhysics, MujocoSettings
+from spinefarm.worker.setup import SetupCache
+from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial, simulate
 
-from protocol.errors import ConfigError
-from protocol.messages import TrialStatus
-from robot.bodies import build_bodies
-from robot.morphology.registry import load_morphology
-from robot.scene import GroundSpec, SceneConfig, build_terrain, surface_height_cm
 from tests.worker_tests.helpers import ENGINES, PassiveRig, two_rod_structure
-from worker.engines.mujoco import MujocoPhysics, MujocoSettings
-from worker.setup import SetupCache
-from worker.sim import strings as sk
-from worker.trial import TrialConfig, random_unit_params, run_trial, simulate
 
 V_CM_S, A_CM_S2 = 24.0, 10000.0
 
@@ -54,8 +54,8 @@ def test_motor_limits_do_not_depend_on_the_step_in_the_engine(engine):
 
 SNIPPET = """
 import json
-from robot.morphology.registry import load_morphology
-from worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
 m = load_morphology("tetraspine")
 r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco"), seed=11)
 d = r.to_dict(); d.pop("wall_time_s")
@@ -103,7 +103,7 @@ def test_reused_setup_gives_the_same_bits_as_a_fresh_one():
 
 
 def test_absurd_stiffness_fails_as_diverged_on_mujoco(tmp_path, monkeypatch):
-    from robot.morphology.variants import with_strings
+    from spinefarm.robot.morphology.variants import with_strings
 
     monkeypatch.chdir(tmp_path)
     morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=1e8)
@@ -115,7 +115,8 @@ def test_absurd_stiffness_fails_as_diverged_on_mujoco(tmp_path, monkeypatch):
 
 
 def test_spec_file_robot_runs_on_mujoco(tmp_path, capsys):
-    from cli.main import main
+    from spinefarm.cli.main import main
+
     from tests.worker_tests.test_specfile import GOOD
 
     path = tmp_path / "chain.yaml"
@@ -204,7 +205,7 @@ def test_the_contact_guard_is_silent_while_segments_are_apart():
 
 
 def test_segment_distance_agrees_with_dense_sampling():
-    from worker.engines.contact_guard import _segment_distance
+    from spinefarm.worker.engines.contact_guard import _segment_distance
 
     rng = np.random.default_rng(3)
     t = np.linspace(0.0, 1.0, 401)[:, None]

@@ -6,13 +6,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from cli.main import main
-from protocol.errors import ConfigError
-from robot.bodies import build_bodies
-from robot.morphology.registry import load_morphology
-from worker.render import Frame, frames_from_record, initial_frame, render, rod_segments
-from worker.trial import TrialConfig, simulate
+from spinefarm.cli.main import main
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot.bodies import build_bodies
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.worker.render import Frame, frames_from_record, initial_frame, render, rod_segments
+from spinefarm.worker.trial import TrialConfig, simulate
 
 
 def _image(path: Path) -> np.ndarray:

@@ -8,11 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from cli.main import main
-from protocol.errors import ConfigError
-from robot.morphology.registry import load_morphology
-from worker.replay import (
+from spinefarm.cli.main import main
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.worker.replay import (
     PUBLISHED_DIR,
     REFERENCES,
     detect_morphology,
@@ -128,7 +127,7 @@ def test_replay_command_json_short(capsys):
 def test_replay_text_says_when_it_diverges(monkeypatch, capsys):
     from dataclasses import replace as dc_replace
 
-    import worker.replay as rp
+    import spinefarm.worker.replay as rp
 
     real = rp.replay(_folder("octahedral-complex"), duration_s=0.05)
     failed = dc_replace(real, result=dc_replace(real.result, status=type(real.result.status)("failed"),

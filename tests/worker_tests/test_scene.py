@@ -5,14 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pybullet as pb
 import pytest
-
-from protocol.errors import ConfigError
-from protocol.messages import TrialStatus
-from robot.bodies import build_bodies
-from robot.morphology.registry import load_morphology
-from robot.scene import SceneConfig, build_terrain, pairs_off, surface_height_cm
-from worker.engines.bullet import BulletPhysics
-from worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.messages import TrialStatus
+from spinefarm.robot.bodies import build_bodies
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.scene import SceneConfig, build_terrain, pairs_off, surface_height_cm
+from spinefarm.worker.engines.bullet import BulletPhysics
+from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
 
 
 def engine_surface(terrain, xs, zs) -> np.ndarray:
@@ -113,11 +112,11 @@ def test_bad_scene_values_are_named():
 
 
 def test_scene_from_the_command_line_and_into_the_run_file(tmp_path):
-    from coordinator.problem import build_run_config
-    from coordinator.setup import SearchSettings, new_run
-    from coordinator.verifier import VerifyPolicy
-    from robot.scene import parse_scene
-    from storage.hdf5 import read_meta
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.setup import SearchSettings, new_run
+    from spinefarm.coordinator.verifier import VerifyPolicy
+    from spinefarm.robot.scene import parse_scene
+    from spinefarm.storage.hdf5 import read_meta
 
     scene = parse_scene("rough, rough_amplitude_cm=3, rough_seed=7, collision_filter=auto")
     assert scene["kind"] == "rough" and scene["rough_amplitude_cm"] == 3.0 and scene["rough_seed"] == 7

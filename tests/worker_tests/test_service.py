@@ -8,18 +8,18 @@ import time
 
 import numpy as np
 import pytest
+from spinefarm.coordinator.service import CoordinatorService
+from spinefarm.protocol.messages import TrialAssignment, TrialStatus
+from spinefarm.protocol.run import RunConfig
+from spinefarm.worker.service import Backoff, WorkerService, build_evaluator, default_worker_id, sphere_result
 
-from coordinator.service import CoordinatorService
-from protocol.messages import TrialAssignment, TrialStatus
-from protocol.run import RunConfig
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
-from worker.service import Backoff, WorkerService, build_evaluator, default_worker_id, sphere_result
 
 pytestmark = pytest.mark.integration
 
 
 def sphere_config(n: int = 3, delay_s: float | None = None) -> RunConfig:
-    from coordinator.problem import build_run_config
+    from spinefarm.coordinator.problem import build_run_config
 
     return build_run_config("r", f"sphere:{n}", duration_s=delay_s)
 
@@ -50,7 +50,7 @@ def test_backoff_doubles_up_to_a_cap_and_resets():
 
 
 def test_default_worker_ids_are_valid_and_distinct():
-    from protocol.keys import check_worker_id
+    from spinefarm.protocol.keys import check_worker_id
 
     a, b = default_worker_id(), default_worker_id()
     assert a != b and check_worker_id(a) == a
@@ -98,7 +98,7 @@ def test_results_are_resent_until_the_coordinator_acknowledges_them():
 
 
 def test_auto_batch_follows_the_mean_trial_time():
-    from worker.service import BatchSizer
+    from spinefarm.worker.service import BatchSizer
 
     auto = BatchSizer(None, target_s=0.5, max_batch=64)
     assert auto.size() == 1  # nothing measured yet: one trial
@@ -117,10 +117,9 @@ class HandRolledCoordinator:
 
     def __init__(self, endpoint: str, config: RunConfig, refuse_results: bool) -> None:
         import zenoh
-
-        from coordinator.service import zenoh_config
-        from protocol import keys
-        from protocol.messages import RunInfo, TrialAssignment, WorkGrant, encode, encode_message
+        from spinefarm.coordinator.service import zenoh_config
+        from spinefarm.protocol import keys
+        from spinefarm.protocol.messages import RunInfo, TrialAssignment, WorkGrant, encode, encode_message
 
         self.config, self.granted, self.submissions = config, False, 0
         h = config.config_hash()
@@ -203,7 +202,7 @@ def test_zenoh_json5_config_file_is_passed_through(tmp_path):
 
 
 def test_unreadable_zenoh_config_is_a_clear_error(tmp_path):
-    from protocol.errors import ConfigError
+    from spinefarm.protocol.errors import ConfigError
 
     bad = tmp_path / "bad.json5"
     bad.write_text("{ this is not json5 ")

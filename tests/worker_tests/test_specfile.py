@@ -7,11 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from cli.main import main
-from protocol.errors import MorphologySpecError, UnknownMorphologyError
-from robot.morphology.registry import builtin_names, load_morphology
-from robot.morphology.specfile import SPEC_DIR, builtin_spec, load_spec_file, parse_spec
+from spinefarm.cli.main import main
+from spinefarm.protocol.errors import MorphologySpecError, UnknownMorphologyError
+from spinefarm.robot.morphology.registry import builtin_names, load_morphology
+from spinefarm.robot.morphology.specfile import SPEC_DIR, builtin_spec, load_spec_file, parse_spec
 
 GOOD = textwrap.dedent("""\
     name: bar-chain

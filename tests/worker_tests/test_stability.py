@@ -6,15 +6,15 @@ import math
 
 import numpy as np
 import pytest
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.messages import TrialStatus
+from spinefarm.robot.morphology.model import ControlSpec, Morphology
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.morphology.variants import with_density_factor, with_gains, with_strings
+from spinefarm.worker.sim.stability import estimate_stable_step
+from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
 
-from protocol.errors import ConfigError
-from protocol.messages import TrialStatus
-from robot.morphology.model import ControlSpec, Morphology
-from robot.morphology.registry import load_morphology
-from robot.morphology.variants import with_density_factor, with_gains, with_strings
 from tests.worker_tests.helpers import mass_between_anchors
-from worker.sim.stability import estimate_stable_step
-from worker.trial import TrialConfig, random_unit_params, run_trial
 
 
 def test_estimate_matches_the_analytic_two_spring_oscillator():
@@ -55,7 +55,7 @@ def test_auto_step_runs_the_stiff_case_stably():
 
 
 def test_every_builtin_is_stable_at_its_default_step():
-    from robot.morphology.registry import builtin_names
+    from spinefarm.robot.morphology.registry import builtin_names
 
     for name in builtin_names():
         est = estimate_stable_step(load_morphology(name))

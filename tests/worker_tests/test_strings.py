@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pybullet as pb
 import pytest
+from spinefarm.worker.engines.couple import wrench_to_force_pairs
+from spinefarm.worker.sim import strings as sk
 
 from tests.worker_tests.helpers import ENGINES, PassiveRig, mass_between_anchors, two_rod_structure
-from worker.engines.couple import wrench_to_force_pairs
-from worker.sim import strings as sk
 
 
 @pytest.mark.parametrize("engine", ENGINES)
@@ -94,11 +94,11 @@ def test_force_pair_matches_net_wrench():
 
 def test_force_pairs_match_per_anchor_application_in_pybullet():
     """The net-wrench shortcut against applying each string's force at its two anchors."""
-    from robot.bodies import build_bodies, build_strings
-    from robot.morphology.registry import load_morphology
-    from robot.scene import GroundSpec
-    from worker.engines.bullet import BulletPhysics
-    from worker.trial import string_tables
+    from spinefarm.robot.bodies import build_bodies, build_strings
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.scene import GroundSpec
+    from spinefarm.worker.engines.bullet import BulletPhysics
+    from spinefarm.worker.trial import string_tables
 
     morph = load_morphology("tetraspine-ntrt")
     bodies = build_bodies(morph.structure)

@@ -9,13 +9,12 @@ import sys
 
 import numpy as np
 import pytest
-
-from protocol.errors import ParameterError
-from protocol.messages import TrialStatus
-from robot.morphology.registry import load_morphology
-from robot.morphology.structure import StringMaterial
-from robot.morphology.variants import with_strings
-from worker.trial import TrialConfig, random_unit_params, run_trial, simulate
+from spinefarm.protocol.errors import ParameterError
+from spinefarm.protocol.messages import TrialStatus
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.morphology.structure import StringMaterial
+from spinefarm.robot.morphology.variants import with_strings
+from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial, simulate
 
 
 def test_passive_tetraspine_settles_and_holds_its_shape():
@@ -76,9 +75,9 @@ def test_bad_parameters_raise_named_errors():
 
 TRIAL_SNIPPET = """
 import json
-from robot.morphology.registry import load_morphology
-from robot.morphology.variants import with_strings
-from worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.morphology.variants import with_strings
+from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
 m = load_morphology("tetraspine")
 r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11)
 d = r.to_dict(); d.pop("wall_time_s")
@@ -99,7 +98,7 @@ def test_deterministic_across_processes():
 
 
 def test_config_rejects_bad_values_with_the_field_name():
-    from protocol.errors import ConfigError
+    from spinefarm.protocol.errors import ConfigError
 
     with pytest.raises(ConfigError, match="dt_s"):
         TrialConfig(dt_s=0.5)
@@ -125,7 +124,7 @@ def test_cpg_integration_error_is_small_against_substepping():
 @pytest.mark.parametrize("name", ["tetraspine", "octahedral-complex"])
 def test_default_cpg_sub_step_keeps_the_bits_of_1ms_sub_steps_on_ntrt_networks(name):
     """A fast network (most of NTRT's space) keeps 1 ms sub-steps, at a 1 ms and at a 0.1 s update period."""
-    from worker.control.cpg import CpgIntegrator
+    from spinefarm.worker.control.cpg import CpgIntegrator
 
     morph = load_morphology(name)
     u = random_unit_params(morph, 4)
@@ -137,7 +136,7 @@ def test_default_cpg_sub_step_keeps_the_bits_of_1ms_sub_steps_on_ntrt_networks(n
 
 
 def test_a_2ms_screen_of_a_sidewinding_gait_takes_one_cpg_step_per_update_at_no_cost_in_accuracy():
-    from worker.control.cpg import CpgIntegrator
+    from spinefarm.worker.control.cpg import CpgIntegrator
 
     morph = load_morphology("tetraspine")
     u = random_unit_params(morph, 3, "sidewinding")

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from robot.morphology.registry import load_morphology
-from robot.morphology.variants import with_strings
-from worker.trial import TrialConfig, random_unit_params, run_trial
-from worker.verify import VerifySettings, verify_trial
+from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.morphology.variants import with_strings
+from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.verify import VerifySettings, verify_trial
 
 
 def test_creep_artefact_is_not_reproduced_at_a_finer_step():

@@ -12,8 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-
-from robot.cpg_network import CpgNetwork
+from spinefarm.robot.cpg_network import CpgNetwork
 
 
 @njit(cache=True)

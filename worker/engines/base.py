@@ -29,10 +29,9 @@ from dataclasses import fields
 from typing import Any, ClassVar
 
 import numpy as np
-
-from protocol.errors import ConfigError
-from robot.bodies import BodyModel
-from robot.scene import Terrain
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot.bodies import BodyModel
+from spinefarm.robot.scene import Terrain
 
 GRAVITY_CM_S2 = 981.0
 
@@ -80,8 +79,8 @@ class BasePhysics:
 # name -> (module, class name): backends are imported only when used, so one engine's package
 # need not be installed to run another
 _ENGINES: dict[str, tuple[str, str]] = {
-    "bullet": ("worker.engines.bullet", "BulletPhysics"),
-    "mujoco": ("worker.engines.mujoco", "MujocoPhysics"),
+    "bullet": ("spinefarm.worker.engines.bullet", "BulletPhysics"),
+    "mujoco": ("spinefarm.worker.engines.mujoco", "MujocoPhysics"),
 }
 
 

@@ -16,12 +16,11 @@ from itertools import chain
 
 import numpy as np
 import pybullet as pb
-
-from protocol.errors import ConfigError, check_range
-from robot.bodies import BodyModel
-from robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
-from worker.engines.base import GRAVITY_CM_S2, BasePhysics
-from worker.engines.couple import wrench_to_force_pairs
+from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.robot.bodies import BodyModel
+from spinefarm.robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
+from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics
+from spinefarm.worker.engines.couple import wrench_to_force_pairs
 
 
 @dataclass(frozen=True)

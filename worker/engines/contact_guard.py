@@ -18,8 +18,7 @@ import math
 
 import numpy as np
 from numba import njit
-
-from robot.bodies import BodyModel
+from spinefarm.robot.bodies import BodyModel
 
 SAFETY_FACTOR = 2.0
 MIN_CLEARANCE_CM = 0.1

@@ -31,11 +31,10 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
-
-from protocol.errors import ConfigError, check_range
-from robot.bodies import BodyModel
-from robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
-from worker.engines.base import GRAVITY_CM_S2, BasePhysics
+from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.robot.bodies import BodyModel
+from spinefarm.robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
+from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics
 
 log = logging.getLogger("spinefarm.mujoco")
 # MuJoCo's own warnings (e.g. "Nan, Inf or huge value in QACC" of a diverging trial) would go to stdout and
@@ -300,7 +299,7 @@ class MujocoPhysics(BasePhysics):
         self.base_pos = np.array([rot @ b.com_cm for b in bodies])  # start COMs before offsets
         self.guard = None
         if self.settings.segment_contacts == "auto":
-            from worker.engines.contact_guard import SegmentContactGuard  # compiled: numba only when used
+            from spinefarm.worker.engines.contact_guard import SegmentContactGuard  # compiled: numba only when used
 
             self.guard = SegmentContactGuard(bodies, off)
         self._bind()
@@ -363,7 +362,7 @@ class MujocoPhysics(BasePhysics):
 
     def fused_stepper(self, bank, cpg, cpg_every: int, motor_mode: int):
         """Compiled loop: see worker.engines.mujoco_loop.FusedStepper."""
-        from worker.engines.mujoco_loop import FusedStepper
+        from spinefarm.worker.engines.mujoco_loop import FusedStepper
 
         return FusedStepper(self, bank, cpg, cpg_every, motor_mode)
 

@@ -15,9 +15,8 @@ import llvmlite.binding as llvm
 import mujoco
 import numpy as np
 from numba import njit, types
-
-from worker.control.cpg import rk4_advance
-from worker.sim.strings import STATUS_OK, string_step
+from spinefarm.worker.control.cpg import rk4_advance
+from spinefarm.worker.sim.strings import STATUS_OK, string_step
 
 _LIB = next(Path(mujoco.__file__).parent.glob("libmujoco.so*"), None)
 if _LIB is not None:

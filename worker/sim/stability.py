@@ -15,9 +15,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
-from robot.bodies import build_bodies, build_strings
-from robot.morphology.model import Morphology
+from spinefarm.robot.bodies import build_bodies, build_strings
+from spinefarm.robot.morphology.model import Morphology
 
 
 @dataclass(frozen=True)
