@@ -205,10 +205,11 @@ def wheelhouse(python: str, target: Path, extras: Sequence[str]) -> dict[str, ob
         log("pip wheel: the wheelhouse of the images")
         part = CACHE_DIR / f"wheels-{key}.part"
         shutil.rmtree(part, ignore_errors=True)
-        sh(python, "-m", "pip", "wheel", "-q", "--wheel-dir", part, f".[{','.join(extras)}]", "setuptools>=68",
-           "wheel", "pip", timeout_s=1500, env=dict(os.environ, PIP_DISABLE_PIP_VERSION_CHECK="1"))
-        for own in part.glob("spinefarm-*.whl"):
-            own.unlink()
+        part.mkdir(parents=True)
+        requirements = sh(python, ROOT / "deploy" / "requirements.py", ROOT / "pyproject.toml", ",".join(extras))
+        (part / "requirements.txt").write_text(requirements.stdout)
+        sh(python, "-m", "pip", "wheel", "-q", "--wheel-dir", part, "-r", part / "requirements.txt",
+           "setuptools>=68", "wheel", "pip", timeout_s=1500, env=dict(os.environ, PIP_DISABLE_PIP_VERSION_CHECK="1"))
         os.replace(part, cache)
     for old in target.glob("*.whl"):
         old.unlink()
