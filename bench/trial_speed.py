@@ -48,8 +48,8 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
     geom = build_strings(morph.structure, bodies)
     sparams, sstate = string_tables(morph, geom.start_length_cm, {int(s): n for n, s in enumerate(net.node_string)})
     ground = GroundSpec(friction=morph.ground_friction)
-    scene = BulletPhysics(bodies, ground, dt)
-    bare = BulletPhysics(bodies, ground, dt)
+    scene = BulletPhysics(bodies, ground, dt).worlds[0]  # one pybullet world: the parts of a step, timed apart
+    bare = BulletPhysics(bodies, ground, dt).worlds[0]
     cpg = CpgIntegrator(net, cfg.cpg_max_step_s)
     nb = len(bodies)
     bank = sk.StringBank(nb, geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm, sparams, sstate)
@@ -133,10 +133,10 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
                     cfg, engine_options={**cfg.engine_options, "segment_contacts": "scene"})
                 scene = caches[name].get(morph, ran, controller)._scene
                 if name == "mujoco":
-                    contacts.append(int(scene.data.ncon))
+                    contacts.append(scene.contact_count())
                 t1 = time.process_time()
                 for _ in range(200):
-                    mujoco.mj_step(scene.model, scene.data)
+                    mujoco.mj_step(scene.model, scene.data[0])
                 (mj_step_us if name == "mujoco" else mj_step_2ms_us).append((time.process_time() - t1) / 200 * 1e6)
     med = {e: float(np.median(v)) for e, v in cpu.items()}
     mj = float(np.median(mj_step_us))
@@ -170,10 +170,10 @@ def cpg_cost(morph_name: str, seed: int, updates: int = 5000) -> dict:
         cpg = CpgIntegrator(net, max_step)
         h, n = cpg.plan(period)
         kernel = cpg.kernel_arrays()
-        rk4_advance(cpg.state, *kernel, h, n, cpg.work, cpg.output_cm_s)  # compiled before timing
+        rk4_advance(cpg.state, kernel, h, n, cpg.work, cpg.output_cm_s)  # compiled before timing
         t0 = time.process_time()
         for _ in range(updates):
-            rk4_advance(cpg.state, *kernel, h, n, cpg.work, cpg.output_cm_s)
+            rk4_advance(cpg.state, kernel, h, n, cpg.work, cpg.output_cm_s)
         out[label] = (time.process_time() - t0) / updates * 1e6 / (period * 1e3)
     return out
 

@@ -12,6 +12,7 @@ import numpy as np
 from spinefarm.cli import checks
 from spinefarm.cli.sim_commands import add_engine_argument
 from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot.engines import DEFAULT_ENGINE
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -93,7 +94,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
     if not 0 <= args.seeds <= 100:
         raise ConfigError("--seeds out of range", received=args.seeds, expected="0 to 100 jittered replays")
-    engine = args.engine or "bullet"
+    engine = args.engine or DEFAULT_ENGINE
     args.path = parameter_folder(args.path)
     report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix, engine=engine)
     s = replay_summary(report)

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from spinefarm.cli import checks
 from spinefarm.protocol.errors import ParameterError
+from spinefarm.robot.engines import DEFAULT_ENGINE
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,8 +68,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def add_engine_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--engine", choices=("bullet", "mujoco"), default=None,
-                   help="physics engine (default bullet): bullet, or mujoco (the fast tier, soft contacts)")
+    from spinefarm.robot.engines import ENGINES, engine_names
+
+    p.add_argument("--engine", choices=engine_names(), default=None,
+                   help="physics engine (default bullet): "
+                   + "; ".join(f"{name}: {spec.summary}" for name, spec in ENGINES.items()))
 
 
 def add_engine_option_argument(p: argparse.ArgumentParser) -> None:
@@ -191,7 +195,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
             params = random_unit_params(morph, rseed, controller)
         seed = args.seed if args.seed is not None else (args.random_seed or 0)
     overrides = trial_overrides(args)
-    if "engine" in overrides and overrides["engine"] != base.get("engine", "bullet"):
+    if "engine" in overrides and overrides["engine"] != base.get("engine", DEFAULT_ENGINE):
         base.pop("engine_options", None)  # the run's options belong to its own engine
         base.pop("dt_s", None)  # and so does its step: the new engine's default unless --dt says
     overrides = {**base, **overrides, "controller": controller}
@@ -301,7 +305,7 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
         controller = controller or meta.controller
         base = {k: v for k, v in meta.trial_config.items() if k not in ("duration_s", "dt_s", "record_every_s")}
     if args.engine is not None:
-        if base is not None and base.get("engine", "bullet") != args.engine:
+        if base is not None and base.get("engine", DEFAULT_ENGINE) != args.engine:
             base.pop("engine_options", None)  # the run's options belong to its own engine
         base = {**(base or {}), "engine": args.engine}
     seeds = args.seeds if args.seeds is not None else (3 if args.quick else 5)

@@ -56,7 +56,6 @@ def run_config_for(run_id: str, morphology: Morphology | dict[str, Any], *, obje
     """The run object of a morphology, or of its to_dict() (e.g. the spec stored in a run file)."""
     from spinefarm.robot.morphology.model import Morphology
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.engines.base import engine_names
 
     morph = morphology if isinstance(morphology, Morphology) else Morphology.from_dict(morphology)
     space = morph.param_space(controller)
@@ -64,9 +63,7 @@ def run_config_for(run_id: str, morphology: Morphology | dict[str, Any], *, obje
     tc_dict.update(trial_overrides or {})
     if duration_s is not None:
         tc_dict["duration_s"] = duration_s
-    trial_config = TrialConfig.from_dict(tc_dict)  # validates the overrides
-    if trial_config.engine not in engine_names():
-        raise ConfigError("unknown engine", received=trial_config.engine, expected=engine_names())
+    trial_config = TrialConfig.from_dict(tc_dict)  # validates the overrides, the engine and its options
     return RunConfig(run_id, morph.name, morph.to_dict(), controller, tuple(space.describe()),
                      trial_config.to_dict(), objective, seed, spec_hash=morph.spec_hash(),
                      space_hash=space.space_hash(), trial_config_hash=trial_config.config_hash())

@@ -14,6 +14,14 @@ import numpy as np
 from spinefarm.robot.morphology.structure import StructureSpec, rotation_from_y
 
 
+def quaternion_matrix(q_xyzw) -> np.ndarray:
+    """(3, 3) rotation matrix of a unit quaternion (x, y, z, w)."""
+    x, y, z, w = q_xyzw
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
 @dataclass(frozen=True)
 class RodGeometry:
     """One cylinder in its body frame: centre (3,) cm, rotation (3, 3) taking +Y to its axis."""

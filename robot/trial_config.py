@@ -5,28 +5,26 @@ from __future__ import annotations
 
 import hashlib
 import json
-import re
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.robot.engines import DEFAULT_ENGINE, check_engine_options, engine_spec
 from spinefarm.robot.scene import SceneConfig
 
 MOTOR_MODEL_NAMES = ("physical", "ntrt2014")
-# each engine's default physics step when dt_s is not given: the largest whose median distance error on the
-# 12-segment Tetraspine stays within max(1 %, chaos floor) of the converged reference (docs/accuracy.md)
-ENGINE_DEFAULT_DT_S = {"bullet": 1e-3, "mujoco": 1e-3}
-ENGINE_NAME = re.compile(r"^[a-z][a-z0-9_-]{0,31}$")
 
 
 @dataclass(frozen=True)
 class TrialConfig:
     """How to run one trial. None means "the morphology's default".
 
-    dt_s: the physics step; None means the engine's default (ENGINE_DEFAULT_DT_S; `step_s` resolves it).
-    engine: the physics backend ("bullet", "mujoco"); engine_options: that backend's own settings
-    (solver iterations, friction anchors, contact parameters), validated by the backend.
+    dt_s: the physics step; None means the engine's default (robot.engines: the largest step whose median
+    distance error on the 12-segment Tetraspine stays within max(1 %, chaos floor) of the converged reference,
+    docs/accuracy.md; `step_s` resolves it).
+    engine: a registered physics backend (robot.engines: "bullet", "mujoco"); engine_options: that backend's
+    own settings (solver iterations, friction anchors, contact parameters), checked against the registry here.
     motor_model: "physical" (limits in cm/s and cm/s^2, independent of dt) or "ntrt2014" (NTRT's
     per-step caps, only faithful at dt = 1 ms, for replaying published gaits).
     cpg_update_period_s: NTRT's controlTime (CPG output held in between).
@@ -46,7 +44,7 @@ class TrialConfig:
     auto_dt: bool = False
     dt_safety_factor: float = 0.5
     refuse_unstable_dt: bool = True
-    engine: str = "bullet"
+    engine: str = DEFAULT_ENGINE
     engine_options: dict[str, Any] = field(default_factory=dict)
     motor_model: str = "physical"
     controller: str | None = None
@@ -72,13 +70,11 @@ class TrialConfig:
         if self.dt_s is not None:
             check_range("dt_s", self.dt_s, 1e-6, 0.02)
         check_range("dt_safety_factor", self.dt_safety_factor, 0.0, 1.0, low_inclusive=False)
-        if not isinstance(self.engine, str) or not ENGINE_NAME.match(self.engine):
-            raise ConfigError("engine is not an engine name", received=self.engine,
-                              expected="a registered engine such as 'bullet' or 'mujoco'")
         if not isinstance(self.engine_options, Mapping):
             raise ConfigError("engine_options is not a mapping", received=self.engine_options,
                               expected="{option: value} of the engine's settings")
         object.__setattr__(self, "engine_options", dict(self.engine_options))
+        check_engine_options(self.engine, self.engine_options)
         if self.motor_model not in MOTOR_MODEL_NAMES:
             raise ConfigError("unknown motor_model", received=self.motor_model, expected=sorted(MOTOR_MODEL_NAMES))
         if self.cpg_update_period_s is not None:
@@ -103,7 +99,7 @@ class TrialConfig:
     @property
     def step_s(self) -> float:
         """The physics step asked for: dt_s, or the engine's default."""
-        return self.dt_s if self.dt_s is not None else ENGINE_DEFAULT_DT_S.get(self.engine, 1e-3)
+        return self.dt_s if self.dt_s is not None else engine_spec(self.engine).default_dt_s
 
     def to_dict(self) -> dict:
         return asdict(self)

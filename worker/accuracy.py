@@ -19,14 +19,14 @@ from statistics import median
 from typing import Any
 
 import numpy as np
+from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.robot.trial_config import ENGINE_DEFAULT_DT_S
 from spinefarm.worker import scoring
 from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
 
 
 def baseline_label(engine: str = "bullet") -> str:
-    return f"dt {ENGINE_DEFAULT_DT_S.get(engine, 1e-3) * 1e3:g} ms (default)"
+    return f"dt {engine_spec(engine).default_dt_s * 1e3:g} ms (default)"
 
 
 @dataclass(frozen=True)
@@ -45,7 +45,7 @@ def sweep(quick: bool, engine: str = "bullet") -> list[Setting]:
     steps = (2e-3, 1e-3, 5e-4) if quick else (4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
     if engine == "mujoco" and not quick:
         steps = (8e-3, 4e-3, 3e-3, 2e-3, 1e-3, 5e-4, 2.5e-4)
-    default = ENGINE_DEFAULT_DT_S.get(engine, 1e-3)
+    default = engine_spec(engine).default_dt_s
     if default not in steps:
         steps = tuple(sorted((*steps, default), reverse=True))
     out = [Setting(baseline_label(engine) if dt == default else f"dt {dt * 1e3:g} ms", "step", {"dt_s": dt})

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from spinefarm.protocol.errors import SpinefarmError
 from spinefarm.robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
+from spinefarm.robot.engines import DEFAULT_ENGINE
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.trial_config import TrialConfig
 
@@ -47,7 +48,7 @@ def _step_config(morph: Morphology, engine: str, **kw) -> TrialConfig:
 
 
 def check_builds(morph: Morphology) -> CheckResult:
-    from spinefarm.worker.trial import string_tables
+    from spinefarm.worker.control.law import string_tables
 
     bodies = build_bodies(morph.structure)
     geom = build_strings(morph.structure, bodies)
@@ -81,7 +82,7 @@ def check_sane_numbers(morph: Morphology) -> CheckResult:
                        f"{geom.start_length_cm.min():.3g}-{geom.start_length_cm.max():.3g} cm")
 
 
-def check_passive_settle(morph: Morphology, engine: str = "bullet", duration_s: float = 5.0) -> CheckResult:
+def check_passive_settle(morph: Morphology, engine: str = DEFAULT_ENGINE, duration_s: float = 5.0) -> CheckResult:
     """With no CPG output the structure stays in one piece, above ground, in a steady shape, at rest."""
     from spinefarm.worker.trial import simulate
 
@@ -115,7 +116,7 @@ def check_passive_settle(morph: Morphology, engine: str = "bullet", duration_s: 
                        f"({speed:.2g} cm/s)")
 
 
-def check_deterministic(morph: Morphology, engine: str = "bullet") -> CheckResult:
+def check_deterministic(morph: Morphology, engine: str = DEFAULT_ENGINE) -> CheckResult:
     from spinefarm.worker.trial import simulate
 
     name = "two runs agree"
@@ -132,7 +133,7 @@ def check_deterministic(morph: Morphology, engine: str = "bullet") -> CheckResul
     return CheckResult(name, True, f"identical poses; work {a.result.work_j:.3g} J in 0.5 s")
 
 
-def run_contract(morph: Morphology, engine: str = "bullet") -> list[CheckResult]:
+def run_contract(morph: Morphology, engine: str = DEFAULT_ENGINE) -> list[CheckResult]:
     """Every check, in order; a check that raises fails with the error (later ones still run if the
     structure built)."""
     out: list[CheckResult] = []

@@ -4,11 +4,13 @@ score. Engine-neutral: works on poses and string state, whatever engine produced
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.robot.bodies import quaternion_matrix
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.scene import GROUND_TOP_CM, SceneConfig, surface_height_cm
 from spinefarm.robot.trial_config import TrialConfig
@@ -41,12 +43,7 @@ def choose_step(morph: Morphology, cfg: TrialConfig) -> float:
 
 
 def _rotation_matrix(rotation: tuple[float, float, float, float] | None) -> np.ndarray:
-    if rotation is None:
-        return np.eye(3)
-    x, y, z, w = rotation
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.eye(3) if rotation is None else quaternion_matrix(rotation)
 
 
 def start_rotation(scene: SceneConfig) -> tuple[float, float, float, float] | None:
@@ -108,21 +105,34 @@ def check_state(poses: np.ndarray, last: np.ndarray, masses: np.ndarray, sstate:
 
 
 
-def score(morph: Morphology, masses: np.ndarray, build: np.ndarray, end_poses: np.ndarray, steps_done: int,
-          dt_s: float, work_internal: float, reason: str, seed: int, wall_time_s: float,
-          extras: dict[str, float], start: np.ndarray | None = None) -> TrialResult:
-    """A TrialResult from the start pose `build` (without jitter) and the final poses: the whole
-    robot's COM distance, NTRT's scored-segment distance, speed, work and cost of transport.
+@dataclass(frozen=True)
+class Measured:
+    """What a trial measured, for its score: end_poses (nb, 7), steps_done (of locomotion) of dt_s each,
+    work_internal (kg cm^2/s^2, of locomotion), reason ("" if it completed), start: the poses locomotion is
+    scored from (the end of a settle phase; None: the build pose)."""
 
-    start: the poses locomotion is scored from (the end of a settle phase; default `build`); steps_done
-    and work_internal count from there. NTRT's distance always counts from `build`, as NTRT's did."""
+    end_poses: np.ndarray
+    steps_done: int
+    dt_s: float
+    work_internal: float
+    reason: str
+    start: np.ndarray | None = None
+
+
+def score(morph: Morphology, masses: np.ndarray, build: np.ndarray, measured: Measured, seed: int,
+          wall_time_s: float, extras: dict[str, float]) -> TrialResult:
+    """A TrialResult from the start pose `build` (without jitter) and what was measured: the whole
+    robot's COM distance, NTRT's scored-segment distance, speed, work and cost of transport.
+    Locomotion counts from measured.start (default `build`); NTRT's distance always counts from `build`,
+    as NTRT's did."""
+    end_poses, reason, start = measured.end_poses, measured.reason, measured.start
     total_mass = float(masses.sum())
-    sim_time = steps_done * dt_s
+    sim_time = measured.steps_done * measured.dt_s
     start_com = scoring.robot_com_cm(build if start is None else start, masses)
     distance_cm = scoring.planar_distance_cm(start_com, scoring.robot_com_cm(end_poses, masses))
     seg = morph.scored_segment
     ntrt_cm = scoring.planar_distance_cm(build[seg, :3], end_poses[seg, :3])
-    work_j = max(0.0, work_internal) * scoring.WORK_J_PER_INTERNAL
+    work_j = max(0.0, measured.work_internal) * scoring.WORK_J_PER_INTERNAL
     distance_m = distance_cm * scoring.CM
     return TrialResult(
         status=TrialStatus.FAILED if reason else TrialStatus.COMPLETE, reason=reason,

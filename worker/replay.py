@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, MorphologySpecError
 from spinefarm.protocol.messages import TrialResult
+from spinefarm.robot.engines import DEFAULT_ENGINE
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.spaces import NtrtTableSpace
 
@@ -154,7 +155,7 @@ def unit_params(morph: Morphology, params: NtrtParameterSet) -> np.ndarray:
 
 def replay(folder: str | Path, morphology: str | Morphology | None = None, *, duration_s: float | None = None,
            suffix: str = "default", seed: int = 0, pose_jitter_cm: float = 0.0,
-           engine: str = "bullet") -> ReplayReport:
+           engine: str = DEFAULT_ENGINE) -> ReplayReport:
     """Run NTRT's published parameters on the NTRT-era morphology (2014 motor, 1 ms, one sub-step,
     no friction anchors in Bullet; `engine` "mujoco" runs the same on MuJoCo's default contacts)."""
     from spinefarm.robot.morphology.registry import load_morphology
@@ -177,7 +178,7 @@ JITTER_CM = 1e-6  # spec 0a.5: perturbations this small already spread the tetra
 
 
 def replay_spread(folder: str | Path, morphology: str | Morphology | None, seeds: int, *,
-                  duration_s: float | None = None, suffix: str = "default", engine: str = "bullet"
+                  duration_s: float | None = None, suffix: str = "default", engine: str = DEFAULT_ENGINE
                   ) -> list[ReplayReport]:
     """Replays with the start pose jittered by JITTER_CM (seeds 1..seeds): a distribution, not one sample."""
     return [replay(folder, morphology, duration_s=duration_s, suffix=suffix, seed=s, pose_jitter_cm=JITTER_CM,

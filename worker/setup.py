@@ -16,9 +16,11 @@ from typing import Any
 import numpy as np
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.cpg_network import CpgNetwork
+from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.scene import build_terrain
 from spinefarm.robot.trial_config import TrialConfig
+from spinefarm.worker.control.law import string_tables
 from spinefarm.worker.engines.base import BasePhysics, EngineFactory, engine_class
 from spinefarm.worker.episode import build_poses, choose_step, start_lift_cm, start_rotation
 
@@ -27,8 +29,6 @@ class TrialSetup:
     """The parameter- and seed-independent part of a trial of `morph` under `cfg` (controller given)."""
 
     def __init__(self, morph: Morphology, cfg: TrialConfig, controller: str | None) -> None:
-        from spinefarm.worker.trial import string_tables
-
         self.morph, self.cfg, self.controller = morph, cfg, controller
         self.engine_cls = engine_class(cfg.engine)
         self.settings = self.engine_cls.settings_from_options(cfg.engine_options)
@@ -66,15 +66,19 @@ class TrialSetup:
             offsets[:, 1] += self.lift
         return offsets
 
-    def scene(self, offsets: np.ndarray | None, factory: EngineFactory | None = None) -> tuple[BasePhysics, bool]:
-        """(engine world at the start pose, whether the caller owns it and must close it)."""
-        if factory is not None or not hasattr(self.engine_cls, "reset"):
+    def scene(self, offsets: np.ndarray | None, factory: EngineFactory | None = None, n_worlds: int = 1
+              ) -> tuple[BasePhysics, bool]:
+        """(n_worlds engine worlds at the start pose, offsets (n_worlds, nb, 3) or None; whether the caller owns
+        them and must close them). An engine that can reset keeps its worlds for the next call of as many."""
+        args = (self.bodies, self.terrain, self.dt, self.settings, offsets, self.rotation)
+        if factory is not None or not engine_spec(self.cfg.engine).can("reset"):
             self.scenes_built += 1
-            return (factory or self.engine_cls)(self.bodies, self.terrain, self.dt, self.settings, offsets,
-                                                self.rotation), True
+            return (factory or self.engine_cls)(*args, n_worlds=n_worlds), True
+        if self._scene is not None and self._scene.n_worlds != n_worlds:
+            self.close()
         if self._scene is None:
             self.scenes_built += 1
-            self._scene = self.engine_cls(self.bodies, self.terrain, self.dt, self.settings, offsets, self.rotation)
+            self._scene = self.engine_cls(*args, n_worlds=n_worlds)
         else:
             self._scene.reset(offsets)
         return self._scene, False

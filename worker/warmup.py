@@ -8,7 +8,8 @@ import os
 from pathlib import Path
 
 # Modules whose @njit(cache=True) kernels every trial runs.
-KERNEL_MODULES = ("spinefarm.worker.sim.strings", "spinefarm.worker.control.cpg", "spinefarm.worker.engines.couple")
+KERNEL_MODULES = ("spinefarm.worker.sim.strings", "spinefarm.worker.control.cpg", "spinefarm.worker.control.law",
+                  "spinefarm.worker.engines.couple")
 
 
 def _cache_dirs(source: Path) -> list[Path]:

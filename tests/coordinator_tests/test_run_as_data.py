@@ -210,9 +210,10 @@ def test_run_ids_come_from_the_robot_name_and_are_valid_everywhere(tmp_path):
         check_run_id("-home-me")
 
 
-def test_an_engine_option_no_worker_can_build_stops_the_search_with_the_workers_reason(tmp_path):
+def test_an_engine_option_the_engine_lacks_stops_the_search_before_the_run_file(tmp_path):
     r = spinefarm("search", "tetraspine-ntrt", "--engine", "mujoco", "--engine-option", "bogus=1", "--trials", "2",
                   "--workers", "1", "--duration", "0.2", "--out", str(tmp_path / "run.h5"), "--api-port", "-1",
                   timeout=120)
-    assert r.returncode == 1, r.stderr[-2000:]
-    assert "cannot serve" in r.stderr and "unknown mujoco engine options" in r.stderr and "bogus" in r.stderr
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert "unknown mujoco engine option 'bogus'" in r.stderr and "segment_contacts" in r.stderr
+    assert not (tmp_path / "run.h5").exists()

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 from spinefarm.robot.bodies import build_bodies, build_strings
+from spinefarm.robot.engines import engine_names
 from spinefarm.robot.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec
 from spinefarm.robot.scene import GroundSpec
 from spinefarm.worker.engines.base import engine_class
 from spinefarm.worker.sim import strings as sk
 
-ENGINES = ("bullet", "mujoco")
+ENGINES = tuple(engine_names())
 
 
 def two_rod_structure(gap_cm: float, *, heavy_density: float = 0.014, light_density: float = 0.014,
@@ -67,10 +68,10 @@ class PassiveRig:
         self.no_cpg = np.zeros(0)
 
     def step(self) -> np.ndarray:
-        poses = self.scene.read_poses()
+        poses = self.scene.read_poses()[0]  # one world
         status = self.bank.step(poses, self.no_cpg, self.dt, sk.MOTOR_PHYSICAL)
         assert status == sk.STATUS_OK
-        self.scene.apply_wrenches(self.bank.force, self.bank.torque)
+        self.scene.apply_wrenches(self.bank.force[None], self.bank.torque[None])
         self.scene.step()
         return poses
 

@@ -15,7 +15,7 @@ from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
 
 
 def engine_surface(terrain, xs, zs) -> np.ndarray:
-    scene = BulletPhysics([], terrain)
+    scene = BulletPhysics([], terrain).worlds[0]  # one pybullet world, its own API
     try:
         starts = [[x, 200.0, z] for x, z in zip(xs, zs, strict=True)]
         ends = [[x, -200.0, z] for x, z in zip(xs, zs, strict=True)]
@@ -67,7 +67,7 @@ def test_collision_filter_pairs():
 def test_filtered_pairs_pass_through_each_other_in_the_engine():
     bodies = build_bodies(load_morphology("tetraspine-ntrt").structure)
     terrain = build_terrain(SceneConfig(collision_filter="neighbours"), 0.5, (0, 0))
-    scene = BulletPhysics(bodies, terrain)
+    scene = BulletPhysics(bodies, terrain).worlds[0]
     try:
         ids = scene.body_ids
         pb.resetBasePositionAndOrientation(ids[2], bodies[0].com_cm.tolist(), [0, 0, 0, 1],

@@ -45,7 +45,7 @@ def test_slack_string_does_not_push(engine):
     rig.scene.set_velocity(1, [-5.0, 0, 0])
     for _ in range(200):  # 0.2 s at 5 cm/s closes 1 cm: the string stays slack
         rig.step()
-    vel = rig.scene.velocities()
+    vel = rig.scene.velocities()[0]
     rig.close()
     assert np.all(rig.bank.tension == 0.0)
     assert np.allclose(vel[1, :3], [-5.0, 0, 0], atol=1e-9)
@@ -108,7 +108,7 @@ def test_force_pairs_match_per_anchor_application_in_pybullet():
         params, state = string_tables(morph, geom.start_length_cm, {})
         bank = sk.StringBank(len(bodies), geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm,
                              params, state)
-        scene = BulletPhysics(bodies, GroundSpec())
+        scene = BulletPhysics(bodies, GroundSpec()).worlds[0]  # one pybullet world, its own API
         for _ in range(500):
             poses = scene.read_poses()
             bank.step(poses, np.zeros(0), 1e-3, sk.MOTOR_PHYSICAL)

@@ -16,7 +16,10 @@ from spinefarm.robot.cpg_network import CpgNetwork
 
 
 @njit(cache=True)
-def _rhs(state, omega, amp, indptr, source, wc, a, out, cs, sn, zr, zi):
+def _rhs(state, net, out, scratch):
+    """out (n, 3) = d state / dt; net as rk4_advance takes it; scratch = (cos phi, sin phi, Re z, Im z), each (n,)."""
+    omega, amp, indptr, source, wc, a = net
+    cs, sn, zr, zi = scratch
     n = state.shape[0]
     for j in range(n):
         cs[j] = np.cos(state[j, 0])
@@ -37,26 +40,27 @@ def _rhs(state, omega, amp, indptr, source, wc, a, out, cs, sn, zr, zi):
 
 
 @njit(cache=True)
-def rk4_advance(state, omega, amp, indptr, source, wc, a, h, n_steps, work, out):
+def rk4_advance(state, net, h, n_steps, work, out):
     """Advance state (n, 3) = (phi, r, dr/dt) in place by n_steps RK4 steps of h seconds, then write
-    the outputs r cos(phi) to out (n,). work (9, n, 3) is scratch space."""
+    the outputs r cos(phi) to out (n,). net = (omega (n,) rad/s, amp (n,) cm/s, indptr (n+1,), source (e,),
+    complex weights (e,), amplitude rate 1/s) (CpgIntegrator.kernel_arrays); work (9, n, 3) is scratch space."""
     n = state.shape[0]
     k1, k2, k3, k4, tmp = work[0], work[1], work[2], work[3], work[4]
-    cs, sn, zr, zi = work[5, :, 0], work[6, :, 0], work[7, :, 0], work[8, :, 0]
+    scratch = (work[5, :, 0], work[6, :, 0], work[7, :, 0], work[8, :, 0])
     for _ in range(n_steps):
-        _rhs(state, omega, amp, indptr, source, wc, a, k1, cs, sn, zr, zi)
+        _rhs(state, net, k1, scratch)
         for i in range(n):
             for c in range(3):
                 tmp[i, c] = state[i, c] + 0.5 * h * k1[i, c]
-        _rhs(tmp, omega, amp, indptr, source, wc, a, k2, cs, sn, zr, zi)
+        _rhs(tmp, net, k2, scratch)
         for i in range(n):
             for c in range(3):
                 tmp[i, c] = state[i, c] + 0.5 * h * k2[i, c]
-        _rhs(tmp, omega, amp, indptr, source, wc, a, k3, cs, sn, zr, zi)
+        _rhs(tmp, net, k3, scratch)
         for i in range(n):
             for c in range(3):
                 tmp[i, c] = state[i, c] + h * k3[i, c]
-        _rhs(tmp, omega, amp, indptr, source, wc, a, k4, cs, sn, zr, zi)
+        _rhs(tmp, net, k4, scratch)
         for i in range(n):
             for c in range(3):
                 state[i, c] += h / 6.0 * (k1[i, c] + 2.0 * k2[i, c] + 2.0 * k3[i, c] + k4[i, c])
@@ -106,11 +110,10 @@ class CpgIntegrator:
         return self._work
 
     def kernel_arrays(self) -> tuple:
-        """(omega, amp, indptr, source, wc, amplitude rate) as rk4_advance takes them, for fused loops."""
+        """(omega, amp, indptr, source, wc, amplitude rate): the network as rk4_advance takes it."""
         return (self._omega, self._amp, self._indptr, self._source, self._wc,
                 float(self.network.amplitude_rate_per_s))
 
     def advance(self, period_s: float) -> None:
         plan = self.plan(period_s)
-        rk4_advance(self.state, self._omega, self._amp, self._indptr, self._source, self._wc,
-                    self.network.amplitude_rate_per_s, plan[0], plan[1], self._work, self.output_cm_s)
+        rk4_advance(self.state, self.kernel_arrays(), plan[0], plan[1], self._work, self.output_cm_s)

@@ -19,7 +19,7 @@ import pybullet as pb
 from spinefarm.protocol.errors import ConfigError, check_range
 from spinefarm.robot.bodies import BodyModel
 from spinefarm.robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
-from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics
+from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics, world_offsets
 from spinefarm.worker.engines.couple import wrench_to_force_pairs
 
 
@@ -105,7 +105,7 @@ def _load_compound_urdf(body: BodyModel, pos: np.ndarray, quat: tuple[float, ...
 
 
 class BulletPhysics(BasePhysics):
-    """A pybullet DIRECT world holding the segments and the terrain."""
+    """B pybullet DIRECT worlds (one client each), stepped one after another."""
 
     name = "bullet"
     settings_type = BulletSettings
@@ -113,7 +113,53 @@ class BulletPhysics(BasePhysics):
     def __init__(self, bodies: list[BodyModel], ground: GroundSpec | Terrain, dt_s: float = 1e-3,
                  settings: BulletSettings | None = None, start_offsets_cm: np.ndarray | None = None,
                  start_rotation: tuple[float, float, float, float] | None = None,
-                 collision_pairs_off: list[tuple[int, int]] | None = None) -> None:
+                 collision_pairs_off: list[tuple[int, int]] | None = None, n_worlds: int | None = None) -> None:
+        offsets = world_offsets(start_offsets_cm, n_worlds, len(bodies))
+        self.worlds = [BulletWorld(bodies, ground, dt_s, settings, o, start_rotation, collision_pairs_off)
+                       for o in offsets]
+        self.n_worlds, self.n_bodies, self.dt_s = len(self.worlds), len(bodies), dt_s
+        self.retries = {}
+        self._poses = np.zeros((self.n_worlds, self.n_bodies, 7))
+
+    def read_poses(self) -> np.ndarray:
+        """(B, n_bodies, 7): COM position (cm) and quaternion (x, y, z, w) of each segment."""
+        for b, world in enumerate(self.worlds):
+            self._poses[b] = world.read_poses()
+        return self._poses
+
+    def apply_wrenches(self, force: np.ndarray, torque: np.ndarray, active: np.ndarray | None = None) -> None:
+        for b, world in enumerate(self.worlds):
+            if active is None or active[b]:
+                world.apply_wrenches(force[b], torque[b])
+
+    def step(self, active: np.ndarray | None = None) -> None:
+        for b, world in enumerate(self.worlds):
+            if active is None or active[b]:
+                world.step()
+
+    def velocities(self) -> np.ndarray:
+        """(B, n_bodies, 6): linear (cm/s) and angular (rad/s) velocity; for checks, not the hot loop."""
+        return np.array([w.velocities() for w in self.worlds])
+
+    def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0), world: int = 0) -> None:
+        """Set one body's world-frame velocity; for checks and tests."""
+        self.worlds[world].set_velocity(index, linear_cm_s, angular_rad_s)
+
+    def body_dynamics(self, index: int, world: int = 0) -> tuple:
+        return self.worlds[world].body_dynamics(index)
+
+    def close(self) -> None:
+        for world in self.worlds:
+            world.close()
+
+
+class BulletWorld:
+    """One pybullet DIRECT world holding the segments and the terrain."""
+
+    def __init__(self, bodies: list[BodyModel], ground: GroundSpec | Terrain, dt_s: float,
+                 settings: BulletSettings | None, start_offsets_cm: np.ndarray | None,
+                 start_rotation: tuple[float, float, float, float] | None,
+                 collision_pairs_off: list[tuple[int, int]] | None) -> None:
         engine = settings or BulletSettings()
         self.client = pb.connect(pb.DIRECT)
         c = self.client

@@ -76,13 +76,17 @@ def _segment_distance(p1, q1, p2, q2) -> float:
 
 
 @njit(cache=True)
-def contact_free_time(qpos, qvel, horizon_s, cap_start, cap_p0, cap_p1, cap_radius, cap_reach, body_radius,
-                      pair_a, pair_b, world0, world1):
+def contact_free_time(qpos, qvel, horizon_s, capsules, pairs, scratch):
     """(t, gap): no two segments can touch for t seconds (at most horizon_s), and the gap (cm) of the pair
-    that limits it (inf if none does). A pair's t is (gap - MIN_CLEARANCE_CM) / (SAFETY_FACTOR * v), with v
+    that limits it (inf if none does). capsules = (cap_start (nb+1,), cap_p0, cap_p1 (c, 3) body frame,
+    cap_radius, cap_reach (c,), body_radius (nb,)); pairs = (pair_a, pair_b) (p,); scratch = world ends
+    (c, 3) twice. A pair's t is (gap - MIN_CLEARANCE_CM) / (SAFETY_FACTOR * v), with v
     the largest relative speed of two of their points, |v_a - v_b| + |w_a| r_a + |w_b| r_b (r the bounding
     radii). Body pairs and capsule pairs whose bounding spheres alone give a longer t than the shortest
     found so far are skipped without a segment-segment distance."""
+    cap_start, cap_p0, cap_p1, cap_radius, cap_reach, body_radius = capsules
+    pair_a, pair_b = pairs
+    world0, world1 = scratch
     nb = qpos.shape[0]
     spin = np.empty(nb)
     for b in range(nb):
@@ -160,5 +164,6 @@ class SegmentContactGuard:
         that limits it, inf if none does): see contact_free_time."""
         if self.pair_a.size == 0:
             return horizon_s, math.inf
-        return contact_free_time(qpos, qvel, horizon_s, self.cap_start, self.cap_p0, self.cap_p1, self.cap_radius,
-                                 self.cap_reach, self.body_radius, self.pair_a, self.pair_b, self._w0, self._w1)
+        return contact_free_time(qpos, qvel, horizon_s, (self.cap_start, self.cap_p0, self.cap_p1, self.cap_radius,
+                                                         self.cap_reach, self.body_radius),
+                                 (self.pair_a, self.pair_b), (self._w0, self._w1))

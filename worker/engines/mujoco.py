@@ -1,257 +1,26 @@
-"""The MuJoCo backend (the only module that imports mujoco): rigid segments on a terrain, soft contacts.
-
-Same world as the Bullet backend: cm, kg, s, Y up, gravity -981 cm/s^2 (MuJoCo is unit-free; its
-only length tolerance that matters here, solimp's width, is given in cm). Each segment is one free
-body whose frame is its COM with world-aligned axes at build time, with explicit mass and diagonal
-inertia. String wrenches go straight into `xfrc_applied` (force at the COM and torque about it, world
-frame: no force couple needed); poses are read from `qpos` after mj_step (xpos/xquat are those of the
-step's start).
-
-Contacts: rods are capsules. On plane terrains (flat ground, slope) a plane touches a capsule only at
-an end cap, so `contact_geometry="ends"` (the default there) replaces each segment's rods by one
-sphere per distinct rod end for terrain contact (a Tetraspine segment: 4 spheres instead of 6 rods
-giving 6 nearly redundant contacts); segment-segment contacts stay capsule-capsule. Rough ground and
-obstacles touch rods anywhere: capsules. "cylinders" gives every rod Bullet's shape instead (for
-comparisons: on flat ground it stands where Bullet's spine stands).
-
-Friction: MuJoCo takes the larger of two geoms' coefficients (or the one of higher priority); Bullet
-multiplies them. Terrain geoms get priority and the coefficient mu_terrain * mu_rod, rod geoms mu_rod^2,
-so terrain and segment-segment contacts see the same products as in Bullet (exact while every segment
-has the same rod friction, as every built-in does). Sliding friction only (condim 3): Bullet's rolling
-friction is the product with the ground's 0, its spinning friction 0.
-"""
+"""The MuJoCo backend (with worker.engines.mujoco_model, the only modules that import mujoco): B worlds of
+rigid segments on a terrain, soft contacts; the model, its settings and the contact scheme are described in
+worker.engines.mujoco_model."""
 
 from __future__ import annotations
 
 import ctypes
-import logging
-import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
 import numpy as np
-from spinefarm.protocol.errors import ConfigError, check_range
-from spinefarm.robot.bodies import BodyModel
-from spinefarm.robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
-from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot.bodies import BodyModel, quaternion_matrix
+from spinefarm.robot.scene import GroundSpec, Terrain, pairs_off
+from spinefarm.worker.engines.base import BasePhysics, world_offsets
+from spinefarm.worker.engines.mujoco_model import (
+    POSE_COLUMNS,
+    MujocoSettings,
+    fill_heightfield,
+    model_xml,
+)
 
-log = logging.getLogger("spinefarm.mujoco")
-# MuJoCo's own warnings (e.g. "Nan, Inf or huge value in QACC" of a diverging trial) would go to stdout and
-# a MUJOCO_LOG.TXT in the user's working directory; the divergence guard reports the trial, so they are
-# debug detail here
-mujoco.set_mju_user_warning(lambda message: log.debug("mujoco: %s", message))
-
-INTEGRATORS = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
-               "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "rk4": mujoco.mjtIntegrator.mjINT_RK4}
-CONES = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}
-SOLVERS = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG,
-           "pgs": mujoco.mjtSolver.mjSOL_PGS}
-CONTACT_GEOMETRIES = ("auto", "ends", "capsules", "cylinders")
-SEGMENT_CONTACTS = ("auto", "scene", "off")
-# contype/conaffinity bits: terrain, terrain-only proxies, capsules (segment-segment, and terrain in
-# "capsules" mode). Two geoms collide if (contype1 & conaffinity2) or (contype2 & conaffinity1).
-_TERRAIN = (1, 0)
-_END_PROXY = (0, 1)
-_CAPSULE_SELF = (2, 2)
-_CAPSULE_ALL = (2, 3)
-PLANE_ASPECT = 100.0  # a box this much wider than thick is a plane (its top face) for contacts
-
-
-@dataclass(frozen=True)
-class MujocoSettings:
-    """MuJoCo's numerical and contact settings (engine_options of a TrialConfig with engine "mujoco").
-
-    solref_time_s, solref_damping_ratio: contact stiffness as a time constant and damping ratio
-    (0.005 s converges best on the Tetraspine; MuJoCo clamps it to >= 2 dt). solimp: MuJoCo's
-    impedance (d0, dwidth, width_cm, midpoint, power). contact_geometry: "auto" (rod-end spheres on
-    plane terrains, capsules otherwise), "ends", "capsules" or "cylinders" (Bullet's rod shape).
-    segment_contacts: "auto" (modelled only if a trial needs them: left out while a guard sees every gap
-    stay open, see worker.engines.contact_guard; the same bits as "scene"), "scene" (segments collide as
-    the scene's collision filter says) or "off" (segments touch only the terrain).
-    islands: MuJoCo's constraint island discovery (slower here: every segment is its own island).
-    noslip_iterations: MuJoCo's no-slip pass after the solve (0: off), which removes the slow sliding of
-    loaded contacts that soft friction allows.
-    """
-
-    integrator: str = "implicitfast"
-    cone: str = "pyramidal"
-    solver: str = "newton"
-    iterations: int = 100
-    ls_iterations: int = 50
-    tolerance: float = 1e-8
-    solref_time_s: float = 0.005
-    solref_damping_ratio: float = 1.0
-    solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
-    contact_geometry: str = "auto"
-    segment_contacts: str = "auto"
-    islands: bool = False
-    noslip_iterations: int = 0
-    margin_cm: float = 0.0
-    gravity_cm_s2: float = GRAVITY_CM_S2
-
-    def __post_init__(self) -> None:
-        for name, table in (("integrator", INTEGRATORS), ("cone", CONES), ("solver", SOLVERS)):
-            if getattr(self, name) not in table:
-                raise ConfigError(f"unknown mujoco {name}", received=getattr(self, name), expected=sorted(table))
-        if self.contact_geometry not in CONTACT_GEOMETRIES:
-            raise ConfigError("unknown mujoco contact_geometry", received=self.contact_geometry,
-                              expected=list(CONTACT_GEOMETRIES))
-        if self.segment_contacts not in SEGMENT_CONTACTS:
-            raise ConfigError("unknown mujoco segment_contacts", received=self.segment_contacts,
-                              expected=list(SEGMENT_CONTACTS))
-        if not isinstance(self.islands, bool):
-            raise ConfigError("islands is not a boolean", received=self.islands, expected="true or false")
-        for name, low in (("iterations", 1), ("ls_iterations", 1), ("noslip_iterations", 0)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= 10_000:
-                raise ConfigError(f"{name} out of range", received=v, expected=f"an integer in [{low}, 10000]")
-        check_range("tolerance", self.tolerance, 0.0, 1.0)
-        check_range("solref_time_s", self.solref_time_s, 0.0, 1.0, low_inclusive=False)
-        check_range("solref_damping_ratio", self.solref_damping_ratio, 0.0, 100.0, low_inclusive=False)
-        check_range("margin_cm", self.margin_cm, 0.0, 10.0)
-        check_range("gravity_cm_s2", self.gravity_cm_s2, 0.0, None)
-        try:
-            solimp = tuple(float(v) for v in self.solimp)
-        except (TypeError, ValueError) as exc:
-            raise ConfigError("solimp is not five numbers", received=self.solimp,
-                              expected="(d0, dwidth, width_cm, midpoint, power)") from exc
-        if len(solimp) != 5 or not (0 < solimp[0] < 1 and 0 < solimp[1] < 1 and solimp[2] > 0):
-            raise ConfigError("solimp out of range", received=self.solimp,
-                              expected="(d0, dwidth, width_cm, midpoint, power) with 0 < d0, dwidth < 1, width > 0")
-        object.__setattr__(self, "solimp", solimp)
-
-
-def _f(v: float) -> str:
-    return f"{float(v):.17g}"
-
-
-def _vec(v) -> str:
-    return " ".join(_f(x) for x in v)
-
-
-def _wxyz(q_xyzw) -> tuple[float, float, float, float]:
-    x, y, z, w = (float(v) for v in q_xyzw)
-    return (w, x, y, z)
-
-
-def _matrix(q_xyzw) -> np.ndarray:
-    x, y, z, w = q_xyzw
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
-# MuJoCo planes and heightfields face +z of their frame; this turns +z into world +y (local y -> world -z)
-_Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-_Z_UP_TO_Y_UP_WXYZ = (math.sqrt(0.5), -math.sqrt(0.5), 0.0, 0.0)
-
-
-def _quat_wxyz_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
-    q = np.zeros(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(r, dtype=np.float64).ravel())
-    return tuple(float(v) for v in q)
-
-
-def rod_ends(body: BodyModel) -> list[tuple[np.ndarray, float]]:
-    """Distinct rod end points of a segment in its frame (cm), each with the largest radius there."""
-    ends: dict[tuple[float, ...], tuple[np.ndarray, float]] = {}
-    for rod in body.rods:
-        axis = rod.rotation[:, 1] * (rod.length_cm / 2)
-        for p in (rod.centre_cm - axis, rod.centre_cm + axis):
-            key = tuple(np.round(p, 6))
-            if key not in ends or ends[key][1] < rod.radius_cm:
-                ends[key] = (p, rod.radius_cm)
-    return list(ends.values())
-
-
-def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: MujocoSettings,
-              start_offsets_cm: np.ndarray | None, start_rotation, excluded: list[tuple[int, int]]) -> str:
-    """The MJCF of the world; heightfield elevations are filled in after compiling."""
-    s = settings
-    frictions = {b.friction for b in bodies}
-    if len(frictions) > 1:
-        raise ConfigError("the mujoco backend needs one rod friction for the whole robot (MuJoCo cannot "
-                          "multiply per-pair coefficients)", received=sorted(frictions), expected="one value")
-    mu_rod = frictions.pop() if frictions else 1.0
-    geometry = s.contact_geometry
-    if geometry == "auto":
-        geometry = "capsules" if terrain.heightfield is not None or any(
-            not _is_plane(b) for b in terrain.boxes) else "ends"
-    solref = f'solref="{_f(s.solref_time_s)} {_f(s.solref_damping_ratio)}" solimp="{_vec(s.solimp)}"'
-    common = f'condim="3" {solref} margin="{_f(s.margin_cm)}"'
-    mu_terrain = terrain.friction * mu_rod
-    tgeom = f'friction="{_f(mu_terrain)} 0 0" priority="1" contype="{_TERRAIN[0]}" conaffinity="{_TERRAIN[1]}"'
-    world, assets = [], []
-    for i, box in enumerate(terrain.boxes):
-        rot = _matrix(box.quaternion)
-        if _is_plane(box):
-            top = np.asarray(box.centre_cm) + rot @ np.array([0.0, box.half_extents_cm[1], 0.0])
-            hx, _, hz = box.half_extents_cm
-            world.append(f'<geom name="terrain{i}" type="plane" pos="{_vec(top)}" '
-                         f'quat="{_vec(_quat_wxyz_from_matrix(rot @ _Z_UP_TO_Y_UP))}" size="{_f(hx)} {_f(hz)} 1" '
-                         f'{tgeom} {common}/>')
-        else:
-            world.append(f'<geom name="terrain{i}" type="box" pos="{_vec(box.centre_cm)}" '
-                         f'quat="{_vec(_wxyz(box.quaternion))}" size="{_vec(box.half_extents_cm)}" {tgeom} {common}/>')
-    if terrain.heightfield is not None:
-        hf = terrain.heightfield
-        rows, cols = hf.heights_cm.shape
-        lo, hi = float(hf.heights_cm.min()), float(hf.heights_cm.max())
-        rx, rz = (cols - 1) * hf.spacing_cm / 2, (rows - 1) * hf.spacing_cm / 2
-        assets.append(f'<hfield name="rough" nrow="{rows}" ncol="{cols}" '
-                      f'size="{_f(rx)} {_f(rz)} {_f(max(hi - lo, 1e-6))} 1"/>')
-        world.append(f'<geom name="heightfield" type="hfield" hfield="rough" pos="0 {_f(GROUND_TOP_CM + lo)} 0" '
-                     f'quat="{_vec(_Z_UP_TO_Y_UP_WXYZ)}" {tgeom} {common}/>')
-    rot = np.eye(3) if start_rotation is None else _matrix(start_rotation)
-    quat = "1 0 0 0" if start_rotation is None else _vec(_wxyz(start_rotation))
-    capsule_bits = _CAPSULE_SELF if geometry == "ends" else _CAPSULE_ALL
-    if s.segment_contacts != "scene":  # "auto": left out while the guard sees no segment come near
-        capsule_bits = (0, 0) if geometry == "ends" else _END_PROXY  # capsules touch the terrain only
-    rgeom = f'friction="{_f(mu_rod * mu_rod)} 0 0" {common}'
-    rod_type = "cylinder" if geometry == "cylinders" else "capsule"
-    for i, body in enumerate(bodies):
-        pos = (rot @ body.com_cm) + (0.0 if start_offsets_cm is None else start_offsets_cm[i])
-        parts = [f'<body name="s{i}" pos="{_vec(pos)}" quat="{quat}"><freejoint/>',
-                 f'<inertial pos="0 0 0" mass="{_f(body.mass_kg)}" diaginertia="{_vec(body.inertia_kg_cm2)}"/>']
-        for rod in body.rods:
-            half = rod.rotation[:, 1] * (rod.length_cm / 2)
-            parts.append(f'<geom type="{rod_type}" fromto="{_vec(rod.centre_cm - half)} {_vec(rod.centre_cm + half)}" '
-                         f'size="{_f(rod.radius_cm)}" contype="{capsule_bits[0]}" conaffinity="{capsule_bits[1]}" '
-                         f'{rgeom}/>')
-        if geometry == "ends":
-            for p, r in rod_ends(body):
-                parts.append(f'<geom type="sphere" pos="{_vec(p)}" size="{_f(r)}" contype="{_END_PROXY[0]}" '
-                             f'conaffinity="{_END_PROXY[1]}" {rgeom}/>')
-        parts.append("</body>")
-        world.append("".join(parts))
-    pairs = excluded if s.segment_contacts == "scene" else []
-    excludes = "".join(f'<exclude body1="s{a}" body2="s{b}"/>' for a, b in pairs)
-    integrator = {"euler": "Euler", "implicit": "implicit", "implicitfast": "implicitfast", "rk4": "RK4"}
-    solver = {"newton": "Newton", "cg": "CG", "pgs": "PGS"}
-    return (f'<mujoco model="spinefarm"><compiler angle="radian" inertiafromgeom="false"/>'
-            f'<option timestep="{_f(dt_s)}" gravity="0 {_f(-s.gravity_cm_s2)} 0" '
-            f'integrator="{integrator[s.integrator]}" cone="{s.cone}" solver="{solver[s.solver]}" '
-            f'iterations="{s.iterations}" ls_iterations="{s.ls_iterations}" tolerance="{_f(s.tolerance)}" '
-            f'noslip_iterations="{s.noslip_iterations}">'
-            # a NaN must reach the divergence guard, not silently reset the world to its start
-            f'<flag autoreset="disable" island="{"enable" if s.islands else "disable"}"/></option>'
-            f'<asset>{"".join(assets)}</asset><worldbody>{"".join(world)}</worldbody>'
-            f'<contact>{excludes}</contact></mujoco>')
-
-
-def _is_plane(box) -> bool:
-    hx, hy, hz = box.half_extents_cm
-    return min(hx, hz) >= PLANE_ASPECT * hy
-
-
-def _fill_heightfield(model: mujoco.MjModel, terrain: Terrain) -> None:
-    if terrain.heightfield is None:
-        return
-    h = terrain.heightfield.heights_cm
-    span = max(float(h.max() - h.min()), 1e-6)
-    # mjModel rows run along local +y = world -z, our rows along world +z
-    model.hfield_data[:] = (np.flipud(h) - h.min()).ravel() / span
+__all__ = ["MujocoPhysics", "MujocoSettings", "mj_step_cfunc"]
 
 
 def _libmujoco() -> ctypes.CDLL:
@@ -277,7 +46,10 @@ def mj_step_cfunc():
 
 
 class MujocoPhysics(BasePhysics):
-    """A MuJoCo model and data holding the segments and the terrain."""
+    """One MuJoCo model holding the segments and the terrain, and B data (worlds) stepped one after another.
+
+    The model is built with world 0's start offsets; every other world is placed by reset's arithmetic, the
+    same bits as a model built with its own offsets."""
 
     name = "mujoco"
     settings_type = MujocoSettings
@@ -285,87 +57,140 @@ class MujocoPhysics(BasePhysics):
     def __init__(self, bodies: list[BodyModel], ground: GroundSpec | Terrain, dt_s: float = 1e-3,
                  settings: MujocoSettings | None = None, start_offsets_cm: np.ndarray | None = None,
                  start_rotation: tuple[float, float, float, float] | None = None,
-                 collision_pairs_off: list[tuple[int, int]] | None = None) -> None:
+                 collision_pairs_off: list[tuple[int, int]] | None = None, n_worlds: int | None = None) -> None:
         self.settings = settings or MujocoSettings()
+        offsets = world_offsets(start_offsets_cm, n_worlds, len(bodies))
         terrain = ground.to_terrain() if isinstance(ground, GroundSpec) else ground
         off = collision_pairs_off if collision_pairs_off is not None else pairs_off(terrain, len(bodies))
-        self.xml = model_xml(bodies, terrain, dt_s, self.settings, start_offsets_cm, start_rotation, off)
+        self.xml = model_xml(bodies, terrain, dt_s, self.settings, offsets[0], start_rotation, off)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
-        _fill_heightfield(self.model, terrain)
-        self.data = mujoco.MjData(self.model)
-        self.dt_s = dt_s
-        self.n_bodies = len(bodies)
-        rot = np.eye(3) if start_rotation is None else _matrix(start_rotation)
+        fill_heightfield(self.model, terrain)
+        self.dt_s, self.n_bodies, self.n_worlds = dt_s, len(bodies), len(offsets)
+        rot = np.eye(3) if start_rotation is None else quaternion_matrix(start_rotation)
         self.base_pos = np.array([rot @ b.com_cm for b in bodies])  # start COMs before offsets
         self.guard = None
         if self.settings.segment_contacts == "auto":
             from spinefarm.worker.engines.contact_guard import SegmentContactGuard  # compiled: numba only when used
 
             self.guard = SegmentContactGuard(bodies, off)
+        self.data = [mujoco.MjData(self.model) for _ in offsets]
         self._bind()
+        for b in range(1, self.n_worlds):
+            self._place(b, offsets[b])
+        self._start_trial()
 
     def _bind(self) -> None:
         nb = self.n_bodies
-        self.qpos = self.data.qpos.reshape(nb, 7)  # views: x y z, qw qx qy qz per body
-        self.qvel = self.data.qvel.reshape(nb, 6)
-        self.xfrc = self.data.xfrc_applied[1:]  # (nb, 6) force, torque; body 0 is the world
-        self._poses = np.zeros((nb, 7))
-        self._step = mujoco.mj_step
-        self._order = np.array([0, 1, 2, 4, 5, 6, 3])
+        self.qpos = [d.qpos.reshape(nb, 7) for d in self.data]  # views: x y z, qw qx qy qz per body
+        self.qvel = [d.qvel.reshape(nb, 6) for d in self.data]
+        self.xfrc = [d.xfrc_applied[1:] for d in self.data]  # (nb, 6) force, torque; body 0 is the world
+        self._poses = np.zeros((self.n_worlds, nb, 7))
+        self._order = POSE_COLUMNS
+
+    def _start_trial(self) -> None:
+        self.retries = {}
+        self._steps = [0] * self.n_worlds  # since the start, for the contact guard
+        self._safe_until = [0] * self.n_worlds
+
+    def _place(self, b: int, offsets: np.ndarray | None) -> None:
+        mujoco.mj_resetData(self.model, self.data[b])
+        # the same arithmetic as the model's build, so a reset world and a fresh one hold the same bits
+        self.qpos[b][:, :3] = self.base_pos + (0.0 if offsets is None else offsets)
 
     def reset(self, start_offsets_cm: np.ndarray | None = None) -> None:
-        """Back to the build pose (optionally shifted per body by start_offsets_cm (nb, 3)) at rest:
-        the same state as a freshly built world, without recompiling the model."""
-        mujoco.mj_resetData(self.model, self.data)
-        # the same arithmetic as the model's build, so a reset world and a fresh one hold the same bits
-        self.qpos[:, :3] = self.base_pos + (0.0 if start_offsets_cm is None else start_offsets_cm)
+        """Every world back to the build pose (optionally shifted per world and body by start_offsets_cm
+        (B, nb, 3), or (nb, 3) for one world) at rest: the state of freshly built worlds, without recompiling."""
+        for b, offsets in enumerate(world_offsets(start_offsets_cm, self.n_worlds, self.n_bodies)):
+            self._place(b, offsets)
+        self._start_trial()
 
     def read_poses(self) -> np.ndarray:
-        """(n_bodies, 7): COM position (cm) and quaternion (x, y, z, w) of each segment."""
-        np.take(self.qpos, self._order, axis=1, out=self._poses)
+        """(B, n_bodies, 7): COM position (cm) and quaternion (x, y, z, w) of each segment."""
+        for b, qpos in enumerate(self.qpos):
+            np.take(qpos, self._order, axis=1, out=self._poses[b])
         return self._poses
 
-    def apply_wrenches(self, force: np.ndarray, torque: np.ndarray) -> None:
-        self.xfrc[:, :3] = force
-        self.xfrc[:, 3:] = torque
+    def apply_wrenches(self, force: np.ndarray, torque: np.ndarray, active: np.ndarray | None = None) -> None:
+        for b, xfrc in enumerate(self.xfrc):
+            if active is None or active[b]:
+                xfrc[:, :3] = force[b]
+                xfrc[:, 3:] = torque[b]
 
-    def step(self) -> None:
-        self._step(self.model, self.data)
+    def step(self, active: np.ndarray | None = None) -> None:
+        for b, data in enumerate(self.data):
+            if active is None or active[b]:
+                mujoco.mj_step(self.model, data)
 
-    def velocities(self) -> np.ndarray:
-        """(n_bodies, 6): linear (cm/s) and angular (rad/s) velocity in the world frame; for checks."""
-        out = np.zeros((self.n_bodies, 6))
-        for b in range(self.n_bodies):
-            out[b, :3] = self.qvel[b, :3]
-            rot = _matrix(self.read_poses()[b, 3:])
-            out[b, 3:] = rot @ self.qvel[b, 3:]  # a free joint's angular velocity is in the body frame
-        return out
+    def compiled_worlds(self) -> list[tuple]:
+        """Per world (address of mj_step, model address, data address, qpos (nb, 7), POSE_COLUMNS, xfrc (nb, 6));
+        see worker.loop."""
+        step = ctypes.cast(mj_step_cfunc(), ctypes.c_void_p).value
+        return [(step, self.model._address, d._address, q, self._order, x) for d, q, x in
+                zip(self.data, self.qpos, self.xfrc, strict=True)]
 
-    def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0)) -> None:
-        """Set one body's world-frame velocity; for checks and tests."""
-        rot = _matrix(self.read_poses()[index, 3:])
-        self.qvel[index, :3] = linear_cm_s
-        self.qvel[index, 3:] = rot.T @ np.asarray(angular_rad_s, dtype=float)
+    def advance(self, run, n_steps: int, active: np.ndarray, horizon_steps: int) -> None:
+        """With segment_contacts "auto", the steps are run in pieces no longer than the contact guard finds
+        safe (it looks again when a world reaches the end of its safe steps, at most horizon_steps ahead); a
+        world for which not even one step is safe leaves `active` for `retries`: run it again from its start
+        with segment_contacts "scene"."""
+        if self.guard is None:
+            run(n_steps, active)
+            return
+        steps, safe = self._steps, self._safe_until
+        done = 0
+        self._look(active, horizon_steps)
+        while done < n_steps:
+            live = [b for b in range(self.n_worlds) if active[b]]
+            if not live:
+                return
+            k = min(n_steps - done, min(safe[b] - steps[b] for b in live))
+            run(k, active)
+            for b in live:
+                steps[b] += k
+            done += k
+            self._look(active, horizon_steps)
 
-    def contact_free_steps(self, max_steps: int) -> tuple[int, str]:
+    def _look(self, active: np.ndarray, horizon_steps: int) -> None:
+        for b in range(self.n_worlds):
+            if not active[b] or self._steps[b] != self._safe_until[b]:
+                continue
+            steps, why = self.contact_free_steps(horizon_steps, b)
+            if steps == 0:
+                why = f"{why} at t={self._steps[b] * self.dt_s:.3f} s"
+                self.retries[b] = ({"segment_contacts": "scene"}, {"segment_contacts": f"modelled: {why}"})
+                active[b] = False
+            self._safe_until[b] = self._steps[b] + steps
+
+    def contact_free_steps(self, max_steps: int, world: int = 0) -> tuple[int, str]:
         """(steps, at most max_steps, before which none of the segment-segment contacts this model leaves
-        out ("auto") can form; why not even one step is safe, or ""). Always max_steps when they are
-        modelled or switched off."""
+        out ("auto") can form in `world`; why not even one step is safe, or ""). Always max_steps when they
+        are modelled or switched off."""
         if self.guard is None:
             return max_steps, ""
-        t_free, gap = self.guard.free_time_s(self.qpos, self.qvel, max_steps * self.dt_s)
+        t_free, gap = self.guard.free_time_s(self.qpos[world], self.qvel[world], max_steps * self.dt_s)
         steps = min(max_steps, int(t_free / self.dt_s * (1.0 + 1e-12)))
         return steps, "" if steps else f"gap {gap:.3g} cm could close within one {self.dt_s * 1e3:g} ms step"
 
-    def contact_count(self) -> int:
-        return int(self.data.ncon)
+    def velocities(self) -> np.ndarray:
+        """(B, n_bodies, 6): linear (cm/s) and angular (rad/s) velocity in the world frame; for checks."""
+        out = np.zeros((self.n_worlds, self.n_bodies, 6))
+        poses = self.read_poses()
+        for w in range(self.n_worlds):
+            for b in range(self.n_bodies):
+                out[w, b, :3] = self.qvel[w][b, :3]
+                # a free joint's angular velocity is in the body frame
+                out[w, b, 3:] = quaternion_matrix(poses[w, b, 3:]) @ self.qvel[w][b, 3:]
+        return out
 
-    def fused_stepper(self, bank, cpg, cpg_every: int, motor_mode: int):
-        """Compiled loop: see worker.engines.mujoco_loop.FusedStepper."""
-        from spinefarm.worker.engines.mujoco_loop import FusedStepper
+    def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0), world: int = 0) -> None:
+        """Set one body's world-frame velocity; for checks and tests."""
+        rot = quaternion_matrix(self.read_poses()[world, index, 3:])
+        self.qvel[world][index, :3] = linear_cm_s
+        self.qvel[world][index, 3:] = rot.T @ np.asarray(angular_rad_s, dtype=float)
 
-        return FusedStepper(self, bank, cpg, cpg_every, motor_mode)
+    def contact_count(self, world: int = 0) -> int:
+        return int(self.data[world].ncon)
 
     def close(self) -> None:
-        self.data = None
+        self.data = []
         self.model = None

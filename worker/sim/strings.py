@@ -114,18 +114,20 @@ def world_anchors(poses, body, anchors, out):
 
 
 @njit(cache=True)
-def string_step(poses, body_a, body_b, anc_a, anc_b, params, state, cpg_out, dt, motor_mode,
-                out_force, out_torque, out_tension, work, wa, wb, string_force):
+def string_step(poses, geometry, params, state, cpg_out, dt, motor_mode, outputs):
     """One control + force step for every string.
 
-    poses (nb, 7) COM position (cm) and quaternion (x, y, z, w); cpg_out (n_nodes,) cm/s.
-    Writes out_force/out_torque (nb, 3): each body's net string force at its COM and torque about
-    it (world frame), for the engine's one wrench write per body; out_tension (n,) spring tension
-    max(0, k (L - rest)); adds reel-in work to work[0];
-    wa, wb (n, 3) world anchors (cm) and string_force (n, 3) the force on end a (end b gets its
-    negative), kept for checks and recording.
+    poses (nb, 7) COM position (cm) and quaternion (x, y, z, w); geometry = (body_a (n,), body_b (n,),
+    anchor_a (n, 3), anchor_b (n, 3) cm body frame); params (n, N_PARAM), state (n, N_STATE); cpg_out
+    (n_nodes,) cm/s. outputs = (out_force, out_torque, out_tension, work, wa, wb, string_force): writes
+    out_force/out_torque (nb, 3), each body's net string force at its COM and torque about it (world
+    frame), for the engine's one wrench write per body; out_tension (n,) spring tension
+    max(0, k (L - rest)); adds reel-in work to work[0]; wa, wb (n, 3) world anchors (cm) and
+    string_force (n, 3) the force on end a (end b gets its negative), kept for checks and recording.
     Returns STATUS_NONFINITE if any length or force is not finite.
     """
+    body_a, body_b, anc_a, anc_b = geometry
+    out_force, out_torque, out_tension, work, wa, wb, string_force = outputs
     nb = poses.shape[0]
     n = params.shape[0]
     world_anchors(poses, body_a, anc_a, wa)
@@ -238,6 +240,6 @@ class StringBank:
         self.string_force = np.zeros((n, 3))
 
     def step(self, poses: np.ndarray, cpg_out: np.ndarray, dt: float, motor_mode: int) -> int:
-        return string_step(poses, self.body_a, self.body_b, self.anchor_a, self.anchor_b, self.params,
-                           self.state, cpg_out, dt, motor_mode, self.force, self.torque, self.tension,
-                           self.work, self.wa, self.wb, self.string_force)
+        return string_step(poses, (self.body_a, self.body_b, self.anchor_a, self.anchor_b), self.params,
+                           self.state, cpg_out, dt, motor_mode, (self.force, self.torque, self.tension,
+                                                                 self.work, self.wa, self.wb, self.string_force))

@@ -1,0 +1,254 @@
+"""The MuJoCo backend's model: its settings and the MJCF of a world (worker.engines.mujoco steps it).
+
+Same world as the Bullet backend: cm, kg, s, Y up, gravity -981 cm/s^2 (MuJoCo is unit-free; its
+only length tolerance that matters here, solimp's width, is given in cm). Each segment is one free
+body whose frame is its COM with world-aligned axes at build time, with explicit mass and diagonal
+inertia. String wrenches go straight into `xfrc_applied` (force at the COM and torque about it, world
+frame: no force couple needed); poses are read from `qpos` after mj_step (xpos/xquat are those of the
+step's start).
+
+Contacts: rods are capsules. On plane terrains (flat ground, slope) a plane touches a capsule only at
+an end cap, so `contact_geometry="ends"` (the default there) replaces each segment's rods by one
+sphere per distinct rod end for terrain contact (a Tetraspine segment: 4 spheres instead of 6 rods
+giving 6 nearly redundant contacts); segment-segment contacts stay capsule-capsule. Rough ground and
+obstacles touch rods anywhere: capsules. "cylinders" gives every rod Bullet's shape instead (for
+comparisons: on flat ground it stands where Bullet's spine stands).
+
+Friction: MuJoCo takes the larger of two geoms' coefficients (or the one of higher priority); Bullet
+multiplies them. Terrain geoms get priority and the coefficient mu_terrain * mu_rod, rod geoms mu_rod^2,
+so terrain and segment-segment contacts see the same products as in Bullet (exact while every segment
+has the same rod friction, as every built-in does). Sliding friction only (condim 3): Bullet's rolling
+friction is the product with the ground's 0, its spinning friction 0.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.robot.bodies import BodyModel, quaternion_matrix
+from spinefarm.robot.scene import GROUND_TOP_CM, Terrain
+from spinefarm.worker.engines.base import GRAVITY_CM_S2
+
+log = logging.getLogger("spinefarm.mujoco")
+# MuJoCo's own warnings (e.g. "Nan, Inf or huge value in QACC" of a diverging trial) would go to stdout and
+# a MUJOCO_LOG.TXT in the user's working directory; the divergence guard reports the trial, so they are
+# debug detail here
+mujoco.set_mju_user_warning(lambda message: log.debug("mujoco: %s", message))
+
+INTEGRATORS = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
+               "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST, "rk4": mujoco.mjtIntegrator.mjINT_RK4}
+CONES = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL, "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}
+SOLVERS = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG,
+           "pgs": mujoco.mjtSolver.mjSOL_PGS}
+CONTACT_GEOMETRIES = ("auto", "ends", "capsules", "cylinders")
+SEGMENT_CONTACTS = ("auto", "scene", "off")
+# contype/conaffinity bits: terrain, terrain-only proxies, capsules (segment-segment, and terrain in
+# "capsules" mode). Two geoms collide if (contype1 & conaffinity2) or (contype2 & conaffinity1).
+_TERRAIN = (1, 0)
+_END_PROXY = (0, 1)
+_CAPSULE_SELF = (2, 2)
+_CAPSULE_ALL = (2, 3)
+PLANE_ASPECT = 100.0  # a box this much wider than thick is a plane (its top face) for contacts
+POSE_COLUMNS = np.array([0, 1, 2, 4, 5, 6, 3], dtype=np.int64)  # qpos (x y z qw qx qy qz) -> (x y z qx qy qz qw)
+
+
+@dataclass(frozen=True)
+class MujocoSettings:
+    """MuJoCo's numerical and contact settings (engine_options of a TrialConfig with engine "mujoco").
+
+    solref_time_s, solref_damping_ratio: contact stiffness as a time constant and damping ratio
+    (0.005 s converges best on the Tetraspine; MuJoCo clamps it to >= 2 dt). solimp: MuJoCo's
+    impedance (d0, dwidth, width_cm, midpoint, power). contact_geometry: "auto" (rod-end spheres on
+    plane terrains, capsules otherwise), "ends", "capsules" or "cylinders" (Bullet's rod shape).
+    segment_contacts: "auto" (modelled only if a trial needs them: left out while a guard sees every gap
+    stay open, see worker.engines.contact_guard; the same bits as "scene"), "scene" (segments collide as
+    the scene's collision filter says) or "off" (segments touch only the terrain).
+    islands: MuJoCo's constraint island discovery (slower here: every segment is its own island).
+    noslip_iterations: MuJoCo's no-slip pass after the solve (0: off), which removes the slow sliding of
+    loaded contacts that soft friction allows.
+    """
+
+    integrator: str = "implicitfast"
+    cone: str = "pyramidal"
+    solver: str = "newton"
+    iterations: int = 100
+    ls_iterations: int = 50
+    tolerance: float = 1e-8
+    solref_time_s: float = 0.005
+    solref_damping_ratio: float = 1.0
+    solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
+    contact_geometry: str = "auto"
+    segment_contacts: str = "auto"
+    islands: bool = False
+    noslip_iterations: int = 0
+    margin_cm: float = 0.0
+    gravity_cm_s2: float = GRAVITY_CM_S2
+
+    def __post_init__(self) -> None:
+        for name, table in (("integrator", INTEGRATORS), ("cone", CONES), ("solver", SOLVERS)):
+            if getattr(self, name) not in table:
+                raise ConfigError(f"unknown mujoco {name}", received=getattr(self, name), expected=sorted(table))
+        if self.contact_geometry not in CONTACT_GEOMETRIES:
+            raise ConfigError("unknown mujoco contact_geometry", received=self.contact_geometry,
+                              expected=list(CONTACT_GEOMETRIES))
+        if self.segment_contacts not in SEGMENT_CONTACTS:
+            raise ConfigError("unknown mujoco segment_contacts", received=self.segment_contacts,
+                              expected=list(SEGMENT_CONTACTS))
+        if not isinstance(self.islands, bool):
+            raise ConfigError("islands is not a boolean", received=self.islands, expected="true or false")
+        for name, low in (("iterations", 1), ("ls_iterations", 1), ("noslip_iterations", 0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= 10_000:
+                raise ConfigError(f"{name} out of range", received=v, expected=f"an integer in [{low}, 10000]")
+        check_range("tolerance", self.tolerance, 0.0, 1.0)
+        check_range("solref_time_s", self.solref_time_s, 0.0, 1.0, low_inclusive=False)
+        check_range("solref_damping_ratio", self.solref_damping_ratio, 0.0, 100.0, low_inclusive=False)
+        check_range("margin_cm", self.margin_cm, 0.0, 10.0)
+        check_range("gravity_cm_s2", self.gravity_cm_s2, 0.0, None)
+        try:
+            solimp = tuple(float(v) for v in self.solimp)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError("solimp is not five numbers", received=self.solimp,
+                              expected="(d0, dwidth, width_cm, midpoint, power)") from exc
+        if len(solimp) != 5 or not (0 < solimp[0] < 1 and 0 < solimp[1] < 1 and solimp[2] > 0):
+            raise ConfigError("solimp out of range", received=self.solimp,
+                              expected="(d0, dwidth, width_cm, midpoint, power) with 0 < d0, dwidth < 1, width > 0")
+        object.__setattr__(self, "solimp", solimp)
+
+
+def _f(v: float) -> str:
+    return f"{float(v):.17g}"
+
+
+def _vec(v) -> str:
+    return " ".join(_f(x) for x in v)
+
+
+def _wxyz(q_xyzw) -> tuple[float, float, float, float]:
+    x, y, z, w = (float(v) for v in q_xyzw)
+    return (w, x, y, z)
+
+
+# MuJoCo planes and heightfields face +z of their frame; this turns +z into world +y (local y -> world -z)
+_Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+_Z_UP_TO_Y_UP_WXYZ = (math.sqrt(0.5), -math.sqrt(0.5), 0.0, 0.0)
+
+
+def _quat_wxyz_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(r, dtype=np.float64).ravel())
+    return tuple(float(v) for v in q)
+
+
+def rod_ends(body: BodyModel) -> list[tuple[np.ndarray, float]]:
+    """Distinct rod end points of a segment in its frame (cm), each with the largest radius there."""
+    ends: dict[tuple[float, ...], tuple[np.ndarray, float]] = {}
+    for rod in body.rods:
+        axis = rod.rotation[:, 1] * (rod.length_cm / 2)
+        for p in (rod.centre_cm - axis, rod.centre_cm + axis):
+            key = tuple(np.round(p, 6))
+            if key not in ends or ends[key][1] < rod.radius_cm:
+                ends[key] = (p, rod.radius_cm)
+    return list(ends.values())
+
+
+def _terrain_xml(terrain: Terrain, attributes: str) -> tuple[list[str], list[str]]:
+    """(worldbody geoms, assets) of the terrain; `attributes`: friction, contact bits and solver settings."""
+    world, assets = [], []
+    for i, box in enumerate(terrain.boxes):
+        rot = quaternion_matrix(box.quaternion)
+        if _is_plane(box):
+            top = np.asarray(box.centre_cm) + rot @ np.array([0.0, box.half_extents_cm[1], 0.0])
+            hx, _, hz = box.half_extents_cm
+            world.append(f'<geom name="terrain{i}" type="plane" pos="{_vec(top)}" '
+                         f'quat="{_vec(_quat_wxyz_from_matrix(rot @ _Z_UP_TO_Y_UP))}" size="{_f(hx)} {_f(hz)} 1" '
+                         f'{attributes}/>')
+        else:
+            world.append(f'<geom name="terrain{i}" type="box" pos="{_vec(box.centre_cm)}" '
+                         f'quat="{_vec(_wxyz(box.quaternion))}" size="{_vec(box.half_extents_cm)}" {attributes}/>')
+    if terrain.heightfield is not None:
+        hf = terrain.heightfield
+        rows, cols = hf.heights_cm.shape
+        lo, hi = float(hf.heights_cm.min()), float(hf.heights_cm.max())
+        rx, rz = (cols - 1) * hf.spacing_cm / 2, (rows - 1) * hf.spacing_cm / 2
+        assets.append(f'<hfield name="rough" nrow="{rows}" ncol="{cols}" '
+                      f'size="{_f(rx)} {_f(rz)} {_f(max(hi - lo, 1e-6))} 1"/>')
+        world.append(f'<geom name="heightfield" type="hfield" hfield="rough" pos="0 {_f(GROUND_TOP_CM + lo)} 0" '
+                     f'quat="{_vec(_Z_UP_TO_Y_UP_WXYZ)}" {attributes}/>')
+    return world, assets
+
+
+def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: MujocoSettings,
+              start_offsets_cm: np.ndarray | None, start_rotation, excluded: list[tuple[int, int]]) -> str:
+    """The MJCF of the world; heightfield elevations are filled in after compiling."""
+    s = settings
+    frictions = {b.friction for b in bodies}
+    if len(frictions) > 1:
+        raise ConfigError("the mujoco backend needs one rod friction for the whole robot (MuJoCo cannot "
+                          "multiply per-pair coefficients)", received=sorted(frictions), expected="one value")
+    mu_rod = frictions.pop() if frictions else 1.0
+    geometry = s.contact_geometry
+    if geometry == "auto":
+        geometry = "capsules" if terrain.heightfield is not None or any(
+            not _is_plane(b) for b in terrain.boxes) else "ends"
+    solref = f'solref="{_f(s.solref_time_s)} {_f(s.solref_damping_ratio)}" solimp="{_vec(s.solimp)}"'
+    common = f'condim="3" {solref} margin="{_f(s.margin_cm)}"'
+    mu_terrain = terrain.friction * mu_rod
+    tgeom = f'friction="{_f(mu_terrain)} 0 0" priority="1" contype="{_TERRAIN[0]}" conaffinity="{_TERRAIN[1]}"'
+    world, assets = _terrain_xml(terrain, f"{tgeom} {common}")
+    rot = np.eye(3) if start_rotation is None else quaternion_matrix(start_rotation)
+    quat = "1 0 0 0" if start_rotation is None else _vec(_wxyz(start_rotation))
+    capsule_bits = _CAPSULE_SELF if geometry == "ends" else _CAPSULE_ALL
+    if s.segment_contacts != "scene":  # "auto": left out while the guard sees no segment come near
+        capsule_bits = (0, 0) if geometry == "ends" else _END_PROXY  # capsules touch the terrain only
+    rgeom = f'friction="{_f(mu_rod * mu_rod)} 0 0" {common}'
+    rod_type = "cylinder" if geometry == "cylinders" else "capsule"
+    for i, body in enumerate(bodies):
+        pos = (rot @ body.com_cm) + (0.0 if start_offsets_cm is None else start_offsets_cm[i])
+        parts = [f'<body name="s{i}" pos="{_vec(pos)}" quat="{quat}"><freejoint/>',
+                 f'<inertial pos="0 0 0" mass="{_f(body.mass_kg)}" diaginertia="{_vec(body.inertia_kg_cm2)}"/>']
+        for rod in body.rods:
+            half = rod.rotation[:, 1] * (rod.length_cm / 2)
+            parts.append(f'<geom type="{rod_type}" fromto="{_vec(rod.centre_cm - half)} {_vec(rod.centre_cm + half)}" '
+                         f'size="{_f(rod.radius_cm)}" contype="{capsule_bits[0]}" conaffinity="{capsule_bits[1]}" '
+                         f'{rgeom}/>')
+        if geometry == "ends":
+            for p, r in rod_ends(body):
+                parts.append(f'<geom type="sphere" pos="{_vec(p)}" size="{_f(r)}" contype="{_END_PROXY[0]}" '
+                             f'conaffinity="{_END_PROXY[1]}" {rgeom}/>')
+        parts.append("</body>")
+        world.append("".join(parts))
+    pairs = excluded if s.segment_contacts == "scene" else []
+    excludes = "".join(f'<exclude body1="s{a}" body2="s{b}"/>' for a, b in pairs)
+    integrator = {"euler": "Euler", "implicit": "implicit", "implicitfast": "implicitfast", "rk4": "RK4"}
+    solver = {"newton": "Newton", "cg": "CG", "pgs": "PGS"}
+    return (f'<mujoco model="spinefarm"><compiler angle="radian" inertiafromgeom="false"/>'
+            f'<option timestep="{_f(dt_s)}" gravity="0 {_f(-s.gravity_cm_s2)} 0" '
+            f'integrator="{integrator[s.integrator]}" cone="{s.cone}" solver="{solver[s.solver]}" '
+            f'iterations="{s.iterations}" ls_iterations="{s.ls_iterations}" tolerance="{_f(s.tolerance)}" '
+            f'noslip_iterations="{s.noslip_iterations}">'
+            # a NaN must reach the divergence guard, not silently reset the world to its start
+            f'<flag autoreset="disable" island="{"enable" if s.islands else "disable"}"/></option>'
+            f'<asset>{"".join(assets)}</asset><worldbody>{"".join(world)}</worldbody>'
+            f'<contact>{excludes}</contact></mujoco>')
+
+
+def _is_plane(box) -> bool:
+    hx, hy, hz = box.half_extents_cm
+    return min(hx, hz) >= PLANE_ASPECT * hy
+
+
+def fill_heightfield(model: mujoco.MjModel, terrain: Terrain) -> None:
+    if terrain.heightfield is None:
+        return
+    h = terrain.heightfield.heights_cm
+    span = max(float(h.max() - h.min()), 1e-6)
+    # mjModel rows run along local +y = world -z, our rows along world +z
+    model.hfield_data[:] = (np.flipud(h) - h.min()).ravel() / span
+
+
