@@ -61,6 +61,8 @@ class Slurm:
 
     def __init__(self, stack: ExitStack) -> None:
         self.dir = RUN_DIR / "slurm"
+        for daemon in ("slurmctld", "slurmd"):  # left by an earlier run that was killed
+            _stop_stale(self.dir / f"{daemon}.pid", daemon)
         shutil.rmtree(self.dir, ignore_errors=True)
         for sub in ("state", "spool"):
             (self.dir / sub).mkdir(parents=True)
@@ -124,6 +126,15 @@ def _stop(proc: subprocess.Popen[bytes]) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(10)
+
+
+def _stop_stale(pidfile: Path, name: str) -> None:
+    with suppress(OSError, ValueError):
+        pid = int(pidfile.read_text().strip())
+        if Path(f"/proc/{pid}/comm").read_text().strip() == name:
+            log(f"stopping the {name} a killed earlier run left (pid {pid})")
+            os.kill(pid, 15)
+            wait_until(lambda: not Path(f"/proc/{pid}").exists(), 30, f"the stale {name} to stop")
 
 
 def _stop_munged() -> None:
