@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from pydantic import BaseModel, Field
 
 
@@ -10,9 +12,21 @@ class Verification(BaseModel):
     not_reproduced); a not-reproduced trial never counts as best."""
 
     verdict: str
+    label: str | None = None  # "holds" (same engine, within tolerance) or "judged in bullet" (another engine)
     fine_step_distance_m: float | None
+    screen_distance_m: float | None = None
+    judge_distance_m: float | None = None
+    screen_to_judge_ratio: float | None = None
     reason: str | None
     judge: str | None = None  # how it was re-simulated: "bullet at 0.25 ms", or a finer step of the same engine
+
+
+class Audit(BaseModel):
+    """Re-simulation by another worker at the same fidelity (not_audited, pending, agrees, disagrees)."""
+
+    state: str
+    distance_m: float | None = None
+    worker_id: str | None = None
 
 
 class Trial(BaseModel):
@@ -29,6 +43,7 @@ class Trial(BaseModel):
     worker_id: str | None
     finished_at_unix_s: float | None
     verification: Verification
+    audit: Audit | None = None
     pareto_front: bool
     engine: str | None = None        # the engine and step this trial actually ran with
     dt_s: float | None = None
@@ -42,6 +57,11 @@ class Worker(BaseModel):
     alive: bool
     leases: int
     last_contact_unix_s: float
+    engines: list[str] | None = None
+    environment: dict[str, str] = Field(default_factory=dict, description="python, packages, CPU it reported")
+    audits_agree: int = 0
+    audits_disagree: int = 0
+    quarantined: bool = False
 
 
 class RunStatus(BaseModel):
@@ -64,6 +84,9 @@ class RunStatus(BaseModel):
     best: Trial | None
     workers: list[Worker]
     status_age_s: float | None
+    audit: dict[str, Any] | None = Field(None, description="audits_pending/agrees/disagrees, fraction, tolerance, "
+                                         "and the figures per worker environment")
+    fidelity_raised: str | None = Field(None, description="why the judge raised the screen's fidelity")
 
 
 class ErrorDetail(BaseModel):

@@ -21,10 +21,17 @@ def _num(x: float) -> float | None:
 
 def judge_of(meta: Any) -> str:
     """How the run re-simulates its bests: in another engine at its step, or at a finer step."""
-    policy = (meta.extra or {}).get("verify") or {}
-    if policy.get("engine"):
-        return f"{policy['engine']} at {1e3 * float(policy.get('dt_s', 2.5e-4)):g} ms"
-    return f"the search's engine at a {int(policy.get('refine', 4))}x finer step"
+    rung = meta.settings.judge.rung
+    if rung.engine:
+        return f"{rung.engine} at {1e3 * (rung.dt_s or 2.5e-4):g} ms"
+    return "the search's engine at a finer step" + (f" ({1e3 * rung.dt_s:g} ms)" if rung.dt_s else "")
+
+
+def verdict_label(rec: TrialRecord, meta: Any) -> str:
+    """"holds" only within tolerance at the same engine; a cross-engine judgement: "judged in ENGINE"."""
+    if rec.verification == "judged":
+        return f"judged in {meta.settings.judge.rung.engine or 'the judge engine'}"
+    return rec.verification or "not_checked"
 
 
 def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
@@ -39,9 +46,13 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
         "params_unit": dict(zip(names, rec.params_unit, strict=True)),
         "worker_id": rec.worker_id or None,
         "finished_at_unix_s": _num(rec.finished_at_unix_s),
-        "verification": {"verdict": rec.verification or "not_checked",
+        "verification": {"verdict": rec.verification or "not_checked", "label": verdict_label(rec, meta),
                          "fine_step_distance_m": _num(rec.verify_distance_m),
+                         "screen_distance_m": _num(rec.distance_m), "judge_distance_m": _num(rec.verify_distance_m),
+                         "screen_to_judge_ratio": _num(rec.judge_ratio),
                          "reason": rec.verify_reason or None, "judge": judge_of(meta)},
+        "audit": {"state": rec.audit or "not_audited", "distance_m": _num(rec.audit_distance_m),
+                  "worker_id": rec.audit_worker_id or None},
         "pareto_front": bool(rec.pareto_front),
         "engine": rec.engine or None, "dt_s": _num(rec.dt_s), "settle_s": _num(rec.settle_s),
         "rung": rec.rung, "duration_s": _num(rec.duration_s),
@@ -61,12 +72,16 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     return {
         "run_id": meta.run_id, "file": path.name, "morphology": meta.morphology,
         "objective": meta.objective, "state": state, "trials_budget": meta.trials_budget,
-        "trials_planned": planned_evaluations(meta.trials_budget, (meta.extra or {}).get("fidelity")),
+        "trials_planned": planned_evaluations(meta.trials_budget, meta.settings),
         "parameter_sets_sampled": storage.count_rung(0),
         "trials_done": finished, "trials_complete": counts["complete"], "trials_failed": counts["failed"],
         "trials_leased": live.get("trials_leased"), "trials_queued": live.get("trials_queued"),
         "rate_trials_s": live.get("rate_trials_s"), "eta_s": live.get("eta_s"),
         "best": trial_view(storage, best[0]) if best else None,
         "workers": live.get("workers", []),
+        "audit": {**storage.audit_counts(), "fraction": meta.settings.audit.fraction,
+                  "tolerance": meta.settings.audit.tolerance,
+                  "environments": (live.get("audit") or {}).get("environments", [])},
+        "fidelity_raised": live.get("fidelity_raised"),
         "status_age_s": age if live else None,
     }

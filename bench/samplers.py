@@ -76,15 +76,15 @@ def search(pool: ProcessPoolExecutor, morphology: str, controller: str | None, s
            overrides: dict | None = None, judge_dt_s: float = 0.00025) -> dict:
     from spinefarm.coordinator.problem import build_run_config
     from spinefarm.coordinator.setup import SearchSettings, new_run
-    from spinefarm.coordinator.verifier import VerifyPolicy
     from spinefarm.protocol.messages import TrialResult
+    from spinefarm.protocol.settings import JudgePolicy
 
     overrides = {**(overrides or {}), **({"engine": engine} if engine != "bullet" else {})} or None
     screened = engine != "bullet"
     config = build_run_config(f"bench-{sampler}-{seed}", morphology, objective="speed", seed=seed,
                               controller=controller, duration_s=duration_s, trial_overrides=overrides)
     core, storage = new_run(config, SearchSettings(trials=budget, sampler=sampler,
-                                                   verify=VerifyPolicy(enabled=False)), None)
+                                                   judge=JudgePolicy(enabled=False)), None)
     study = core.study
     target = 0.8 * PAPER_SPEED_CM_S.get(morphology, float("nan"))
     running: dict = {}

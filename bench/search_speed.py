@@ -40,7 +40,7 @@ def search(label: str, out: Path, args: argparse.Namespace, extra: list[str]) ->
     with Hdf5Storage.open_read(out) as st:
         counts = st.counts()
         cols = st.columns()
-        verified = [b for b in st.best(20) if b.verification == "holds"]
+        verified = [b for b in st.best(20) if b.verification in ("holds", "judged")]
         best = verified[0] if verified else None
         cpu_sim_s = float(cols["sim_time_s"][cols["status"] == b"complete"].sum())
     return {

@@ -23,19 +23,19 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
+from spinefarm.coordinator.dispatch import TaskDispatch
+from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
-from spinefarm.coordinator.verifier import Verifier
+from spinefarm.coordinator.tasks import AUDIT, JUDGE, REFEREE, TaskBook, split_key, task_key
 from spinefarm.protocol.errors import MessageError
 from spinefarm.protocol.messages import (
     ResultAck,
     ResultSubmission,
     RunInfo,
-    TrialAssignment,
     TrialResult,
     TrialStatus,
     Verdict,
-    Verification,
     WorkGrant,
     WorkRequest,
     decode_message,
@@ -48,10 +48,10 @@ log = logging.getLogger("spinefarm.coordinator")
 _RATE_WINDOW_S = 30.0
 
 
-class CoordinatorCore:
+class CoordinatorCore(TaskDispatch):
     def __init__(self, study: Study, scheduler: Scheduler, run_config: RunConfig,
                  clock: Callable[[], float] = time.monotonic, idle_retry_s: float = 0.5,
-                 verifier: Verifier | None = None) -> None:
+                 tasks: TaskBook | None = None, peers: PeerBook | None = None) -> None:
         self.study = study
         self.scheduler = scheduler
         self.run_config = run_config
@@ -67,21 +67,31 @@ class CoordinatorCore:
         self.write_failure: str | None = None  # why the run file can no longer be written
         self.started_s = clock()
         self._config_payload = encode_message(run_config)
-        # Trials sampled but never finished before a restart are issued again first.
-        scheduler.enqueue(study.storage.waiting_ids())
-        self.verifier = verifier
+        self.tasks = tasks or TaskBook(study.storage, study.trial_scheduler.settings, None, study.seed, False)
+        self.peers = peers or PeerBook(quarantine=False)
+        self.peers.rebuild(study.storage)
+        # Trials sampled but never finished before a restart are issued again first, after the tasks
+        # (judge, audit) a restart cut short.
+        scheduler.enqueue(self.tasks.restart() + study.storage.waiting_ids())
         self.failure: str | None = None  # why the run cannot go on (a worker cannot build it)
-        if verifier is not None:  # a verification cut short by a restart is started again
-            self._verify_best()
+        self.drift = self.tasks.drift()  # why the screen's fidelity was raised (None: it was not)
+        self._judge_best()
 
     @property
     def run_id(self) -> str:
         return self.run_config.run_id
 
     @property
-    def done(self) -> bool:
+    def search_done(self) -> bool:
+        """Every evaluation of the search is stored (tasks may still be running)."""
         with self.lock:  # a multi-fidelity "done" reads several columns the transport threads write
             return self.study.done
+
+    @property
+    def done(self) -> bool:
+        """The search is done and so are its judge's and audits' tasks."""
+        with self.lock:
+            return self.study.done and not self.tasks.pending
 
     # --- handlers (transport calls these) ---------------------------------------------------------
     def _error(self, what: str, exc: MessageError) -> bytes:
@@ -112,21 +122,22 @@ class CoordinatorCore:
         except MessageError as exc:
             return self._error("work request", exc)
         with self.lock:
+            self.peers.heard(req.worker_id, req.engines, req.environment)
             verdicts = self._settle_all(req.worker_id, req.results)  # before "done": they may finish it
             if verdicts and not self.commit():
                 return None
             if self.study.done:
+                self._drop_unservable_tasks()
+            if self.done:
                 self.told_done.add(req.worker_id)
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True,
                                                 verdicts))
-            leases = self.scheduler.grant(req.worker_id, req.capacity, self.study.ask)
+            if self.peers.is_quarantined(req.worker_id):
+                return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, False,
+                                                verdicts))
+            leases = self.scheduler.grant(req.worker_id, req.capacity, self._ask, self._eligible)
             self._store_given_up()
-            cols = self.study.storage.columns()
-            assignments = tuple(
-                TrialAssignment(ls.trial_id, ls.lease_id, tuple(cols["params_unit"][ls.trial_id].tolist()),
-                                int(cols["seed"][ls.trial_id]), ls.deadline_s - self.clock(),
-                                _duration(cols["duration_s"][ls.trial_id]))
-                for ls in leases)
+            assignments = tuple(self._assignment(ls) for ls in leases)
         retry = 0.0 if assignments else self.idle_retry_s
         return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False, verdicts))
 
@@ -162,6 +173,12 @@ class CoordinatorCore:
         tid = result.trial_id
         if not 0 <= tid < storage.n_trials():
             return Verdict.UNKNOWN
+        for kind in (JUDGE, AUDIT, REFEREE):  # a task's result quotes the task's lease and the row it checks
+            key = task_key(kind, tid)
+            if self.scheduler.is_current(key, lease_id, worker_id):
+                return self._settle_task(key, worker_id, result)
+            if self.scheduler.was_issued(key, lease_id, worker_id):
+                return Verdict.STALE
         if storage.columns()["status"][tid] != TrialStatus.WAITING.stored:
             return Verdict.DUPLICATE
         if not self.scheduler.is_current(tid, lease_id, worker_id):
@@ -170,6 +187,9 @@ class CoordinatorCore:
                 log.warning("result for trial %d from %s quotes a lease it was never given: dropped", tid,
                             worker_id)
             return Verdict.STALE
+        refused = self._refuse_quarantined(tid, worker_id)
+        if refused is not None:
+            return refused
         if result.seed != int(storage.columns()["seed"][tid]):
             log.warning("result for trial %d has seed %d, expected %d: dropped", tid, result.seed,
                         int(storage.columns()["seed"][tid]))
@@ -180,8 +200,11 @@ class CoordinatorCore:
         self.study.tell(result)
         self.scheduler.release(tid)
         self.scheduler.observe_trial(result.wall_time_s)
-        if self.verifier is not None and result.ok:
-            self._verify_best()
+        if result.ok:
+            audit = self.tasks.audit_due(tid)
+            if audit is not None:
+                self.scheduler.push_front(audit)
+            self._judge_best()
         return Verdict.STORED
 
     def _finite_or_failed(self, result: TrialResult) -> TrialResult:
@@ -200,66 +223,15 @@ class CoordinatorCore:
         """Store trials the scheduler gave up on (they lost their worker too often) as failed (lock held)."""
         while self.scheduler.given_up:
             tid, reason = self.scheduler.given_up.pop(0)
+            if tid < 0:  # a task: the best goes unchecked rather than holding up the run
+                log.warning("%s task of trial %d %s: dropped", *split_key(tid), reason)
+                self.tasks.drop(tid)
+                continue
             seed = int(self.study.storage.columns()["seed"][tid])
             nan = math.nan
             log.warning("trial %d %s: stored as failed", tid, reason)
             self.study.tell(TrialResult(TrialStatus.FAILED, reason, nan, nan, nan, nan, nan, 0.0, nan, nan, seed,
                                         trial_id=tid))
-
-    # --- verification of new bests ----------------------------------------------------------------
-    def _verify_best(self) -> None:
-        """Start re-simulating the current best unless it is checked or being checked (caller holds the lock)."""
-        storage = self.study.storage
-        best = storage.best_ids(1)
-        if not best:
-            return
-        tid = best[0]
-        cols = storage.columns()
-        rungs = self.study.rungs
-        if rungs is not None and int(cols["rung"][tid]) < rungs.top:
-            return  # a screened best is provisional: only a full-length trial is judged (and can count)
-        done = (Verification.HOLDS.stored, Verification.NOT_REPRODUCED.stored)
-        if cols["verification"][tid] in done or tid in self.verifier.pending:
-            return
-        # a queued check of a best that has since been overtaken would only delay this one: drop it
-        for old in self.verifier.cancel_queued():
-            storage.set_verification(old, Verification.NOT_CHECKED)
-        storage.set_verification(tid, Verification.PENDING)
-        self.verifier.submit(tid, cols["params_unit"][tid].tolist(), int(cols["seed"][tid]),
-                             float(cols["distance_m"][tid]), _duration(cols["duration_s"][tid]))
-
-    def collect_verifications(self, wait_s: float = 0.0) -> int:
-        """Store finished verdicts; a best that did not hold hands the check to the next best."""
-        if self.verifier is None:
-            return 0
-        done = self.verifier.collect(wait_s)
-        with self.lock:
-            for tid, v in done:
-                verdict = Verification.HOLDS if v["holds"] else Verification.NOT_REPRODUCED
-                self.study.storage.set_verification(tid, verdict, v.get("fine_distance_m", float("nan")),
-                                                    "" if v["holds"] else v["verdict"])
-                if not v["holds"]:
-                    log.warning("best trial %d not reproduced: %s", tid, v["verdict"])
-            if done:
-                self._verify_best()
-        return len(done)
-
-    def finish_verifications(self, timeout_s: float) -> bool:
-        """Once the search is over: wait (up to timeout_s) until the best is verified; True if nothing is
-        left pending. A check of a best since overtaken, running or queued, is stopped first: during the
-        search it may run on, since the best may yet fall back to it, but now it only delays the best's."""
-        if self.verifier is None:
-            return True
-        with self.lock:
-            best = self.study.storage.best_ids(1)
-            if best:
-                for tid in self.verifier.stop_all_but(best[0]):
-                    self.study.storage.set_verification(tid, Verification.NOT_CHECKED)
-                self._verify_best()
-        end = time.monotonic() + timeout_s
-        while self.verifier.pending and time.monotonic() < end:
-            self.collect_verifications(wait_s=min(1.0, max(0.0, end - time.monotonic())))
-        return not self.verifier.pending
 
     def workers_released(self) -> bool:
         """Every live worker has heard that the run is done (so it can exit before we do)."""
@@ -307,8 +279,7 @@ class CoordinatorCore:
         return lost
 
     def tick(self) -> list[int]:
-        """Expire overdue leases and store finished verifications (called periodically by the transport)."""
-        self.collect_verifications()
+        """Expire overdue leases (called periodically by the transport)."""
         with self.lock:
             expired = self.scheduler.expire()
             self._store_given_up()
@@ -317,39 +288,15 @@ class CoordinatorCore:
     # --- status -----------------------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
         """JSON-able live status: counts, rate, ETA, workers (the API reads it from the status file)."""
+        from spinefarm.coordinator.status import live_status
+
         with self.lock:
-            now = self.clock()
-            while self._finish_times and self._finish_times[0] < now - _RATE_WINDOW_S:
-                self._finish_times.popleft()
-            window = min(_RATE_WINDOW_S, max(now - self.started_s, 1e-9))
-            rate = len(self._finish_times) / window
-            remaining = max(0, self.study.planned - self.study.n_finished)
-            counts = self.study.storage.counts()
-            wall = time.time()
-            return {
-                "run_id": self.run_id,
-                "state": "done" if self.study.done else ("failed" if self.failure else "running"),
-                "failure": self.failure,
-                "trials_budget": self.study.budget,
-                "trials_planned": self.study.planned,
-                "trials_sampled": self.study.n_asked,
-                "trials_complete": counts["complete"],
-                "trials_failed": counts["failed"],
-                "trials_leased": self.scheduler.n_leased,
-                "trials_queued": self.scheduler.n_queued + max(0, self.study.planned - self.study.n_asked),
-                "trials_reissued": self.scheduler.reissued,
-                "rate_trials_s": rate,
-                "eta_s": (remaining / rate) if rate > 0 else None,
-                "rejected_messages": self.rejected_messages,
-                "forged_results": self.forged_results,
-                "dropped_results": dict(self.dropped_results),
-                "workers": [{"worker_id": w.worker_id, "alive": w.alive, "leases": len(w.leases),
-                             "last_contact_unix_s": wall - (now - w.last_contact_s)}
-                            for w in self.scheduler.workers.values()],
-                "updated_at_unix_s": wall,
-            }
+            return live_status(self)
 
-
-def _duration(value: float) -> float | None:
-    """A row's requested duration for the wire: None (the run's own) when it has none."""
-    return float(value) if value == value else None
+    def finish_rate(self) -> float:
+        """Results stored per second over the last half minute (lock held)."""
+        now = self.clock()
+        while self._finish_times and self._finish_times[0] < now - _RATE_WINDOW_S:
+            self._finish_times.popleft()
+        window = min(_RATE_WINDOW_S, max(now - self.started_s, 1e-9))
+        return len(self._finish_times) / window

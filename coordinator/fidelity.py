@@ -1,85 +1,141 @@
-"""Multi-fidelity search: asynchronous successive halving over trial durations ("rungs").
+"""Which evaluation comes next on a run's fidelity ladder: the trial-scheduler seam.
 
-Every new parameter set is screened at the first rung's duration. Whenever a worker asks for work, a
-parameter set in the top 1/eta of the completed trials of its rung that has not been promoted yet is
-re-run at the next rung's duration (a new row: phase "promoted", parent = the row it re-runs) before
-anything new is sampled, as long as that rung has promoted fewer than 1/eta of its completed trials
-(at the end, each rung's best goes on past that quota).
-The last rung is the full trial; a longer rung ranks before any shorter one for "best".
+A BaseTrialScheduler decides, from storage alone, whether the next row re-runs a stored parameter set
+at a higher rung (a promotion) or samples a new one, when the search is done, and what a sampler
+reads. Two schedulers, in the spirit of Ray Tune's TrialScheduler and Optuna's pruners:
 
-Samplers see only the first rung (FirstRungView): every parameter set they proposed has exactly one
-first-rung row, so a model-based sampler (CMA-ES, TPE) learns from values of one duration, and the n-th
-proposal of a run is the same with and without rungs (proposal n draws from the stream of set n, not of
-row n, which promotions shift).
+- PlainTrialScheduler: every parameter set is one evaluation at the ladder's one rung.
+- HalvingTrialScheduler: asynchronous successive halving over the ladder. Every new parameter set is
+  screened at the first rung. Whenever a worker asks for work, a parameter set in the top 1/eta of the
+  completed rows of its rung that has not been promoted yet is re-run at the next rung (a new row:
+  phase "promoted", parent = the row it re-runs) before anything new is sampled, as long as that rung
+  has promoted fewer than 1/eta of its completed rows (at the end, each rung's best goes on past that
+  quota). A longer rung ranks before any shorter one for "best". Samplers see only the first rung
+  (FirstRungView): every parameter set has exactly one first-rung row, so a model-based sampler learns
+  from values of one duration, and proposal n is the same with and without rungs.
 
-Promotions are decided from storage alone (which rows exist at which rung, with which parents), so a
-restarted coordinator continues exactly where it stopped, and a lost lease re-issues the same row.
+Everything is decided from which rows exist at which rung with which parents, so a restarted
+coordinator continues exactly where it stopped, and a lost lease re-issues the same row.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from itertools import pairwise
+import math
 from typing import Any
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.messages import TrialStatus
+from spinefarm.protocol.settings import PROMOTED, Rung, RunSettings
 from spinefarm.storage.base import BaseStorage
 
+_PROMOTED = PROMOTED.encode()
 
-@dataclass(frozen=True)
-class Rungs:
-    """durations_s: increasing simulated durations, the last being the full trial; eta: keep 1/eta
-    of each rung for the next."""
 
-    durations_s: tuple[float, ...]
-    eta: int = 3
+def parse_rungs(text: str) -> tuple[float, ...]:
+    """`--rungs 10,30` as durations in seconds (checked by RunSettings)."""
+    try:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError as exc:
+        raise ConfigError("rungs are not numbers", received=text,
+                          expected="comma-separated seconds, e.g. 10,30") from exc
 
-    def __post_init__(self) -> None:
-        d = tuple(float(x) for x in self.durations_s)
-        object.__setattr__(self, "durations_s", d)
-        if not d or any(not np.isfinite(x) or x <= 0 for x in d) or any(b <= a for a, b in pairwise(d)):
-            raise ConfigError("rungs must be increasing positive durations", received=list(d),
-                              expected="e.g. --rungs 10,30 (seconds; the last is the full trial)")
-        if not isinstance(self.eta, int) or isinstance(self.eta, bool) or self.eta < 2:
-            raise ConfigError("eta out of range", received=self.eta, expected="an integer >= 2")
+
+class BaseTrialScheduler:
+    """Called by the study under the coordinator's lock. `promotion` when a worker asks for work
+    (before anything is sampled), `sampler_view` before each proposal, `done` whenever the run's state
+    is asked for; nothing is kept between calls that storage cannot rebuild."""
+
+    name = ""
+
+    def __init__(self, settings: RunSettings) -> None:
+        self.settings = settings
 
     @property
     def top(self) -> int:
-        return len(self.durations_s) - 1
+        return self.settings.top
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"durations_s": list(self.durations_s), "eta": self.eta}
+    def duration_s(self, rung: int) -> float:
+        """Simulated seconds of rung `rung` (NaN: the run's own duration)."""
+        d = self.settings.ladder[rung].duration_s
+        return math.nan if d is None else d
 
-    @classmethod
-    def from_dict(cls, d: dict[str, Any] | None) -> Rungs | None:
-        return None if not d else cls(tuple(d["durations_s"]), int(d["eta"]))
+    def rung(self, index: int) -> Rung:
+        return self.settings.ladder[index]
 
-    @classmethod
-    def parse(cls, text: str, eta: int = 3) -> Rungs:
-        try:
-            durations = tuple(float(x) for x in text.split(",") if x.strip())
-        except ValueError as exc:
-            raise ConfigError("rungs are not numbers", received=text,
-                              expected="comma-separated seconds, e.g. 10,30") from exc
-        return cls(durations, eta)
+    def planned(self, budget: int) -> int:
+        return self.settings.planned_evaluations(budget)
+
+    def n_sampled(self, storage: BaseStorage) -> int:
+        """New parameter sets sampled so far."""
+        return storage.n_trials()
 
     def promotion(self, storage: BaseStorage, sampling_done: bool = False) -> int | None:
-        """The row to re-run at the next rung, or None: the best not-yet-promoted row among the top
-        1/eta of some rung's complete rows (higher rungs first), while that rung has promoted fewer
-        than 1/eta of its complete rows (so a search that keeps improving, as hill climbing does,
-        promotes about 1/eta, not every row that was once in the top). Once no new parameter set will
-        be sampled (`sampling_done`), each rung's best goes on past the quota too, so the best screened
-        parameter set always reaches the full length."""
+        """The row to re-run at its next rung, or None (sample a new set)."""
+        return None
+
+    def sampler_view(self, storage: BaseStorage) -> Any:
+        """What a sampler reads: storage itself, or a view with the same reading methods."""
+        return storage
+
+    def parent_id(self, view: Any, parent: int) -> int:
+        """A proposal's parent (an index of the view) as a storage trial id."""
+        return parent
+
+    def done(self, storage: BaseStorage, budget: int, n_finished: int) -> bool:
+        return n_finished >= budget
+
+
+class PlainTrialScheduler(BaseTrialScheduler):
+    """Every parameter set evaluated once, at the ladder's last rung."""
+
+    name = "plain"
+
+
+class HalvingTrialScheduler(BaseTrialScheduler):
+    """Asynchronous successive halving over the ladder, keeping 1/eta of each rung (see the module)."""
+
+    name = "halving"
+
+    @classmethod
+    def from_durations(cls, durations_s: tuple[float, ...], eta: int = 3) -> HalvingTrialScheduler:
+        ladder = tuple(Rung(duration_s=d) for d in durations_s)
+        return cls(RunSettings(scheduler="halving", ladder=ladder, eta=eta))
+
+    @property
+    def eta(self) -> int:
+        return self.settings.eta
+
+    def n_sampled(self, storage: BaseStorage) -> int:
+        return int(storage.count_rung(0))
+
+    def duration_s(self, rung: int) -> float:
+        return float(self.settings.ladder[rung].duration_s)
+
+    def sampler_view(self, storage: BaseStorage) -> FirstRungView:
+        return FirstRungView(storage)
+
+    def parent_id(self, view: Any, parent: int) -> int:
+        return view.trial_id(parent) if parent >= 0 else -1
+
+    def done(self, storage: BaseStorage, budget: int, n_finished: int) -> bool:
+        if self.n_sampled(storage) < budget or n_finished < storage.n_trials():
+            return False
+        return self.promotion(storage, True) is None
+
+    def promotion(self, storage: BaseStorage, sampling_done: bool = False) -> int | None:
+        """The best not-yet-promoted row among the top 1/eta of some rung's complete rows (higher rungs
+        first), while that rung has promoted fewer than 1/eta of its complete rows (so a search that
+        keeps improving, as hill climbing does, promotes about 1/eta, not every row that was once in
+        the top). Once no new parameter set will be sampled (`sampling_done`), each rung's best goes on
+        past the quota too, so the best screened parameter set always reaches the full length."""
         cols = storage.columns()
-        n = len(cols["trial_id"])
-        if n == 0:
+        if len(cols["trial_id"]) == 0:
             return None
-        rung, parent, obj = cols["rung"], cols["parent"], cols["objective"]
+        rung, obj = cols["rung"], cols["objective"]
         complete = cols["status"] == TrialStatus.COMPLETE.stored
-        promoted = cols["phase"] == b"promoted"
-        promoted_from = set(parent[promoted].tolist())
+        promoted = cols["phase"] == _PROMOTED
+        promoted_from = set(cols["parent"][promoted].tolist())
         for r in range(self.top - 1, -1, -1):
             done = np.flatnonzero(complete & (rung == r) & np.isfinite(obj))
             keep = len(done) // self.eta
@@ -94,6 +150,12 @@ class Rungs:
                 if tid not in promoted_from:
                     return int(tid)
         return None
+
+
+def trial_scheduler(settings: RunSettings) -> BaseTrialScheduler:
+    """The stored run's scheduler."""
+    cls = HalvingTrialScheduler if settings.scheduler == "halving" else PlainTrialScheduler
+    return cls(settings)
 
 
 class FirstRungView:
@@ -134,7 +196,3 @@ class FirstRungView:
             if len(out) == k:
                 break
         return out
-
-
-def describe_rungs(rungs: Rungs | None) -> dict[str, Any] | None:
-    return None if rungs is None else asdict(rungs)

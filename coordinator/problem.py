@@ -42,8 +42,10 @@ def build_run_config(run_id: str, morphology: str, *, objective: str = "distance
     check_run_id(run_id)
     if is_test_objective(morphology):
         space = sphere_space(morphology)
+        engine = (trial_overrides or {}).get("engine")  # the test objective ignores it; tasks are routed by it
         return RunConfig(run_id, morphology, {}, None, tuple(space.describe()),
-                         {"duration_s": duration_s}, objective, seed, space_hash=space.space_hash())
+                         {"duration_s": duration_s, **({"engine": engine} if engine else {})}, objective, seed,
+                         space_hash=space.space_hash())
     from spinefarm.robot.morphology.registry import load_morphology
 
     return run_config_for(run_id, load_morphology(morphology), objective=objective, seed=seed,

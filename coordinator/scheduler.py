@@ -90,9 +90,12 @@ class Scheduler:
             self.expected_trial_s = (0.8 * self.expected_trial_s + 0.2 * t) if self._measured else t
             self._measured = True
 
-    def grant(self, worker_id: str, capacity: int, new_trial: Callable[[], int | None]) -> list[Lease]:
+    def grant(self, worker_id: str, capacity: int, new_trial: Callable[[], int | None],
+              eligible: Callable[[int, str], bool] | None = None) -> list[Lease]:
         """Lease up to `capacity` trials (at most max_grant, counting those the worker holds already):
-        re-issues first, then new ones from `new_trial` (None = none).
+        queued ones this worker may run first (`eligible(key, worker)`: e.g. it runs their engine, or
+        it is not the worker an audit checks), then new ones from `new_trial` (None = none; a new one
+        the worker may not run is queued for another).
 
         The i-th lease of a batch gets lease_s + i x expected_trial_s, as the worker runs its batch in order.
         """
@@ -100,9 +103,15 @@ class Scheduler:
         self.expire()
         worker = self.contact(worker_id)
         capacity = min(capacity, self.max_grant - len(worker.leases))
+        ok = eligible or (lambda key, wid: True)
         out: list[Lease] = []
         while len(out) < capacity:
-            tid = self._queue.popleft() if self._queue else new_trial()
+            tid = self._next_queued(worker_id, ok)
+            if tid is None:
+                tid = new_trial()
+                if tid is not None and not ok(tid, worker_id):
+                    self._queue.append(tid)
+                    tid = None
             if tid is None:
                 break
             lease_id = secrets.randbits(62)
@@ -113,6 +122,32 @@ class Scheduler:
             worker.leases.add(tid)
             out.append(lease)
         return out
+
+    def _next_queued(self, worker_id: str, ok: Callable[[int, str], bool]) -> int | None:
+        """The first queued key this worker may run, taken out of the queue (the others keep their order)."""
+        for i, key in enumerate(self._queue):
+            if ok(key, worker_id):
+                del self._queue[i]
+                return key
+        return None
+
+    def push_front(self, key: int) -> None:
+        """Issue `key` (a task) before anything queued."""
+        if key not in self._queue and key not in self._leases:
+            self._queue.appendleft(key)
+
+    def queued(self, key: int) -> bool:
+        return key in self._queue
+
+    def withdraw(self, key: int) -> None:
+        """Forget `key` whether queued or leased: a late result for it is stale (its issue is remembered)."""
+        if key in self._queue:
+            self._queue.remove(key)
+        self._drop_lease(key)
+        self._attempts.pop(key, None)
+
+    def queued_keys(self) -> list[int]:
+        return list(self._queue)
 
     def is_current(self, trial_id: int, lease_id: int, worker_id: str) -> bool:
         lease = self._leases.get(trial_id)

@@ -3,21 +3,26 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from spinefarm.coordinator.core import CoordinatorCore
-from spinefarm.coordinator.fidelity import Rungs
+from spinefarm.coordinator.fidelity import trial_scheduler
 from spinefarm.coordinator.objectives import objective_fn
+from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sampler_class, sampler_from_dict
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
-from spinefarm.coordinator.verifier import Verifier, VerifyPolicy
+from spinefarm.coordinator.tasks import TaskBook
 from spinefarm.protocol.errors import ConfigError, check_range
 from spinefarm.protocol.run import RunConfig
+from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung, RunSettings
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.schema import RunMeta
+
+# The judge in the search's own engine re-simulates at this many times finer a step.
+JUDGE_REFINE = 4
 
 
 def software_version() -> str:
@@ -31,7 +36,9 @@ def software_version() -> str:
 
 @dataclass(frozen=True)
 class SearchSettings:
-    """How to search: budget, sampler and its settings (sigma, top_k: the paper's sampler), leases."""
+    """How to search: budget, sampler and its settings (sigma, top_k: the paper's sampler), leases, the
+    fidelity ladder (rungs: screening durations for successive halving, else one rung), the judge and
+    the audit. The judge's rung is resolved against the run (see judge_rung)."""
 
     trials: int
     sampler: str = DEFAULT_SAMPLER
@@ -39,13 +46,36 @@ class SearchSettings:
     top_k: int = 1
     startup_trials: int | None = None   # None: half the budget is Monte Carlo
     lease_s: float = 60.0
-    verify: VerifyPolicy = field(default_factory=VerifyPolicy)
-    rungs: Rungs | None = None   # multi-fidelity screening (successive halving over durations)
+    judge: JudgePolicy = field(default_factory=JudgePolicy)
+    audit: AuditPolicy = field(default_factory=AuditPolicy)
+    rungs: tuple[float, ...] | None = None   # multi-fidelity screening (successive halving over durations)
+    eta: int = 3
 
     def __post_init__(self) -> None:
         check_range("trials", self.trials, 1)
         check_range("lease_s", self.lease_s, 0.0, low_inclusive=False)
         sampler_class(self.sampler)
+
+    def run_settings(self, config: RunConfig) -> RunSettings:
+        ladder = (Rung(),) if self.rungs is None else tuple(Rung(duration_s=d) for d in self.rungs)
+        return RunSettings(scheduler="plain" if self.rungs is None else "halving", ladder=ladder, eta=self.eta,
+                           judge=judge_rung(config, self.judge), audit=self.audit, lease_s=self.lease_s)
+
+
+def judge_rung(config: RunConfig, judge: JudgePolicy) -> JudgePolicy:
+    """The judge with its rung resolved: another engine at its own step, or the search's engine at a
+    JUDGE_REFINE times finer step. A test objective has a judge only when one is named."""
+    screen = config.trial_config.get("engine")
+    rung = judge.rung
+    if rung.engine == screen:
+        rung = replace(rung, engine=None)
+    if config.is_test_objective and rung.engine is None:
+        return replace(judge, enabled=False)
+    if rung.engine is None and rung.dt_s is None and not config.is_test_objective:
+        from spinefarm.robot.trial_config import TrialConfig
+
+        rung = replace(rung, dt_s=TrialConfig.from_dict(config.trial_config).step_s / JUDGE_REFINE)
+    return replace(judge, rung=rung)
 
 
 def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
@@ -60,27 +90,29 @@ def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
                    objective=config.objective, seed=config.seed, trials_budget=settings.trials,
                    sampler=sampler.describe(), software_version=software_version(),
                    created_at_unix_s=time.time(), config_hash=config.config_hash(),
-                   run=config.to_dict(), extra={"lease_s": settings.lease_s, "verify": settings.verify.to_dict(),
-                                                "fidelity": None if settings.rungs is None else
-                                                settings.rungs.to_dict()})
+                   run=config.to_dict(), settings=settings.run_settings(config))
 
 
-def build_core(storage: BaseStorage, clock=time.monotonic) -> CoordinatorCore:
-    """A core over a storage that already holds its run (new or resumed)."""
+def build_core(storage: BaseStorage, clock=time.monotonic, trusted_peers: bool = False) -> CoordinatorCore:
+    """A core over a storage that already holds its run (new or resumed). trusted_peers: access is
+    controlled (--credentials), so a worker whose audits disagree is marked, not quarantined."""
     meta = storage.run_meta()
     config = RunConfig.from_dict(meta.run)
     space = config.space()
+    settings = meta.settings
     sampler = sampler_from_dict(meta.sampler, len(space))
     study = Study(storage, sampler, space, meta.trials_budget, objective_fn(meta.objective), meta.seed,
-                  Rungs.from_dict(meta.extra.get("fidelity")))
-    scheduler = Scheduler(clock, float(meta.extra.get("lease_s", 60.0)))
-    policy = VerifyPolicy.from_dict(meta.extra.get("verify"))
-    verifier = Verifier(config, policy) if policy.enabled and Verifier.applies_to(config) else None
-    return CoordinatorCore(study, scheduler, config, clock, verifier=verifier)
+                  trial_scheduler(settings))
+    scheduler = Scheduler(clock, settings.lease_s)
+    judged = settings.judge.enabled and (not config.is_test_objective or settings.judge.rung.engine is not None)
+    tasks = TaskBook(storage, settings, config.trial_config.get("engine"), meta.seed, judged)
+    peers = PeerBook(quarantine=settings.audit.quarantine and not trusted_peers)
+    return CoordinatorCore(study, scheduler, config, clock, tasks=tasks, peers=peers)
 
 
 def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,
-            clock=time.monotonic, overwrite: bool = False) -> tuple[CoordinatorCore, BaseStorage]:
+            clock=time.monotonic, overwrite: bool = False,
+            trusted_peers: bool = False) -> tuple[CoordinatorCore, BaseStorage]:
     """Create the run's storage (an HDF5 file, or memory when `out` is None) and its core.
 
     overwrite: replace an existing file, unless another coordinator holds it (storage.runlock)."""
@@ -93,19 +125,19 @@ def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,
         from spinefarm.storage.hdf5 import Hdf5Storage
 
         storage = Hdf5Storage.create(out, meta, overwrite=overwrite)
-    return _core_or_close(storage, clock), storage
+    return _core_or_close(storage, clock, trusted_peers), storage
 
 
-def _core_or_close(storage: BaseStorage, clock) -> CoordinatorCore:
+def _core_or_close(storage: BaseStorage, clock, trusted_peers: bool = False) -> CoordinatorCore:
     try:
-        return build_core(storage, clock)
+        return build_core(storage, clock, trusted_peers)
     except BaseException:
         storage.close()  # release the file and its lock: the error is the caller's to report
         raise
 
 
-def resume_run(path: str | Path, clock=time.monotonic,
-               trials_budget: int | None = None) -> tuple[CoordinatorCore, BaseStorage]:
+def resume_run(path: str | Path, clock=time.monotonic, trials_budget: int | None = None,
+               trusted_peers: bool = False) -> tuple[CoordinatorCore, BaseStorage]:
     """Continue a stored run (optionally to a new budget): same numbering, same sampler state."""
     from spinefarm.storage.hdf5 import Hdf5Storage
 
@@ -115,4 +147,4 @@ def resume_run(path: str | Path, clock=time.monotonic,
     from spinefarm.coordinator.study import trial_seed
 
     storage = Hdf5Storage.resume(path, trials_budget, seed_of=trial_seed)
-    return _core_or_close(storage, clock), storage
+    return _core_or_close(storage, clock, trusted_peers), storage

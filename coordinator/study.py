@@ -2,19 +2,16 @@
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 
 import numpy as np
-from spinefarm.coordinator.fidelity import FirstRungView, Rungs
+from spinefarm.coordinator.fidelity import BaseTrialScheduler, PlainTrialScheduler
 from spinefarm.coordinator.samplers.base import BaseSampler
 from spinefarm.protocol.messages import TrialResult
 from spinefarm.protocol.params import ParamSpace
+from spinefarm.protocol.settings import PROMOTED, RunSettings
 from spinefarm.storage.base import BaseStorage
-from spinefarm.storage.schema import planned_evaluations
-
-PROMOTED = "promoted"
 
 
 def trial_seed(run_seed: int, trial_id):
@@ -25,14 +22,15 @@ def trial_seed(run_seed: int, trial_id):
 class Study:
     """`ask` samples and records the next trial; `tell` stores a result once.
 
-    Trial ids are dense row numbers; the seed of trial n is derived from the run seed and n.
+    Trial ids are dense row numbers; the seed of trial n is derived from the run seed and n. Which
+    evaluation comes next on the fidelity ladder is the trial scheduler's (coordinator.fidelity).
     """
 
     def __init__(self, storage: BaseStorage, sampler: BaseSampler, space: ParamSpace, budget: int,
-                 objective: Callable[[TrialResult], float], seed: int, rungs: Rungs | None = None) -> None:
-        """rungs: multi-fidelity screening; `budget` then counts new parameter sets (the first rung),
-        and promotions to longer rungs come on top."""
-        self.rungs = rungs
+                 objective: Callable[[TrialResult], float], seed: int,
+                 trial_scheduler: BaseTrialScheduler | None = None) -> None:
+        """budget counts new parameter sets; a scheduler's promotions to longer rungs come on top."""
+        self.trial_scheduler = trial_scheduler or PlainTrialScheduler(RunSettings())
         self.storage = storage
         self.sampler = sampler
         self.space = space
@@ -52,22 +50,16 @@ class Study:
     @property
     def n_sampled(self) -> int:
         """New parameter sets sampled so far (promotions re-run earlier ones)."""
-        if self.rungs is None:
-            return self.storage.n_trials()
-        return int(self.storage.count_rung(0))
+        return self.trial_scheduler.n_sampled(self.storage)
 
     @property
     def planned(self) -> int:
-        """Evaluations the run expects: the budget, plus about budget / eta^k promotions to rung k."""
-        return planned_evaluations(self.budget, None if self.rungs is None else self.rungs.to_dict())
+        """Evaluations the run expects: the budget, plus the scheduler's promotions."""
+        return self.trial_scheduler.planned(self.budget)
 
     @property
     def done(self) -> bool:
-        if self.rungs is None:
-            return self._n_finished >= self.budget
-        if self.n_sampled < self.budget or self._n_finished < self.storage.n_trials():
-            return False
-        return self.rungs.promotion(self.storage, True) is None
+        return self.trial_scheduler.done(self.storage, self.budget, self._n_finished)
 
     def trial_seed(self, trial_id: int) -> int:
         return trial_seed(self.seed, trial_id)
@@ -76,27 +68,21 @@ class Study:
         """Sample and record the next trial (first a promotion to a longer rung, if one is due);
         None once the budget is allotted."""
         tid = self.storage.n_trials()
-        if self.rungs is not None:
-            source = self.rungs.promotion(self.storage, self.n_sampled >= self.budget)
-            if source is not None:
-                row = self.storage.trial(source)
-                unit = np.asarray(row.params_unit)
-                self.storage.add_trial(tid, unit, self.space.from_unit(unit), PROMOTED, source,
-                                       self.trial_seed(tid), row.rung + 1, self.rungs.durations_s[row.rung + 1])
-                return tid
-            if self.n_sampled >= self.budget:
-                return None
-        elif tid >= self.budget:
+        ts = self.trial_scheduler
+        sampling_done = self.n_sampled >= self.budget
+        source = ts.promotion(self.storage, sampling_done)
+        if source is not None:
+            row = self.storage.trial(source)
+            unit = np.asarray(row.params_unit)
+            self.storage.add_trial(tid, unit, self.space.from_unit(unit), PROMOTED, source,
+                                   self.trial_seed(tid), row.rung + 1, ts.duration_s(row.rung + 1))
+            return tid
+        if sampling_done:
             return None
-        if self.rungs is None:
-            p = self.sampler.propose(tid, self.storage)
-            parent, duration = p.parent, math.nan
-        else:  # the sampler sees the first rung only: proposal k is the k-th parameter set
-            view = FirstRungView(self.storage)
-            p = self.sampler.propose(view.n_trials(), view)
-            parent, duration = (view.trial_id(p.parent) if p.parent >= 0 else -1), self.rungs.durations_s[0]
-        self.storage.add_trial(tid, p.params_unit, self.space.from_unit(p.params_unit), p.phase, parent,
-                               self.trial_seed(tid), 0, duration)
+        view = ts.sampler_view(self.storage)  # with rungs: proposal k is the k-th parameter set
+        p = self.sampler.propose(view.n_trials(), view)
+        self.storage.add_trial(tid, p.params_unit, self.space.from_unit(p.params_unit), p.phase,
+                               ts.parent_id(view, p.parent), self.trial_seed(tid), 0, ts.duration_s(0))
         return tid
 
     def tell(self, result: TrialResult) -> bool:

@@ -13,7 +13,8 @@ from enum import StrEnum
 from typing import Any
 
 from spinefarm.protocol import limits
-from spinefarm.protocol.errors import MessageError
+from spinefarm.protocol.errors import ConfigError, MessageError
+from spinefarm.protocol.settings import TaskFidelity
 
 SCHEMA_VERSION = 1
 
@@ -41,8 +42,24 @@ class Verification(StrEnum):
 
     NOT_CHECKED = ""
     PENDING = "pending"
-    HOLDS = "holds"
+    HOLDS = "holds"              # same engine, within tolerance
+    JUDGED = "judged"            # in another engine: the judge's distance counts
     NOT_REPRODUCED = "not_reproduced"
+
+    @property
+    def stored(self) -> bytes:
+        return self.value.encode()
+
+
+class AuditState(StrEnum):
+    """Re-simulation of a result by another worker at the same fidelity."""
+
+    NOT_AUDITED = ""
+    PENDING = "pending"
+    AGREES = "agrees"            # the auditor measured the same
+    DISPUTED = "disputed"        # they differ: a third worker referees
+    DISAGREES = "disagrees"      # the referee sided with the auditor: the result (and its worker) is wrong
+    OVERRULED = "overruled"      # the referee sided with the result: the auditor is wrong
 
     @property
     def stored(self) -> bytes:
@@ -264,10 +281,17 @@ class WorkRequest:
     worker_id: str
     capacity: int
     results: tuple[SubmittedResult, ...] = ()
+    engines: tuple[str, ...] | None = None      # the engines this worker can run (None: not said)
+    environment: dict[str, str] | None = None   # what this worker runs on (python, packages, CPU)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"worker_id": self.worker_id, "capacity": self.capacity,
-                "results": [r.to_dict() for r in self.results]}
+        d: dict[str, Any] = {"worker_id": self.worker_id, "capacity": self.capacity,
+                             "results": [r.to_dict() for r in self.results]}
+        if self.engines is not None:
+            d["engines"] = list(self.engines)
+        if self.environment is not None:
+            d["environment"] = dict(self.environment)
+        return d
 
     @classmethod
     def from_dict(cls, data: Any) -> WorkRequest:
@@ -280,7 +304,28 @@ class WorkRequest:
         if len(items) > _MAX_BATCH:
             raise MessageError("work request carries too many results", received=len(items),
                                expected=f"at most {_MAX_BATCH}")
-        return cls(worker_id, capacity, tuple(SubmittedResult.from_dict(i) for i in items))
+        return cls(worker_id, capacity, tuple(SubmittedResult.from_dict(i) for i in items),
+                   _engines(data.get("engines")), _environment(data.get("environment")))
+
+
+def _engines(value: Any) -> tuple[str, ...] | None:
+    if value is None:
+        return None
+    if not isinstance(value, list) or len(value) > 16 or not all(
+            isinstance(e, str) and e.isidentifier() and len(e) <= 32 for e in value):
+        raise MessageError("work request field 'engines' is malformed", received=str(value)[:80],
+                           expected="a list of at most 16 engine names")
+    return tuple(value)
+
+
+def _environment(value: Any) -> dict[str, str] | None:
+    if value is None:
+        return None
+    if not isinstance(value, dict) or len(value) > 32 or not all(
+            isinstance(k, str) and len(k) <= 32 and isinstance(v, str) for k, v in value.items()):
+        raise MessageError("work request field 'environment' is malformed", received=str(value)[:80],
+                           expected="at most 32 name: text pairs")
+    return {k: limits.check_text(v, f"environment entry {k!r}", 200) for k, v in value.items()}
 
 
 @dataclass(frozen=True)
@@ -298,12 +343,15 @@ class TrialAssignment:
     seed: int
     lease_s: float
     duration_s: float | None = None
+    fidelity: TaskFidelity | None = None   # a rung's engine / step / settle, or a judge's or audit's task
 
     def to_dict(self) -> dict[str, Any]:
         d = {"trial_id": self.trial_id, "lease_id": self.lease_id, "params_unit": list(self.params_unit),
              "seed": self.seed, "lease_s": self.lease_s}
         if self.duration_s is not None:
             d["duration_s"] = self.duration_s
+        if self.fidelity is not None:
+            d["fidelity"] = self.fidelity.to_dict()
         return d
 
     @classmethod
@@ -319,9 +367,16 @@ class TrialAssignment:
             if duration <= 0:
                 raise MessageError("trial assignment has a non-positive duration", received=duration,
                                    expected="duration_s > 0 s")
+        fidelity = None
+        if data.get("fidelity") is not None:
+            try:
+                fidelity = TaskFidelity.from_dict(_field(data, "fidelity", dict, what))
+            except ConfigError as exc:
+                raise MessageError(f"trial assignment has a bad fidelity: {exc}", received=data["fidelity"],
+                                   expected="{task, engine, dt_s, settle_s, perturb}") from exc
         return cls(_field(data, "trial_id", int, what), _field(data, "lease_id", int, what),
                    tuple(float(p) for p in params), _field(data, "seed", int, what),
-                   _finite(_field(data, "lease_s", (int, float), what), "lease_s", what), duration)
+                   _finite(_field(data, "lease_s", (int, float), what), "lease_s", what), duration, fidelity)
 
 
 @dataclass(frozen=True)

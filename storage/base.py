@@ -12,12 +12,16 @@ from spinefarm.protocol.messages import (
     RECORDED_EXTRAS,
     SCORE_NAMES,
     STORED_STATUSES,
+    AuditState,
     TrialResult,
     TrialStatus,
     Verification,
 )
 from spinefarm.storage import pareto
 from spinefarm.storage.schema import RunMeta, TrialRecord
+
+# A result whose audit found it wrong, or is still refereeing it, never counts as best.
+DISQUALIFYING_AUDITS = (AuditState.DISAGREES.stored, AuditState.DISPUTED.stored)
 
 
 class BaseStorage:
@@ -110,17 +114,30 @@ class BaseStorage:
         return [int(i) for i in ids[np.lexsort((ids, -cols["speed_cm_s"][ids]))]]
 
     def set_verification(self, trial_id: int, verdict: Verification | str, distance_m: float = math.nan,
-                         reason: str = "") -> None:
-        """Record the re-simulation verdict of a trial (pending, holds, not_reproduced; not_checked when a
-        queued check is dropped)."""
+                         reason: str = "", ratio: float = math.nan) -> None:
+        """Record the judge's verdict of a trial (pending, holds, judged, not_reproduced; not_checked when a
+        queued check is dropped) with the judge's distance and the screen-to-judge ratio."""
         self._writable()
-        if not 0 <= trial_id < self.n_trials():
-            raise StorageError("no such trial", received=trial_id, expected=f"0 <= id < {self.n_trials()}")
+        self._check_id(trial_id)
         allowed = tuple(Verification)
         if verdict not in allowed:
             raise StorageError("unknown verification verdict", received=verdict, expected=[str(v) for v in allowed])
         self._update(trial_id, {"verification": Verification(verdict).stored, "verify_distance_m": distance_m,
-                                "verify_reason": reason.encode("utf-8", "replace")[:160]})
+                                "verify_reason": reason.encode("utf-8", "replace")[:160], "judge_ratio": ratio})
+
+    def set_audit(self, trial_id: int, state: AuditState | str, distance_m: float = math.nan,
+                  worker_id: str = "") -> None:
+        """Record the audit of a result by another worker (pending, agrees, disagrees)."""
+        self._writable()
+        self._check_id(trial_id)
+        if state not in tuple(AuditState):
+            raise StorageError("unknown audit state", received=state, expected=[str(a) for a in AuditState])
+        self._update(trial_id, {"audit": AuditState(state).stored, "audit_distance_m": distance_m,
+                                "audit_worker_id": worker_id.encode("utf-8", "replace")[:64]})
+
+    def _check_id(self, trial_id: int) -> None:
+        if not 0 <= trial_id < self.n_trials():
+            raise StorageError("no such trial", received=trial_id, expected=f"0 <= id < {self.n_trials()}")
 
     def trial(self, trial_id: int) -> TrialRecord:
         cols = self.columns()
@@ -133,6 +150,12 @@ class BaseStorage:
         status = self.columns()["status"]
         return {s.value: int(np.count_nonzero(status == s.stored)) for s in STORED_STATUSES}
 
+    def audit_counts(self) -> dict[str, int]:
+        """How the audits came out: audits_pending, audits_agrees, audits_disagrees."""
+        audit = self.columns()["audit"]
+        return {f"audits_{a.value}": int(np.count_nonzero(audit == a.stored)) for a in AuditState
+                if a != AuditState.NOT_AUDITED}
+
     def best_ids(self, k: int) -> list[int]:
         """Ids of the k complete trials with the highest objective, best first (ties: lower id). In a
         multi-fidelity run a trial of a higher rung (a longer trial) ranks before any of a lower one."""
@@ -140,7 +163,8 @@ class BaseStorage:
         obj = cols["objective"]
         # a result a finer re-simulation did not reproduce never counts as best
         valid = (cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(obj) & \
-            (cols["verification"] != Verification.NOT_REPRODUCED.stored)
+            (cols["verification"] != Verification.NOT_REPRODUCED.stored) & \
+            ~np.isin(cols["audit"], DISQUALIFYING_AUDITS)  # nor one other workers did not reproduce (or dispute)
         ids = np.flatnonzero(valid)
         if k <= 0 or ids.size == 0:
             return []

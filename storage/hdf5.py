@@ -29,6 +29,7 @@ import h5py
 import numpy as np
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.messages import SCHEMA_VERSION
+from spinefarm.protocol.settings import RunSettings
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.probe import check_eof, probe, stored_eof
 from spinefarm.storage.runlock import RunLock
@@ -48,7 +49,7 @@ COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 # the reserve a sync only overwrites blocks the file already has. Trimmed to HDF5's end at close.
 RESERVE_B = 8 << 20      # reserved beyond HDF5's end when it is topped up
 RESERVE_LOW_B = 4 << 20  # topped up when less than this is left (one flush grows the file far less)
-_JSON_FIELDS = ("sampler", "extra", "run")
+_JSON_FIELDS = ("sampler", "settings", "run")
 _TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
 
 
@@ -63,7 +64,7 @@ def _write_meta(f: h5py.File, meta: RunMeta) -> None:
     for fld in fields(RunMeta):
         value = getattr(meta, fld.name)
         if fld.name in _JSON_FIELDS:
-            f.attrs[fld.name] = json.dumps(value, sort_keys=True)
+            f.attrs[fld.name] = json.dumps(value.to_dict() if fld.name == "settings" else value, sort_keys=True)
         elif fld.name in _TUPLE_FIELDS:
             f.attrs[fld.name] = np.array(value, dtype=h5py.string_dtype() if "names" in fld.name
                                          or "units" in fld.name else float)
@@ -80,7 +81,9 @@ def _read_meta(f: h5py.File, path: Path) -> RunMeta:
     kw: dict[str, Any] = {}
     for fld in fields(RunMeta):
         raw = f.attrs[fld.name]
-        if fld.name in _JSON_FIELDS:
+        if fld.name == "settings":
+            kw[fld.name] = RunSettings.from_dict(json.loads(raw))
+        elif fld.name in _JSON_FIELDS:
             kw[fld.name] = json.loads(raw)
         elif fld.name in ("param_names", "param_units"):
             kw[fld.name] = tuple(x.decode() if isinstance(x, bytes) else str(x) for x in raw)

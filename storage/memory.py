@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.messages import TrialStatus, Verification
-from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.base import DISQUALIFYING_AUDITS, BaseStorage
 from spinefarm.storage.schema import RunMeta
 from spinefarm.storage.table import TrialTable
 
@@ -57,10 +57,11 @@ class InMemoryStorage(BaseStorage):
     def best_ids(self, k: int) -> list[int]:
         if k <= 0:
             return []
-        verification = self.table.columns()["verification"]
+        cols = self.table.columns()
+        verification, audit = cols["verification"], cols["audit"]
         out = []
-        for *_, i in self._ranking:
-            if verification[i] != Verification.NOT_REPRODUCED.stored:
+        for *_, i in self._ranking:  # as BaseStorage.best_ids: not refuted by the judge or an audit
+            if verification[i] != Verification.NOT_REPRODUCED.stored and audit[i] not in DISQUALIFYING_AUDITS:
                 out.append(i)
                 if len(out) == k:
                     break

@@ -10,11 +10,20 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.messages import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, STORED_STATUSES, Verification
+from spinefarm.protocol.messages import (
+    RECORDED_EXTRAS,
+    SCORE_NAMES,
+    SCORE_PARTS,
+    STORED_STATUSES,
+    AuditState,
+    Verification,
+)
+from spinefarm.protocol.settings import RunSettings
 
-FILE_SCHEMA_VERSION = 5
+FILE_SCHEMA_VERSION = 6
 
-PHASES = ("monte_carlo", "gaussian", "cmaes", "tpe", "promoted")
+# A sampler names its own phases: any short lower-case name is a valid phase (no list to extend here).
+PHASE_PATTERN = rb"^[a-z][a-z0-9_]{0,15}$"
 STATUSES = tuple(s.value for s in STORED_STATUSES)
 
 
@@ -31,8 +40,8 @@ COLUMNS: tuple[Column, ...] = (
     Column("trial_id", "i8", "", "trial number; equals the row index"),
     Column("params_unit", "f8", "1", "parameter vector in the unit cube; columns named by param_names"),
     Column("params", "f8", "see param_units", "physical parameter values, low + u * (high - low)"),
-    Column("phase", "S16", "", "sampler phase: monte_carlo (uniform), gaussian (hill climbing), "
-           "cmaes, tpe, or promoted (a multi-fidelity re-run of its parent at a longer rung)"),
+    Column("phase", "S16", "", "sampler phase (the sampler's own name for it: monte_carlo, gaussian, cmaes, "
+           "tpe, ...), or promoted (a multi-fidelity re-run of its parent at a longer rung)"),
     Column("parent", "i8", "", "trial id of the centre a gaussian sample was drawn around; -1 for none"),
     Column("seed", "i8", "", "simulation seed of the trial"),
     Column("rung", "i8", "", "fidelity rung of a multi-fidelity search (0: the screen); a promoted row re-runs its "
@@ -44,28 +53,32 @@ COLUMNS: tuple[Column, ...] = (
     *(Column(p.name, "f8", p.unit, p.description) for p in SCORE_PARTS),
     Column("worker_id", "S64", "", "worker that ran the trial"),
     Column("finished_at_unix_s", "f8", "s since 1970-01-01 UTC", "when the coordinator stored the result"),
-    Column("verification", "S16", "", "re-simulation of a trial that became best: empty (not checked), "
-           "pending, holds or not_reproduced (then it never counts as best)"),
-    Column("verify_distance_m", "f8", "m", "distance of that re-simulation at a finer step"),
+    Column("verification", "S16", "", "the judge's re-simulation of a trial that became best: empty (not "
+           "checked), pending, holds (same engine, within tolerance), judged (in another engine: its distance "
+           "counts) or not_reproduced (then it never counts as best)"),
+    Column("verify_distance_m", "f8", "m", "distance of that re-simulation (the judge's distance)"),
     Column("verify_reason", "S160", "", "what the re-simulation found when the distance did not hold"),
+    Column("judge_ratio", "f8", "1", "screen-to-judge distance ratio, distance_m / verify_distance_m"),
+    Column("audit", "S16", "", "re-simulation on another worker at the same fidelity: empty (not audited), "
+           "pending, agrees or disagrees (then the result never counts as best)"),
+    Column("audit_distance_m", "f8", "m", "distance the auditing worker measured"),
+    Column("audit_worker_id", "S64", "", "worker that audited the result"),
     *(Column(e.name, e.dtype, e.unit, e.description) for e in RECORDED_EXTRAS),
     Column("pareto_front", "i1", "", "1 if the trial is on the Pareto front of speed (max) and COT (min) among "
            "complete trials, else 0; kept up to date as results arrive"),
 )
 VERIFICATIONS = tuple(v.value for v in Verification)
+AUDITS = tuple(a.value for a in AuditState)
 COLUMN_BY_NAME = {c.name: c for c in COLUMNS}
 VECTOR_COLUMNS = ("params_unit", "params")
 SCORE_COLUMNS = SCORE_NAMES
 EXTRA_COLUMNS = tuple(e.name for e in RECORDED_EXTRAS)
 
 
-def planned_evaluations(trials_budget: int, fidelity: dict[str, Any] | None) -> int:
-    """Evaluations a run expects: its budget of parameter sets, plus in a multi-fidelity run (fidelity:
-    {"durations_s": [...], "eta": k}) about budget / eta^r promotions to each rung r."""
-    if not fidelity:
-        return trials_budget
-    eta = int(fidelity["eta"])
-    return sum(trials_budget // eta**r for r in range(len(fidelity["durations_s"])))
+def planned_evaluations(trials_budget: int, settings: RunSettings) -> int:
+    """Evaluations a run expects: its budget of parameter sets, plus with successive halving about
+    budget / eta^r promotions to each rung r."""
+    return settings.planned_evaluations(trials_budget)
 
 
 @dataclass(frozen=True)
@@ -86,7 +99,7 @@ class RunMeta:
     software_version: str
     created_at_unix_s: float
     config_hash: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
+    settings: RunSettings = field(default_factory=RunSettings)   # how the run searches, typed
     run: dict[str, Any] = field(default_factory=dict)   # the RunConfig, stored once
 
     @property
@@ -128,6 +141,10 @@ class TrialRecord:
     verification: str = ""
     verify_distance_m: float = float("nan")
     verify_reason: str = ""
+    judge_ratio: float = float("nan")
+    audit: str = ""
+    audit_distance_m: float = float("nan")
+    audit_worker_id: str = ""
     engine: str = ""
     dt_s: float = float("nan")
     rung: int = 0

@@ -9,12 +9,13 @@ finite scores for complete rows. The error lists the first offending rows and wh
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 from spinefarm.protocol.errors import StorageError
-from spinefarm.storage.schema import PHASES, STATUSES, VERIFICATIONS, RunMeta
+from spinefarm.storage.schema import AUDITS, PHASE_PATTERN, STATUSES, VERIFICATIONS, RunMeta
 
 _SHOWN = 5
 _FINITE_WHEN_COMPLETE = ("objective", "distance_m", "ntrt_distance_cm", "speed_cm_s", "work_j")
@@ -31,11 +32,14 @@ def row_problems(meta: RunMeta, cols: dict[str, np.ndarray],
     params = cols["params"].reshape(n, meta.n_params)
     lows, highs = np.asarray(meta.param_lows, dtype=float), np.asarray(meta.param_highs, dtype=float)
     span = np.maximum(np.abs(highs - lows), 1.0)
+    phase = re.compile(PHASE_PATTERN)
     out = {
         "trial id is not the row number": cols["trial_id"] != ids,
         f"status not one of {', '.join(STATUSES)}": ~np.isin(status, [s.encode() for s in STATUSES]),
-        f"phase not one of {', '.join(PHASES)}": ~np.isin(cols["phase"], [p.encode() for p in PHASES]),
+        "phase is not a short lower-case name": ~np.array([bool(phase.fullmatch(bytes(p))) for p in cols["phase"]],
+                                                          dtype=bool),
         "verification verdict unknown": ~np.isin(cols["verification"], [v.encode() for v in VERIFICATIONS]),
+        "audit state unknown": ~np.isin(cols["audit"], [a.encode() for a in AUDITS]),
         "unit parameters not finite or outside [0, 1]": ~np.all(np.isfinite(unit) & (unit >= 0) & (unit <= 1),
                                                                 axis=1),
         "parameters outside the stored bounds": ~np.all(

@@ -9,7 +9,6 @@ retry, never exit. The only worker module that imports zenoh.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 import os
@@ -41,6 +40,7 @@ from spinefarm.protocol.messages import (
 )
 from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.run import RunConfig, WorkerProblem
+from spinefarm.worker.tasks import available_engines, environment, physics_evaluator, with_fault
 
 log = logging.getLogger("spinefarm.worker")
 Evaluator = Callable[[TrialAssignment], TrialResult]
@@ -108,10 +108,9 @@ def build_evaluator(config: RunConfig) -> Evaluator:
             raise RunMismatchError("run has no morphology spec", received=config.morphology,
                                    expected="a morphology spec, or the test objective sphere[:N]")
         delay_s = float(config.trial_config.get("duration_s") or 0.0)
-        return lambda a: sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s)
+        return lambda a: with_fault(sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s))
     from spinefarm.robot.morphology.model import Morphology
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import TrialConfig, run_trial
+    from spinefarm.worker.trial import TrialConfig
 
     morphology = Morphology.from_dict(config.morphology_spec)
     trial_config = TrialConfig.from_dict(config.trial_config)
@@ -122,19 +121,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
         if getattr(config, name) != value:
             raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
                                    "version?)", received=value, expected=getattr(config, name))
-    from spinefarm.worker.engines.base import engine_class
-
-    # a missing engine package or an option the engine does not have fails here, not in every trial
-    engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
-    setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
-
-    def evaluate(a: TrialAssignment) -> TrialResult:
-        # a multi-fidelity rung asks for its own duration; everything else is the run's
-        cfg = trial_config if a.duration_s is None else dataclasses.replace(trial_config, duration_s=a.duration_s)
-        return run_trial(morphology, np.asarray(a.params_unit, dtype=float), cfg, a.seed,
-                         controller=config.controller, setup=setup)
-
-    return evaluate
+    return physics_evaluator(morphology, trial_config, config.controller)
 
 
 def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:
@@ -185,8 +172,11 @@ class WorkerService:
                  exit_when_done: bool = False, query_timeout_s: float = 5.0,
                  submit_interval_s: float = 1.0, idle_exit_s: float = 2.0,
                  coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S,
-                 credentials_file: str | Path | None = None) -> None:
+                 credentials_file: str | Path | None = None, engines: tuple[str, ...] | None = None) -> None:
+        """engines: the engines this worker offers (default: every installed one)."""
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
+        self.engines = available_engines(engines)
+        self.environment = environment()
         self.run_id = keys.check_run_id(run_id) if run_id else None
         if batch is not None and not 1 <= batch <= 4096:
             raise ConfigError("batch out of range", received=batch, expected="1 <= batch <= 4096, or auto")
@@ -347,7 +337,8 @@ class WorkerService:
                 continue
             idle_since = None
             carried = tuple(self._pending.get(run_id, {}).values())
-            req = encode_message(WorkRequest(self.worker_id, self.batch.size(), carried))
+            req = encode_message(WorkRequest(self.worker_id, self.batch.size(), carried, self.engines,
+                                             self.environment))
             grants, refused = self._query(session, keys.work(run_id), req, WorkGrant)
             if not grants:
                 if refused and carried:

@@ -275,7 +275,9 @@ async function showRun(runId, gen, first) {
     card("workers", `${alive}${status.workers.length > alive ? " (+" + (status.workers.length - alive) + " gone)" : ""}`),
     card("best " + esc(meta.objective), best ? `<a href="#/run/${r}/trial/${best.trial_id}">${fmt(best.objective)}</a>` : "–"),
     card("best speed (cm/s)", best ? fmt(best.scores.speed_cm_s) : "–"), card("best COT", best ? fmt(best.scores.cot) : "–"),
-    card("best verified", best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.verdict)}</span>` : "–"),
+    card("best verified", best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.label || best.verification.verdict)}</span>` : "–"),
+    ...(status.audit && status.audit.fraction > 0 ? [card("audits agree / disagree",
+      `${status.audit.audits_agrees} / ${status.audit.audits_disagrees}`)] : []),
     meta.physical ? card("engine, step", `${esc(meta.trial_config.engine || "bullet")}, ${meta.trial_config.dt_s ? fmt(meta.trial_config.dt_s * 1000) + " ms" : "–"}`) : "",
   ].join("");
   drawRunPlots(runId, cols, analysis, meta);
@@ -308,9 +310,12 @@ async function showTrial(runId, trialId, gen) {
       download>download --params file</a></div>
     <div class="grid">
       <div class="panel"><h2>Verification</h2><table id="verification"><tbody>
-        <tr><td class="l">verdict</td><td class="l verdict ${esc(v.verdict)}">${esc(v.verdict)}</td></tr>
+        <tr><td class="l">verdict</td><td class="l verdict ${esc(v.verdict)}" id="verdict-label">${esc(v.label || v.verdict)}</td></tr>
         <tr><td class="l">distance at the search's step (m)</td><td>${fmt(t.scores.distance_m, 6)}</td></tr>
         <tr><td class="l">distance re-simulated in ${esc(v.judge || "a finer step")} (m)</td><td>${fmt(v.fine_step_distance_m, 6)}</td></tr>
+        ${v.verdict === "judged" && v.screen_to_judge_ratio != null ? `<tr><td class="l">screen / judge ratio</td><td>${fmt(v.screen_to_judge_ratio, 4)}</td></tr>` : ""}
+        ${t.audit && t.audit.state !== "not_audited" ? `<tr><td class="l">audit by ${esc(t.audit.worker_id || "another worker")}</td>
+          <td class="l">${esc(t.audit.state)} (${fmt(t.audit.distance_m, 6)} m)</td></tr>` : ""}
         ${v.reason ? `<tr><td class="l">reason</td><td class="l">${esc(v.reason)}</td></tr>` : ""}</tbody></table>
         <h2 style="margin-top:1em">Score parts</h2><table id="scores"><tbody>${scoreRows}</tbody></table></div>
       <div class="panel"><h2>Parameters</h2><div class="tablewrap"><table id="params"><thead><tr><th class="l">name</th>

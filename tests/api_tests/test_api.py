@@ -169,8 +169,10 @@ def test_verification_verdicts_show_and_a_not_reproduced_best_is_skipped(tmp_pat
     with TestClient(create_app(runs_dir=tmp_path)) as c:
         best = c.get("/runs/run-v/best", params={"k": 2}).json()
         assert [b["trial_id"] for b in best] == [1, 0]  # trial 2 had the top objective but did not hold
-        assert best[0]["verification"] == {"verdict": "holds", "fine_step_distance_m": 0.98, "reason": None,
-                                           "judge": "the search's engine at a 4x finer step"}
+        v = best[0]["verification"]
+        assert {k: v[k] for k in ("verdict", "label", "fine_step_distance_m", "judge_distance_m", "reason", "judge")} \
+            == {"verdict": "holds", "label": "holds", "fine_step_distance_m": 0.98, "judge_distance_m": 0.98,
+                "reason": None, "judge": "the search's engine at a finer step"}
         t2 = c.get("/runs/run-v/trials/2").json()
         assert t2["verification"]["verdict"] == "not_reproduced" and "finer step" in t2["verification"]["reason"]
         assert c.get("/runs/run-v/trials/3").json()["verification"]["verdict"] == "not_checked"

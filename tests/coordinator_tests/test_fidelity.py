@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 import pytest
-from spinefarm.coordinator.fidelity import Rungs
+from spinefarm.coordinator.fidelity import HalvingTrialScheduler, parse_rungs
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.messages import TrialResult, TrialStatus
 from spinefarm.storage.hdf5 import Hdf5Storage, read_run
@@ -35,7 +35,7 @@ def _storage_with(objectives: list[float]) -> InMemoryStorage:
 
 
 def test_the_best_third_of_a_rung_is_promoted_best_first_and_once():
-    rungs = Rungs((1.0, 3.0), eta=3)
+    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
     st = _storage_with([0.1, 0.9, 0.5, 0.7, 0.2, 0.8])  # top third of 6: ids 1 and 5
     assert rungs.promotion(st) == 1
     st.add_trial(6, np.full(3, 0.5), np.zeros(3), "promoted", 1, 0, 1, 3.0)
@@ -49,10 +49,10 @@ def test_the_best_third_of_a_rung_is_promoted_best_first_and_once():
 @pytest.mark.parametrize(("text", "eta"), [("30,10", 3), ("10,10", 3), ("0,10", 3), ("ten", 3), ("10,30", 1)])
 def test_bad_rungs_are_refused_with_what_was_expected(text, eta):
     with pytest.raises(ConfigError):
-        Rungs.parse(text, eta)
+        HalvingTrialScheduler.from_durations(parse_rungs(text), eta)
 
 
-def _check_fidelity(out, budget: int, rungs: Rungs) -> None:
+def _check_fidelity(out, budget: int, rungs: HalvingTrialScheduler) -> None:
     with Hdf5Storage.open_read(out) as s:
         c = s.columns()
         assert set(c["status"].tolist()) == {b"complete"}
@@ -63,7 +63,7 @@ def _check_fidelity(out, budget: int, rungs: Rungs) -> None:
         assert len(set(parents.tolist())) == len(parents)  # each row promoted at most once
         np.testing.assert_array_equal(rung[promoted], rung[parents] + 1)
         np.testing.assert_array_equal(c["params_unit"][promoted], c["params_unit"][parents])
-        np.testing.assert_array_equal(c["duration_s"], np.asarray(rungs.durations_s)[rung])
+        np.testing.assert_array_equal(c["duration_s"], np.asarray(rungs.settings.durations_s())[rung])
         for r in range(rungs.top):  # about 1/eta of each rung goes on (a few more if bests came late)
             n_r, n_next = int((rung == r).sum()), int((rung == r + 1).sum())
             assert n_r // rungs.eta <= n_next <= n_r // rungs.eta + 1 + n_r // (2 * rungs.eta)
@@ -74,7 +74,7 @@ def _check_fidelity(out, budget: int, rungs: Rungs) -> None:
 
 def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(tmp_path):
     ep, out = free_endpoint(), tmp_path / "run.h5"
-    rungs = Rungs((0.01, 0.02, 0.04), 3)
+    rungs = HalvingTrialScheduler.from_durations((0.01, 0.02, 0.04), 3)
     coord = coordinator(ep, out, "sphere:3", "--trials", "27", "--rungs", "0.01,0.02,0.04", "--run-id", "mf")
     workers = [worker(ep, "mf", f"w{i}", batch=2) for i in range(2)]
     try:
@@ -95,7 +95,7 @@ def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(
 
 def test_a_multi_fidelity_search_killed_mid_rung_resumes_to_its_exact_budget(tmp_path):
     ep, out = free_endpoint(), tmp_path / "run.h5"
-    rungs = Rungs((0.05, 0.1), 3)
+    rungs = HalvingTrialScheduler.from_durations((0.05, 0.1), 3)
     coord = coordinator(ep, out, "sphere:3", "--trials", "60", "--rungs", "0.05,0.1", "--run-id", "mfk")
     workers = [worker(ep, "mfk", f"w{i}", batch=1) for i in range(2)]
     resumed = None
@@ -130,15 +130,18 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
     with Hdf5Storage.open_read(out) as s:
         best = s.best(1)[0]
         assert best.rung == 1 and best.duration_s == 0.9 and best.engine == "mujoco"
-        assert best.verification == "holds"
+        assert best.verification == "judged"  # another engine: its distance counts, the ratio is stored
+        assert best.judge_ratio == pytest.approx(best.distance_m / best.verify_distance_m)
         assert np.isfinite(best.verify_distance_m) and best.verify_distance_m != best.distance_m
-        assert s.run_meta().extra["verify"]["engine"] == "bullet"
+        assert s.run_meta().settings.judge.rung.engine == "bullet"
         c = s.columns()  # a screened best is provisional: only full-length trials go to the judge
         assert set(c["verification"][c["rung"] == 0].tolist()) == {b""}
         from spinefarm.api.views import trial_view
 
-        assert trial_view(s, best)["verification"]["judge"] == "bullet at 0.25 ms"
-    assert f"verified in bullet: {best.verify_distance_m:.4g} m" in r.stdout
+        view = trial_view(s, best)["verification"]
+        assert view["judge"] == "bullet at 0.25 ms" and view["label"] == "judged in bullet"
+        assert view["screen_distance_m"] == best.distance_m and view["judge_distance_m"] == best.verify_distance_m
+    assert f"judged in bullet: {best.verify_distance_m:.4g} m" in r.stdout and "screen/judge ratio" in r.stdout
     # `trial --run` re-runs the stored best: in its own engine it is the stored result, and in Bullet at the
     # judge's step it is the judge's distance
     import json
@@ -163,7 +166,7 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
 def test_a_search_that_keeps_improving_promotes_about_a_third_and_always_its_best():
     """Hill climbing makes each new trial better than the last: every one enters the top third when it
     finishes, but only a third (plus late bests) may go on."""
-    rungs = Rungs((1.0, 3.0), eta=3)
+    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
     st = _storage_with([])
     n_promoted = 0
     for i in range(30):
@@ -178,7 +181,7 @@ def test_a_search_that_keeps_improving_promotes_about_a_third_and_always_its_bes
     assert best in set(st.columns()["parent"][st.columns()["phase"] == b"promoted"].tolist())
 
 
-def _study(sampler_name: str, rungs: Rungs | None, budget: int = 12):
+def _study(sampler_name: str, rungs: HalvingTrialScheduler | None, budget: int = 12):
     from spinefarm.coordinator.samplers import make_sampler
     from spinefarm.coordinator.study import Study
     from spinefarm.protocol.params import ParamSpace, ParamSpec
@@ -189,7 +192,7 @@ def _study(sampler_name: str, rungs: Rungs | None, budget: int = 12):
     st.create_run(make_meta(n_params=3))
     space = ParamSpace("test", tuple(ParamSpec(f"p{i}", 0.0, 1.0) for i in range(3)))
     sampler = make_sampler(sampler_name, 3, 7, budget=budget, objective="distance", startup_trials=4)
-    return Study(st, sampler, space, budget, lambda r: r.distance_m, seed=7, rungs=rungs), st
+    return Study(st, sampler, space, budget, lambda r: r.distance_m, seed=7, trial_scheduler=rungs), st
 
 
 def _drive(study, st) -> None:
@@ -204,7 +207,7 @@ def _drive(study, st) -> None:
 def test_samplers_see_the_first_rung_only_so_rungs_do_not_change_their_proposals(sampler):
     plain, plain_st = _study(sampler, None)
     _drive(plain, plain_st)
-    screened, screened_st = _study(sampler, Rungs((1.0, 3.0), eta=3))
+    screened, screened_st = _study(sampler, HalvingTrialScheduler.from_durations((1.0, 3.0), 3))
     _drive(screened, screened_st)
     c = screened_st.columns()
     assert int((c["phase"] == b"promoted").sum()) >= 4  # promotions were interleaved with sampling

@@ -11,6 +11,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 OWN = ["protocol/keys.py", "protocol/messages.py", "coordinator", "storage", "api", "cli/service_commands.py",
+       "cli/search_loop.py", "cli/run_setup.py", "cli/search_args.py", "cli/report.py", "cli/export_command.py",
        "worker/service.py", "bench/coordinator_throughput.py"]
 
 
@@ -24,10 +25,12 @@ def loaded_after(statement: str) -> set[str]:
     ("import spinefarm.protocol.keys, spinefarm.protocol.messages", {"zenoh", "h5py", "pybullet", "fastapi"}),
     ("import spinefarm.coordinator.core, spinefarm.coordinator.setup, spinefarm.coordinator.samplers, "
      "spinefarm.coordinator.problem",
-     {"zenoh", "h5py", "pybullet", "fastapi"}),
+     {"zenoh", "h5py", "pybullet", "mujoco", "numba", "fastapi"}),
+    ("import spinefarm.coordinator.service, spinefarm.cli.search_loop, spinefarm.cli.run_setup",
+     {"pybullet", "mujoco", "numba"}),
     ("import spinefarm.storage", {"h5py", "zenoh", "pybullet"}),
     ("import spinefarm.api.app", {"zenoh", "pybullet"}),
-    ("import spinefarm.cli.service_commands", {"zenoh", "h5py", "pybullet", "fastapi"}),
+    ("import spinefarm.cli.service_commands", {"zenoh", "h5py", "pybullet", "mujoco", "numba", "fastapi"}),
 ])
 def test_clean_interpreter_imports_stay_light(statement, forbidden):
     assert not loaded_after(statement) & forbidden

@@ -1,4 +1,4 @@
-"""Nothing runs or waits for ever: re-simulation processes, workers of a run that ended while they
+"""Nothing runs or waits for ever: workers of a run that ended while they
 were frozen, damaged files on resume, errors while starting up."""
 
 from __future__ import annotations
@@ -11,46 +11,9 @@ import time
 
 from spinefarm.storage.probe import check_eof
 
-from tests.coordinator_tests.helpers import free_endpoint, wait_for
+from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import ROOT, coordinator, spinefarm, stop, wait_status
 from tests.coordinator_tests.test_run_file_faults import finished_run
-
-_VERIFIER_PARENT = """
-import os, sys, time
-from concurrent.futures import ProcessPoolExecutor
-import multiprocessing
-from spinefarm.coordinator.verifier import _exit_with_parent
-pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=_exit_with_parent,
-                           initargs=(os.getpid(),))
-pool.submit(time.sleep, 120)
-time.sleep(1.0)
-print(list(pool._processes), flush=True)
-time.sleep(120)
-"""
-
-
-def alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    try:  # a zombie waiting for its (new) parent to reap it has ended too
-        with open(f"/proc/{pid}/stat") as fh:
-            return fh.read().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
-def test_a_resimulation_process_ends_when_its_coordinator_is_killed():
-    parent = subprocess.Popen([sys.executable, "-c", _VERIFIER_PARENT], cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    try:
-        (child,) = eval(parent.stdout.readline())
-        assert alive(child)
-        parent.send_signal(signal.SIGKILL)
-        parent.wait(5)
-        wait_for(lambda: not alive(child), timeout_s=5, what="the re-simulation process to exit")
-    finally:
-        stop(parent)
 
 
 def test_a_worker_frozen_until_its_run_ended_exits_after_waking(tmp_path):

@@ -82,13 +82,13 @@ def test_a_worker_that_cannot_reproduce_the_spec_hash_stops_the_run(tmp_path):
     from spinefarm.coordinator.problem import build_run_config
     from spinefarm.coordinator.service import CoordinatorService
     from spinefarm.coordinator.setup import SearchSettings, new_run
-    from spinefarm.coordinator.verifier import VerifyPolicy
+    from spinefarm.protocol.settings import JudgePolicy
 
     from tests.coordinator_tests.helpers import free_endpoint
 
     config = build_run_config("forged-spec", "tetraspine-ntrt", duration_s=0.2)
     config = dataclasses.replace(config, spec_hash="0123456789abcdef")
-    core, storage = new_run(config, SearchSettings(trials=3, verify=VerifyPolicy(enabled=False)),
+    core, storage = new_run(config, SearchSettings(trials=3, judge=JudgePolicy(enabled=False)),
                             tmp_path / "run.h5")
     endpoint = free_endpoint()
     service = CoordinatorService(core, storage, listen=[endpoint]).start()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from spinefarm.coordinator.samplers import (
@@ -15,7 +17,7 @@ from spinefarm.coordinator.samplers import (
 )
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.storage.memory import InMemoryStorage
-from spinefarm.storage.schema import PHASES
+from spinefarm.storage.schema import PHASE_PATTERN
 
 from tests.storage_tests.conftest import make_meta, result
 
@@ -151,7 +153,7 @@ def test_sampler_contract(make):
     sampler, storage, props = run(21)
     for i, p in enumerate(props):
         assert p.params_unit.shape == (3,) and p.params_unit.min() >= 0 and p.params_unit.max() <= 1
-        assert p.phase in PHASES
+        assert re.fullmatch(PHASE_PATTERN, p.phase.encode())
         assert -1 <= p.parent < i and (p.parent == -1) == (p.phase != "gaussian")
     assert len({tuple(p.params_unit) for p in props}) == len(props)
     # same run seed: the same proposals; another seed: others

@@ -4,6 +4,7 @@ import time
 
 import pytest
 from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.protocol.settings import RunSettings
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.schema import RunMeta
@@ -26,7 +27,7 @@ def make_meta(run_id: str = "run-a", n_params: int = 3, budget: int = 100) -> Ru
         software_version="test",
         created_at_unix_s=time.time(),
         config_hash="abcd1234",
-        extra={"lease_s": 3.0},
+        settings=RunSettings(lease_s=3.0),
         run={"morphology_spec": {"nodes": [1, 2]}, "trial_config": {"duration_s": 0.5}},
     )
 

@@ -38,7 +38,7 @@ def test_file_is_self_describing(tmp_path):
         assert f["trials/status"][:].tolist() == [b"complete"] * 3 + [b"waiting"] * 2
         assert f["trials/distance_m"][2] == 2.0
     meta = read_meta(path)
-    assert meta.morphology_spec == {"nodes": [1, 2]} and meta.extra == {"lease_s": 3.0}
+    assert meta.morphology_spec == {"nodes": [1, 2]} and meta.settings.lease_s == 3.0  # typed, not a dict
 
 
 def test_existing_file_is_not_overwritten(tmp_path):

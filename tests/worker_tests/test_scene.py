@@ -114,7 +114,7 @@ def test_bad_scene_values_are_named():
 def test_scene_from_the_command_line_and_into_the_run_file(tmp_path):
     from spinefarm.coordinator.problem import build_run_config
     from spinefarm.coordinator.setup import SearchSettings, new_run
-    from spinefarm.coordinator.verifier import VerifyPolicy
+    from spinefarm.protocol.settings import JudgePolicy
     from spinefarm.robot.scene import parse_scene
     from spinefarm.storage.hdf5 import read_meta
 
@@ -125,7 +125,7 @@ def test_scene_from_the_command_line_and_into_the_run_file(tmp_path):
     with pytest.raises(ConfigError, match="not a number"):
         parse_scene("slope,slope_deg=steep")
     config = build_run_config("scene-run", "tetraspine-ntrt", duration_s=0.2, trial_overrides={"scene": scene})
-    _, storage = new_run(config, SearchSettings(trials=1, verify=VerifyPolicy(enabled=False)), tmp_path / "run.h5")
+    _, storage = new_run(config, SearchSettings(trials=1, judge=JudgePolicy(enabled=False)), tmp_path / "run.h5")
     storage.close()
     stored = read_meta(tmp_path / "run.h5").trial_config["scene"]
     assert stored == scene  # the HDF5 file records the scene its trials ran on

@@ -1,0 +1,143 @@
+"""A search's run, new or resumed, from what the user typed: checked before any file is written."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import secrets
+import socket
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from spinefarm.cli import checks
+from spinefarm.protocol.errors import ConfigError
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def default_run_id(robot_name: str) -> str:
+    """<robot name>-<time>-<random>: valid as a command-line value, a Zenoh key chunk and a file name."""
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "-", robot_name).lstrip("-_.")[:24] or "run"
+    return f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(2)}"
+
+
+def robot_name(morphology: str) -> str:
+    """The name a run is known by: the robot's own name (a spec file's `name:`), never its path."""
+    from spinefarm.coordinator.problem import is_test_objective
+
+    if is_test_objective(morphology):
+        return morphology.replace(":", "-")
+    from spinefarm.robot.morphology.registry import load_morphology
+
+    return load_morphology(morphology).name
+
+
+def credentials(args: argparse.Namespace) -> Any:
+    if not args.credentials:
+        return None
+    from spinefarm.protocol.credentials import load_credentials
+
+    creds = load_credentials(args.credentials)
+    if creds.world_readable:
+        print(f"warning: credentials file {args.credentials} is readable by every user (chmod 600 it)",
+              file=sys.stderr)
+    return creds
+
+
+def check_run_args(args: argparse.Namespace) -> None:
+    """Everything typed that can be checked before a run file is created."""
+    checks.endpoints("--listen", args.listen)
+    checks.endpoints("--connect", args.connect)
+    checks.port("--api-port", args.api_port, allow_off=True)
+    if args.out:
+        checks.output_path("--out", args.out, (".h5", ".hdf5"))
+
+
+def check_step(config: Any) -> None:
+    """Refuse before the run starts a step every trial would refuse (e.g. tetraspine-hardware at 1 ms).
+    Engine-free: the stable-step estimate is numpy over the structure."""
+    if config.is_test_objective:
+        return
+    from spinefarm.robot.morphology.model import Morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.sim.stability import estimate_stable_step
+
+    cfg = TrialConfig.from_dict(config.trial_config)
+    if cfg.auto_dt or not cfg.refuse_unstable_dt:
+        return
+    morph = Morphology.from_dict(config.morphology_spec)
+    est = estimate_stable_step(morph, cfg.relocate_anchors)
+    if cfg.step_s > est.dt_limit_s:
+        raise ConfigError(
+            f"dt_s is unstable for {morph.name}: its string network has omega_max = {est.omega_max_rad_s:.4g} rad/s "
+            f"and gamma_max = {est.gamma_max_per_s:.4g} 1/s, so explicit string forces diverge above "
+            f"dt = {est.dt_limit_s:.3g} s; set auto_dt (--dt auto) or a smaller step",
+            received=cfg.step_s, expected=f"dt_s <= {est.dt_limit_s:.3g} s")
+
+
+def open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
+    """(core, storage, run file) of the run the arguments ask for."""
+    from spinefarm.coordinator.setup import new_run, resume_run
+
+    trusted = bool(args.credentials)
+    if args.resume:
+        if args.morphology or args.out:
+            raise ConfigError("--resume continues a stored run", received="a morphology or --out too",
+                              expected="only --resume RUN.h5")
+        core, storage = resume_run(args.resume, trials_budget=args.trials, trusted_peers=trusted)
+        return core, storage, Path(args.resume)
+    if not args.morphology:
+        raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")
+    run_id = args.run_id or default_run_id(robot_name(args.morphology))
+    config, settings = run_config(args, run_id)
+    out = Path(args.out) if args.out else Path("runs") / f"{run_id}.h5"
+    core, storage = new_run(config, settings, out, overwrite=args.overwrite, trusted_peers=trusted)
+    return core, storage, out
+
+
+def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
+    """The RunConfig and SearchSettings of a new run."""
+    from spinefarm.cli.sim_commands import trial_overrides
+    from spinefarm.coordinator.fidelity import parse_rungs
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.samplers import DEFAULT_SAMPLER
+    from spinefarm.coordinator.setup import SearchSettings
+    from spinefarm.protocol.settings import AuditPolicy
+
+    rungs = None if args.rungs is None else parse_rungs(args.rungs)
+    if rungs:
+        if args.duration is not None and args.duration != rungs[-1]:
+            raise ConfigError("--duration and --rungs disagree on the trial length", received=args.duration,
+                              expected=f"--rungs ending at the full length ({rungs[-1]:g} s) alone")
+        args.duration = rungs[-1]
+    config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
+                              controller=args.controller, duration_s=args.duration,
+                              trial_overrides=trial_overrides(args))
+    check_step(config)
+    lease = args.lease
+    if lease is None:
+        lease = max(60.0, 20.0 * float(config.trial_config.get("duration_s") or 0.0))
+    settings = SearchSettings(trials=2000 if args.trials is None else args.trials,
+                              sampler=args.sampler or DEFAULT_SAMPLER, sigma=args.sigma, top_k=args.top_k,
+                              startup_trials=args.startup_trials, lease_s=lease, judge=judge_policy(args, config),
+                              audit=AuditPolicy(args.audit, args.audit_tolerance), rungs=rungs or None,
+                              eta=args.eta)
+    return config, settings
+
+
+def judge_policy(args: argparse.Namespace, config: Any) -> Any:
+    """--verify-*: the judge's engine (bullet behind another screen engine) at --verify-dt, or the search's
+    engine at a finer step."""
+    from spinefarm.protocol.settings import JudgePolicy, Rung
+
+    screen = config.trial_config.get("engine", "bullet")
+    engine = args.verify_engine or ("bullet" if screen not in ("bullet", None) else None)
+    rung = Rung(engine, args.verify_dt) if engine and engine != screen else Rung()
+    return JudgePolicy(enabled=not args.no_verify, rung=rung, tolerance=args.verify_tolerance,
+                       perturb=args.verify_perturb)

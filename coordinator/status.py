@@ -1,0 +1,41 @@
+"""The coordinator's live status (written to RUN.h5.status.json for the API): counts, rate, ETA, the
+state of the judge and the audits, and each worker with its engines, environment and audit figures."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+
+def live_status(core: Any) -> dict[str, Any]:
+    """JSON-able status of a CoordinatorCore (its lock held)."""
+    study, scheduler = core.study, core.scheduler
+    now, wall = core.clock(), time.time()
+    rate = core.finish_rate()
+    remaining = max(0, study.planned - study.n_finished)
+    counts = study.storage.counts()
+    return {
+        "run_id": core.run_id,
+        "state": "done" if core.done else ("failed" if core.failure else "running"),
+        "failure": core.failure,
+        "trials_budget": study.budget,
+        "trials_planned": study.planned,
+        "trials_sampled": study.n_asked,
+        "trials_complete": counts["complete"],
+        "trials_failed": counts["failed"],
+        "trials_leased": scheduler.n_leased,
+        "trials_queued": scheduler.n_queued + max(0, study.planned - study.n_asked),
+        "trials_reissued": scheduler.reissued,
+        "tasks_pending": len(core.tasks.pending),
+        "fidelity_raised": core.drift,
+        "audit": {**study.storage.audit_counts(), "environments": core.peers.environments()},
+        "rate_trials_s": rate,
+        "eta_s": (remaining / rate) if rate > 0 else None,
+        "rejected_messages": core.rejected_messages,
+        "forged_results": core.forged_results,
+        "dropped_results": dict(core.dropped_results),
+        "workers": [{"worker_id": w.worker_id, "alive": w.alive, "leases": len(w.leases),
+                     "last_contact_unix_s": wall - (now - w.last_contact_s), **core.peers.describe(w.worker_id)}
+                    for w in scheduler.workers.values()],
+        "updated_at_unix_s": wall,
+    }

@@ -1,0 +1,233 @@
+"""How a run searches, typed and stored with the run: its fidelity ladder, judge, audit and leases.
+
+A run's fidelities are a ladder of rungs. Each rung says how one evaluation is simulated (engine,
+step, simulated duration, settle phase, episodes); a field left None takes the run's trial config.
+The screening rungs are the search's own (the last one is the full trial); the judge is one more
+rung that re-simulates every new best before it counts. Workers run any rung's task like any trial.
+
+RunSettings is stored in the run file as JSON (`RunSettings.SCHEMA` describes every field) and read
+back with `RunSettings.from_dict`, which refuses unknown fields and wrong types with one line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+from itertools import pairwise
+from typing import Any, ClassVar
+
+from spinefarm.protocol.errors import ConfigError, check_range
+
+SCHEDULERS = ("plain", "halving")
+
+
+@dataclass(frozen=True)
+class Rung:
+    """One fidelity: engine (None: the run's), dt_s (None: the run's step), duration_s (None: the
+    run's), settle_s (None: the run's), episodes (evaluations of one parameter set averaged)."""
+
+    engine: str | None = None
+    dt_s: float | None = None
+    duration_s: float | None = None
+    settle_s: float | None = None
+    episodes: int = 1
+
+    def __post_init__(self) -> None:
+        if self.engine is not None and (not isinstance(self.engine, str) or not self.engine.isidentifier()):
+            raise ConfigError("rung engine is not a name", received=self.engine, expected="e.g. bullet, mujoco")
+        for name, low in (("dt_s", 1e-7), ("duration_s", 1e-6), ("settle_s", 0.0)):
+            value = getattr(self, name)
+            if value is not None:
+                check_range(f"rung {name}", value, low, 1e6)
+                object.__setattr__(self, name, float(value))
+        if isinstance(self.episodes, bool) or not isinstance(self.episodes, int) or self.episodes < 1:
+            raise ConfigError("rung episodes out of range", received=self.episodes, expected="an integer >= 1")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Any) -> Rung:
+        return cls(**_known(d, cls, "rung"))
+
+
+@dataclass(frozen=True)
+class JudgePolicy:
+    """The judge: re-simulate every new full-length best at `rung` before it counts.
+
+    Same engine as the screen: the result holds when the distance changes by at most `tolerance`
+    (relative). Another engine (two models, whose distances differ by more than any step error): the
+    judge's distance is the one reported, the screen-to-judge ratio is stored, and the result fails
+    only if the judge's run fails. perturb: also re-simulate with a jittered start pose and 10 % more
+    friction. drift: a run whose judged ratios leave [1 - drift, 1 + drift] raises its fidelity."""
+
+    enabled: bool = True
+    rung: Rung = field(default_factory=Rung)
+    tolerance: float = 0.05
+    perturb: bool = False
+    drift: float = 0.2
+
+    def __post_init__(self) -> None:
+        check_range("judge tolerance", self.tolerance, 0.0, 10.0, low_inclusive=False)
+        check_range("judge drift", self.drift, 0.0, 10.0, low_inclusive=False)
+        if isinstance(self.rung, dict):
+            object.__setattr__(self, "rung", Rung.from_dict(self.rung))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "rung": self.rung.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: Any) -> JudgePolicy:
+        return cls(**_known(d, cls, "judge"))
+
+
+@dataclass(frozen=True)
+class AuditPolicy:
+    """Re-simulate `fraction` of the results (and every new best) on another worker at the same
+    fidelity; a relative distance difference above `tolerance` marks the result, its worker and that
+    worker's environment. quarantine: a worker with a disagreeing audit gets no more leases."""
+
+    fraction: float = 0.0
+    tolerance: float = 1e-6
+    quarantine: bool = True
+
+    def __post_init__(self) -> None:
+        check_range("audit fraction", self.fraction, 0.0, 1.0)
+        check_range("audit tolerance", self.tolerance, 0.0, 10.0)
+
+    @property
+    def enabled(self) -> bool:
+        return self.fraction > 0
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Any) -> AuditPolicy:
+        return cls(**_known(d, cls, "audit"))
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """scheduler: plain (every parameter set at the last rung) or halving (successive halving over the
+    ladder, keeping 1/eta of each rung); ladder: the screening rungs, the last being the full trial;
+    judge, audit: see their classes; lease_s: how long a worker may hold a task."""
+
+    scheduler: str = "plain"
+    ladder: tuple[Rung, ...] = (Rung(),)
+    eta: int = 3
+    judge: JudgePolicy = field(default_factory=JudgePolicy)
+    audit: AuditPolicy = field(default_factory=AuditPolicy)
+    lease_s: float = 60.0
+
+    SCHEMA: ClassVar[dict[str, str]] = {
+        "scheduler": f"one of {', '.join(SCHEDULERS)}",
+        "ladder": "list of rungs {engine, dt_s, duration_s, settle_s, episodes} (null: the run's), "
+                  "increasing durations, the last the full trial",
+        "eta": "integer >= 2: the halving scheduler keeps 1/eta of each rung",
+        "judge": "{enabled, rung, tolerance, perturb, drift}",
+        "audit": "{fraction in [0, 1], tolerance >= 0, quarantine}",
+        "lease_s": "seconds > 0",
+    }
+
+    def __post_init__(self) -> None:
+        if self.scheduler not in SCHEDULERS:
+            raise ConfigError("unknown scheduler", received=self.scheduler, expected=list(SCHEDULERS))
+        ladder = tuple(r if isinstance(r, Rung) else Rung.from_dict(r) for r in self.ladder)
+        object.__setattr__(self, "ladder", ladder)
+        if not ladder:
+            raise ConfigError("a run needs at least one rung", received=[], expected="one rung or more")
+        durations = [r.duration_s for r in ladder]
+        if len(ladder) > 1 and (None in durations or any(b <= a for a, b in pairwise(durations))):
+            raise ConfigError("rungs must be increasing positive durations", received=durations,
+                              expected="e.g. --rungs 10,30 (seconds; the last is the full trial)")
+        if isinstance(self.eta, bool) or not isinstance(self.eta, int) or self.eta < 2:
+            raise ConfigError("eta out of range", received=self.eta, expected="an integer >= 2")
+        check_range("lease_s", self.lease_s, 0.0, low_inclusive=False)
+        for name, cls in (("judge", JudgePolicy), ("audit", AuditPolicy)):
+            if isinstance(getattr(self, name), dict):
+                object.__setattr__(self, name, cls.from_dict(getattr(self, name)))
+
+    @property
+    def top(self) -> int:
+        """Index of the full-length rung."""
+        return len(self.ladder) - 1
+
+    def rung(self, index: int) -> Rung:
+        """Rung `index` of the ladder; -1 (or len(ladder)) is the judge's."""
+        return self.judge.rung if index in (-1, len(self.ladder)) else self.ladder[index]
+
+    def durations_s(self) -> tuple[float, ...]:
+        return tuple(math.nan if r.duration_s is None else r.duration_s for r in self.ladder)
+
+    def planned_evaluations(self, budget: int) -> int:
+        """The budget of parameter sets, plus with halving about budget / eta^k promotions to rung k."""
+        if self.scheduler != "halving":
+            return budget
+        return sum(budget // self.eta**k for k in range(len(self.ladder)))
+
+    def with_judge_rung(self, rung: Rung) -> RunSettings:
+        return replace(self, judge=replace(self.judge, rung=rung))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"scheduler": self.scheduler, "ladder": [r.to_dict() for r in self.ladder], "eta": self.eta,
+                "judge": self.judge.to_dict(), "audit": self.audit.to_dict(), "lease_s": self.lease_s}
+
+    @classmethod
+    def from_dict(cls, d: Any) -> RunSettings:
+        kw = _known(d, cls, "run settings")
+        if "ladder" in kw:
+            if not isinstance(kw["ladder"], list | tuple):
+                raise ConfigError("run settings field 'ladder' is not a list", received=kw["ladder"],
+                                  expected=cls.SCHEMA["ladder"])
+            kw["ladder"] = tuple(Rung.from_dict(r) for r in kw["ladder"])
+        return cls(**kw)
+
+
+def _known(d: Any, cls: type, what: str) -> dict[str, Any]:
+    """d as keyword arguments of cls: an object with known field names only."""
+    if not isinstance(d, dict):
+        raise ConfigError(f"{what} is not an object", received=type(d).__name__, expected="a JSON object")
+    names = {f for f in cls.__dataclass_fields__ if f != "SCHEMA"}
+    unknown = sorted(set(d) - names)
+    if unknown:
+        raise ConfigError(f"{what} has unknown fields", received=unknown, expected=sorted(names))
+    try:
+        return dict(d)
+    except TypeError as exc:  # pragma: no cover - a dict always converts
+        raise ConfigError(f"{what} is malformed", received=str(d)[:80], expected="a JSON object") from exc
+
+
+PROMOTED = "promoted"   # the phase of a row that re-runs its parent at the next rung
+TASKS = ("trial", "judge", "audit")
+
+
+@dataclass(frozen=True)
+class TaskFidelity:
+    """How a worker runs one leased task, beyond the run's trial config: task (trial, judge, audit),
+    engine / dt_s / settle_s (None: the run's), perturb (a jittered start pose and 10 % more friction,
+    run besides the plain one: its distance comes back as the extra `perturbed_distance_m`)."""
+
+    task: str = "trial"
+    engine: str | None = None
+    dt_s: float | None = None
+    settle_s: float | None = None
+    perturb: bool = False
+
+    def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise ConfigError("unknown task", received=self.task, expected=list(TASKS))
+        Rung(self.engine, self.dt_s, None, self.settle_s)  # the same checks as a rung's
+        if not isinstance(self.perturb, bool):
+            raise ConfigError("task field 'perturb' is not a boolean", received=self.perturb, expected="true/false")
+
+    @classmethod
+    def of(cls, task: str, rung: Rung, perturb: bool = False) -> TaskFidelity:
+        return cls(task, rung.engine, rung.dt_s, rung.settle_s, perturb)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Any) -> TaskFidelity:
+        return cls(**_known(d, cls, "task fidelity"))

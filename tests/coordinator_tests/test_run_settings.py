@@ -1,0 +1,146 @@
+"""A run's settings are typed and stored with it; a sampler's own phase needs no storage edit; the judge
+watches the screen and raises the fidelity when its ratios drift (decided from storage, so resumed too)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from spinefarm.coordinator.problem import build_run_config
+from spinefarm.coordinator.samplers import SAMPLERS
+from spinefarm.coordinator.samplers.base import BaseSampler, Proposal, trial_rng
+from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.messages import (
+    ResultSubmission,
+    SubmittedResult,
+    TrialResult,
+    TrialStatus,
+    WorkGrant,
+    WorkRequest,
+    decode_message,
+)
+from spinefarm.protocol.messages import encode_message as enc
+from spinefarm.protocol.settings import JudgePolicy, Rung, RunSettings
+from spinefarm.storage.hdf5 import read_meta
+
+from tests.coordinator_tests.helpers import FakeClock
+
+
+def test_run_settings_round_trip_typed_and_refuse_unknown_fields():
+    s = RunSettings(scheduler="halving", ladder=(Rung("mujoco", 0.002, 3.0), Rung(duration_s=10.0)), eta=2,
+                    judge=JudgePolicy(rung=Rung("bullet", 2.5e-4)))
+    assert RunSettings.from_dict(s.to_dict()) == s
+    with pytest.raises(ConfigError, match="unknown fields") as e:
+        RunSettings.from_dict({**s.to_dict(), "verify": {}})
+    assert "verify" in str(e.value) and "\n" not in str(e.value)
+    with pytest.raises(ConfigError, match="increasing"):
+        RunSettings(scheduler="halving", ladder=(Rung(duration_s=10.0), Rung(duration_s=3.0)))
+    assert s.planned_evaluations(18) == 18 + 9
+
+
+def test_the_stored_run_holds_its_settings_typed(tmp_path):
+    config = build_run_config("typed", "sphere:3", duration_s=0.0)
+    _, storage = new_run(config, SearchSettings(trials=9, rungs=(1.0, 2.0), eta=3, lease_s=7.0), tmp_path / "r.h5")
+    storage.close()
+    settings = read_meta(tmp_path / "r.h5").settings
+    assert isinstance(settings, RunSettings) and settings.scheduler == "halving" and settings.lease_s == 7.0
+    assert settings.durations_s() == (1.0, 2.0) and not settings.judge.enabled  # a test objective: no judge
+
+
+class _StripesSampler(BaseSampler):
+    """A sampler with a phase of its own, unknown to storage."""
+
+    name = "stripes"
+
+    def propose(self, trial_id: int, storage) -> Proposal:
+        return Proposal(trial_rng(self.seed, trial_id).random(self.n_params), "stripes_phase", -1)
+
+
+def _answer(core, worker: str, n: int, distance=lambda a: 1.0) -> WorkGrant:
+    """Take up to n tasks as `worker` and return each with `distance(assignment)` metres."""
+    grant = decode_message(core.handle_work(enc(WorkRequest(worker, n))), WorkGrant)
+    items = tuple(SubmittedResult(a.lease_id, TrialResult(TrialStatus.COMPLETE, "", distance(a), 0.0, 1.0, 1.0, 1.0,
+                                                          1.0, 0.0, 1.0, a.seed, trial_id=a.trial_id))
+                  for a in grant.assignments)
+    if items:
+        core.handle_results(enc(ResultSubmission(worker, items)))
+    return grant
+
+
+def test_a_sampler_with_its_own_phase_needs_no_storage_edit_and_resumes(tmp_path):
+    SAMPLERS["stripes"] = _StripesSampler
+    try:
+        config = build_run_config("stripes", "sphere:3")
+        core, storage = new_run(config, SearchSettings(trials=6, sampler="stripes"), tmp_path / "r.h5", FakeClock())
+        _answer(core, "w1", 3)
+        storage.close()
+        core, storage = resume_run(tmp_path / "r.h5", FakeClock())  # every row validated, the phase too
+        assert set(storage.columns()["phase"].tolist()) == {b"stripes_phase"}
+        storage.close()
+    finally:
+        del SAMPLERS["stripes"]
+
+
+def test_drifting_judged_ratios_raise_the_screens_fidelity_and_a_resumed_run_keeps_it(tmp_path):
+    """A MuJoCo screen judged in Bullet whose judge keeps measuring half the screen's distance: after three
+    judged bests the screen is no longer trusted and new trials run in Bullet at 4x the judge's step."""
+    config = build_run_config("drift", "sphere:3", trial_overrides={"engine": "mujoco"})
+    judge = JudgePolicy(rung=Rung("bullet", 2.5e-4), drift=0.2)
+    core, storage = new_run(config, SearchSettings(trials=20, judge=judge), tmp_path / "r.h5", FakeClock())
+    judged = 0
+    try:
+        for _ in range(40):
+            grant = _answer(core, "w1", 1, lambda a: 0.5 * (a.trial_id + 1) if a.fidelity.task == "judge"
+                            else float(a.trial_id + 1))  # every trial a new best; the judge measures half
+            judged += sum(a.fidelity.task == "judge" for a in grant.assignments)
+            if core.drift:
+                break
+        assert judged == 3 and "ratio 2" in core.drift and core.status()["fidelity_raised"] == core.drift
+        cols = storage.columns()
+        ratios = cols["judge_ratio"][np.isfinite(cols["judge_ratio"])]
+        assert ratios.tolist() == [2.0, 2.0, 2.0] and set(cols["verification"][cols["verification"] != b""]
+                                                          .tolist()) <= {b"judged", b"pending"}
+        grant = decode_message(core.handle_work(enc(WorkRequest("w1", 1))), WorkGrant)
+        f = grant.assignments[0].fidelity
+        if f.task == "trial":
+            assert (f.engine, f.dt_s) == ("bullet", pytest.approx(1e-3))
+    finally:
+        storage.close()
+    core, storage = resume_run(tmp_path / "r.h5", FakeClock())
+    try:
+        assert core.drift is not None  # decided from the stored ratios
+        f = core.tasks.trial_fidelity(0, core.drift is not None)
+        assert (f.engine, f.dt_s) == ("bullet", pytest.approx(1e-3)) and not math.isnan(f.dt_s)
+    finally:
+        storage.close()
+
+
+def _r(distance: float, ok: bool = True) -> TrialResult:
+    status = TrialStatus.COMPLETE if ok else TrialStatus.FAILED
+    return TrialResult(status, "" if ok else "diverged: x", distance, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 0)
+
+
+def test_a_verdict_says_holds_only_within_tolerance_at_the_same_engine():
+    from spinefarm.coordinator.tasks import judge_verdict
+
+    assert judge_verdict(1.0, False, "bullet", _r(1.04), 0.05)[0] == "holds"
+    verdict, reason = judge_verdict(1.0, False, "bullet", _r(0.5), 0.05)
+    assert verdict == "not_reproduced" and "finer step run moved 0.5 m against 1 m" in reason
+    assert judge_verdict(0.0229, True, "bullet", _r(0.0411), 0.05)[0] == "judged"  # never "holds" across engines
+    assert judge_verdict(1.0, True, "bullet", _r(1.0, ok=False), 0.05)[0] == "not_reproduced"
+
+
+def test_a_cross_engine_judgement_is_reported_as_judged_in_bullet_with_both_distances_and_their_ratio():
+    from spinefarm.cli.report import verdict_text
+    from spinefarm.storage.schema import TrialRecord
+
+    fields = dict.fromkeys(("objective", "distance_m", "ntrt_distance_cm", "speed_cm_s", "work_j", "cot",
+                            "mass_kg", "sim_time_s", "wall_time_s", "finished_at_unix_s"), 1.0)
+    rec = TrialRecord(0, (0.5,), (0.5,), "cmaes", -1, 0, "complete", "", worker_id="w", **{
+        **fields, "distance_m": 0.0229, "sim_time_s": 10.0}, verification="judged", verify_distance_m=0.0411,
+        judge_ratio=0.0229 / 0.0411)
+    text = verdict_text(rec, "bullet")
+    assert text.startswith("judged in bullet: 0.0411 m") and "screen 0.0229 m" in text and "ratio 0.557" in text
+    assert "holds" not in text
