@@ -39,6 +39,9 @@ def describe_best(core: Any, path: Path) -> str:
     storage = core.study.storage
     best = storage.best(1)
     lines = []
+    choice = storage.run_meta().settings.engine_choice
+    if choice is not None:
+        lines.append(choice.describe())
     if core.drift:
         lines.append(f"the judge raised the screen's fidelity: {core.drift}")
     audit = core.status()["audit"]

@@ -279,11 +279,19 @@ async function showRun(runId, gen, first) {
     ...(status.audit && status.audit.fraction > 0 ? [card("audits agree / disagree",
       `${status.audit.audits_agrees} / ${status.audit.audits_disagrees}`)] : []),
     meta.physical ? card("engine, step", `${esc(meta.trial_config.engine || "bullet")}, ${meta.trial_config.dt_s ? fmt(meta.trial_config.dt_s * 1000) + " ms" : "–"}`) : "",
+    meta.engine_choice ? engineChoiceCard(meta.engine_choice) : "",
   ].join("");
   drawRunPlots(runId, cols, analysis, meta);
   drawTable(runId, cols);
   document.body.dataset.trialsShown = String(cols.n_trials);
   schedule(() => showRun(runId, gen, false).catch(showError), status.state === "running");
+}
+
+// how `search --engine auto` chose the tier: the calibration's figures, its reason on hover
+function engineChoiceCard(c) {
+  const text = `${esc(c.engine)}: ρ ${fmt(c.spearman, 3)}, top-${c.top_k} ${c.top_overlap}, ratio ${fmt(c.median_distance_ratio, 3)}`;
+  return `<div class="card" title="${esc(c.reason || "")}" data-engine-choice="${esc(c.engine)}"><div class="v">${text}</div>`
+    + `<div class="k">engine auto${c.cached ? " (cached calibration)" : ""}</div></div>`;
 }
 
 // ---------------------------------------------------------------- one trial
