@@ -6,10 +6,13 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: install run test test-all lint bench clean
 
-$(STAMP): pyproject.toml
+# exact versions and hashes from requirements.lock (docs/reproducibility.md says how to refresh it), then the
+# package itself without resolving anything again
+$(STAMP): pyproject.toml requirements.lock
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[dev]'
+	$(PY) -m pip install -q --require-hashes --no-deps -r requirements.lock
+	$(PY) -m pip install -q --no-deps -e .
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -20,12 +23,14 @@ run: $(STAMP)
 test: $(STAMP)
 	sh .ci/ensure-chromium
 	sh .ci/ensure-netns-tools
+	sh .ci/ensure-qemu-user
 	$(PY) -m ruff check .
 	$(PY) -m pytest -q -ra
 
 test-all: $(STAMP)
 	sh .ci/ensure-chromium
 	sh .ci/ensure-netns-tools
+	sh .ci/ensure-qemu-user
 	$(PY) -m pytest -q -ra -m ''
 
 bench: $(STAMP)

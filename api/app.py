@@ -10,7 +10,7 @@ from fastapi import FastAPI
 from spinefarm.api import errors
 from spinefarm.api.pictures import PictureCache
 from spinefarm.api.registry import RunRegistry
-from spinefarm.api.routers import dashboard, files, runs, trials
+from spinefarm.api.routers import dashboard, episodes, files, runs, trials
 from spinefarm.api.schemas import ErrorResponse
 from spinefarm.protocol.errors import ConfigError
 
@@ -35,6 +35,7 @@ def create_app(run_files: Sequence[str | Path] = (), runs_dir: str | Path | None
     errors.install(app)
     app.include_router(runs.router)
     app.include_router(trials.router)
+    app.include_router(episodes.router)
     app.include_router(files.router)
     dashboard.install(app)
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from spinefarm.cli import checks
+from spinefarm.cli.robust_args import robust_given, robust_settings
 from spinefarm.protocol.errors import ConfigError
 
 
@@ -83,14 +84,17 @@ def check_step(config: Any) -> None:
 
 def open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     """(core, storage, run file) of the run the arguments ask for."""
+    from spinefarm.cli.environment_notes import note_environment
     from spinefarm.coordinator.setup import new_run, resume_run
 
     trusted = bool(args.credentials)
     if args.resume:
-        if args.morphology or args.out:
-            raise ConfigError("--resume continues a stored run", received="a morphology or --out too",
+        if args.morphology or args.out or robust_given(args):
+            raise ConfigError("--resume continues a stored run (robust settings included)",
+                              received="a morphology, --out or --episodes/--randomize/--robust too",
                               expected="only --resume RUN.h5")
         core, storage = resume_run(args.resume, trials_budget=args.trials, trusted_peers=trusted)
+        note_environment(args.resume, storage.run_meta().environment or None)
         return core, storage, Path(args.resume)
     if not args.morphology:
         raise ConfigError("no morphology given", expected="a morphology name (e.g. tetraspine) or --resume")
@@ -120,7 +124,8 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
         args.duration = rungs[-1]
     config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
                               controller=args.controller, duration_s=args.duration,
-                              trial_overrides=trial_overrides(args))
+                              trial_overrides=trial_overrides(args),
+                              robust=robust_settings(args, tuple(rungs) if rungs else None))
     check_step(config)
     lease = args.lease
     if lease is None:

@@ -6,6 +6,7 @@ import argparse
 import os
 
 from spinefarm.cli import engine_auto
+from spinefarm.cli.robust_args import add_robust_args
 
 
 def zenoh_args(p: argparse.ArgumentParser, listen_default: str | None) -> None:
@@ -103,6 +104,7 @@ def _judge_args(p: argparse.ArgumentParser) -> None:
 
 
 def _ladder_args(p: argparse.ArgumentParser) -> None:
+    add_robust_args(p)
     g = p.add_argument_group("multi-fidelity screening")
     g.add_argument("--rungs", metavar="S,S,...", default=None,
                    help="screen every parameter set with a short trial and promote the best 1/eta to each longer "

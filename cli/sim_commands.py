@@ -166,6 +166,8 @@ def result_summary(result: Any, morph_name: str, controller: str | None) -> dict
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
+    from spinefarm.cli.environment_notes import note_environment, recorded_environment
+    from spinefarm.protocol.environment import environment_record
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
 
@@ -182,6 +184,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
         morph = load_morphology(morphology)
         controller = args.controller or controller
         seed = args.seed if args.seed is not None else seed
+        note_environment(args.run, recorded_environment(args.run))
     else:
         if args.morphology is None:
             raise ParameterError("no robot to run", received="nothing", expected="a morphology or --run RUN.h5")
@@ -217,7 +220,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
     if args.run is not None:
         summary["rerun_of"] = {"run": str(args.run), "trial_id": stored_id}
     if args.json:
-        print(json.dumps(summary))
+        print(json.dumps({**summary, "environment": environment_record()}))
     else:
         if args.run is not None:
             length = "the robot's trial length" if cfg.duration_s is None else f"{cfg.duration_s:g} s"

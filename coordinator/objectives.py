@@ -45,3 +45,26 @@ def objective_fn(name: str) -> Callable[[TrialResult], float]:
         return OBJECTIVES[name]
     except KeyError:
         raise ConfigError("unknown objective", received=name, expected=sorted(OBJECTIVES)) from None
+
+
+def robust_objective(fn: Callable[[TrialResult], float], name: str) -> Callable[[TrialResult], float]:
+    """The objective of a robust run: `fn` of every episode, reduced by the statistic `name` (mean, q25,
+    min; protocol.robust). A result without episodes (a failed lease, a plain run) scores as `fn` alone."""
+    from spinefarm.protocol.robust import statistic
+
+    statistic([0.0], name)  # an unknown statistic fails here, not at the first result
+
+    def robust(r: TrialResult) -> float:
+        if not r.episodes:
+            return fn(r)
+        return statistic([fn(episode_result(r, e)) for e in r.episodes], name)
+
+    return robust
+
+
+def episode_result(r: TrialResult, e) -> TrialResult:
+    """Episode `e` of result `r` as a TrialResult of its own (the robot's mass and extras of `r`)."""
+    from spinefarm.protocol.messages import TrialStatus
+
+    return TrialResult(TrialStatus(e.status), e.reason, e.distance_m, e.ntrt_distance_cm, e.speed_cm_s, e.work_j,
+                       e.cot, e.sim_time_s, e.wall_time_s, r.mass_kg, e.seed, r.trial_id, r.worker_id, r.extras)

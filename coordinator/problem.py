@@ -7,11 +7,13 @@ in microseconds, so the transport and the coordinator can be tested and benchmar
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.keys import check_run_id
 from spinefarm.protocol.params import ParamSpace, ParamSpec
+from spinefarm.protocol.robust import RobustSpec
 from spinefarm.protocol.run import RunConfig
 
 if TYPE_CHECKING:
@@ -36,10 +38,20 @@ def sphere_space(morphology: str) -> ParamSpace:
 
 def build_run_config(run_id: str, morphology: str, *, objective: str = "distance", seed: int = 0,
                      controller: str | None = None, duration_s: float | None = None,
-                     trial_overrides: dict[str, Any] | None = None) -> RunConfig:
+                     trial_overrides: dict[str, Any] | None = None, robust: dict[str, Any] | None = None
+                     ) -> RunConfig:
     """Resolve `morphology` (a built-in name, a spec file path, or sphere[:N]) into the run object
-    workers fetch. Engine-free: neither a simulator nor a compiler is imported here."""
+    workers fetch. Engine-free: neither a simulator nor a compiler is imported here. robust: RobustSpec.to_dict()
+    of a robust run (K randomised episodes per parameter set, protocol.robust)."""
     check_run_id(run_id)
+    spec = RobustSpec.from_dict(robust)
+    if spec.active:
+        if is_test_objective(morphology):
+            raise ConfigError("robust scoring needs a robot", received=morphology,
+                              expected="a morphology (the test objective has no world to randomise)")
+        config = build_run_config(run_id, morphology, objective=objective, seed=seed, controller=controller,
+                                  duration_s=duration_s, trial_overrides=trial_overrides)
+        return replace(config, robust=spec.to_dict())
     if is_test_objective(morphology):
         space = sphere_space(morphology)
         engine = (trial_overrides or {}).get("engine")  # the test objective ignores it; tasks are routed by it

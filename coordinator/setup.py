@@ -8,13 +8,14 @@ from pathlib import Path
 
 from spinefarm.coordinator.core import CoordinatorCore
 from spinefarm.coordinator.fidelity import trial_scheduler
-from spinefarm.coordinator.objectives import objective_fn
+from spinefarm.coordinator.objectives import objective_fn, robust_objective
 from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sampler_class, sampler_from_dict
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
 from spinefarm.coordinator.tasks import TaskBook
 from spinefarm.protocol.engine_choice import EngineChoice
+from spinefarm.protocol.environment import environment_record
 from spinefarm.protocol.errors import ConfigError, check_range
 from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung, RunSettings
@@ -93,7 +94,7 @@ def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
                    objective=config.objective, seed=config.seed, trials_budget=settings.trials,
                    sampler=sampler.describe(), software_version=software_version(),
                    created_at_unix_s=time.time(), config_hash=config.config_hash(),
-                   run=config.to_dict(), settings=settings.run_settings(config))
+                   run=config.to_dict(), settings=settings.run_settings(config), environment=environment_record())
 
 
 def build_core(storage: BaseStorage, clock=time.monotonic, trusted_peers: bool = False) -> CoordinatorCore:
@@ -104,7 +105,10 @@ def build_core(storage: BaseStorage, clock=time.monotonic, trusted_peers: bool =
     space = config.space()
     settings = meta.settings
     sampler = sampler_from_dict(meta.sampler, len(space))
-    study = Study(storage, sampler, space, meta.trials_budget, objective_fn(meta.objective), meta.seed,
+    objective = objective_fn(meta.objective)
+    if config.robust:  # K episodes per parameter set, scored by a statistic over them
+        objective = robust_objective(objective, config.robust["statistic"])
+    study = Study(storage, sampler, space, meta.trials_budget, objective, meta.seed,
                   trial_scheduler(settings))
     scheduler = Scheduler(clock, settings.lease_s)
     judged = settings.judge.enabled and (not config.is_test_objective or settings.judge.rung.engine is not None)

@@ -14,6 +14,7 @@ from typing import Any
 
 from spinefarm.protocol import limits
 from spinefarm.protocol.errors import ConfigError, MessageError
+from spinefarm.protocol.robust import MAX_EPISODES, EpisodeResult
 from spinefarm.protocol.settings import TaskFidelity
 
 SCHEMA_VERSION = 1
@@ -115,6 +116,8 @@ class TrialResult:
     work_j: work done shortening strings under tension (relaxation is passive).
     cot: work_j / (mass_kg * g * distance_m), dimensionless (inf when distance is 0).
     status: complete, or failed with `reason` (diverged: ..., error: ...); partial metrics kept.
+    episodes: a robust run's episodes (protocol.robust), each in its own randomised world; the parts
+    above are then their medians.
     """
 
     status: TrialStatus
@@ -131,6 +134,7 @@ class TrialResult:
     trial_id: int = -1
     worker_id: str = ""
     extras: dict[str, float] = field(default_factory=dict)
+    episodes: tuple[EpisodeResult, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -139,6 +143,8 @@ class TrialResult:
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["status"] = str(self.status)
+        if not self.episodes:
+            del d["episodes"]
         return d
 
     @classmethod
@@ -149,7 +155,7 @@ class TrialResult:
         kwargs: dict[str, Any] = {}
         for f in fields(cls):
             if f.name not in data:
-                if f.name in ("trial_id", "worker_id", "extras"):
+                if f.name in ("trial_id", "worker_id", "extras", "episodes"):
                     continue
                 raise MessageError(f"trial result lacks field {f.name!r}", received=sorted(data),
                                    expected=[g.name for g in fields(cls)])
@@ -175,6 +181,11 @@ class TrialResult:
         if not _extras_ok(kwargs.get("extras", {})):
             raise MessageError("trial result field 'extras' is malformed", received=str(kwargs["extras"])[:80],
                                expected=f"at most {limits.MAX_EXTRAS} name: number or short text pairs")
+        episodes = kwargs.get("episodes", [])
+        if not isinstance(episodes, list | tuple) or len(episodes) > MAX_EPISODES:
+            raise MessageError("trial result field 'episodes' is malformed", received=str(episodes)[:80],
+                               expected=f"a list of at most {MAX_EPISODES} episode results")
+        kwargs["episodes"] = tuple(EpisodeResult.from_dict(e) for e in episodes)
         return cls(**kwargs)
 
 

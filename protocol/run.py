@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from spinefarm.protocol.errors import MessageError
@@ -34,6 +34,8 @@ class RunConfig:
     param_space: ParamSpace.describe() of the space the unit-cube vectors map into;
     trial_config: TrialConfig.to_dict() with the engine, its options and the scene;
     spec_hash, space_hash, trial_config_hash: what a worker must reproduce from the above.
+    robust: protocol.robust.RobustSpec.to_dict() of a robust run (K randomised episodes per parameter
+    set), empty otherwise (and then left out of to_dict, so a plain run's hash is as before).
     """
 
     KIND = "run_config"
@@ -48,10 +50,13 @@ class RunConfig:
     spec_hash: str = ""
     space_hash: str = ""
     trial_config_hash: str = ""
+    robust: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["param_space"] = [dict(p) for p in self.param_space]
+        if not self.robust:
+            del d["robust"]
         return d
 
     def config_hash(self) -> str:
@@ -84,10 +89,18 @@ class RunConfig:
         for k, v in hashes.items():
             if not isinstance(v, str):
                 raise MessageError(f"run config field {k!r} has the wrong type", received=v, expected="a string")
+        from spinefarm.protocol.errors import ConfigError
+        from spinefarm.protocol.robust import RobustSpec
+
+        try:
+            robust = RobustSpec.from_dict(data.get("robust")).to_dict() if data.get("robust") else {}
+        except ConfigError as exc:
+            raise MessageError(f"run config field 'robust' is malformed: {exc}", received=data.get("robust"),
+                               expected="{episodes, randomize, statistic}") from exc
         return cls(_field(data, "run_id", str, what), _field(data, "morphology", str, what),
                    _field(data, "morphology_spec", dict, what), controller, tuple(space),
                    _field(data, "trial_config", dict, what), _field(data, "objective", str, what),
-                   _field(data, "seed", int, what), **hashes)
+                   _field(data, "seed", int, what), **hashes, robust=robust)
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.morphology.structure import StructureSpec, rotation_from_y
 
 
@@ -70,12 +71,12 @@ def build_bodies(spec: StructureSpec) -> list[BodyModel]:
         for rod in rods:
             mat = spec.rod_material(rod.tag)
             a, b = nodes[rod.a], nodes[rod.b]
-            length = float(np.linalg.norm(b - a))
+            length = fm.norm(b - a)
             masses.append(np.pi * mat.radius_cm**2 * length * mat.density_kg_per_cm3)
             mid = 0.5 * (a + b)
             mids.append(mid)
             rot = rotation_from_y(b - a)
-            half = np.abs(rot) @ np.array([mat.radius_cm, length / 2, mat.radius_cm])
+            half = fm.matvec(np.abs(rot), np.array([mat.radius_cm, length / 2, mat.radius_cm]))
             lo.append(mid - half)
             hi.append(mid + half)
             geoms.append((mid, rot, length, mat.radius_cm))
@@ -101,9 +102,9 @@ def _holding_rod(spec: StructureSpec, node: int, nodes: np.ndarray) -> tuple[np.
         if node not in (rod.a, rod.b):
             continue
         a, b = nodes[rod.a], nodes[rod.b]
-        dist = float(np.linalg.norm(0.5 * (a + b) - nodes[node]))
+        dist = fm.norm(0.5 * (a + b) - nodes[node])
         if best is None or dist < best[0] - 1e-6:
-            best = (dist, (b - a) / np.linalg.norm(b - a), spec.rod_material(rod.tag).radius_cm)
+            best = (dist, (b - a) / fm.norm(b - a), spec.rod_material(rod.tag).radius_cm)
     if best is None:
         return np.zeros(3), 0.0
     return best[1], best[2]
@@ -116,8 +117,8 @@ def anchor_point(spec: StructureSpec, node: int, other: int, nodes: np.ndarray, 
         return p.copy()
     axis, radius = _holding_rod(spec, node, nodes)
     d = nodes[other] - p
-    perp = d - np.dot(d, axis) * axis
-    norm = np.linalg.norm(perp)
+    perp = d - fm.dot(d, axis) * axis
+    norm = fm.norm(perp)
     if radius == 0.0 or norm < 1e-12:
         return p.copy()
     return p + radius * perp / norm
@@ -138,7 +139,7 @@ def build_strings(spec: StructureSpec, bodies: list[BodyModel], relocate_anchors
         body_b[i] = spec.node_segment[s.b]
         anc_a[i] = wa - bodies[body_a[i]].com_cm
         anc_b[i] = wb - bodies[body_b[i]].com_cm
-        start[i] = np.linalg.norm(wb - wa)
+        start[i] = fm.norm(wb - wa)
     return StringGeometry(body_a, body_b, anc_a, anc_b, start)
 
 
@@ -148,7 +149,7 @@ def lowest_rod_surface_cm(spec: StructureSpec) -> float:
     low = np.inf
     for rod in spec.rods:
         a, b = nodes[rod.a], nodes[rod.b]
-        axis = (b - a) / np.linalg.norm(b - a)
+        axis = (b - a) / fm.norm(b - a)
         r = spec.rod_material(rod.tag).radius_cm
         drop = r * np.sqrt(max(0.0, 1.0 - axis[1] ** 2))  # rim reach below the end centre
         low = min(low, a[1] - drop, b[1] - drop)

@@ -92,8 +92,20 @@ class BaseStorage:
             **{name: getattr(result, name) for name in SCORE_NAMES},
             "worker_id": result.worker_id.encode("utf-8", "replace")[:64],
             "finished_at_unix_s": time.time() if finished_at_unix_s is None else finished_at_unix_s})
+        if result.episodes:
+            self._add_episodes(trial_id, result.episodes)
         self._update_front(trial_id)
         return True
+
+    def _add_episodes(self, trial_id: int, episodes: tuple) -> None:
+        raise StorageError("this storage keeps no episodes", expected="a storage with an episodes table")
+
+    def episodes(self, trial_id: int | None = None) -> dict[str, np.ndarray]:
+        """The episodes table (storage.episodes) of a robust run, or of one trial in episode order; empty
+        columns for a plain run."""
+        from spinefarm.storage.episodes import empty_columns
+
+        return empty_columns()
 
     def _update_front(self, trial_id: int) -> None:
         cols = self.columns()

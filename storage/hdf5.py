@@ -30,6 +30,7 @@ import numpy as np
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.messages import SCHEMA_VERSION
 from spinefarm.protocol.settings import RunSettings
+from spinefarm.storage import episodes as ep
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.probe import check_eof, probe, stored_eof
 from spinefarm.storage.runlock import RunLock
@@ -49,7 +50,7 @@ COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 # the reserve a sync only overwrites blocks the file already has. Trimmed to HDF5's end at close.
 RESERVE_B = 8 << 20      # reserved beyond HDF5's end when it is topped up
 RESERVE_LOW_B = 4 << 20  # topped up when less than this is left (one flush grows the file far less)
-_JSON_FIELDS = ("sampler", "settings", "run")
+_JSON_FIELDS = ("sampler", "settings", "run", "environment")
 _TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
 
 
@@ -80,6 +81,8 @@ def _read_meta(f: h5py.File, path: Path) -> RunMeta:
                            received=f.attrs.get("file_schema_version"), expected=FILE_SCHEMA_VERSION)
     kw: dict[str, Any] = {}
     for fld in fields(RunMeta):
+        if fld.name == "environment" and fld.name not in f.attrs:
+            continue  # written before runs recorded one
         raw = f.attrs[fld.name]
         if fld.name == "settings":
             kw[fld.name] = RunSettings.from_dict(json.loads(raw))
@@ -160,20 +163,35 @@ def read_meta(path: str | Path) -> RunMeta:
                                expected="an undamaged spinefarm run file") from exc
 
 
-def write_run(path: str | Path, meta: RunMeta, cols: dict[str, np.ndarray]) -> None:
-    """Write a complete, closed (non-SWMR) run file: used for snapshots and for resume."""
+def write_run(path: str | Path, meta: RunMeta, cols: dict[str, np.ndarray],
+              episodes: dict[str, np.ndarray] | None = None) -> None:
+    """Write a complete, closed (non-SWMR) run file: used for snapshots and for resume. episodes: the
+    episodes table (storage.episodes; none: empty)."""
     n = len(cols["trial_id"])
     with h5py.File(path, "w", libver="latest") as f:
         _write_meta(f, meta)
         for name, ds in _create_datasets(f, meta.n_params, n).items():
             if n:
                 ds[:] = cols[name]
+        ep.create_datasets(f, ep.empty_columns() if episodes is None else episodes, COMPRESSION)
+
+
+def read_episodes(path: str | Path) -> dict[str, np.ndarray]:
+    """The episodes table of a run file (storage.episodes), of its finished trials; empty for a plain run."""
+    _, cols = read_run(path)
+    try:
+        with h5py.File(path, "r", libver="latest", swmr=True) as f:
+            episodes = ep.read_datasets(f)
+    except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:
+        raise StorageError(f"cannot read the episodes of run file {path}: {str(exc).splitlines()[0][:200]}",
+                           expected="an undamaged spinefarm run file") from exc
+    return ep.of_finished(episodes, cols["status"], b"waiting")
 
 
 def snapshot(src: str | Path, dst: str | Path) -> int:
     """Consistent copy of a (possibly live) run file; returns the number of rows copied."""
     meta, cols = read_run(src)
-    write_run(dst, meta, cols)
+    write_run(dst, meta, cols, read_episodes(src))
     return len(cols["trial_id"])
 
 
@@ -240,15 +258,18 @@ class Hdf5Storage(InMemoryStorage):
                                        "promoted re-runs do not count)", received=trials_budget,
                                        expected=f"at least {max(n, 1)}")
                 meta = replace(meta, trials_budget=trials_budget)
+            episodes = read_episodes(path)
             tmp = path.with_name(path.name + ".resume-tmp")
-            write_run(tmp, meta, cols)
+            write_run(tmp, meta, cols, episodes)
             with open(tmp, "rb") as fh:
                 os.fsync(fh.fileno())
             os.replace(tmp, path)  # atomic: the old file stays intact until the new one is complete
             _fsync_dir(path)
             table = TrialTable(meta.n_params, capacity=max(1024, len(cols["trial_id"])))
             table.load(cols)
-            return cls._open_writer(path, meta, table, lock)
+            storage = cls._open_writer(path, meta, table, lock)
+            storage._episodes.load(episodes)
+            return storage
         except BaseException:
             lock.release()
             raise
@@ -279,7 +300,9 @@ class Hdf5Storage(InMemoryStorage):
         meta, cols = read_run(path)
         table = TrialTable(meta.n_params, capacity=max(1, len(cols["trial_id"])))
         table.load(cols)
-        return cls(Path(path), None, meta, table)
+        storage = cls(Path(path), None, meta, table)
+        storage._episodes.load(read_episodes(path))
+        return storage
 
     def create_run(self, meta: RunMeta) -> None:
         raise StorageError("an Hdf5Storage holds its run already", expected="Hdf5Storage.create(path, meta)")
@@ -308,6 +331,7 @@ class Hdf5Storage(InMemoryStorage):
         cols = self.table.columns()
         rows = np.array(sorted(self.table.dirty), dtype=np.int64)
         self.table.dirty.clear()
+        ep.write_new(self._file, self._episodes)  # a finished trial's episodes before its status
         # Fill rows before extending the status column, so a reader never sees a half-written row.
         for c in COLUMNS:
             ds = self._datasets[c.name]

@@ -91,6 +91,12 @@ class Hdf5Reader(BaseStorage):
         at = {tid: j for j, tid in enumerate(rows)}
         return [TrialRecord.from_columns(cols, at[tid]) for tid in ids]
 
+    def episodes(self, trial_id: int | None = None) -> dict[str, np.ndarray]:
+        from spinefarm.storage import episodes as ep
+
+        cols = ep.of_finished(ep.read_datasets(self._file), self._cols["status"], b"waiting")
+        return cols if trial_id is None else ep.rows_of(cols, trial_id)
+
     def close(self) -> None:
         if self._file is not None:
             self._file.close()

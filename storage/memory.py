@@ -10,6 +10,7 @@ import numpy as np
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.messages import TrialStatus, Verification
 from spinefarm.storage.base import DISQUALIFYING_AUDITS, BaseStorage
+from spinefarm.storage.episodes import EpisodeTable, rows_of
 from spinefarm.storage.schema import RunMeta
 from spinefarm.storage.table import TrialTable
 
@@ -21,6 +22,7 @@ class InMemoryStorage(BaseStorage):
         # Complete trials as (-rung, -objective, id), kept sorted as results arrive: best_ids is O(k),
         # not a scan of the table per proposal (a longer multi-fidelity rung ranks first).
         self._ranking: list[tuple[int, float, int]] = []
+        self._episodes = EpisodeTable()
 
     def create_run(self, meta: RunMeta) -> None:
         if self._meta is not None:
@@ -69,6 +71,13 @@ class InMemoryStorage(BaseStorage):
 
     def n_trials(self) -> int:
         return self.table.n
+
+    def _add_episodes(self, trial_id: int, episodes: tuple) -> None:
+        self._episodes.append(trial_id, episodes)
+
+    def episodes(self, trial_id: int | None = None) -> dict[str, np.ndarray]:
+        cols = self._episodes.columns()
+        return cols if trial_id is None else rows_of(cols, trial_id)
 
     def columns(self) -> dict[str, np.ndarray]:
         return self.table.columns()

@@ -101,6 +101,7 @@ class RunMeta:
     config_hash: str = ""
     settings: RunSettings = field(default_factory=RunSettings)   # how the run searches, typed
     run: dict[str, Any] = field(default_factory=dict)   # the RunConfig, stored once
+    environment: dict[str, Any] = field(default_factory=dict)   # what created the run (protocol.environment)
 
     @property
     def n_params(self) -> int:

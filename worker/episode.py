@@ -10,6 +10,7 @@ from functools import lru_cache
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import quaternion_matrix
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.scene import GROUND_TOP_CM, SceneConfig, surface_height_cm
@@ -58,13 +59,13 @@ def build_poses(bodies, lift_cm: float = 0.0, rotation=None) -> np.ndarray:
     """Start poses without jitter (tilted on a slope, lifted clear of the terrain)."""
     rot = _rotation_matrix(rotation)
     q = (0.0, 0.0, 0.0, 1.0) if rotation is None else rotation
-    return np.array([[*(rot @ b.com_cm + np.array([0.0, lift_cm, 0.0])), *q] for b in bodies])
+    return np.array([[*(fm.matvec(rot, b.com_cm) + np.array([0.0, lift_cm, 0.0])), *q] for b in bodies])
 
 
 def start_lift_cm(terrain, morph: Morphology, rotation=None) -> float:
     """How far to raise the robot so that no point along its rods starts lower above the terrain
     than it would above flat ground (0 on flat ground)."""
-    nodes = morph.structure.node_array() @ _rotation_matrix(rotation).T
+    nodes = fm.rotate_rows(morph.structure.node_array(), _rotation_matrix(rotation))
     ends = np.array([(r.a, r.b) for r in morph.structure.rods])
     t = np.linspace(0.0, 1.0, 9)[:, None, None]
     pts = (nodes[ends[:, 0]][None] * (1 - t) + nodes[ends[:, 1]][None] * t).reshape(-1, 3)

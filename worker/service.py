@@ -121,7 +121,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
         if getattr(config, name) != value:
             raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
                                    "version?)", received=value, expected=getattr(config, name))
-    return physics_evaluator(morphology, trial_config, config.controller)
+    return physics_evaluator(morphology, trial_config, config.controller, config.robust)
 
 
 def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:

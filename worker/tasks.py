@@ -104,8 +104,8 @@ def with_fault(result: TrialResult) -> TrialResult:
                                speed_cm_s=result.speed_cm_s * k)
 
 
-def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None) -> Callable[[TrialAssignment],
-                                                                                              TrialResult]:
+def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None,
+                      robust: dict | None = None) -> Callable[[TrialAssignment], TrialResult]:
     """A function of one assignment: the trial at its fidelity (a rung, the judge, an audit), with the
     judge's perturbed run when asked. A missing engine package or an option the engine does not have fails
     here, not in every trial (a worker without the run's engine says so in its requests and is only given
@@ -118,10 +118,19 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
     if trial_config.engine in available_engines():
         engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
     setup = SetupCache()  # bodies, string tables, terrain and a resettable engine world, kept across trials
+    from spinefarm.protocol.robust import RobustSpec
+
+    spec = RobustSpec.from_dict(robust)
 
     def evaluate(a: TrialAssignment) -> TrialResult:
         cfg = task_config(trial_config, a)
         params = np.asarray(a.params_unit, dtype=float)
+        if spec.active:  # K randomised episodes of this parameter set, at this task's fidelity (worker.robust)
+            from spinefarm.worker.robust import run_episodes
+
+            k = dataclasses.replace(spec, episodes=spec.episodes_for(a.duration_s), rung_episodes=(),
+                                    rung_durations_s=())
+            return with_fault(run_episodes(morphology, params, cfg, a.seed, k, controller=controller, setup=setup))
         r = run_trial(morphology, params, cfg, a.seed, controller=controller, setup=setup)
         if a.fidelity is not None and a.fidelity.perturb:
             friction = cfg.ground_friction if cfg.ground_friction is not None else morphology.ground_friction

@@ -329,7 +329,9 @@ async function showTrial(runId, trialId, gen) {
       <div class="panel"><h2>Parameters</h2><div class="tablewrap"><table id="params"><thead><tr><th class="l">name</th>
         <th>value</th><th class="l">unit</th><th>in range (0–1)</th></tr></thead><tbody>${paramRows}</tbody></table></div></div>
     </div>
+    <div id="episodes"></div>
     <div class="panel picture" style="margin-top:1em"><h2>The gait</h2><div id="picture"></div></div>`;
+  if (meta.robust && meta.robust.episodes) showEpisodes(r, t.trial_id, gen);
   const pic = document.getElementById("picture");
   if (!meta.physical) { pic.innerHTML = "<p class='muted'>a test objective: there is no robot to draw</p>"; return; }
   if (t.status === "waiting") { pic.innerHTML = "<p class='muted'>not run yet</p>"; return; }
@@ -349,6 +351,21 @@ async function showTrial(runId, trialId, gen) {
   await img.decode().catch(() => null);
   if (gen !== generation) return;
   pic.replaceChildren(img);
+}
+
+// a robust trial's episodes: each its own randomised world, and their spread
+async function showEpisodes(r, trialId, gen) {
+  const e = await api(`/runs/${r}/trials/${trialId}/episodes`);
+  if (gen !== generation || !e.episodes.length) return;
+  const s = e.spread.speed_cm_s;
+  const draws = Object.entries(e.robust.randomize || {}).map(([k, v]) => `${esc(k)}=${esc(v)}`).join(", ") || "none";
+  const rows = e.episodes.map((x) => `<tr><td>${x.episode}</td><td class="l">${esc(x.status)}</td><td>${fmt(x.speed_cm_s, 4)}</td>
+    <td>${fmt(x.distance_m, 4)}</td><td>${fmt(x.cot, 4)}</td><td>${fmt(x.friction_scale, 4)}</td><td>${fmt(x.mass_scale, 4)}</td></tr>`).join("");
+  document.getElementById("episodes").innerHTML = `<div class="panel" style="margin-top:1em"><h2>Episodes</h2>
+    <p id="episode-spread">${e.episodes.length} episodes (draws: ${draws}; objective: ${esc(e.robust.statistic)} over them):
+      speed median ${fmt(s.median, 4)} cm/s, quartiles ${fmt(s.q25, 4)} – ${fmt(s.q75, 4)}, min ${fmt(s.min, 4)}, max ${fmt(s.max, 4)}</p>
+    <div class="tablewrap"><table id="episode-table"><thead><tr><th>episode</th><th class="l">status</th><th>speed (cm/s)</th>
+      <th>distance (m)</th><th>COT</th><th>friction ×</th><th>mass ×</th></tr></thead><tbody>${rows}</tbody></table></div></div>`;
 }
 
 // ---------------------------------------------------------------- routing

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, MorphologySpecError
+from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.morphology.model import ControlSpec, ImpedanceGains, Morphology
 from spinefarm.robot.morphology.specyaml import (
     LineDict,
@@ -95,7 +96,7 @@ def _template_rods(spec: SpecSource, rods: Any, names: list[str], points: list[n
                     raise spec.fail(rline, field, "unknown node", received=name,
                                     expected=f"a node of segments.nodes: {names}")
             a, b = index[pair[0]], index[pair[1]]
-            if np.linalg.norm(points[a] - points[b]) < 1e-9:
+            if fm.norm(points[a] - points[b]) < 1e-9:
                 raise spec.fail(rline, field, "rod of zero length", received=f"{pair[0]} -> {pair[1]}",
                                 expected="two nodes at different points (length > 0 cm)")
             if str(tag) not in rod_tags:
@@ -134,16 +135,16 @@ def _transform(spec: SpecSource, steps: Any, field: str, line: int | None, index
                            allowed=("axis", "degrees", "about"), required=("axis", "degrees"))
             rline = line_of(rot)
             axis = vector(spec, rot["axis"], f"{tfield}.rotate.axis", rline, names)
-            if np.linalg.norm(axis) == 0.0:
+            if fm.norm(axis) == 0.0:
                 raise spec.fail(rline, f"{tfield}.rotate.axis", "zero axis", received=list(axis),
                                 expected="a non-zero direction")
             angle = np.radians(number(spec, rot["degrees"], f"{tfield}.rotate.degrees", rline, names))
             r = rotation_matrix(tuple(axis), float(angle))
             if "about" in rot:
                 about = vector(spec, rot["about"], f"{tfield}.rotate.about", rline, names)
-                pts = (pts - about) @ r.T + about
+                pts = fm.rotate_rows(pts - about, r) + about
             else:
-                pts = pts @ r.T
+                pts = fm.rotate_rows(pts, r)
     return pts
 
 

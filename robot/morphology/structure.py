@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, MorphologySpecError, check_range
+from spinefarm.robot import fixedmath as fm
 
 NEWTON = 100.0  # kg*cm/s^2 per N
 
@@ -130,7 +131,7 @@ class StructureSpec:
                 raise MorphologySpecError(f"{where} joins two segments",
                                           received=(self.node_segment[rod.a], self.node_segment[rod.b]),
                                           expected="both ends in one segment (a rigid body)")
-            if np.linalg.norm(pts[rod.a] - pts[rod.b]) < 1e-9:
+            if fm.norm(pts[rod.a] - pts[rod.b]) < 1e-9:
                 raise MorphologySpecError(f"{where} has zero length", received=0.0, expected="> 0 cm")
             if rod.tag not in rod_tags:
                 raise MorphologySpecError(f"{where} has a tag with no rod config", received=rod.tag,
@@ -207,19 +208,19 @@ class StructureSpec:
 
 def rotation_from_y(direction: np.ndarray) -> np.ndarray:
     """Shortest-arc rotation matrix taking +Y to unit(direction) (NTRT's rod orientation)."""
-    d = direction / np.linalg.norm(direction)
+    d = np.asarray(direction, dtype=float) / fm.norm(direction)
     y = np.array([0.0, 1.0, 0.0])
-    c = float(np.dot(y, d))
+    c = fm.dot(y, d)
     if c < -1.0 + 1e-12:  # antiparallel: any perpendicular axis works; use X for determinism
         return np.diag([1.0, -1.0, -1.0])
     v = np.cross(y, d)
     vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + vx + vx @ vx / (1.0 + c)
+    return np.eye(3) + vx + fm.matmul(vx, vx) / (1.0 + c)
 
 
 def rotation_matrix(axis: tuple[float, float, float], angle_rad: float) -> np.ndarray:
     """Right-handed rotation about `axis` by `angle_rad` (Rodrigues)."""
     a = np.asarray(axis, dtype=float)
-    a = a / np.linalg.norm(a)
+    a = a / fm.norm(a)
     k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + math.sin(angle_rad) * k + (1 - math.cos(angle_rad)) * (k @ k)
+    return np.eye(3) + math.sin(angle_rad) * k + (1 - math.cos(angle_rad)) * fm.matmul(k, k)

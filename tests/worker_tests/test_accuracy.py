@@ -7,7 +7,10 @@ import math
 import subprocess
 import sys
 
+import pytest
+from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.accuracy import pareto
+from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
 
 
 def test_accuracy_command_writes_table_json_and_plot(tmp_path):
@@ -24,6 +27,23 @@ def test_accuracy_command_writes_table_json_and_plot(tmp_path):
     assert json.loads(out.with_suffix(".json").read_text())["morphology"] == "tetraspine-ntrt"
     assert out.with_suffix(".png").stat().st_size > 10_000
     assert "Pareto front" in proc.stdout
+    _errors_match_their_own_reference(report)
+
+
+def _errors_match_their_own_reference(report):
+    """The reference and the 0.5 ms row's run, re-run here: the reported errors are theirs, unscaled."""
+    morph = load_morphology("tetraspine-ntrt")
+    u = random_unit_params(morph, 1)
+    ref = report["reference"][0]
+    d_ref = run_trial(morph, u, TrialConfig(duration_s=0.2, dt_s=ref["dt_s"]), 1).distance_m
+    assert d_ref == ref["distance_m"]
+    row = next(r for r in report["table"] if r["label"] == "dt 0.5 ms")
+    d = run_trial(morph, u, TrialConfig(duration_s=0.2, dt_s=5e-4), 1).distance_m
+    assert abs(d - d_ref) > 1e-6
+    assert row["distance_errors"][0] == pytest.approx(abs(d - d_ref) / max(abs(d_ref), 0.01), rel=1e-9)
+    assert row["median_distance_error_cm"] == pytest.approx(abs(d - d_ref) * 100.0, rel=1e-9)
+    default = next(r for r in report["table"] if r["label"] == "dt 1 ms (default)")
+    assert report["default_distance_error"] == default["median_distance_error"]
 
 
 def test_pareto_front_keeps_only_undominated_settings():

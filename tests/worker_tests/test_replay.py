@@ -142,7 +142,6 @@ def test_replay_text_says_when_it_diverges(monkeypatch, capsys):
 
 
 @needs_data
-@pytest.mark.slow
 @pytest.mark.parametrize(("name", "low", "high"), [("octahedral-complex", 0.8, 1.3),
                                                    ("tetrahedral-complex", 0.4, 2.0)])
 def test_full_replay_lands_near_ntrt(name: str, low: float, high: float):
@@ -154,7 +153,6 @@ def test_full_replay_lands_near_ntrt(name: str, low: float, high: float):
 
 
 @needs_data
-@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ribbed", "tetraspine-ntrt"])
 def test_full_replay_without_a_reference_completes(name: str):
     report = replay(_folder(name))

@@ -17,6 +17,7 @@ from itertools import chain
 import numpy as np
 import pybullet as pb
 from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel
 from spinefarm.robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
 from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics, world_offsets
@@ -86,7 +87,7 @@ def _load_compound_urdf(body: BodyModel, pos: np.ndarray, quat: tuple[float, ...
     parts = []
     for rod in body.rods:
         x, y, z = (f"{v:.17g}" for v in rod.centre_cm)
-        roll, pitch, yaw = (f"{v:.17g}" for v in _rpy(rod.rotation @ _Z_TO_Y))
+        roll, pitch, yaw = (f"{v:.17g}" for v in _rpy(fm.matmul(rod.rotation, _Z_TO_Y)))
         parts.append(f'<collision><origin xyz="{x} {y} {z}" rpy="{roll} {pitch} {yaw}"/><geometry>'
                      f'<cylinder radius="{rod.radius_cm:.17g}" length="{rod.length_cm:.17g}"/></geometry></collision>')
     ixx, iyy, izz = (f"{v:.17g}" for v in body.inertia_kg_cm2)
@@ -224,7 +225,7 @@ class BulletWorld:
         c = self.client
         n = len(body.rods)
         quat = (0.0, 0.0, 0.0, 1.0) if rotation is None else tuple(map(float, rotation))
-        pos = np.array(pb.getMatrixFromQuaternion(quat)).reshape(3, 3) @ body.com_cm
+        pos = fm.matvec(np.array(pb.getMatrixFromQuaternion(quat)).reshape(3, 3), body.com_cm)
         pos = pos if offset is None else pos + offset
         if n > MAX_SHAPE_ARRAY:
             bid = _load_compound_urdf(body, pos, quat, c)
@@ -234,7 +235,7 @@ class BulletWorld:
                 radii=[r.radius_cm for r in body.rods],
                 lengths=[r.length_cm for r in body.rods],
                 collisionFramePositions=[list(map(float, r.centre_cm)) for r in body.rods],
-                collisionFrameOrientations=[_quat_from_matrix(r.rotation @ _Z_TO_Y) for r in body.rods],
+                collisionFrameOrientations=[_quat_from_matrix(fm.matmul(r.rotation, _Z_TO_Y)) for r in body.rods],
                 physicsClientId=c)
             bid = pb.createMultiBody(body.mass_kg, shape, -1, list(map(float, pos)), list(quat),
                                      useMaximalCoordinates=True, physicsClientId=c)

@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 from numba import njit
+from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel
 
 SAFETY_FACTOR = 2.0
@@ -141,8 +142,8 @@ class SegmentContactGuard:
                 p0.append(rod.centre_cm - half)
                 p1.append(rod.centre_cm + half)
                 radius.append(rod.radius_cm)
-                body_radius[i] = max(body_radius[i], float(np.linalg.norm(p0[-1])) + rod.radius_cm,
-                                     float(np.linalg.norm(p1[-1])) + rod.radius_cm)
+                body_radius[i] = max(body_radius[i], fm.norm(p0[-1]) + rod.radius_cm,
+                                     fm.norm(p1[-1]) + rod.radius_cm)
             start.append(len(p0))
         off = set(excluded)
         pairs = [(a, b) for a in range(len(bodies)) for b in range(a + 1, len(bodies))
@@ -152,7 +153,7 @@ class SegmentContactGuard:
         self.cap_p1 = np.array(p1, dtype=float).reshape(-1, 3)
         self.cap_radius = np.array(radius, dtype=float)
         # bounding sphere of each capsule about its midpoint: half its length plus its radius
-        self.cap_reach = 0.5 * np.linalg.norm(self.cap_p1 - self.cap_p0, axis=1) + self.cap_radius
+        self.cap_reach = 0.5 * fm.norm(self.cap_p1 - self.cap_p0) + self.cap_radius
         self.body_radius = body_radius
         self.pair_a = np.array([a for a, _ in pairs], dtype=np.int64)
         self.pair_b = np.array([b for _, b in pairs], dtype=np.int64)

@@ -10,6 +10,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel, quaternion_matrix
 from spinefarm.robot.scene import GroundSpec, Terrain, pairs_off
 from spinefarm.worker.engines.base import BasePhysics, world_offsets
@@ -67,7 +68,7 @@ class MujocoPhysics(BasePhysics):
         fill_heightfield(self.model, terrain)
         self.dt_s, self.n_bodies, self.n_worlds = dt_s, len(bodies), len(offsets)
         rot = np.eye(3) if start_rotation is None else quaternion_matrix(start_rotation)
-        self.base_pos = np.array([rot @ b.com_cm for b in bodies])  # start COMs before offsets
+        self.base_pos = np.array([fm.matvec(rot, b.com_cm) for b in bodies])  # start COMs before offsets
         self.guard = None
         if self.settings.segment_contacts == "auto":
             from spinefarm.worker.engines.contact_guard import SegmentContactGuard  # compiled: numba only when used
@@ -179,14 +180,14 @@ class MujocoPhysics(BasePhysics):
             for b in range(self.n_bodies):
                 out[w, b, :3] = self.qvel[w][b, :3]
                 # a free joint's angular velocity is in the body frame
-                out[w, b, 3:] = quaternion_matrix(poses[w, b, 3:]) @ self.qvel[w][b, 3:]
+                out[w, b, 3:] = fm.matvec(quaternion_matrix(poses[w, b, 3:]), self.qvel[w][b, 3:])
         return out
 
     def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0), world: int = 0) -> None:
         """Set one body's world-frame velocity; for checks and tests."""
         rot = quaternion_matrix(self.read_poses()[world, index, 3:])
         self.qvel[world][index, :3] = linear_cm_s
-        self.qvel[world][index, 3:] = rot.T @ np.asarray(angular_rad_s, dtype=float)
+        self.qvel[world][index, 3:] = fm.matvec(rot.T, angular_rad_s)
 
     def contact_count(self, world: int = 0) -> int:
         return int(self.data[world].ncon)

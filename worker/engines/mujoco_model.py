@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel, quaternion_matrix
 from spinefarm.robot.scene import GROUND_TOP_CM, Terrain
 from spinefarm.worker.engines.base import GRAVITY_CM_S2
@@ -163,10 +164,11 @@ def _terrain_xml(terrain: Terrain, attributes: str) -> tuple[list[str], list[str
     for i, box in enumerate(terrain.boxes):
         rot = quaternion_matrix(box.quaternion)
         if _is_plane(box):
-            top = np.asarray(box.centre_cm) + rot @ np.array([0.0, box.half_extents_cm[1], 0.0])
+            top = np.asarray(box.centre_cm) + fm.matvec(rot, np.array([0.0, box.half_extents_cm[1], 0.0]))
             hx, _, hz = box.half_extents_cm
+            quat = _quat_wxyz_from_matrix(fm.matmul(rot, _Z_UP_TO_Y_UP))
             world.append(f'<geom name="terrain{i}" type="plane" pos="{_vec(top)}" '
-                         f'quat="{_vec(_quat_wxyz_from_matrix(rot @ _Z_UP_TO_Y_UP))}" size="{_f(hx)} {_f(hz)} 1" '
+                         f'quat="{_vec(quat)}" size="{_f(hx)} {_f(hz)} 1" '
                          f'{attributes}/>')
         else:
             world.append(f'<geom name="terrain{i}" type="box" pos="{_vec(box.centre_cm)}" '
@@ -209,7 +211,7 @@ def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: 
     rgeom = f'friction="{_f(mu_rod * mu_rod)} 0 0" {common}'
     rod_type = "cylinder" if geometry == "cylinders" else "capsule"
     for i, body in enumerate(bodies):
-        pos = (rot @ body.com_cm) + (0.0 if start_offsets_cm is None else start_offsets_cm[i])
+        pos = fm.matvec(rot, body.com_cm) + (0.0 if start_offsets_cm is None else start_offsets_cm[i])
         parts = [f'<body name="s{i}" pos="{_vec(pos)}" quat="{quat}"><freejoint/>',
                  f'<inertial pos="0 0 0" mass="{_f(body.mass_kg)}" diaginertia="{_vec(body.inertia_kg_cm2)}"/>']
         for rod in body.rods:

@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.morphology.model import Morphology
 
@@ -36,8 +37,10 @@ class StabilityEstimate:
 
 
 def _largest_generalised_eig(a: np.ndarray, inv_sqrt_m: np.ndarray) -> float:
+    """Largest eigenvalue against the mass matrix, to 9 significant digits: LAPACK's last bits depend on the
+    CPU's BLAS kernels, and a step chosen from them would too."""
     sym = inv_sqrt_m[:, None] * a * inv_sqrt_m[None, :]
-    return float(max(np.linalg.eigvalsh(0.5 * (sym + sym.T)).max(), 0.0))
+    return fm.round_significant(max(float(np.linalg.eigvalsh(0.5 * (sym + sym.T)).max()), 0.0))
 
 
 def estimate_stable_step(morph: Morphology, relocate_anchors: bool = True) -> StabilityEstimate:
@@ -50,7 +53,7 @@ def estimate_stable_step(morph: Morphology, relocate_anchors: bool = True) -> St
         a, b = int(geom.body_a[i]), int(geom.body_b[i])
         pa = bodies[a].com_cm + geom.anchor_a_cm[i]
         pb = bodies[b].com_cm + geom.anchor_b_cm[i]
-        u = (pb - pa) / max(np.linalg.norm(pb - pa), 1e-12)
+        u = (pb - pa) / max(fm.norm(pb - pa), 1e-12)
         jac[i, 6 * a:6 * a + 3] -= u
         jac[i, 6 * a + 3:6 * a + 6] -= np.cross(geom.anchor_a_cm[i], u)
         jac[i, 6 * b:6 * b + 3] += u
@@ -60,8 +63,8 @@ def estimate_stable_step(morph: Morphology, relocate_anchors: bool = True) -> St
     c = np.array([morph.structure.string_material(t).damping_n_s_per_m for t in tags])
     mass_diag = np.concatenate([np.r_[np.full(3, b.mass_kg), b.inertia_kg_cm2] for b in bodies])
     inv_sqrt_m = 1.0 / np.sqrt(mass_diag)
-    omega = math.sqrt(_largest_generalised_eig(jac.T @ (k[:, None] * jac), inv_sqrt_m))
-    gamma = _largest_generalised_eig(jac.T @ (c[:, None] * jac), inv_sqrt_m)
+    omega = math.sqrt(_largest_generalised_eig(fm.matmul(jac.T, k[:, None] * jac), inv_sqrt_m))
+    gamma = _largest_generalised_eig(fm.matmul(jac.T, c[:, None] * jac), inv_sqrt_m)
     dt_spring = 2.0 / omega if omega > 0 else math.inf
     dt_damp = 2.0 / gamma if gamma > 0 else math.inf
     # the positive root of omega^2 dt^2 + 2 gamma dt = 4

@@ -1,0 +1,70 @@
+"""The environment record: what it holds, what a run file keeps of it, and saying plainly what differs."""
+
+from __future__ import annotations
+
+import json
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+from spinefarm.protocol.environment import describe_differences, differences, environment_record
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_record_names_python_packages_cpu_blas_and_commit():
+    rec = environment_record()
+    assert rec["python"] == platform.python_version()
+    assert rec["packages"]["numpy"] == np.__version__
+    assert rec["packages"]["spinefarm"] == rec["spinefarm_version"]
+    assert rec["cpu_model"] and "sse2" in rec["cpu_flags"].split()
+    assert rec["blas"]["kernel"] and rec["blas"]["library"]
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True).stdout
+    assert rec["spinefarm_commit"].split("+")[0] == head.strip()
+    json.dumps(rec)
+
+
+def test_differences_name_what_changed_and_nothing_else():
+    rec = environment_record()
+    assert differences(rec, rec) == [] and describe_differences(rec, rec) == ""
+    old = {**rec, "python": "3.11.0", "packages": {**rec["packages"], "numpy": "1.26.0"}, "cpu_model": "Other CPU"}
+    lines = differences(old, rec)
+    assert lines[0] == "Python " + rec["python"] + " here, 3.11.0 in the run"
+    assert f"numpy {np.__version__} here, 1.26.0 in the run" in lines
+    assert any(line.startswith("CPU ") for line in lines) and len(lines) == 3
+    assert differences(None, rec) == ["the run file records no environment (written before spinefarm recorded one)"]
+
+
+def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def _forge_numpy_version(path: Path, version: str) -> None:
+    with h5py.File(path, "r+") as f:
+        env = json.loads(f.attrs["environment"])
+        env["packages"]["numpy"] = version
+        f.attrs["environment"] = json.dumps(env, sort_keys=True)
+
+
+def test_a_run_file_records_it_and_trial_run_and_resume_say_what_differs(tmp_path):
+    out = tmp_path / "run.h5"
+    r = _cli("search", "tetraspine", "--trials", "2", "--workers", "1", "--duration", "0.2", "--out", str(out),
+             "--api-port", "-1", "--no-verify")
+    assert r.returncode == 0, r.stderr
+    with h5py.File(out, "r") as f:
+        stored = json.loads(f.attrs["environment"])
+    assert stored["packages"]["numpy"] == np.__version__ and stored["python"] == platform.python_version()
+    same = _cli("trial", "--run", str(out), "--json")
+    assert same.returncode == 0 and "environment differs" not in same.stderr, same.stderr
+    assert json.loads(same.stdout.splitlines()[-1])["environment"]["packages"]["numpy"] == np.__version__
+    _forge_numpy_version(out, "1.26.0")
+    rerun = _cli("trial", "--run", str(out), "--json")
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"the environment differs from the run's: numpy {np.__version__} here, 1.26.0 in the run" in rerun.stderr
+    resumed = _cli("search", "--resume", str(out), "--workers", "1", "--api-port", "-1")
+    assert resumed.returncode == 0, resumed.stderr
+    assert f"numpy {np.__version__} here, 1.26.0 in the run" in resumed.stderr

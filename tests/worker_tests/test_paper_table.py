@@ -1,0 +1,41 @@
+"""The paper's table, reduced: bench/paper_table.py's short form re-run here lands every shipped gait's median
+speed and COT inside the ranges docs/results.md states for it."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+
+from tests.coordinator_tests.procs import ROOT
+
+BLOCK = re.compile(r"<!-- paper_table bullet 4 s: begin -->(.*?)<!-- paper_table bullet 4 s: end -->", re.S)
+RANGE = re.compile(r"\[([-0-9.]+), ([-0-9.]+)\]")
+
+
+def stated() -> tuple[list[str], dict[str, tuple[tuple[float, float], tuple[float, float]]]]:
+    """(the command docs name, gait -> (accepted speed range, accepted COT range))."""
+    block = BLOCK.search((ROOT / "docs" / "results.md").read_text()).group(1)
+    cmd = next(ln.strip() for ln in block.splitlines() if ln.strip().startswith("python bench/paper_table.py"))
+    ranges = {}
+    for line in block.splitlines():
+        found = RANGE.findall(line)
+        if line.startswith("| ") and len(found) == 2:
+            (s0, s1), (c0, c1) = found
+            ranges[line.split("|")[1].strip()] = ((float(s0), float(s1)), (float(c0), float(c1)))
+    return cmd.split()[1:], ranges
+
+
+def test_every_shipped_gait_lands_in_the_range_docs_state():
+    args, ranges = stated()
+    assert set(ranges) == {p.stem for p in (ROOT / "examples" / "gaits").glob("*.json")}
+    args = [a for a in args if a != "--write-docs"]  # a check never rewrites the docs
+    r = subprocess.run([sys.executable, *args], cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    result = json.loads(r.stdout.strip().splitlines()[-1])
+    for gait, ((s0, s1), (c0, c1)) in ranges.items():
+        got = result["spines"][gait]
+        assert s0 <= got["median_speed_cm_s"] <= s1, (gait, got["median_speed_cm_s"], (s0, s1))
+        assert c0 <= got["median_cot"] <= c1, (gait, got["median_cot"], (c0, c1))
+        assert got["configs"]["bullet"]["failed"] == 0
