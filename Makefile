@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install run test test-all lint bench clean
+.PHONY: install run test test-all test-deploy lint bench clean
 
 # exact versions and hashes from requirements.lock (docs/reproducibility.md says how to refresh it), then the
 # package itself without resolving anything again
@@ -32,6 +32,10 @@ test-all: $(STAMP)
 	sh .ci/ensure-netns-tools
 	sh .ci/ensure-qemu-user
 	$(PY) -m pytest -q -ra -m ''
+
+# The compose and SLURM deployments end to end (root only: apt, dockerd, munge, SLURM); docs/deploy.md.
+test-deploy: $(STAMP)
+	$(PY) -m tests.deploy.main
 
 bench: $(STAMP)
 	$(PY) bench/trial_speed.py

@@ -56,4 +56,6 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
         code = "not_found" if exc.status_code == 404 else f"http_{exc.status_code}"
-        return JSONResponse(status_code=exc.status_code, content=detail(code, str(exc.detail)))
+        # headers carry e.g. a 405's Allow
+        return JSONResponse(status_code=exc.status_code, content=detail(code, str(exc.detail)),
+                            headers=getattr(exc, "headers", None))

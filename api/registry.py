@@ -15,12 +15,23 @@ PARALLEL_PROBES = 4
 
 
 def _probe_or_error(path: Path) -> tuple[str, StorageError | None]:
+    if not path.is_file():
+        return "", StorageError("no such file", received=str(path), expected="an existing run file")
     try:
         return probe(path, PROBE_TIMEOUT_S), None
     except StorageError as exc:
         return "", exc
 
 log = logging.getLogger("spinefarm.api")
+
+
+def servable(files: list[Path]) -> tuple[list[Path], list[tuple[Path, StorageError]]]:
+    """The files that open within the probe's deadline, and (file, error) for the others: a damaged file
+    named on the command line is skipped as one in `--runs-dir` is, never read in the server."""
+    with ThreadPoolExecutor(max_workers=PARALLEL_PROBES) as pool:
+        results = list(pool.map(_probe_or_error, files))
+    ok = [f for f, (_, err) in zip(files, results, strict=True) if err is None]
+    return ok, [(f, err) for f, (_, err) in zip(files, results, strict=True) if err is not None]
 
 
 class RunRegistry:

@@ -18,6 +18,7 @@ usage: python bench/coordinator_throughput.py [--workers 2 8 32] [--batch 1 16 0
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import subprocess
@@ -67,10 +68,14 @@ class StartGate:
         return self.inner(payload)
 
 
+_RUN_NUMBER = itertools.count()
+
+
 def measure(morphology: str, n_workers: int, batch: int, trials: int, duration_s: float | None,
             tmp: Path, fsync: bool = True) -> dict:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    run_id = f"bench-{morphology.replace(':', '')}-{n_workers}-{batch}-{int(fsync)}-{os.getpid()}"
+    # one file per measurement: the fsync comparison repeats a setting the main sweep measured already
+    run_id = f"bench-{morphology.replace(':', '')}-{n_workers}-{batch}-{int(fsync)}-{os.getpid()}-{next(_RUN_NUMBER)}"
     config = build_run_config(run_id, morphology, duration_s=duration_s)
     core, storage = new_run(config, SearchSettings(trials=trials, lease_s=600.0), tmp / f"{run_id}.h5")
     storage.fsync = fsync

@@ -115,6 +115,8 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     from spinefarm.coordinator.setup import SearchSettings
     from spinefarm.protocol.settings import AuditPolicy
 
+    given = None if args.rungs is None else parse_rungs(args.rungs)
+    robust_settings(args, tuple(given) if given else None)  # typed mistakes fail before a calibration runs
     choice = choose_engine(args)
     rungs = None if args.rungs is None else parse_rungs(args.rungs)
     if rungs:

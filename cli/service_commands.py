@@ -40,6 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "--coordinator-timeout seconds (it ended while this worker was frozen or cut off)")
     p.add_argument("--coordinator-timeout", type=float, default=30.0, metavar="S",
                    help="seconds of silence after which --exit-when-done gives a run up (default 30)")
+    p.add_argument("--min-trial-limit", type=float, default=30.0, metavar="S",
+                   help="a trial's wall-clock limit is max(S, 8 x its measured cost), 10 S before one is measured; "
+                        "past it the trial fails (timeout) and the worker goes on (default 30)")
     p.add_argument("--engines", metavar="NAME,...", default=None,
                    help="engines this worker offers (default: every installed one); tasks in others go to other "
                         "workers")
@@ -81,7 +84,8 @@ def cmd_worker(args: argparse.Namespace) -> int:
     service = WorkerService(connect=args.connect or (), run_id=args.run_id, worker_id=args.worker_id,
                             batch=args.batch, listen=args.listen or (), zenoh_config_file=args.zenoh_config,
                             exit_when_done=args.exit_when_done, coordinator_timeout_s=args.coordinator_timeout,
-                            credentials_file=args.credentials, engines=parse_engines(args.engines))
+                            credentials_file=args.credentials, engines=parse_engines(args.engines),
+                            min_trial_limit_s=args.min_trial_limit)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: service.stop.set())
     return service.run()
@@ -90,21 +94,14 @@ def cmd_worker(args: argparse.Namespace) -> int:
 def cmd_api(args: argparse.Namespace) -> int:
     import uvicorn
     from spinefarm.api.app import create_app
-    from spinefarm.protocol.errors import StorageError
-    from spinefarm.storage.hdf5 import read_meta
+    from spinefarm.api.registry import servable
 
     checks.port("--port", args.port)
     if not args.files and args.runs_dir is None:
         raise ConfigError("nothing to serve", expected="run files (RUN.h5 ...) and/or --runs-dir DIR")
-    served = []
-    for f in args.files:
-        try:
-            if not Path(f).is_file():
-                raise StorageError("no such file", expected="an existing run file")
-            read_meta(f)
-            served.append(f)
-        except StorageError as exc:
-            print(f"spinefarm api: skipping {f}: {exc}", file=sys.stderr)
+    served, skipped = servable([Path(f) for f in args.files])
+    for f, exc in skipped:
+        print(f"spinefarm api: skipping {f}: {exc}", file=sys.stderr)
     if not served and args.runs_dir is None:
         raise ConfigError("none of the given run files can be served", received=args.files,
                           expected="spinefarm run files (.h5) written by `spinefarm search`")

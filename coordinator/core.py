@@ -44,6 +44,8 @@ from spinefarm.protocol.messages import (
 )
 from spinefarm.protocol.run import RunConfig, WorkerProblem
 
+RETRIED_REASONS = ("timeout:", "crashed:")   # failures on a worker that another worker may not have
+
 log = logging.getLogger("spinefarm.coordinator")
 _RATE_WINDOW_S = 30.0
 
@@ -194,6 +196,10 @@ class CoordinatorCore(TaskDispatch):
             log.warning("result for trial %d has seed %d, expected %d: dropped", tid, result.seed,
                         int(storage.columns()["seed"][tid]))
             return Verdict.INVALID
+        if result.status == TrialStatus.FAILED and result.reason.startswith(RETRIED_REASONS):
+            self.scheduler.retry(tid, result.reason)  # the trial, not the worker, may be at fault: again
+            self._store_given_up()
+            return Verdict.REQUEUED
         if result.worker_id != worker_id:
             result = replace(result, worker_id=worker_id)
         result = self._finite_or_failed(result)

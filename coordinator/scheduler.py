@@ -184,6 +184,14 @@ class Scheduler:
         self._queue.extendleft(reversed(again))
         self.reissued += len(again)
 
+    def retry(self, trial_id: int, why: str) -> None:
+        """The lease holder gave the trial back unfinished (it timed out or crashed its simulator there):
+        re-queued like a lost lease, and given up after max_attempts with `why` leading its reason."""
+        before = len(self.given_up)
+        self._reissue([trial_id], why)
+        if len(self.given_up) > before:
+            self.given_up[-1] = (trial_id, f"{why[:120]} ({self.max_attempts} attempts)")
+
     def expire(self) -> list[int]:
         """Re-queue every trial whose lease deadline has passed; returns their ids."""
         now = self.clock()

@@ -1,7 +1,9 @@
 # The compose init service that makes the deployment's credentials with openssl from Debian.
-FROM debian:bookworm-slim
-RUN apt-get update \
+# BASE: any Debian image; openssl is installed only when the base lacks it (the offline base has it).
+ARG BASE=debian:bookworm-slim
+FROM ${BASE}
+RUN command -v openssl >/dev/null || (apt-get update \
  && apt-get install -y --no-install-recommends openssl \
- && rm -rf /var/lib/apt/lists/*
+ && rm -rf /var/lib/apt/lists/*)
 COPY deploy/make-credentials.sh /usr/local/bin/make-credentials
 ENTRYPOINT ["/bin/sh", "/usr/local/bin/make-credentials"]

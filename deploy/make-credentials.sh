@@ -10,10 +10,12 @@
 #   router.json5, coordinator.json5, worker.json5    Zenoh configs using the files above (`--zenoh-config`)
 # ROUTER_SAN adds names the router is reached by from other machines, e.g. "DNS:farm.example,IP:10.0.0.5".
 # Files are private to their owner; the coordinator's and workers' files belong to uid $SECRETS_OWNER
-# (1000 = the spinefarm user of the service images).
+# (1000 = the spinefarm user of the service images), the router's to uid $ROUTER_OWNER (0 = root, as the
+# official router image runs; 1000 for `spinefarm router` from the service images).
 set -eu
 d="${SECRETS_DIR:-/secrets}"
 owner="${SECRETS_OWNER:-1000}"
+router_owner="${ROUTER_OWNER:-0}"
 umask 077
 mkdir -p "$d"
 chmod 755 "$d"  # the services' user must reach its own files; every file stays private
@@ -62,5 +64,6 @@ for who in coordinator worker; do
 JSON5
   chown "$owner" "$d/$who" "$d/$who.pem" "$d/$who.key" "$d/$who.json5" 2>/dev/null || true
 done
+chown "$router_owner" "$d/credentials" "$d/router.pem" "$d/router.key" "$d/router.json5" 2>/dev/null || true
 chmod 644 "$d/ca.pem"
 echo "credentials in $d: users $(cut -d: -f1 "$d/credentials" | tr '\n' ' ')and TLS certificates"

@@ -41,6 +41,16 @@ def _reject_constant(text: str) -> float:
     raise MessageError("message has a non-JSON constant", received=text, expected="standard JSON numbers")
 
 
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """An object whose keys are all distinct (JSON parsers disagree on which duplicate wins)."""
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        seen: set[str] = set()
+        dup = next(k for k, _ in pairs if k in seen or seen.add(k))
+        raise MessageError("message has a duplicate key", received=dup[:60], expected="distinct keys per object")
+    return out
+
+
 def _too_deep(value: Any) -> bool:
     stack = [(value, 1)]
     while stack:
@@ -60,7 +70,8 @@ def loads(payload: bytes | str) -> Any:
         raise MessageError("message is too large", received=f"{len(payload)} bytes",
                            expected=f"at most {MAX_MESSAGE_BYTES} bytes")
     try:
-        value = json.loads(payload, parse_int=_parse_int, parse_float=_parse_float, parse_constant=_reject_constant)
+        value = json.loads(payload, parse_int=_parse_int, parse_float=_parse_float, parse_constant=_reject_constant,
+                           object_pairs_hook=_no_duplicates)
     except MessageError:
         raise
     except RecursionError:

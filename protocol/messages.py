@@ -104,6 +104,7 @@ RECORDED_EXTRAS: tuple[ExtraPart, ...] = (
     ExtraPart("engine", "S16", "", "physics engine that ran the trial (bullet, mujoco)"),
     ExtraPart("dt_s", "f8", "s", "physics step the trial used (the automatic choice under --dt auto)"),
     ExtraPart("settle_s", "f8", "s", "settle phase before locomotion was scored (0: scored from the start)"),
+    ExtraPart("time_limit_s", "f8", "s", "wall-clock limit the worker gave the trial (past it: failed, timeout)"),
 )
 
 
@@ -243,7 +244,7 @@ def decode(payload: bytes | str, expected_kind: str | None = None) -> tuple[str,
         got = sorted(envelope) if isinstance(envelope, dict) else type(envelope).__name__
         raise MessageError("message is not a spinefarm envelope", received=got,
                            expected="an object with keys schema, kind, body")
-    if envelope["schema"] != SCHEMA_VERSION:
+    if type(envelope["schema"]) is not int or envelope["schema"] != SCHEMA_VERSION:  # not 1.0, not true
         raise MessageError("message has another schema version", received=envelope["schema"],
                            expected=SCHEMA_VERSION)
     kind = envelope["kind"]
@@ -471,6 +472,7 @@ class Verdict(StrEnum):
     STALE = "stale"            # the lease expired or the trial was re-issued: dropped
     UNKNOWN = "unknown"        # no such trial in this run: dropped
     INVALID = "invalid"        # the result does not fit the trial (e.g. seed mismatch): dropped
+    REQUEUED = "requeued"      # timed out or crashed on its worker: issued again (up to 3 attempts in all)
 
 
 @dataclass(frozen=True)

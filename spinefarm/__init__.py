@@ -37,8 +37,11 @@ def load_run(path: str | Path, episodes: bool = False) -> pd.DataFrame:
     import pandas as pd
 
     from spinefarm.storage.hdf5 import read_run
+    from spinefarm.storage.probe import probe
     from spinefarm.storage.schema import COLUMNS, VECTOR_COLUMNS
 
+    if Path(path).is_file():
+        probe(path)  # a damaged file: a StorageError within the probe's deadline, never a hang
     meta, cols = read_run(path)
     data: dict[str, Any] = {}
     units: dict[str, str] = {}

@@ -18,7 +18,8 @@ def write_csv(storage: BaseStorage, out: TextIO, ids: Sequence[int] | None = Non
     w = csv.writer(out)
     w.writerow(scalar + names)
     for i in range(len(cols["trial_id"])) if ids is None else ids:
-        row = [cols[n][i].decode() if isinstance(cols[n][i], bytes) else cols[n][i].item() for n in scalar]
+        row = [cols[n][i].decode("utf-8", "replace") if isinstance(cols[n][i], bytes) else cols[n][i].item()
+               for n in scalar]
         w.writerow(row + cols["params"][i].tolist())
 
 

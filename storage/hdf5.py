@@ -18,8 +18,6 @@ from __future__ import annotations
 import errno
 import json
 import os
-import re
-import stat
 from collections.abc import Callable
 from dataclasses import fields, replace
 from pathlib import Path
@@ -31,6 +29,7 @@ from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.messages import SCHEMA_VERSION
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.storage import episodes as ep
+from spinefarm.storage.file_ops import _fsync_dir, _quiet_failed_deallocs, _reason, _refuse_read_only, _trim
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.probe import check_eof, probe, stored_eof
 from spinefarm.storage.runlock import RunLock
@@ -89,7 +88,7 @@ def _read_meta(f: h5py.File, path: Path) -> RunMeta:
         elif fld.name in _JSON_FIELDS:
             kw[fld.name] = json.loads(raw)
         elif fld.name in ("param_names", "param_units"):
-            kw[fld.name] = tuple(x.decode() if isinstance(x, bytes) else str(x) for x in raw)
+            kw[fld.name] = tuple(x.decode("utf-8", "replace") if isinstance(x, bytes) else str(x) for x in raw)
         elif fld.name in ("param_lows", "param_highs"):
             kw[fld.name] = tuple(float(x) for x in raw)
         elif fld.name == "controller":
@@ -99,7 +98,7 @@ def _read_meta(f: h5py.File, path: Path) -> RunMeta:
         elif fld.name == "created_at_unix_s":
             kw[fld.name] = float(raw)
         else:
-            kw[fld.name] = raw.decode() if isinstance(raw, bytes) else str(raw)
+            kw[fld.name] = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else str(raw)
     return RunMeta(**kw)
 
 
@@ -226,6 +225,7 @@ class Hdf5Storage(InMemoryStorage):
             path.unlink(missing_ok=True)
             status_path(path).unlink(missing_ok=True)
             write_run(path, meta, TrialTable(meta.n_params).columns())
+            lock.bind(path)  # the new file's identity: a link to it is refused too
             _fsync_dir(path)  # the new name too must survive a power cut
             return cls._open_writer(path, meta, TrialTable(meta.n_params), lock)
         except BaseException:
@@ -259,12 +259,21 @@ class Hdf5Storage(InMemoryStorage):
                                        expected=f"at least {max(n, 1)}")
                 meta = replace(meta, trials_budget=trials_budget)
             episodes = read_episodes(path)
-            tmp = path.with_name(path.name + ".resume-tmp")
-            write_run(tmp, meta, cols, episodes)
-            with open(tmp, "rb") as fh:
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)  # atomic: the old file stays intact until the new one is complete
-            _fsync_dir(path)
+            real = path.resolve()  # a symlink stays a symlink: its target is what gets replaced
+            tmp = real.with_name(real.name + ".resume-tmp")
+            try:
+                write_run(tmp, meta, cols, episodes)
+                with open(tmp, "rb") as fh:
+                    os.fsync(fh.fileno())
+                lock.bind(tmp)  # held on the new file before it takes the name
+                os.replace(tmp, real)  # atomic: the old file stays intact until the new one is complete
+            except BaseException as exc:
+                tmp.unlink(missing_ok=True)
+                if isinstance(exc, OSError):
+                    raise StorageError(f"cannot write the resumed copy of {path}: {_reason(exc)}",
+                                       expected="room for a copy of the run file beside it") from exc
+                raise
+            _fsync_dir(real)
             table = TrialTable(meta.n_params, capacity=max(1024, len(cols["trial_id"])))
             table.load(cols)
             storage = cls._open_writer(path, meta, table, lock)
@@ -324,6 +333,7 @@ class Hdf5Storage(InMemoryStorage):
             self._write_dirty()
         except Exception as exc:
             self.write_error = f"cannot write run file {self.path}: {_reason(exc)}"
+            _quiet_failed_deallocs()
             raise StorageError(self.write_error, expected="a working, writable file system with free space") from exc
 
     def _write_dirty(self) -> None:
@@ -392,42 +402,3 @@ class Hdf5Storage(InMemoryStorage):
             if self._lock is not None:
                 self._lock.release()
                 self._lock = None
-
-
-def _reason(exc: BaseException) -> str:
-    """The OS error behind an HDF5 failure ('No space left on device'), else the exception's first line."""
-    m = re.search(r"error message = '([^']+)'", str(exc))
-    if m:
-        return m.group(1)
-    if isinstance(exc, OSError) and exc.strerror:
-        return exc.strerror
-    return str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
-
-
-def _trim(path: Path) -> None:
-    """Cut a closed file's unused reserve (beyond the end its superblock states)."""
-    with open(path, "r+b") as fh:
-        end = stored_eof(fh.read(2048 + 48))
-        if end is not None and os.fstat(fh.fileno()).st_size > end:
-            fh.truncate(end)
-            os.fsync(fh.fileno())
-
-
-def _fsync_dir(path: Path) -> None:
-    """Make a created or replaced directory entry durable (the file's own fsync does not cover it)."""
-    fd = os.open(path.parent, os.O_RDONLY | os.O_DIRECTORY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def _refuse_read_only(path: Path) -> None:
-    """A run file without write permission stays as it is (root could replace it regardless)."""
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        return
-    if not mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH):
-        raise StorageError("run file is read-only", received=str(path),
-                           expected="a writable run file (chmod u+w to continue it, or copy it)")

@@ -8,7 +8,9 @@ handling SIGTERM. Two guards:
 - `check_eof`: the superblock (48 bytes) states the file's end; a shorter file is truncated. Cheap,
   done before every open.
 - `probe`: read the whole file in a child process with a deadline; a child that hangs is killed and
-  the file reported as damaged. Done once per file (resume, the API's first sight of a file).
+  the file reported as damaged. Done once per file (resume, export, load_run, the API's first sight of
+  a file). It also clears the "open for writing" flags a killed writer left (`clear_stale_write_flags`,
+  only when no coordinator holds the file), so h5py, h5dump or pandas open it without --resume.
 """
 
 from __future__ import annotations
@@ -77,6 +79,7 @@ def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S) -> str:
     """Read the whole file in a child process within `timeout_s`; its run id, else StorageError."""
     path = Path(path)
     check_eof(path)
+    clear_stale_write_flags(path)  # a killed writer's file: plain HDF5 readers can open it from now on
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     try:
         r = subprocess.run([sys.executable, "-P", "-c", _PROBE_CODE, str(path)], capture_output=True, text=True,
@@ -89,3 +92,87 @@ def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S) -> str:
         last = lines[-1] if lines else f"exit code {r.returncode}"
         raise StorageError(f"cannot read run file {path}: {last[:300]}", expected="an undamaged run file")
     return r.stdout.strip()
+
+
+# --- a writer killed mid-run leaves HDF5's "open for writing" flags set ----------------------------------
+def _rot(x: int, k: int) -> int:
+    return ((x << k) | (x >> (32 - k))) & 0xFFFFFFFF
+
+
+def _mix(a: int, b: int, c: int) -> tuple[int, int, int]:
+    m = 0xFFFFFFFF
+    a = ((a - c) & m) ^ _rot(c, 4)
+    c = (c + b) & m
+    b = ((b - a) & m) ^ _rot(a, 6)
+    a = (a + c) & m
+    c = ((c - b) & m) ^ _rot(b, 8)
+    b = (b + a) & m
+    a = ((a - c) & m) ^ _rot(c, 16)
+    c = (c + b) & m
+    b = ((b - a) & m) ^ _rot(a, 19)
+    a = (a + c) & m
+    c = ((c - b) & m) ^ _rot(b, 4)
+    b = (b + a) & m
+    return a, b, c
+
+
+def _final(a: int, b: int, c: int) -> int:
+    m = 0xFFFFFFFF
+    c = ((c ^ b) - _rot(b, 14)) & m
+    a = ((a ^ c) - _rot(c, 11)) & m
+    b = ((b ^ a) - _rot(a, 25)) & m
+    c = ((c ^ b) - _rot(b, 16)) & m
+    a = ((a ^ c) - _rot(c, 4)) & m
+    b = ((b ^ a) - _rot(a, 14)) & m
+    return ((c ^ b) - _rot(b, 24)) & m
+
+
+def lookup3(data: bytes, initval: int = 0) -> int:
+    """Bob Jenkins' lookup3 hashlittle, HDF5's metadata checksum."""
+    n = len(data)
+    a = b = c = (0xDEADBEEF + n + initval) & 0xFFFFFFFF
+    i = 0
+    while n - i > 12:
+        x, y, z = struct.unpack_from("<3I", data, i)
+        a, b, c = _mix((a + x) & 0xFFFFFFFF, (b + y) & 0xFFFFFFFF, (c + z) & 0xFFFFFFFF)
+        i += 12
+    if n - i == 0:
+        return c
+    tail = data[i:] + bytes(12 - (n - i))
+    x, y, z = struct.unpack("<3I", tail)
+    return _final((a + x) & 0xFFFFFFFF, (b + y) & 0xFFFFFFFF, (c + z) & 0xFFFFFFFF)
+
+
+def clear_stale_write_flags(path: str | Path) -> bool:
+    """If no coordinator holds the file (storage.runlock) but its superblock still says "open for
+    writing" (a writer was killed), clear that, as `h5clear -s` does, so plain HDF5 readers open it too.
+    True if the flags were cleared; a file in use, of another layout or not writable is left as it is."""
+    from spinefarm.storage.runlock import RunLock
+
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(48)
+    except OSError:
+        return False
+    if head[:8] != _SIGNATURE or len(head) < 48 or head[8] not in (2, 3) or head[11] == 0:
+        return False
+    if struct.unpack_from("<I", head, 44)[0] != lookup3(head[:44]):
+        return False  # not a superblock this code understands: leave it to HDF5
+    try:
+        lock = RunLock(path).acquire()
+    except (StorageError, OSError):
+        return False  # a live writer (or a directory we may not touch)
+    try:
+        fixed = head[:11] + b"\0" + head[12:44]
+        fd = os.open(path, os.O_WRONLY)
+        try:
+            os.pwrite(fd, fixed + struct.pack("<I", lookup3(fixed)), 0)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+    except OSError:
+        return False
+    finally:
+        lock.release()
+    return True

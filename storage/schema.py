@@ -20,7 +20,7 @@ from spinefarm.protocol.messages import (
 )
 from spinefarm.protocol.settings import RunSettings
 
-FILE_SCHEMA_VERSION = 6
+FILE_SCHEMA_VERSION = 7
 
 # A sampler names its own phases: any short lower-case name is a valid phase (no list to extend here).
 PHASE_PATTERN = rb"^[a-z][a-z0-9_]{0,15}$"
@@ -151,6 +151,7 @@ class TrialRecord:
     rung: int = 0
     duration_s: float = float("nan")
     settle_s: float = float("nan")
+    time_limit_s: float = float("nan")
     pareto_front: int = 0
 
     @classmethod
@@ -161,7 +162,7 @@ class TrialRecord:
             if c.name in VECTOR_COLUMNS:
                 kw[c.name] = tuple(float(x) for x in v)
             elif c.dtype.startswith("S"):
-                kw[c.name] = v.decode() if isinstance(v, bytes) else str(v)
+                kw[c.name] = v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
             elif c.dtype.startswith("i"):
                 kw[c.name] = int(v)
             else:

@@ -12,19 +12,15 @@ from __future__ import annotations
 import json
 import logging
 import os
-import re
-import socket
 import threading
 import time
-import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 import zenoh
 from spinefarm.protocol import keys
-from spinefarm.protocol.errors import ConfigError, MessageError, RunMismatchError, SpinefarmError
+from spinefarm.protocol.errors import ConfigError, MessageError, SpinefarmError
 from spinefarm.protocol.messages import (
     ResultAck,
     ResultSubmission,
@@ -32,18 +28,27 @@ from spinefarm.protocol.messages import (
     SubmittedResult,
     TrialAssignment,
     TrialResult,
-    TrialStatus,
     WorkGrant,
     WorkRequest,
     decode_message,
     encode_message,
 )
-from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.run import RunConfig, WorkerProblem
-from spinefarm.worker.tasks import available_engines, environment, physics_evaluator, with_fault
+from spinefarm.worker.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
+from spinefarm.worker.pacing import (
+    EXIT_REFUSED,
+    Backoff,
+    BatchSizer,
+    default_worker_id,
+    listening_endpoints,
+    mark_ready,
+)
+from spinefarm.worker.sandbox import MIN_LIMIT_S, TrialLimit, TrialSandbox
+from spinefarm.worker.tasks import available_engines, environment
 
+__all__ = ["Backoff", "BatchSizer", "WorkerService", "build_evaluator", "default_worker_id", "sphere_result",
+           "zenoh_config"]
 log = logging.getLogger("spinefarm.worker")
-Evaluator = Callable[[TrialAssignment], TrialResult]
 # A 2 s transport lease lets the coordinator notice a frozen (SIGSTOPped) worker in ~2 s, not 10 s.
 WORKER_LEASE_MS = 2000
 # With --exit-when-done: a run whose coordinator stays silent this long has ended (it may have ended
@@ -51,13 +56,6 @@ WORKER_LEASE_MS = 2000
 COORDINATOR_TIMEOUT_S = 30.0
 # A worker still without its coordinator after this long says so (then keeps trying).
 UNREACHABLE_WARN_S = 3.0
-
-
-def default_worker_id() -> str:
-    host = "".join(ch if ch.isalnum() or ch in "-_." else "-" for ch in socket.gethostname())[:32]
-    return f"{host or 'worker'}-{os.getpid()}-{uuid.uuid4().hex[:6]}"
-
-
 def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
                  config_file: str | Path | None = None, credentials_file: str | Path | None = None) -> zenoh.Config:
     """Client of the coordinator/router at `connect`; multicast scouting off; short transport lease;
@@ -81,98 +79,14 @@ def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
     return conf
 
 
-# --- evaluators ------------------------------------------------------------------------------------
-def sphere_result(space: ParamSpace, a: TrialAssignment, delay_s: float = 0.0) -> TrialResult:
-    """The built-in test objective: no physics, a smooth bowl with its top at x_i = 0.3.
-
-    delay_s: wall time the trial takes (sleeping), to stand in for a physics trial in fault tests.
-    """
-    t0 = time.perf_counter()
-    x = space.from_unit(np.asarray(a.params_unit))
-    if delay_s > 0:
-        time.sleep(delay_s)
-    distance_m = float(len(x) - np.sum((x - 0.3) ** 2))
-    work_j = float(np.sum(x**2))
-    return TrialResult(TrialStatus.COMPLETE, "", distance_m, 100.0 * distance_m, 10.0 * distance_m, work_j,
-                       work_j / (9.81 * distance_m) if distance_m > 0 else float("inf"), 10.0,
-                       time.perf_counter() - t0, 1.0, a.seed)
-
-
-def build_evaluator(config: RunConfig) -> Evaluator:
-    """Turn a run object into a function of one assignment. The robot, its parameter space and the
-    trial config are built from the run's own data (never looked up by name) and must reproduce the
-    run's hashes; otherwise RunMismatchError says which part differs."""
-    space = config.space()
-    if config.is_test_objective:  # the test objective, see coordinator.problem
-        if re.fullmatch(r"sphere(:\d+)?", config.morphology) is None:
-            raise RunMismatchError("run has no morphology spec", received=config.morphology,
-                                   expected="a morphology spec, or the test objective sphere[:N]")
-        delay_s = float(config.trial_config.get("duration_s") or 0.0)
-        return lambda a: with_fault(sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s))
-    from spinefarm.robot.morphology.model import Morphology
-    from spinefarm.worker.trial import TrialConfig
-
-    morphology = Morphology.from_dict(config.morphology_spec)
-    trial_config = TrialConfig.from_dict(config.trial_config)
-    built = {"spec_hash": morphology.spec_hash(),
-             "space_hash": morphology.param_space(config.controller).space_hash(),
-             "trial_config_hash": trial_config.config_hash()}
-    for name, value in built.items():
-        if getattr(config, name) != value:
-            raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
-                                   "version?)", received=value, expected=getattr(config, name))
-    return physics_evaluator(morphology, trial_config, config.controller, config.robust)
-
-
-def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:
-    nan = float("nan")
-    return TrialResult(TrialStatus.FAILED, reason[:150], nan, nan, nan, nan, nan, 0.0, wall_time_s, nan,
-                       a.seed)
-
-
-class Backoff:
-    """Exponential wait between retries while the coordinator is absent."""
-
-    def __init__(self, first_s: float = 0.05, max_s: float = 2.0) -> None:
-        self.first_s, self.max_s, self._next = first_s, max_s, first_s
-
-    def next(self) -> float:
-        wait, self._next = self._next, min(self._next * 2, self.max_s)
-        return wait
-
-    def reset(self) -> None:
-        self._next = self.first_s
-
-
-class BatchSizer:
-    """Trials to ask for: a fixed number, or (auto) about `target_s` of work by the mean trial time.
-
-    Slow physics trials go one at a time (a lost worker strands little work); microsecond test trials
-    go in large batches, so round trips do not dominate.
-    """
-
-    def __init__(self, fixed: int | None, target_s: float = 0.5, max_batch: int = 64) -> None:
-        self.fixed, self.target_s, self.max_batch = fixed, target_s, max_batch
-        self._mean_s: float | None = None
-
-    def observe(self, wall_time_s: float) -> None:
-        self._mean_s = wall_time_s if self._mean_s is None else 0.8 * self._mean_s + 0.2 * wall_time_s
-
-    def size(self) -> int:
-        if self.fixed is not None:
-            return self.fixed
-        if self._mean_s is None:
-            return 1
-        return max(1, min(self.max_batch, int(self.target_s / max(self._mean_s, 1e-6))))
-
-
 class WorkerService:
     def __init__(self, *, connect: Sequence[str], run_id: str | None = None, worker_id: str | None = None,
                  batch: int | None = None, listen: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
                  exit_when_done: bool = False, query_timeout_s: float = 5.0,
                  submit_interval_s: float = 1.0, idle_exit_s: float = 2.0,
                  coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S,
-                 credentials_file: str | Path | None = None, engines: tuple[str, ...] | None = None) -> None:
+                 credentials_file: str | Path | None = None, engines: tuple[str, ...] | None = None,
+                 isolate: bool = True, min_trial_limit_s: float = MIN_LIMIT_S) -> None:
         """engines: the engines this worker offers (default: every installed one)."""
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
         self.engines = available_engines(engines)
@@ -182,6 +96,15 @@ class WorkerService:
             raise ConfigError("batch out of range", received=batch, expected="1 <= batch <= 4096, or auto")
         self.batch = BatchSizer(batch)
         self.exit_when_done = exit_when_done
+        self.isolate = isolate   # trials in a child process under a wall-clock limit (worker.sandbox)
+        if not min_trial_limit_s > 0:
+            raise ConfigError("minimum trial limit out of range", received=min_trial_limit_s, expected="seconds > 0")
+        self.min_trial_limit_s = min_trial_limit_s
+        self._sandboxes: list[TrialSandbox] = []
+        # SPINEFARM_ACK_LOG: one line per verdict received (run, trial, verdict, status, distance), for the
+        # fault benches to count lost and duplicated results against what the coordinator acknowledged
+        ack_log = os.environ.get("SPINEFARM_ACK_LOG")
+        self._ack_log = open(ack_log, "a", buffering=1) if ack_log else None  # noqa: SIM115 (lives with the worker)
         self.query_timeout_s = query_timeout_s
         self.submit_interval_s = submit_interval_s
         self.idle_exit_s = idle_exit_s
@@ -241,13 +164,23 @@ class WorkerService:
             if not configs:
                 return None
             try:
-                self._evaluators[config_hash] = build_evaluator(configs[0])
+                self._evaluators[config_hash] = self._build(configs[0])
             except Exception as exc:  # a spec this worker cannot build: say so, serve nothing of it
                 reason = str(exc) if isinstance(exc, SpinefarmError) else f"{type(exc).__name__}: {exc}"
                 log.error("cannot run trials of run %s: %s", run_id, reason)
                 self._report_problem(session, run_id, reason, lease)
                 return None
         return self._evaluators[config_hash]
+
+    def _build(self, config: RunConfig) -> Evaluator:
+        """In a trial process with a wall-clock limit per trial (worker.sandbox), or in this one (the test
+        objective without fault bands cannot hang: its microsecond trials skip the ~0.2 ms round trip)."""
+        if not self.isolate or (config.is_test_objective and "poison" not in config.trial_config):
+            return build_evaluator(config)
+        sandbox = TrialSandbox(config, TrialLimit(self.min_trial_limit_s), self.stop)
+        self._sandboxes.append(sandbox)
+        sandbox.start()
+        return sandbox.run
 
     def _report_problem(self, session: zenoh.Session, run_id: str, reason: str, lease: TrialAssignment) -> None:
         self.unservable[run_id] = reason
@@ -258,8 +191,13 @@ class WorkerService:
     def _apply(self, run_id: str, verdicts: tuple) -> None:
         pending = self._pending.get(run_id, {})
         for trial_id, verdict in verdicts:
-            if pending.pop(trial_id, None) is not None and verdict.value != "stored":
+            item = pending.pop(trial_id, None)
+            if item is not None and verdict.value != "stored":
                 log.info("trial %d of run %s not stored: %s", trial_id, run_id, verdict.value)
+            if item is not None and self._ack_log is not None:
+                self._ack_log.write(f"{run_id} {trial_id} {verdict.value} {item.result.status} "
+                                    f"{item.result.distance_m!r}\n")
+                self._ack_log.flush()
 
     def _submit(self, session: zenoh.Session, skip: str | None = None) -> bool:
         """Send every unacknowledged result (but those of run `skip`); True if nothing is left pending."""
@@ -270,17 +208,32 @@ class WorkerService:
             acks, refused = self._query(session, keys.results(run_id), encode_message(sub), ResultAck)
             for ack in acks:
                 self._apply(run_id, ack.verdicts)
-            if refused and not acks:
+            if acks and run_id == self._current_run():
+                self._last_heard = time.monotonic()
+            if not acks and self.exit_when_done and run_id in self._done_runs:
+                # Its coordinator said done or fell silent for --coordinator-timeout: nobody will take them.
+                log.warning("run %s is over; %d results it never acknowledged are dropped", run_id, len(pending))
+                pending.clear()
+            elif refused and not acks:
                 # The coordinator answered but refused the batch: resending it would loop forever.
                 log.error("run %s refused %d results; dropping them (their leases will expire)",
                           run_id, len(pending))
                 pending.clear()
         return not any(pending for run_id, pending in self._pending.items() if run_id != skip)
 
-    def _run_one(self, evaluate: Evaluator, a: TrialAssignment) -> TrialResult:
+    def _current_run(self) -> str | None:
+        return self.run_id if self.run_id is not None else self._current
+
+    def _silent(self) -> bool:
+        """With --exit-when-done: the current run's coordinator has not answered for the timeout."""
+        return self.exit_when_done and time.monotonic() - self._last_heard >= self.coordinator_timeout_s
+
+    def _run_one(self, evaluate: Evaluator, a: TrialAssignment) -> TrialResult | None:
         t0 = time.perf_counter()
         try:
             result = evaluate(a)
+            if result is None:  # stopping: the trial was abandoned, its lease will expire
+                return None
         except SpinefarmError as exc:
             result = failed_result(a, f"error: {exc}", time.perf_counter() - t0)
         except Exception as exc:  # a bug in one trial must not take the worker down
@@ -292,28 +245,46 @@ class WorkerService:
     def _open(self) -> zenoh.Session | None:
         """A client session opens only once its router is reachable: retry with back-off until stopped."""
         backoff = Backoff(0.1, 2.0)
-        since, told = time.monotonic(), False
+        since, told, refused_since = time.monotonic(), "", time.monotonic()
+        where = ", ".join(self._conf_args[0]) or "the configured endpoints"
         while not self.stop.is_set():
             try:
                 return zenoh.open(zenoh_config(*self._conf_args))  # a config is used up by open
             except zenoh.ZError as exc:
                 log.info("coordinator not reachable yet (%s); retrying", exc)
-                if not told and time.monotonic() - since >= UNREACHABLE_WARN_S:
-                    where = ", ".join(self._conf_args[0]) or "the configured endpoints"
-                    log.warning("cannot reach a coordinator at %s; still trying (Ctrl-C to stop)", where)
-                    told = True
+                if time.monotonic() - since >= UNREACHABLE_WARN_S:
+                    listening = listening_endpoints(self._conf_args[0])
+                    state = "refused" if listening else "unreachable"
+                    if state == "refused" and told != state:
+                        refused_since = time.monotonic()
+                        log.error("refused by %s: it accepts connections but not this worker's Zenoh session "
+                                  "(missing or wrong --credentials, or TLS settings that do not match)",
+                                  ", ".join(listening))
+                    elif state != told:
+                        log.warning("cannot reach a coordinator at %s; still trying (Ctrl-C to stop)", where)
+                    told = state
+                    # a proxy in front of a restarting coordinator refuses for a few seconds too: give up only
+                    # after --coordinator-timeout of refusals
+                    if (state == "refused" and self.exit_when_done
+                            and time.monotonic() - refused_since >= self.coordinator_timeout_s):
+                        log.error("giving up (--exit-when-done): refused for %.0f s", time.monotonic() - refused_since)
+                        self.exit_code = EXIT_REFUSED
+                        return None
                 self.stop.wait(backoff.next())
         return None
 
     def run(self) -> int:
         session = self._open()
         if session is None:
-            return 0
+            return self.exit_code
         token = session.liveliness().declare_token(keys.worker_token(self.worker_id))
+        mark_ready(self.worker_id)
         try:
             self._loop(session)
         finally:
             self._submit(session)
+            for sandbox in self._sandboxes:
+                sandbox.close()
             token.undeclare()
             session.close()
         return self.exit_code
@@ -343,7 +314,7 @@ class WorkerService:
             if not grants:
                 if refused and carried:
                     self._submit(session)  # let the result path decide what to do with them
-                if self.exit_when_done and time.monotonic() - self._last_heard >= self.coordinator_timeout_s:
+                if self._silent():
                     log.warning("the coordinator of run %s has been silent for %.0f s: its run is over here",
                                 run_id, time.monotonic() - self._last_heard)
                     self._done_runs.add(run_id)
@@ -375,15 +346,23 @@ class WorkerService:
                 self.stop.wait(backoff.next())
                 continue
             backoff.reset()
-            pending = self._pending.setdefault(run_id, {})
-            last_submit = time.monotonic()
-            for a in grant.assignments:
-                if self.stop.is_set():
-                    break
-                t0 = time.perf_counter()
-                pending[a.trial_id] = SubmittedResult(a.lease_id, self._run_one(evaluate, a))
-                self.batch.observe(time.perf_counter() - t0)
-                self.trials_run += 1
-                if time.monotonic() - last_submit >= self.submit_interval_s:
-                    self._submit(session)
-                    last_submit = time.monotonic()
+            self._run_batch(session, run_id, evaluate, grant.assignments)
+
+    def _run_batch(self, session: zenoh.Session, run_id: str, evaluate: Evaluator,
+                   assignments: tuple[TrialAssignment, ...]) -> None:
+        """Run a grant's trials in order, handing results in every submit_interval_s."""
+        pending = self._pending.setdefault(run_id, {})
+        last_submit = time.monotonic()
+        for a in assignments:
+            if self.stop.is_set() or self._silent():
+                break  # a coordinator silent this long is gone: its leases are void
+            t0 = time.perf_counter()
+            result = self._run_one(evaluate, a)
+            if result is None:
+                break
+            pending[a.trial_id] = SubmittedResult(a.lease_id, result)
+            self.batch.observe(time.perf_counter() - t0)
+            self.trials_run += 1
+            if time.monotonic() - last_submit >= self.submit_interval_s:
+                self._submit(session)
+                last_submit = time.monotonic()

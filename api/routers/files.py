@@ -32,7 +32,8 @@ def download(path: Annotated[Path, Depends(run_path)]) -> FileResponse:
                         background=BackgroundTask(os.unlink, tmp))
 
 
-@router.get("/trials.csv", summary="Every trial as CSV (parameters in named columns)")
+@router.get("/trials.csv", summary="Every trial as CSV (parameters in named columns)", response_class=Response,
+            responses={200: {"content": {"text/csv": {}}, "description": "one row per trial, a header row first"}})
 def csv_file(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> Response:
     buf = io.StringIO()
     write_csv(storage, buf)

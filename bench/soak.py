@@ -1,0 +1,340 @@
+"""Soak: a multi-fidelity search on 4 workers under a random schedule of faults runs to its exact budget.
+
+--minutes sizes the budget (about 3.5 parameter sets a second on 2 shared cores); faults go on until the
+run is over: worker SIGKILLs and SIGSTOPs (3-8 s), coordinator SIGKILLs, each
+process restarted automatically whenever it exits before the run is over (as compose's restart policies
+do; nothing is restarted by hand), hang- and crash-poison trials (the
+test objective's fault bands: a trial there sleeps for ever or segfaults its trial process), a forging
+peer (results for leases it was never given, also under other workers' ids) and a 10 s network
+partition of two workers (network namespaces, tests/netns.py; without root the workers share loopback
+and the partition is skipped, said in the JSON).
+
+Checked from the run file and the workers' acknowledgement logs (SPINEFARM_ACK_LOG): every parameter set
+of the budget evaluated, no row left waiting, 0 lost (acknowledged as stored, absent or different in
+the file), 0 duplicated (acknowledged as stored twice), 0 forged rows stored as complete, no process
+left running once the run is over, no exit the schedule did not cause.
+usage: python bench/soak.py [--minutes 30] [--seed 1] [--dir DIR]      (one JSON object)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from dataclasses import replace
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from spinefarm.coordinator.problem import build_run_config  # noqa: E402
+from spinefarm.coordinator.setup import SearchSettings, new_run  # noqa: E402
+from spinefarm.storage.hdf5 import read_run  # noqa: E402
+
+POISON = {"hang": [0.0, 0.015], "crash": [0.015, 0.03]}   # on the first unit parameter
+FORGED_M = 1234.5
+RUNGS_S = (0.1, 0.3)        # test-objective trials take their duration in wall time
+PARTITION_S = 10.0
+N_WORKERS = 4
+COORDINATOR_TIMEOUT_S = 60   # a restarted coordinator validates and rewrites its file: slow under load
+
+
+def make_run(path: Path, run_id: str, trials: int, seed: int) -> None:
+    cfg = build_run_config(run_id, "sphere:4", seed=seed, duration_s=RUNGS_S[-1])
+    cfg = replace(cfg, trial_config={"duration_s": RUNGS_S[-1], "poison": POISON})
+    _, storage = new_run(cfg, SearchSettings(trials=trials, sampler="random", lease_s=20.0,
+                                             rungs=RUNGS_S), path)
+    storage.close()
+
+
+class Net:
+    """Where each process runs: the hub and two worker hosts in namespaces, or plain loopback."""
+
+    def __init__(self, want_netns: bool) -> None:
+        from tests.coordinator_tests.helpers import free_endpoint
+        from tests.netns import ThreeHosts, netns_unavailable
+
+        self.why_not = netns_unavailable() if want_netns else "not asked for"
+        self.hosts = ThreeHosts(delay_ms=1.0, loss_pct=0.0).open() if self.why_not is None else None
+        self.loop_ep = free_endpoint()
+
+    def coordinator_args(self) -> tuple[list[str], str]:
+        if self.hosts is None:
+            return [], self.loop_ep
+        return self.hosts.exec_args(self.hosts.hub), self.hosts.coordinator_listen
+
+    def worker_args(self, i: int) -> tuple[list[str], str]:
+        if self.hosts is None:
+            return [], self.loop_ep
+        side = "a" if i < N_WORKERS // 2 else "b"
+        return self.hosts.exec_args(self.hosts.host(side)), self.hosts.endpoint(side)
+
+    def cut(self, on: bool) -> None:
+        if self.hosts is not None:
+            self.hosts.cut("b", on)
+
+    def close(self) -> None:
+        if self.hosts is not None:
+            self.hosts.close()
+
+
+class Proc:
+    """A process restarted whenever it dies before the run is over (a restart policy, not a person)."""
+
+    def __init__(self, name: str, argv: list[str], env: dict[str, str], log: Path) -> None:
+        self.name, self.argv, self.env, self.log = name, argv, env, log
+        self.proc: subprocess.Popen | None = None
+        self.starts = 0
+        self.stopped_until: float | None = None
+        self.run_id = ""
+        self.killed = False   # by the schedule: its next exit is expected
+        self.exited_at = 0.0  # when it exited 0 (it was told the run is over)
+        self.start()
+
+    def start(self) -> None:
+        with open(self.log, "ab") as err:
+            self.proc = subprocess.Popen(self.argv, env=self.env, cwd=ROOT, stdin=subprocess.DEVNULL,
+                                         stdout=subprocess.DEVNULL, stderr=err)
+        self.starts += 1
+
+    def signal(self, sig: int) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            os.kill(self.proc.pid, sig)
+            self.killed = self.killed or sig == signal.SIGKILL
+
+    def restart(self) -> bool:
+        """Start it again; True if its exit was not one the schedule caused."""
+        unexpected, self.killed = not self.killed, False
+        self.start()
+        return unexpected
+
+    def resume_if_due(self, now: float, force: bool = False) -> None:
+        if self.stopped_until is not None and (force or now >= self.stopped_until):
+            self.signal(signal.SIGCONT)
+            self.stopped_until = None
+
+
+def start_processes(net: Net, path: Path, run_id: str, tmp: Path) -> tuple[Proc, list[Proc]]:
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    prefix, listen = net.coordinator_args()
+    coord = Proc("coordinator", [*prefix, sys.executable, "-m", "spinefarm", "coordinator", "--resume", str(path),
+                                 "--listen", listen, "--api-port", "-1", "--quiet"], env, tmp / "coordinator.log")
+    coord.run_id = run_id
+    workers = []
+    for i in range(N_WORKERS):
+        prefix, ep = net.worker_args(i)
+        wenv = dict(env, SPINEFARM_ACK_LOG=str(tmp / f"acks-w{i}.log"))
+        workers.append(Proc(f"w{i}", [*prefix, sys.executable, "-m", "spinefarm", "worker", "--connect", ep,
+                                      "--run", run_id, "--worker-id", f"w{i}", "--exit-when-done",
+                                      "--coordinator-timeout", str(COORDINATOR_TIMEOUT_S), "--min-trial-limit",
+                                      "0.5"],
+                            wenv, tmp / f"w{i}.log"))
+    return coord, workers
+
+
+def forge(endpoint: str, run_id: str, n: int) -> None:
+    """A peer that submits results for leases it was never given, under its own and others' worker ids."""
+    import zenoh
+    from spinefarm.coordinator.service import zenoh_config
+    from spinefarm.protocol import keys
+    from spinefarm.protocol.messages import ResultSubmission, SubmittedResult, TrialResult, TrialStatus, encode_message
+
+    rng = random.Random(7)
+    session = zenoh.open(zenoh_config("client", connect=[endpoint]))
+    try:
+        for k in range(n):
+            tid = rng.randrange(0, 200)
+            result = TrialResult(TrialStatus.COMPLETE, "", FORGED_M, 1e5, 1e3, 1.0, 0.01, 0.3, 0.3, 1.0,
+                                 rng.randrange(2**31), trial_id=tid, worker_id="forger")
+            who = rng.choice(["forger", "w0", "w3"])
+            sub = ResultSubmission(who, (SubmittedResult(rng.randrange(2**62), result),))
+            for _ in session.get(keys.results(run_id), payload=encode_message(sub), timeout=2.0):
+                pass
+            time.sleep(0.02 if k % 10 else 0.2)
+    finally:
+        session.close()
+
+
+def inject(kind: str, rng: random.Random, coord: Proc, workers: list[Proc], net: Net, now: float,
+           counts: Counter, forger: list) -> float | None:
+    """Do one fault; returns when a partition heals, if this was one."""
+    if kind == "worker_kill":
+        rng.choice(workers).signal(signal.SIGKILL)
+    elif kind == "worker_stop":
+        w = rng.choice([w for w in workers if w.stopped_until is None] or workers)
+        w.signal(signal.SIGSTOP)
+        w.stopped_until = now + rng.uniform(3.0, 8.0)
+    elif kind == "coordinator_kill":
+        coord.signal(signal.SIGKILL)
+    elif kind == "forge":
+        prefix, ep = net.worker_args(0)
+        forger.append(subprocess.Popen([*prefix, sys.executable, __file__, "--forge", ep, coord.run_id],
+                                       cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)),
+                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+    elif kind == "partition":
+        if net.hosts is None:
+            return None
+        net.cut(True)
+        counts[kind] += 1
+        return now + PARTITION_S
+    counts[kind] += 1
+    return None
+
+
+def run_done(path: Path) -> bool:
+    from spinefarm.storage.status import read_status
+
+    return (read_status(path) or {}).get("state") == "done"
+
+
+def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int, path: Path) -> dict:
+    """Run the fault schedule until the coordinator exits 0 (the run is done), restarting whatever dies."""
+    rng = random.Random(seed)
+    t0 = time.monotonic()
+    hard_end = t0 + 60.0 * minutes * 4 + 300.0
+    once = {"forge": t0 + 0.2 * 60.0 * minutes, "coordinator_kill": t0 + 0.35 * 60.0 * minutes,
+            "partition": t0 + 0.5 * 60.0 * minutes}   # each at least once, also in a short soak
+    next_fault = t0 + rng.uniform(2.0, 5.0)
+    counts: Counter = Counter(unexpected_coordinator_exits=0, unexpected_worker_exits=0)
+    forger: list = []
+    heal_at: float | None = None
+    coordinator_restarts = worker_restarts = 0
+    while True:
+        now = time.monotonic()
+        code = coord.proc.poll()
+        if code == 0:
+            break
+        if code is not None:
+            counts["unexpected_coordinator_exits"] += coord.restart()
+            coordinator_restarts += 1
+        done = run_done(path)
+        for w in workers:
+            w.resume_if_due(now, force=done)  # frozen workers hear "done" before the coordinator leaves
+            code = w.proc.poll()
+            if code == 0 and not w.killed:  # told the run is over: restarted only if it is not, 10 s on
+                w.exited_at = w.exited_at or now
+            if code is not None and not done and (code != 0 or w.killed or now - w.exited_at > 10.0):
+                counts["unexpected_worker_exits"] += w.restart()
+                worker_restarts += 1
+                w.exited_at = 0.0
+        if heal_at is not None and now >= heal_at:
+            net.cut(False)
+            heal_at = None
+        for kind, at in list(once.items()):
+            if now >= at:
+                heal_at = inject(kind, rng, coord, workers, net, now, counts, forger) or heal_at
+                del once[kind]
+        if now >= next_fault:  # faults until the run is over
+            kind = rng.choices(["worker_kill", "worker_stop", "coordinator_kill"], [3, 3, 1])[0]
+            inject(kind, rng, coord, workers, net, now, counts, forger)
+            next_fault = now + rng.uniform(4.0, 10.0)
+        if now > hard_end:
+            return {"timed_out": True, "faults": dict(counts)}
+        time.sleep(0.05)
+    if heal_at is not None:
+        net.cut(False)
+    for p in forger:
+        p.wait(60)
+    return {"timed_out": False, "wall_s": round(time.monotonic() - t0, 1), "faults": dict(counts),
+            "coordinator_restarts": coordinator_restarts, "worker_restarts": worker_restarts}
+
+
+def finish(workers: list[Proc], timeout_s: float = COORDINATOR_TIMEOUT_S + 30.0) -> list[str]:
+    """Once the run is over every worker must exit by itself; the names of those that did not."""
+    for w in workers:
+        w.resume_if_due(0.0, force=True)
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end and any(w.proc.poll() is None for w in workers):
+        time.sleep(0.1)
+    hung = [w.name for w in workers if w.proc.poll() is None]
+    for w in workers:
+        if w.proc.poll() is None:
+            w.proc.kill()
+            w.proc.wait(10)
+    return hung
+
+
+def audit(path: Path, tmp: Path, budget: int) -> dict:
+    """Lost, duplicated and forged, from the file against every acknowledgement the workers logged."""
+    _, cols = read_run(path)
+    status = [s.decode() for s in cols["status"]]
+    stored: Counter = Counter()
+    lost = 0
+    for log in tmp.glob("acks-*.log"):
+        for line in log.read_text().splitlines():
+            _, tid, verdict, st, dist = line.split()
+            if verdict != "stored":
+                continue
+            stored[int(tid)] += 1
+            t = int(tid)
+            same = t < len(status) and status[t] == st and (
+                float(dist) == cols["distance_m"][t] or (math.isnan(float(dist)) and math.isnan(cols["distance_m"][t])))
+            lost += not same
+    reasons = [r.decode("utf-8", "replace") for r in cols["reason"]]
+    forged = sum(1 for i, s in enumerate(status) if s == "complete" and (
+        cols["distance_m"][i] == FORGED_M or cols["worker_id"][i] == b"forger"))
+    return {"budget": budget, "parameter_sets": int((cols["rung"] == 0).sum()), "rows": len(status),
+            "waiting": status.count("waiting"), "complete": status.count("complete"), "failed": status.count("failed"),
+            "failed_timeout": sum(r.startswith("timeout:") for r in reasons),
+            "failed_crashed": sum(r.startswith("crashed:") for r in reasons),
+            "failed_lost_worker": sum(r.startswith("lost its worker") for r in reasons),
+            "failed_outside_bands": sum(1 for i, s in enumerate(status)
+                                        if s == "failed" and cols["params_unit"][i, 0] >= POISON["crash"][1]),
+            "acknowledged": sum(stored.values()), "lost": lost,
+            "duplicated": sum(c - 1 for c in stored.values() if c > 1), "forged_complete": forged,
+            "exact_budget": int((cols["rung"] == 0).sum()) == budget and "waiting" not in status}
+
+
+def soak(minutes: float, seed: int, workdir: Path, netns: bool = True) -> dict:
+    budget = max(40, int(minutes * 60 * 3.5))   # about 3.5 parameter sets per second under the faults
+    path, run_id = workdir / "soak.h5", f"soak-{seed}"
+    make_run(path, run_id, budget, seed)
+    net = Net(netns)
+    try:
+        coord, workers = start_processes(net, path, run_id, workdir)
+        try:
+            out = drive(coord, workers, net, minutes, seed, path)
+        finally:
+            hung = finish(workers)
+            if coord.proc.poll() is None:
+                hung.append("coordinator")
+                coord.proc.kill()
+    finally:
+        net.close()
+    out.update(audit(path, workdir, budget))
+    out.update({"minutes": minutes, "seed": seed, "workers": N_WORKERS, "rungs_s": list(RUNGS_S),
+                "poison_bands": POISON, "hung_processes": hung,
+                "network": "namespaces" if net.hosts is not None else f"loopback (partition skipped: {net.why_not})"})
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, default=30.0)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--dir", type=Path, default=None, help="keep the run file and logs here")
+    ap.add_argument("--no-netns", action="store_true", help="all on loopback, no partition")
+    ap.add_argument("--forge", nargs=2, metavar=("ENDPOINT", "RUN_ID"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # a stopped soak still deletes its namespaces
+    if args.forge:
+        forge(args.forge[0], args.forge[1], 300)
+        return
+    if args.dir is not None:
+        args.dir.mkdir(parents=True, exist_ok=True)
+        print(json.dumps(soak(args.minutes, args.seed, args.dir, not args.no_netns)))
+        return
+    with tempfile.TemporaryDirectory(prefix="spinefarm-soak-") as tmp:
+        print(json.dumps(soak(args.minutes, args.seed, Path(tmp), not args.no_netns)))
+
+
+if __name__ == "__main__":
+    main()

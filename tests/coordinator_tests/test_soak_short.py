@@ -1,0 +1,30 @@
+"""The soak (bench/soak.py) in a short form: faults of every kind for 0.4 min, then the run's exact budget,
+nothing lost, duplicated or forged, nothing left running, nothing restarted but what the schedule killed."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from tests.coordinator_tests.procs import ROOT
+from tests.netns import netns_unavailable
+
+
+def test_a_short_soak_reaches_its_exact_budget_through_every_fault(tmp_path):
+    netns = netns_unavailable() is None
+    r = subprocess.run([sys.executable, str(ROOT / "bench" / "soak.py"), "--minutes", "0.4", "--seed", "2", "--dir",
+                        str(tmp_path), *([] if netns else ["--no-netns"])], cwd=ROOT, capture_output=True, text=True,
+                       timeout=400)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert not out["timed_out"] and out["exact_budget"], out
+    assert out["lost"] == 0 and out["duplicated"] == 0 and out["forged_complete"] == 0, out
+    assert out["hung_processes"] == [] and out["waiting"] == 0, out
+    faults = out["faults"]
+    assert faults["unexpected_coordinator_exits"] == 0 and faults["unexpected_worker_exits"] == 0, out
+    assert faults.get("coordinator_kill", 0) >= 1 and faults.get("forge") == 1, out
+    assert out["failed_timeout"] >= 1 and out["failed_crashed"] >= 1, out  # the poison bands were hit
+    assert out["failed_outside_bands"] == 0, out
+    if netns:
+        assert faults.get("partition") == 1, out

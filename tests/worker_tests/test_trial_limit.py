@@ -1,0 +1,97 @@
+"""A per-trial wall-clock limit: a hung or crashing simulator costs one trial, the worker goes on, and a
+trial that times out on 3 attempts is stored as failed(timeout) and not issued again."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import threading
+import time
+
+from spinefarm.coordinator.problem import build_run_config
+from spinefarm.coordinator.setup import SearchSettings, new_run
+from spinefarm.protocol.messages import TrialAssignment
+from spinefarm.storage.hdf5 import read_run
+from spinefarm.worker.sandbox import TrialLimit, TrialSandbox
+
+from tests.coordinator_tests.helpers import free_endpoint
+from tests.coordinator_tests.procs import coordinator, spinefarm, stop
+
+BANDS = {"hang": [0.0, 0.15], "crash": [0.15, 0.25]}
+
+
+def poisoned(run_id: str, delay_s: float):
+    cfg = build_run_config(run_id, "sphere:2", duration_s=delay_s)
+    return dataclasses.replace(cfg, trial_config={"duration_s": delay_s, "poison": BANDS})
+
+
+def at(u0: float, n: int = 2) -> TrialAssignment:
+    return TrialAssignment(0, 1, (u0,) + (0.5,) * (n - 1), 7, 60.0, None)
+
+
+def test_hung_and_crashing_trials_end_in_bounded_time_and_the_sandbox_goes_on():
+    box = TrialSandbox(poisoned("limit", 0.05), TrialLimit(min_s=0.5, first_factor=2.0))
+    try:
+        first = box.run(at(0.9))
+        assert first.ok and first.extras["time_limit_s"] == 1.0  # first_factor x min before a measurement
+        t0 = time.monotonic()
+        hung = box.run(at(0.05))
+        assert hung.reason.startswith("timeout:") and time.monotonic() - t0 < 2.0
+        assert hung.extras["time_limit_s"] == 0.5  # max(min_s, 8 x the measured ~1 s/s x 0.05 s)
+        assert box.run(at(0.9)).ok  # a fresh trial process
+        crashed = box.run(at(0.2))
+        assert crashed.reason.startswith("crashed:") and "SIGSEGV" in crashed.reason
+        assert box.run(at(0.9)).ok and box.restarts == 2
+        threading.Timer(0.2, box.stop.set).start()  # the worker is stopping: a hung trial is abandoned
+        t0 = time.monotonic()
+        assert box.run(at(0.05)) is None and time.monotonic() - t0 < 1.5
+    finally:
+        box.close()
+
+
+def test_a_frozen_physics_trial_times_out_from_its_measured_cost_and_the_next_one_runs():
+    cfg = build_run_config("physics", "tetraspine", duration_s=0.2)
+    box = TrialSandbox(cfg, TrialLimit(min_s=1.0, first_factor=300.0))
+    n = len(cfg.space())
+    try:
+        warm = box.run(at(0.3, n))
+        assert warm.ok, warm.reason
+        limit = box.limit.limit_s(0.2)
+        assert 1.0 <= limit <= max(1.0, 8 * 1.25 * warm.wall_time_s / 0.2 * 0.2)
+        pid = box._proc.pid
+        threading.Timer(0.05, os.kill, (pid, signal.SIGSTOP)).start()  # stands in for a call that never returns
+        t0 = time.monotonic()
+        frozen = box.run(at(0.4, n))
+        assert frozen.reason.startswith("timeout:") and frozen.extras["time_limit_s"] == limit
+        assert time.monotonic() - t0 < limit + 5.0
+        assert box.run(at(0.5, n)).ok
+    finally:
+        box.close()
+
+
+def test_a_hanging_trial_is_given_up_after_three_timeouts_and_the_run_reaches_its_budget(tmp_path):
+    out, ep = tmp_path / "run.h5", free_endpoint()
+    _, storage = new_run(poisoned("poison", 0.1), SearchSettings(trials=30, sampler="random", lease_s=30.0), out)
+    storage.close()
+    coord = coordinator(ep, out, "--resume", str(out))
+    workers = [spinefarm("worker", "--connect", ep, "--run", "poison", "--worker-id", f"w{i}", "--batch", "1",
+                         "--exit-when-done", "--min-trial-limit", "0.3") for i in range(3)]
+    try:
+        assert coord.wait(150) == 0
+        assert all(w.wait(30) == 0 for w in workers)
+    finally:
+        stop(coord, *workers)
+    _, cols = read_run(out)
+    status = [s.decode() for s in cols["status"]]
+    reasons = [r.decode() for r in cols["reason"]]
+    u0 = cols["params_unit"][:, 0]
+    assert len(status) == 30 and "waiting" not in status
+    for i in range(30):
+        if u0[i] < 0.15:
+            assert status[i] == "failed" and reasons[i].startswith("timeout:") and "(3 attempts)" in reasons[i]
+        elif u0[i] < 0.25:
+            assert status[i] == "failed" and reasons[i].startswith("crashed:"), reasons[i]
+        else:
+            assert status[i] == "complete", reasons[i]
+    assert any(u < 0.15 for u in u0) and (cols["time_limit_s"][[s == "complete" for s in status]] > 0).all()

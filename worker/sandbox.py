@@ -1,0 +1,191 @@
+"""Trials run in a child process under a wall-clock limit: a hung or crashing simulator costs one trial,
+not the worker.
+
+A hung pybullet or MuJoCo call sits in C: no signal handler or thread can end it inside the process that
+made it. So the worker keeps one long-lived child per run (spawned, so no Zenoh thread is forked) that
+builds the run's evaluator once (robot, set-up cache, compiled kernels) and runs trials handed to it
+over a pipe; the worker waits for each result at most the trial's limit, then SIGKILLs the child (which
+ends any call, also in a SIGSTOPped child), reports the trial `timeout: ...`, and starts a fresh child
+for the next one. A child that dies mid-trial (a segfault) reports it `crashed: ...`. Both go back to
+the coordinator, which re-issues the trial until it has done this on 3 workers (coordinator.core).
+
+The limit (TrialLimit): max(min_s, factor x the measured wall seconds per simulated second x the
+trial's simulated seconds); before any trial of the run has completed here, first_factor x min_s (a
+first trial may compile kernels). The child asks the kernel for SIGKILL when the worker dies.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import multiprocessing as mp
+import signal
+import time
+from dataclasses import replace
+from multiprocessing.connection import Connection
+from threading import Event
+
+from spinefarm.protocol.errors import SpinefarmError
+from spinefarm.protocol.messages import TrialAssignment, TrialResult
+from spinefarm.protocol.run import RunConfig
+from spinefarm.worker.evaluators import build_evaluator, failed_result
+
+MIN_LIMIT_S = 30.0
+LIMIT_FACTOR = 8.0
+FIRST_FACTOR = 10.0
+START_TIMEOUT_S = 300.0    # building the evaluator in a fresh child (imports, compiled kernels from cache)
+_POLL_S = 0.25             # how often a wait looks at the worker's stop flag
+RETRIED_REASONS = ("timeout:", "crashed:")   # coordinator.core re-issues these (kept in step)
+
+
+class TrialLimit:
+    """Wall-clock limit of a trial from its simulated length and the cost measured on this worker."""
+
+    def __init__(self, min_s: float = MIN_LIMIT_S, factor: float = LIMIT_FACTOR,
+                 first_factor: float = FIRST_FACTOR) -> None:
+        if not (min_s > 0 and factor >= 1 and first_factor >= 1):
+            raise ValueError(f"trial limit settings out of range: min_s={min_s}, factor={factor}, "
+                             f"first_factor={first_factor} (expected min_s > 0, factors >= 1)")
+        self.min_s, self.factor, self.first_factor = min_s, factor, first_factor
+        self.wall_per_sim: float | None = None   # measured wall s per simulated s (slowest-leaning mean)
+
+    def observe(self, wall_time_s: float, sim_time_s: float) -> None:
+        if not (wall_time_s > 0 and sim_time_s > 0):
+            return
+        r = wall_time_s / sim_time_s
+        w = self.wall_per_sim
+        self.wall_per_sim = r if w is None else max(0.8 * w + 0.2 * r, 0.5 * w)
+
+    def limit_s(self, sim_s: float) -> float:
+        if self.wall_per_sim is None or not sim_s > 0:
+            return self.first_factor * self.min_s
+        return max(self.min_s, self.factor * self.wall_per_sim * sim_s)
+
+
+def simulated_s(config: RunConfig, a: TrialAssignment) -> float:
+    """Simulated seconds the trial asks for (settle phase included)."""
+    tc = config.trial_config
+    duration = a.duration_s if a.duration_s is not None else float(tc.get("duration_s") or 0.0)
+    return duration + float(tc.get("settle_s") or 0.0)
+
+
+def _die_with_parent() -> None:
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
+
+def _child(conn: Connection, config: RunConfig) -> None:
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the worker's to handle
+    try:
+        evaluate = build_evaluator(config)
+    except Exception as exc:
+        conn.send(("problem", str(exc) if isinstance(exc, SpinefarmError) else f"{type(exc).__name__}: {exc}"))
+        return
+    conn.send(("ready", None))
+    while True:
+        try:
+            a = conn.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            conn.send(("ok", evaluate(a)))
+        except SpinefarmError as exc:
+            conn.send(("error", f"error: {exc}"))
+        except Exception as exc:  # a bug in one trial must not take the child down
+            conn.send(("error", f"error: {type(exc).__name__}: {exc}"))
+
+
+class SandboxProblem(SpinefarmError):
+    """The run's evaluator cannot be built here (the worker reports it as a WorkerProblem)."""
+
+
+class TrialSandbox:
+    """One child process running one run's trials; `run(a)` never takes longer than the trial's limit."""
+
+    def __init__(self, config: RunConfig, limit: TrialLimit | None = None, stop: Event | None = None) -> None:
+        self.config = config
+        self.limit = limit or TrialLimit()
+        self.stop = stop or Event()
+        self._proc: mp.process.BaseProcess | None = None
+        self._conn: Connection | None = None
+        self.restarts = 0
+
+    def start(self) -> None:
+        """Start the child and wait until its evaluator is built; SandboxProblem if it cannot be."""
+        ctx = mp.get_context("spawn")
+        parent, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_child, args=(child, self.config), daemon=True, name="spinefarm-trials")
+        self._proc.start()
+        child.close()
+        self._conn = parent
+        kind, value = self._wait(START_TIMEOUT_S) or ("problem", "")
+        if kind != "ready":
+            value = None if kind == "eof" else value
+            code = self._kill()
+            raise SandboxProblem(value or f"the trial process did not start ({_exit_text(code)})")
+
+    def _wait(self, timeout_s: float) -> tuple[str, object] | None:
+        """The child's next message within timeout_s; ("eof", None) if it died; None on timeout or stop."""
+        end = time.monotonic() + timeout_s
+        assert self._conn is not None
+        while not self.stop.is_set():
+            try:
+                if self._conn.poll(max(0.0, min(_POLL_S, end - time.monotonic()))):
+                    return self._conn.recv()
+            except (EOFError, OSError):
+                return ("eof", None)
+            if time.monotonic() >= end:
+                return None
+        return None
+
+    def _kill(self) -> int | None:
+        proc, self._proc = self._proc, None
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+        if proc is None:
+            return None
+        if proc.is_alive():
+            proc.kill()
+        proc.join(10)
+        return proc.exitcode
+
+    def run(self, a: TrialAssignment) -> TrialResult | None:
+        """The trial's result (timeout and crash as failed results); None if the worker is stopping."""
+        if self._proc is None or not self._proc.is_alive():
+            self._kill()
+            self.start()
+        sim_s = simulated_s(self.config, a)
+        limit_s = self.limit.limit_s(sim_s)
+        t0 = time.perf_counter()
+        assert self._conn is not None
+        self._conn.send(a)
+        msg = self._wait(limit_s)
+        wall = time.perf_counter() - t0
+        if msg is None and self.stop.is_set():
+            self._kill()
+            return None
+        if msg is None or msg[0] == "eof":
+            code = self._kill()
+            self.restarts += 1
+            reason = (f"timeout: no result within its {limit_s:.3g} s wall-clock limit ({sim_s:g} s simulated)"
+                      if msg is None else f"crashed: the trial process died ({_exit_text(code)})")
+            result = failed_result(a, reason, wall)
+        elif msg[0] == "ok":
+            result = msg[1]
+            if result.ok:
+                self.limit.observe(result.wall_time_s, sim_s)
+        else:
+            result = failed_result(a, str(msg[1]), wall)
+        return replace(result, extras={**result.extras, "time_limit_s": limit_s})
+
+    def close(self) -> None:
+        self._kill()
+
+
+def _exit_text(code: int | None) -> str:
+    if code is not None and code < 0:
+        with contextlib.suppress(ValueError):
+            return f"signal {signal.Signals(-code).name}"
+    return f"exit code {code}"
