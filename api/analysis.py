@@ -7,12 +7,16 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
+from spinefarm.api.views import rung_lengths_s
 from spinefarm.storage.base import BaseStorage
 
 # Columns the dashboard plots and tabulates (parameters come separately, by name).
 TABLE_COLUMNS = ("trial_id", "status", "reason", "phase", "parent", "objective", "distance_m", "speed_cm_s",
                  "work_j", "cot", "wall_time_s", "finished_at_unix_s", "verification", "verify_distance_m",
-                 "worker_id", "pareto_front")
+                 "worker_id", "pareto_front", "rung", "duration_s")
+# Below this many finished trials a rank correlation per parameter is mostly noise: the page says so.
+IMPORTANCE_MIN_TRIALS = 30
+IMPORTANCE_TRIALS_PER_PARAM = 5
 
 
 def _jsonable(a: np.ndarray) -> list[Any]:
@@ -77,8 +81,39 @@ def analysis_view(storage: BaseStorage) -> dict[str, Any]:
     imp = importance(np.asarray(cols["params_unit"], dtype=float), objective)
     reasons = Counter(r.decode("utf-8", "replace").split(":")[0] or "unknown"
                       for r in np.asarray(cols["reason"])[status == b"failed"])
+    n_used = int(np.isfinite(objective).sum())
     return {
         "pareto_front": storage.pareto_ids(),  # speed (max) against COT (min), as stored
         "importance": dict(zip(meta.param_names, (float(v) for v in imp), strict=True)),
+        "importance_trials": n_used,
+        "importance_min_trials": max(IMPORTANCE_MIN_TRIALS, IMPORTANCE_TRIALS_PER_PARAM * meta.n_params),
+        # |rho| a parameter unrelated to the objective reaches by chance (about 2 standard errors)
+        "importance_noise": 2.0 / math.sqrt(n_used - 1) if n_used > 1 else None,
         "failed_by_reason": dict(reasons.most_common()),
+        "rungs": rungs_view(cols, rung_lengths_s(meta.settings)),
     }
+
+
+def rungs_view(cols: Any, durations_s: list[float] | None) -> list[dict[str, Any]] | None:
+    """Per rung of a multi-fidelity run: its trial length, trials, complete, promoted to the next rung,
+    best and median distance, and for verified trials the median judge-to-screen distance ratio."""
+    if not durations_s:
+        return None
+    rung = np.asarray(cols["rung"])
+    parent = np.asarray(cols["parent"])
+    status = np.asarray(cols["status"])
+    dist = np.asarray(cols["distance_m"], dtype=float)
+    judged = np.asarray(cols["verify_distance_m"], dtype=float)
+    out = []
+    for r, duration in enumerate(durations_s):
+        here = rung == r
+        done = here & (status == b"complete")
+        promoted = int(np.isin(parent[rung == r + 1], np.flatnonzero(here)).sum())
+        d = dist[done]
+        ok = done & np.isfinite(judged) & (np.abs(dist) > 1e-9)
+        ratio = judged[ok] / dist[ok]
+        out.append({"rung": r, "duration_s": float(duration), "trials": int(here.sum()), "complete": int(done.sum()),
+                    "promoted": promoted, "best_distance_m": float(d.max()) if d.size else None,
+                    "median_distance_m": float(np.median(d)) if d.size else None,
+                    "judged": int(ok.sum()), "judge_ratio_median": float(np.median(ratio)) if ratio.size else None})
+    return out

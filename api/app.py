@@ -34,6 +34,7 @@ def create_app(run_files: Sequence[str | Path] = (), runs_dir: str | Path | None
                   lifespan=lifespan, responses=responses, docs_url=None, redoc_url=None)
     errors.install(app)
     app.include_router(runs.router)
+    app.include_router(runs.files_router)
     app.include_router(trials.router)
     app.include_router(episodes.router)
     app.include_router(files.router)

@@ -1,12 +1,14 @@
-"""Gait pictures of stored trials, rendered on demand in a subprocess and cached on disk.
+"""Gait pictures and motions of stored trials, re-simulated on demand in a subprocess and cached on disk.
 
 The API process never imports the simulator: `python -m spinefarm.worker.picture` re-simulates the trial and
-draws the `render` strip. A picture is keyed by what determines it (run config, parameters, seed), so
-it is rendered once; requests for one being drawn wait for it instead of starting another.
+draws the `render` strip, `python -m spinefarm.worker.motion` records its motion for the 3D view. Each is
+keyed by what determines it (run config, parameters, seed, the trial's length, engine and step), so it is
+made once; requests for one being made wait for it instead of starting another.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import json
@@ -17,6 +19,7 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
+from typing import Any
 
 from spinefarm.api.errors import NotFound, RenderFailed, SimulatorUnavailable
 from spinefarm.storage.schema import RunMeta, TrialRecord
@@ -25,6 +28,8 @@ FRAMES = 6
 RENDER_TIMEOUT_S = 900.0
 # The Python module each engine needs; a server without it says so instead of failing later.
 ENGINE_MODULES = {"bullet": "pybullet", "mujoco": "mujoco"}
+# what each kind of drawing runs (python -m MODULE JOB OUT) and the file it writes
+KINDS = {"picture": ("spinefarm.worker.picture", ".png"), "motion": ("spinefarm.worker.motion", ".json")}
 
 
 def default_cache_dir() -> Path:
@@ -43,6 +48,42 @@ def simulator_missing(engine: str) -> str | None:
     return None
 
 
+@functools.lru_cache(maxsize=1)
+def code_stamp() -> str:
+    """What the simulator's code is here (its files' sizes and times): a drawing cached by an older version
+    of it is not served for a newer one."""
+    spec = importlib.util.find_spec("spinefarm.worker")
+    if spec is None or not spec.submodule_search_locations:
+        return ""
+    root = Path(next(iter(spec.submodule_search_locations)))
+    stats = sorted((str(p.relative_to(root)), p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*.py"))
+    return hashlib.sha256(repr(stats).encode()).hexdigest()[:16]
+
+
+def trial_job(meta: RunMeta, rec: TrialRecord) -> dict[str, Any]:
+    """What re-simulates a stored trial as it ran: the run's config with the trial's own length, settle,
+    engine and step (a multi-fidelity rung's, a judge's). Raises when there is nothing to simulate."""
+    if not meta.morphology_spec:
+        raise NotFound("this run has no gait to draw", received=meta.morphology,
+                       expected="a run of a robot (its objective here is a test function)")
+    if rec.status == "waiting":
+        raise NotFound("this trial has not run yet", received=rec.trial_id, expected="a finished trial")
+    trial_config = {k: v for k, v in meta.trial_config.items() if k != "record_every_s"}
+    for key, value in (("duration_s", rec.duration_s), ("settle_s", rec.settle_s), ("dt_s", rec.dt_s)):
+        if math.isfinite(value):
+            trial_config[key] = value
+    if rec.engine:
+        trial_config["engine"] = rec.engine
+    engine = str(trial_config.get("engine", "bullet"))
+    missing = simulator_missing(engine)
+    if missing:
+        raise SimulatorUnavailable(f"cannot draw gaits: {missing}",
+                                   expected="the API on a machine with `pip install 'spinefarm[worker]'`")
+    return {"morphology": meta.morphology_spec, "controller": meta.controller, "trial_config": trial_config,
+            "params_unit": list(rec.params_unit), "seed": rec.seed, "frames": FRAMES,
+            "title": f"{meta.run_id} trial {rec.trial_id}"}
+
+
 class PictureCache:
     def __init__(self, cache_dir: Path | None = None) -> None:
         self.dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
@@ -54,44 +95,39 @@ class PictureCache:
             return self._locks.setdefault(key, threading.Lock())
 
     def picture(self, meta: RunMeta, rec: TrialRecord) -> Path:
-        if not meta.morphology_spec:
-            raise NotFound("this run has no gait to draw", received=meta.morphology,
-                           expected="a run of a robot (its objective here is a test function)")
-        if rec.status == "waiting":
-            raise NotFound("this trial has not run yet", received=rec.trial_id, expected="a finished trial")
-        engine = str(meta.trial_config.get("engine", "bullet"))
-        missing = simulator_missing(engine)
-        if missing:
-            raise SimulatorUnavailable(f"cannot draw gaits: {missing}",
-                                       expected="the API on a machine with `pip install spinefarm` complete")
-        trial_config = dict(meta.trial_config)
-        if math.isfinite(rec.duration_s):  # a multi-fidelity rung asks for its own duration
-            trial_config["duration_s"] = rec.duration_s
-        job = {"morphology": meta.morphology_spec, "controller": meta.controller,
-               "trial_config": trial_config, "params_unit": list(rec.params_unit), "seed": rec.seed,
-               "frames": FRAMES, "title": f"{meta.run_id} trial {rec.trial_id}"}
-        key = hashlib.sha256(json.dumps({k: v for k, v in job.items() if k != "title"},
+        """The gait strip (PNG) of a stored trial, drawn from its recorded motion (one re-simulation for both)."""
+        motion = self._cached(meta, rec, "motion")
+        return self._cached(meta, rec, "picture", {"motion_file": str(motion)})
+
+    def motion(self, meta: RunMeta, rec: TrialRecord) -> Path:
+        """The trial's recorded motion (JSON, worker/motion.py's format) for the 3D view."""
+        return self._cached(meta, rec, "motion")
+
+    def _cached(self, meta: RunMeta, rec: TrialRecord, kind: str, inputs: dict[str, Any] | None = None) -> Path:
+        job = trial_job(meta, rec)
+        key = hashlib.sha256(json.dumps({"kind": kind, "code": code_stamp(),
+                                         **{k: v for k, v in job.items() if k != "title"}},
                                         sort_keys=True).encode()).hexdigest()[:32]
-        out = self.dir / f"{key}.png"
+        out = self.dir / f"{key}{KINDS[kind][1]}"
         with self._lock(key):
             if out.is_file():
                 return out
-            self._render(job, out)
+            self._render({**job, **(inputs or {})}, out, KINDS[kind][0])
         return out
 
-    def _render(self, job: dict, out: Path) -> None:
+    def _render(self, job: dict, out: Path, module: str) -> None:
         self.dir.mkdir(parents=True, exist_ok=True)
         fd, job_path = tempfile.mkstemp(suffix=".json", dir=self.dir)
         with os.fdopen(fd, "w") as fh:
             json.dump(job, fh)
-        tmp = out.with_name(out.stem + f".{os.getpid()}.tmp.png")
+        tmp = out.with_name(out.stem + f".{os.getpid()}.tmp{out.suffix}")
         try:
             # -P: the user's current folder never shadows the installed package in the drawing process
-            r = subprocess.run([sys.executable, "-P", "-m", "spinefarm.worker.picture", job_path, str(tmp)],
+            r = subprocess.run([sys.executable, "-P", "-m", module, job_path, str(tmp)],
                                capture_output=True, text=True, timeout=RENDER_TIMEOUT_S, stdin=subprocess.DEVNULL)
             if r.returncode != 0 or not tmp.is_file():
                 last = (r.stderr.strip().splitlines() or ["no output"])[-1]
-                raise RenderFailed("drawing the trial failed", received=last[:300], expected="a picture")
+                raise RenderFailed("re-simulating the trial failed", received=last[:300], expected="its gait")
             os.replace(tmp, out)
         except subprocess.TimeoutExpired as exc:
             raise RenderFailed("drawing the trial took too long", received=f"{RENDER_TIMEOUT_S:.0f} s",

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import math
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -12,6 +14,7 @@ from spinefarm.storage.probe import probe
 
 PROBE_TIMEOUT_S = 5.0
 PARALLEL_PROBES = 4
+RETRY_FIRST_S, RETRY_MAX_S = 5.0, 300.0
 
 
 def _probe_or_error(path: Path) -> tuple[str, StorageError | None]:
@@ -44,6 +47,9 @@ class RunRegistry:
         self.runs_dir = Path(runs_dir) if runs_dir is not None else None
         self._ids: dict[Path, tuple[tuple[int, int], str]] = {}   # path -> (file identity, run id)
         self._bad: dict[Path, tuple[int, int, int, int]] = {}     # path -> (identity, size, mtime) it failed with
+        self._why: dict[Path, str] = {}                           # path -> why it was left out
+        # a probe that ran out of time may only have met a busy machine: tried again later, less and less often
+        self._retry: dict[Path, tuple[float, float]] = {}         # path -> (monotonic time of the retry, backoff)
 
     def paths(self) -> list[Path]:
         found = list(self.files)
@@ -59,7 +65,8 @@ class RunRegistry:
             except OSError:
                 continue
             ident = (st.st_dev, st.st_ino)  # resume replaces the file: a new inode is probed again
-            if self._bad.get(p) != (*ident, st.st_size, st.st_mtime_ns):
+            if self._bad.get(p) != (*ident, st.st_size, st.st_mtime_ns) or \
+                    time.monotonic() >= self._retry.get(p, (math.inf, 0.0))[0]:
                 seen.append((p, ident, (*ident, st.st_size, st.st_mtime_ns)))
         new = [(p, ident, mark) for p, ident, mark in seen if p not in self._ids or self._ids[p][0] != ident]
         if new:  # each probe is a child process: several at once, so many new files cost one deadline
@@ -69,15 +76,28 @@ class RunRegistry:
                 if error is not None:
                     log.warning("leaving out %s: %s", p, error)
                     self._bad[p] = mark
+                    self._why[p] = str(error)
                     self._ids.pop(p, None)
+                    if "did not finish within" in str(error):
+                        backoff = min(RETRY_MAX_S, 2 * self._retry.get(p, (0.0, RETRY_FIRST_S / 2))[1])
+                        self._retry[p] = (time.monotonic() + backoff, backoff)
+                    else:
+                        self._retry.pop(p, None)
                 else:
                     self._ids[p] = (ident, run_id)
                     self._bad.pop(p, None)
+                    self._why.pop(p, None)
+                    self._retry.pop(p, None)
         out: dict[str, Path] = {}
         for p, _, _ in seen:
             if p in self._ids and p not in self._bad:
                 out.setdefault(self._ids[p][1], p)
         return out
+
+    def damaged(self) -> list[tuple[Path, str]]:
+        """Files left out (as of the last runs() call) and why, in path order."""
+        present = set(self.paths())
+        return sorted((p, why) for p, why in self._why.items() if p in self._bad and p in present)
 
     def path_of(self, run_id: str) -> Path:
         runs = self.runs()

@@ -69,7 +69,8 @@ class RunStatus(BaseModel):
     file: str
     morphology: str
     objective: str
-    state: str
+    state: str = Field(description="running, stalled (its coordinator holds the file but is silent), done, "
+                       "stopped (budget not met, no coordinator: resumable), failed, or empty; from the file")
     trials_budget: int = Field(description="parameter sets the run samples")
     trials_planned: int = Field(description="evaluations it expects: the budget, plus a multi-fidelity run's "
                                 "promotions to longer trials")
@@ -84,6 +85,14 @@ class RunStatus(BaseModel):
     best: Trial | None
     workers: list[Worker]
     status_age_s: float | None
+    started_at_unix_s: float | None = None
+    controller: str | None = None
+    engine: str | None = Field(None, description="the engine of every trial (null: a test objective)")
+    step_s: float | None = Field(None, description="the physics step the trials ran with (median)")
+    sampler: str | None = None
+    rungs_s: list[float] | None = Field(None, description="a multi-fidelity run's trial lengths, short to full")
+    reopen_command: str = Field(description="the command that serves this run file again")
+    resume_command: str | None = Field(None, description="the command that continues a stopped run")
     audit: dict[str, Any] | None = Field(None, description="audits_pending/agrees/disagrees, fraction, tolerance, "
                                          "and the figures per worker environment")
     fidelity_raised: str | None = Field(None, description="why the judge raised the screen's fidelity")

@@ -7,12 +7,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from spinefarm.api.run_state import derive_state, live_figures
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, planned_evaluations
 from spinefarm.storage.status import read_status
-
-# A status file not rewritten for this long means its coordinator is gone.
-STALE_STATUS_S = 10.0
 
 
 def _num(x: float) -> float | None:
@@ -59,29 +58,54 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
     }
 
 
+def rung_lengths_s(settings: Any) -> list[float] | None:
+    """A multi-fidelity run's trial lengths, short to full (None for a run of one length)."""
+    if settings.scheduler != "halving" or len(settings.ladder) < 2:
+        return None
+    return [float(d) for d in settings.durations_s()]
+
+
 def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
+    """The run's status from its file alone (state, counts, best, rate and ETA), with what only a live
+    coordinator knows (leases, workers) from its status file when there is one. path: the file as the API
+    was given it, for the commands that reopen or resume it."""
     meta = storage.run_meta()
     counts = storage.counts()
     live = read_status(path) or {}
     age = time.time() - live.get("updated_at_unix_s", 0.0)
-    state = live.get("state", "unknown")
-    if state == "running" and age > STALE_STATUS_S:
-        state = "stalled"
     finished = counts["complete"] + counts["failed"]
+    planned = planned_evaluations(meta.trials_budget, meta.settings)
+    n_trials = storage.n_trials()
+    state = derive_state(path, n_trials, finished, planned, live, age)
+    cols = storage.columns() if n_trials else {}
+    finished_at = np.asarray(cols.get("finished_at_unix_s", []), dtype=float)
+    steps = np.asarray(cols.get("dt_s", []), dtype=float)
+    steps = steps[np.isfinite(steps)]
     best = storage.best(1)
+    shown = str(path)
+    tc = meta.trial_config
     return {
         "run_id": meta.run_id, "file": path.name, "morphology": meta.morphology,
         "objective": meta.objective, "state": state, "trials_budget": meta.trials_budget,
-        "trials_planned": planned_evaluations(meta.trials_budget, meta.settings),
+        "trials_planned": planned,
         "parameter_sets_sampled": storage.count_rung(0),
         "trials_done": finished, "trials_complete": counts["complete"], "trials_failed": counts["failed"],
-        "trials_leased": live.get("trials_leased"), "trials_queued": live.get("trials_queued"),
-        "rate_trials_s": live.get("rate_trials_s"), "eta_s": live.get("eta_s"),
+        "trials_leased": live.get("trials_leased") if state == "running" else None,
+        "trials_queued": live.get("trials_queued") if state == "running" else None,
+        **live_figures(state, live, age, finished_at, max(0, planned - finished)),
         "best": trial_view(storage, best[0]) if best else None,
-        "workers": live.get("workers", []),
+        "workers": live.get("workers", []) if state in ("running", "stalled") else [],
         "audit": {**storage.audit_counts(), "fraction": meta.settings.audit.fraction,
                   "tolerance": meta.settings.audit.tolerance,
                   "environments": (live.get("audit") or {}).get("environments", [])},
         "fidelity_raised": live.get("fidelity_raised"),
         "status_age_s": age if live else None,
+        "started_at_unix_s": _num(meta.created_at_unix_s),
+        "controller": meta.controller or (tc.get("controller") if tc else None),
+        "engine": (tc.get("engine") or "bullet") if meta.morphology_spec else None,
+        "step_s": float(np.median(steps)) if steps.size else None,
+        "sampler": (meta.sampler or {}).get("name"),
+        "rungs_s": rung_lengths_s(meta.settings),
+        "reopen_command": f"spinefarm api {shown}",
+        "resume_command": f"spinefarm search --resume {shown}" if state in ("stopped", "failed", "empty") else None,
     }

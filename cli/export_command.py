@@ -65,7 +65,7 @@ def _write_parquet(run_file: str, out: str) -> None:
         import pyarrow  # noqa: F401
     except ImportError as exc:
         raise ConfigError("--parquet needs pyarrow", received="no pyarrow here",
-                          expected="pip install 'spinefarm[data]'") from exc
+                          expected="pip install 'spinefarm[parquet]'") from exc
     from spinefarm import load_run
 
     df = load_run(run_file)

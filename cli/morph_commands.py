@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from spinefarm.cli import checks
+from spinefarm.cli import checks, render_motion
 from spinefarm.cli.sim_commands import add_engine_argument
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.engines import DEFAULT_ENGINE
@@ -36,11 +36,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_engine_argument(p)
     p.set_defaults(func=cmd_replay)
 
-    r = sub.add_parser("render", help="draw a structure to a PNG (rods dark, strings coloured by tension)",
-                       description="Draw a morphology from its initial pose, a recorded trajectory or a short "
-                                   "simulation. Strings are coloured by tension: blue low, red high.")
-    r.add_argument("morphology", help="built-in name or a .yaml spec file")
-    r.add_argument("--out", type=Path, required=True, help="PNG file to write")
+    r = sub.add_parser("render", help="draw a gait: a PNG strip or a video (rods dark, strings coloured by tension)",
+                       description="Draw a morphology from its initial pose, a recorded trajectory, a short "
+                                   "simulation or a stored trial of a run (--run), as a strip of keyframes "
+                                   "(--out) and/or a video (--video). Strings are coloured by tension: blue "
+                                   "low, red high.")
+    r.add_argument("morphology", nargs="?", help="built-in name or a .yaml spec file (omit with --run)")
+    r.add_argument("--out", type=Path, default=None, help="PNG file to write")
     r.add_argument("--record", type=Path, default=None,
                    help="trajectory .npz to draw (as written by `spinefarm trial --record`); with --duration, "
                         "the simulated trajectory is saved to this file instead")
@@ -53,6 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--random-seed", type=int, default=0, help="seed of random parameters when --params is absent")
     r.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
     add_engine_argument(r)
+    render_motion.add_arguments(r)
     r.set_defaults(func=cmd_render)
 
 
@@ -176,6 +179,11 @@ def cmd_render(args: argparse.Namespace) -> int:
     from spinefarm.worker.render import frames_from_record, initial_frame, render
     from spinefarm.worker.trial import TrialConfig, simulate
 
+    if render_motion.wants_motion(args):
+        return render_motion.cmd_render_motion(args)
+    if args.out is None or not args.morphology:
+        raise ConfigError("nothing to draw", received=f"morphology {args.morphology!r}, --out {args.out}",
+                          expected="a morphology and --out STRIP.png, or --video GAIT.mp4|GAIT.gif")
     checks.output_path("--out", args.out, (".png",))
     if args.record is not None and (args.duration is not None or args.params is not None):
         checks.output_path("--record", args.record, (".npz",))

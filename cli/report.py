@@ -1,8 +1,16 @@
-"""The search's progress line and its final report of the best trial and the judge's verdict."""
+"""The search's progress line and the report it prints when it ends: what it found, whether it holds, where
+it is, what to run next.
+
+Parameters are left to `--verbose` and to the gait file (`spinefarm export RUN.h5 --gait best.json`): a
+controller has up to a few hundred of them, which no one reads on a terminal.
+"""
 
 from __future__ import annotations
 
 import math
+import shlex
+import sys
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -35,27 +43,82 @@ def verdict_text(b: Any, judge_engine: str | None) -> str:
     return {"pending": "verification pending", "": "not verified"}.get(b.verification, b.verification)
 
 
-def describe_best(core: Any, path: Path) -> str:
+def _g(x: float, digits: int = 4) -> str:
+    return f"{x:.{digits}g}" if math.isfinite(x) else "–"
+
+
+def next_commands(path: Path, physical: bool, resumable: bool, best_id: int | None) -> list[tuple[str, str]]:
+    """(command, what it does) for a person to copy."""
+    f = shlex.quote(str(path))
+    out = [(f"spinefarm api {f}", "the dashboard: plots, every trial, the gait moving")]
+    if physical and best_id is not None:
+        out += [(f"spinefarm render --run {f} --video best.mp4", "watch the best gait (or best.gif)"),
+                (f"spinefarm export {f} --gait best.json", "its parameters as a file for `spinefarm trial --params`"),
+                (f"spinefarm trial --run {f}", "run the best again")]
+    if resumable:
+        out.append((f"spinefarm search --resume {f}", "continue where it stopped"))
+    return out
+
+
+def describe_best(core: Any, path: Path, verbose: bool = False) -> str:
+    """The final report of a search's coordinator core."""
     storage = core.study.storage
-    best = storage.best(1)
-    lines = []
-    choice = storage.run_meta().settings.engine_choice
-    if choice is not None:
-        lines.append(choice.describe())
+    notes = []
     if core.drift:
-        lines.append(f"the judge raised the screen's fidelity: {core.drift}")
+        notes.append(f"the judge raised the screen's fidelity: {core.drift}")
     audit = core.status()["audit"]
     if any(v for k, v in audit.items() if k.startswith("audits_")):
-        lines.append("audits: " + ", ".join(f"{k[7:]} {v}" for k, v in audit.items() if k.startswith("audits_")))
-    if not best:
-        return "\n".join([*lines, f"no complete trial yet; file {path}"])
-    b = best[0]
+        notes.append("audits: " + ", ".join(f"{k[7:]} {v}" for k, v in audit.items() if k.startswith("audits_")))
+    best = storage.best(1)
+    verdict = verdict_text(best[0], storage.run_meta().settings.judge.rung.engine) if best else ""
+    return final_report(storage, path, verdict=verdict, done=core.done, verbose=verbose, notes=tuple(notes))
+
+
+def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose: bool = False,
+                 notes: tuple[str, ...] = ()) -> str:
+    """The whole report as text (ends without a newline); verdict: the judge's word on the best, notes: lines
+    on how the search went (drift, audits)."""
     meta = storage.run_meta()
-    params = ", ".join(f"{n}={v:.4g}{(' ' + u) if u and u != '1' else ''}"
-                       for n, v, u in zip(meta.param_names, b.params, meta.param_units, strict=True))
-    engine = f" in {b.engine} at {b.dt_s * 1e3:g} ms" if b.engine else ""
-    lines.append(f"best trial {b.trial_id} ({b.phase}, {b.sim_time_s:g} s{engine}): objective {b.objective:.4g}, "
-                 f"distance {b.distance_m:.4g} m, speed {b.speed_cm_s:.4g} cm/s, work {b.work_j:.4g} J, "
-                 f"COT {b.cot:.4g}; {verdict_text(b, meta.settings.judge.rung.engine)}")
-    lines.append(f"  params: {params}\nfile: {path}")
+    counts = storage.counts()
+    finished = counts["complete"] + counts["failed"]
+    physical = bool(meta.morphology_spec)
+    lines = [f"{'search done' if done else 'search stopped'}: {finished} trials of {meta.morphology} "
+             f"({counts['failed']} failed), run {meta.run_id}"]
+    lines += list(notes)
+    if meta.settings.engine_choice is not None:  # how --engine auto chose the tier
+        lines.append(meta.settings.engine_choice.describe())
+    best = storage.best(1)
+    if not best:
+        lines.append("no complete trial yet")
+    else:
+        b = best[0]
+        engine = f" in {b.engine} at {b.dt_s * 1e3:g} ms" if b.engine and math.isfinite(b.dt_s) else ""
+        lines += [f"best trial {b.trial_id} ({b.phase}, {b.sim_time_s:g} s{engine})",
+                  "  " + ("" if meta.objective == "distance" else f"{meta.objective} {_g(b.objective)} · ")
+                  + f"distance {_g(b.distance_m)} m · speed {_g(b.speed_cm_s)} cm/s · COT {_g(b.cot)} · "
+                  f"work {_g(b.work_j)} J",
+                  f"  verdict: {verdict}"]
+        if verbose:
+            lines.append(f"  parameters ({meta.n_params}):")
+            width = max(len(n) for n in meta.param_names) if meta.param_names else 0
+            lines += [f"    {n:<{width}}  {v:.6g}{(' ' + u) if u and u != '1' else ''}"
+                      for n, v, u in zip(meta.param_names, b.params, meta.param_units, strict=True)]
+        else:
+            lines.append(f"  {meta.n_params} parameters: --verbose prints them, `spinefarm export "
+                         f"{shlex.quote(str(path))} --gait best.json` writes them")
+    lines.append(f"file: {path}")
+    cmds = next_commands(path, physical, not done, best[0].trial_id if best else None)
+    width = max(len(c) for c, _ in cmds)
+    lines.append("next:")
+    lines += [f"  {c:<{width}}   # {what}" for c, what in cmds]
     return "\n".join(lines)
+
+
+def serve_until_stopped(api: tuple[Any, threading.Thread, int], host: str, stopped: threading.Event) -> None:
+    """`search --serve`: the dashboard stays up over the finished run file until Ctrl-C (or SIGTERM)."""
+    server, thread, port = api
+    print(f"the dashboard stays up on http://{host}:{port}/ until Ctrl-C", file=sys.stderr, flush=True)
+    while not stopped.wait(0.25) and thread.is_alive():
+        pass
+    server.should_exit = True
+    thread.join(5)

@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
+
+from spinefarm.protocol.errors import ConfigError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,6 +20,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Print the spec file of a built-in morphology. Save it under a new name, "
                                    "change it, check it with `spinefarm check`, then search it.")
     p.add_argument("name", help="a built-in morphology (see `spinefarm morphologies`)")
+    p.add_argument("--name", dest="new_name", default=None, metavar="NEW_NAME",
+                   help="the new robot's name in the printed file (default my-<built-in>): runs, their ids and "
+                        "the dashboard know it by this name, apart from the built-in's")
     p.set_defaults(func=cmd_spec)
 
     p = sub.add_parser("check", help="run the morphology contract on a spec file",
@@ -47,10 +53,29 @@ def cmd_morphologies(args: argparse.Namespace) -> int:
     return 0
 
 
+NAME_LINE = re.compile(r"^name:.*$", re.MULTILINE)
+ROBOT_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,47}$")
+
+
+def derived_spec(builtin: str, text: str, new_name: str) -> str:
+    """A built-in's spec file text under a name of its own (its first top-level `name:` line replaced)."""
+    if not ROBOT_NAME.match(new_name):
+        raise ConfigError("--name is not a robot name", received=new_name,
+                          expected="letters, digits, '_', '.', '-' (at most 48, starting with a letter or digit)")
+    if new_name == builtin:
+        raise ConfigError("--name must differ from the built-in's", received=new_name,
+                          expected=f"a name of its own, e.g. my-{builtin}")
+    head = f"# derived from the built-in {builtin} (`spinefarm spec {builtin}`), under a name of its own\n"
+    if NAME_LINE.search(text):
+        return head + NAME_LINE.sub(f"name: {new_name}", text, count=1)
+    return head + f"name: {new_name}\n" + text
+
+
 def cmd_spec(args: argparse.Namespace) -> int:
     from spinefarm.robot.morphology.registry import builtin_path
 
-    sys.stdout.write(builtin_path(args.name).read_text())
+    text = builtin_path(args.name).read_text()
+    sys.stdout.write(derived_spec(args.name, text, args.new_name or f"my-{args.name}"))
     return 0
 
 

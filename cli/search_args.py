@@ -85,6 +85,10 @@ def _service_args(p: argparse.ArgumentParser, local: bool) -> None:
                                                                else "default off; ") + "-1 = off)")
     p.add_argument("--api-host", default="127.0.0.1")
     p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.add_argument("--verbose", action="store_true", help="the final report lists the best's parameters")
+    if local:
+        p.add_argument("--serve", action="store_true",
+                       help="keep the dashboard up after the search ends, until Ctrl-C")
 
 
 def _judge_args(p: argparse.ArgumentParser) -> None:

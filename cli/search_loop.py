@@ -17,7 +17,7 @@ from typing import Any
 
 from spinefarm.cli.local_workers import LocalWorkers, worker_command
 from spinefarm.cli.progress import ProgressLine
-from spinefarm.cli.report import describe_best, progress
+from spinefarm.cli.report import describe_best, progress, serve_until_stopped
 from spinefarm.cli.run_setup import check_run_args, credentials, free_port, open_run
 from spinefarm.protocol.errors import ConfigError
 
@@ -125,7 +125,9 @@ class SearchSession:
         if self.workers is not None:
             self.workers.stop()
         self.service.close()
-        if self.api is not None:
+        # `search --serve` keeps the dashboard over the finished file until Ctrl-C (see serve_after)
+        self.keep_api = self.api is not None and getattr(self.args, "serve", False) and not self.stopped.is_set()
+        if self.api is not None and not self.keep_api:
             self.api[0].should_exit = True
             self.api[1].join(5)
         self.progress.close(progress(self.core)[3])
@@ -152,8 +154,12 @@ class SearchSession:
             print(f"stopped with everything stored; continue with: spinefarm search --resume {path}",
                   file=sys.stderr)
             code = 130
-        print(describe_best(core, path))
+        print(describe_best(core, path, getattr(self.args, "verbose", False)), flush=True)
         return code
+
+    def serve_after(self) -> None:
+        if self.api is not None and getattr(self, "keep_api", False):
+            serve_until_stopped(self.api, self.args.api_host, self.stopped)
 
 
 def run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: list[str]) -> int:
@@ -165,4 +171,6 @@ def run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: li
         code = 130
     finally:
         session.close()
-    return session.exit_code(failure, code)
+    code = session.exit_code(failure, code)
+    session.serve_after()
+    return code

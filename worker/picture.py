@@ -1,4 +1,5 @@
-"""The gait picture of a stored trial: re-simulate it as the run did and draw the `render` strip.
+"""The gait picture of a stored trial: re-simulate it as the run did (or read its recorded motion, JOB's
+motion_file) and draw the `render` strip.
 
 Run as `python -m spinefarm.worker.picture JOB.json OUT.png` (the API calls it in a subprocess, so a server
 without the simulator still serves everything else). JOB holds morphology (a Morphology.to_dict()),
@@ -15,11 +16,30 @@ from typing import Any
 import numpy as np
 
 
+def render_motion_file(job: dict[str, Any], out: str | Path) -> Path:
+    """The strip drawn from an already recorded motion (worker/motion.py's JSON): no simulation."""
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.motion import motion_record
+    from spinefarm.worker.render import frames_from_record, render
+
+    morph = load_morphology(job["morphology"])
+    motion = json.loads(Path(job["motion_file"]).read_text())
+    frames = frames_from_record(motion_record(motion), int(job.get("frames", 6)), motion["n_bodies"],
+                                len(motion["strings"]))
+    r = motion.get("result") or {}
+    fig = lambda k: "–" if r.get(k) is None else f"{r[k]:.3g}"  # noqa: E731
+    title = (f"{job.get('title', morph.name)}: {fig('distance_m')} m, {fig('speed_cm_s')} cm/s, COT {fig('cot')}"
+             + (f" ({r['reason']})" if r.get("reason") else ""))
+    return render(morph, frames, out, title=title)
+
+
 def render_trial(job: dict[str, Any], out: str | Path) -> Path:
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.render import frames_from_record, render
     from spinefarm.worker.trial import TrialConfig, simulate
 
+    if job.get("motion_file"):
+        return render_motion_file(job, out)
     morph = load_morphology(job["morphology"])
     base = dict(job["trial_config"])
     duration = float(base.get("duration_s") or morph.duration_s)

@@ -15,6 +15,13 @@ from spinefarm.protocol.errors import StorageError
 from spinefarm.storage.hdf5_reader import Hdf5Reader
 
 router = APIRouter(prefix="/runs", tags=["runs"])
+files_router = APIRouter(tags=["runs"])
+
+
+@files_router.get("/damaged-files", summary="Run files the API leaves out (damaged, or not run files), and why")
+def damaged_files(reg: Annotated[RunRegistry, Depends(registry)]) -> list[dict[str, str]]:
+    reg.runs()  # probe what is new since the last call
+    return [{"file": str(path), "reason": why} for path, why in reg.damaged()]
 
 
 @router.get("", response_model=list[RunStatus], summary="Every run and its status")

@@ -63,3 +63,16 @@ def picture(request: Request, storage: Annotated[Hdf5Reader, Depends(run_storage
     storage.close()  # drawing can take a while: do not hold the run file open meanwhile
     path = request.app.state.pictures.picture(meta, rec)
     return FileResponse(path, media_type="image/png")
+
+
+@router.get("/trials/{trial_id}/motion.json", response_class=FileResponse,
+            summary="The trial's motion for the 3D view: body-frame geometry once, then poses, string tensions and "
+                    "the centre of mass at 30 frames per second (re-simulated once, then cached)",
+            responses={503: {"description": "this server has no simulator to re-simulate with"}})
+def motion(request: Request, storage: Annotated[Hdf5Reader, Depends(run_storage)],
+           trial_id: TrialId) -> FileResponse:
+    rec = _record(storage, trial_id)
+    meta = storage.run_meta()
+    storage.close()  # re-simulating can take a while: do not hold the run file open meanwhile
+    path = request.app.state.pictures.motion(meta, rec)
+    return FileResponse(path, media_type="application/json")

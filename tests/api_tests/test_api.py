@@ -15,6 +15,7 @@ from fastapi.testclient import TestClient
 from spinefarm.api.app import create_app
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.storage.hdf5 import Hdf5Storage
+from spinefarm.storage.runlock import RunLock
 from spinefarm.storage.status import write_status
 
 from tests.coordinator_tests.helpers import wait_for
@@ -37,12 +38,14 @@ def write_run(path, run_id="run-a", n=6, finished=4, keep_open=False):
 @pytest.fixture
 def client(tmp_path):
     write_run(tmp_path / "a.h5")
+    lock = RunLock(tmp_path / "a.h5").acquire()  # a coordinator holds the file: the status file speaks for it
     write_status(tmp_path / "a.h5", {"state": "running", "trials_leased": 2, "trials_queued": 94,
                                       "rate_trials_s": 3.5, "eta_s": 27.0, "updated_at_unix_s": time.time(),
                                       "workers": [{"worker_id": "w-1", "alive": True, "leases": 2,
                                                    "last_contact_unix_s": time.time()}]})
     with TestClient(create_app(runs_dir=tmp_path)) as c:
         yield c
+    lock.release()
 
 
 def test_runs_list_and_status(client):
@@ -115,10 +118,16 @@ def test_openapi_documents_every_endpoint(client):
 
 
 def test_stale_status_file_reads_as_stalled(tmp_path):
+    """Silent while it still holds the file: stalled; once nothing holds it: stopped (the file's own state)."""
     write_run(tmp_path / "a.h5")
     write_status(tmp_path / "a.h5", {"state": "running", "updated_at_unix_s": time.time() - 3600})
+    lock = RunLock(tmp_path / "a.h5").acquire()
     with TestClient(create_app([tmp_path / "a.h5"])) as c:
         assert c.get("/runs/run-a").json()["state"] == "stalled"
+        lock.release()
+        st = c.get("/runs/run-a").json()
+        assert st["state"] == "stopped" and st["workers"] == [] and st["eta_s"] is None
+        assert st["resume_command"] == f"spinefarm search --resume {tmp_path / 'a.h5'}"
 
 
 def test_app_needs_something_to_serve():

@@ -47,7 +47,12 @@ def test_the_wheel_carries_docs_data_and_browser_assets(wheel_tree):
                    "spinefarm/api/static/index.html", "spinefarm/api/static/vendor/plotly-basic.min.js",
                    "spinefarm/api/static/vendor/LICENSE-plotly.js.txt",
                    "spinefarm/api/static/vendor/redoc.standalone.js",
-                   "spinefarm/api/static/vendor/swagger/swagger-ui-bundle.js", "spinefarm/worker/replay_data/LICENSE",
+                   "spinefarm/api/static/vendor/swagger/swagger-ui-bundle.js",
+                   "spinefarm/api/static/gait3d.js", "spinefarm/api/static/run_views.js",
+                   "spinefarm/api/static/favicon.svg", "spinefarm/api/static/vendor/three/three.module.min.js",
+                   "spinefarm/api/static/vendor/three/three.core.min.js",
+                   "spinefarm/api/static/vendor/three/OrbitControls.js",
+                   "spinefarm/api/static/vendor/three/LICENSE-three.txt", "spinefarm/worker/replay_data/LICENSE",
                    "spinefarm/worker/replay_data/NOTICE",
                    "spinefarm/worker/replay_data/OctahedralComplex/paper-2014-06-07/logs/bestParameters-default_node-0.nnw"):
         assert needed in names, needed
