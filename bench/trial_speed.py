@@ -19,6 +19,14 @@ against reused from the worker's SetupCache, per engine.
 
     python bench/trial_speed.py [--morphology tetraspine] [--steps 3000] [--repeats 3] [--tier-seconds 10]
                                 [--moving RUN.h5]
+
+With --spines (all, or names separated by commas) it measures whole trials only, per spine: seeded random
+gaits at each engine's default step, interleaved, with `bullet_cpu_s_per_sim_s`, `mujoco_cpu_s_per_sim_s`
+(segment-segment contacts by the default "auto": left out while the contact guard finds none can form, the
+trial run again with them when one could; `mujoco_reruns` lists those), `mujoco_speedup`, and for comparison
+MuJoCo with them modelled by MuJoCo's own search ("scene") and left out ("off"), and every trial's distance:
+
+    python bench/trial_speed.py --spines all [--tier-seconds 10] [--repeats 3]
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 import time
 
 import numpy as np
@@ -154,6 +163,52 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
             "distance_m": {e: [round(x, 4) for x in v] for e, v in distances.items()}}
 
 
+SPEED_TIERS = {"bullet": ("bullet", {}), "mujoco": ("mujoco", {}),
+               "mujoco_segment_contacts_scene": ("mujoco", {"segment_contacts": "scene"}),
+               "mujoco_segment_contacts_off": ("mujoco", {"segment_contacts": "off"})}
+
+
+def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
+    """CPU s per simulated s of whole trials (set-up reused, a first round to warm up) at each engine's
+    default step: Bullet, MuJoCo as it runs by default, and MuJoCo's segment-segment contacts both ways."""
+    from spinefarm.protocol.errors import ConfigError
+    from spinefarm.worker.episode import choose_step
+    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial import simulate
+
+    morph = load_morphology(morph_name)
+    configs = {name: TrialConfig(duration_s=seconds, engine=engine, engine_options=options)
+               for name, (engine, options) in SPEED_TIERS.items()}
+    try:
+        choose_step(morph, configs["bullet"])
+    except ConfigError:  # a string network the default step cannot take (tetraspine-hardware): the automatic one
+        configs = {name: dataclasses.replace(cfg, auto_dt=True) for name, cfg in configs.items()}
+    caches = {name: SetupCache() for name in configs}
+    cpu: dict[str, list[float]] = {name: [] for name in configs}
+    distance: dict[str, list[float]] = {name: [] for name in configs}
+    reruns = []
+    for r in range(repeats + 1):
+        u = random_unit_params(morph, 1 + r)
+        for name, cfg in configs.items():
+            t0 = time.process_time()
+            res = simulate(morph, u, cfg, 1 + r, setup=caches[name]).result
+            if r:
+                cpu[name].append((time.process_time() - t0) / res.sim_time_s)
+                distance[name].append(round(res.distance_m, 5))
+                if name == "mujoco" and "segment_contacts" in res.extras:
+                    reruns.append(res.extras["segment_contacts"])
+    med = {name: float(np.median(v)) for name, v in cpu.items()}
+    print(f"{morph_name}: bullet {med['bullet']:.3f}, mujoco {med['mujoco']:.3f} CPU s per simulated s",
+          file=sys.stderr)
+    return {"dt_s": {name: choose_step(morph, cfg) for name, cfg in configs.items()},
+            "bullet_cpu_s_per_sim_s": med["bullet"], "mujoco_cpu_s_per_sim_s": med["mujoco"],
+            "mujoco_speedup": med["bullet"] / med["mujoco"],
+            "mujoco_segment_contacts_scene_cpu_s_per_sim_s": med["mujoco_segment_contacts_scene"],
+            "mujoco_segment_contacts_off_cpu_s_per_sim_s": med["mujoco_segment_contacts_off"],
+            "mujoco_reruns": reruns, "cpu_s_per_sim_s_all": {k: [round(x, 4) for x in v] for k, v in cpu.items()},
+            "distance_m": distance}
+
+
 def cpg_cost(morph_name: str, seed: int, updates: int = 5000) -> dict:
     """CPU µs of the compiled CPG kernel per simulated millisecond: at the morphology's control period with
     the default sub-steps (as trials run it: 1 ms on NTRT's networks), and as one RK4 step per 2 ms (the
@@ -233,7 +288,17 @@ def main() -> None:
     ap.add_argument("--mujoco-options", default="{}", help="MuJoCo engine options as JSON (default: its defaults)")
     ap.add_argument("--moving", metavar="RUN.h5", help="also the tiers on 3 of the best gaits of this run file, "
                     "all different (gaits that move: their segments come nearer each other than random ones')")
+    ap.add_argument("--spines", help="whole trials per spine only: 'all' (every built-in) or names, comma-separated")
     args = ap.parse_args()
+    if args.spines:
+        from spinefarm.robot.morphology.registry import builtin_names
+
+        names = builtin_names() if args.spines == "all" else args.spines.split(",")
+        t0 = time.time()
+        out = {"benchmark": "trial_speed", "tier_seconds": args.tier_seconds, "repeats": args.repeats,
+               "spines": {name: spine_speeds(name, args.tier_seconds, args.repeats) for name in names}}
+        print(json.dumps({**out, "wall_s": time.time() - t0}))
+        return
     runs = [measure(args.morphology, args.steps, args.warmup, seed=7 + r) for r in range(args.repeats)]
     best = min(runs, key=lambda r: r["step_to_bare_ratio"])
     tier = tiers(args.morphology, args.tier_seconds, args.repeats, json.loads(args.mujoco_options))

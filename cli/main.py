@@ -11,7 +11,8 @@ from spinefarm.protocol.errors import SpinefarmError
 
 # Each module exposes register(subparsers); a sub-command sets `func(args) -> int`.
 COMMAND_MODULES = tuple(f"spinefarm.cli.{name}" for name in (
-    "sim_commands", "morph_commands", "robot_commands", "service_commands", "router_command", "docs_command"))
+    "sim_commands", "morph_commands", "robot_commands", "service_commands", "router_command", "calibrate_command",
+    "docs_command"))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -85,6 +85,8 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
     lines = [f"{'search done' if done else 'search stopped'}: {finished} trials of {meta.morphology} "
              f"({counts['failed']} failed), run {meta.run_id}"]
     lines += list(notes)
+    if meta.settings.engine_choice is not None:  # how --engine auto chose the tier
+        lines.append(meta.settings.engine_choice.describe())
     best = storage.best(1)
     if not best:
         lines.append("no complete trial yet")

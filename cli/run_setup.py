@@ -106,7 +106,8 @@ def open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
 
 
 def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
-    """The RunConfig and SearchSettings of a new run."""
+    """The RunConfig and SearchSettings of a new run (--engine auto resolved first)."""
+    from spinefarm.cli.engine_auto import choose_engine
     from spinefarm.cli.sim_commands import trial_overrides
     from spinefarm.coordinator.fidelity import parse_rungs
     from spinefarm.coordinator.problem import build_run_config
@@ -114,6 +115,9 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     from spinefarm.coordinator.setup import SearchSettings
     from spinefarm.protocol.settings import AuditPolicy
 
+    given = None if args.rungs is None else parse_rungs(args.rungs)
+    robust_settings(args, tuple(given) if given else None)  # typed mistakes fail before a calibration runs
+    choice = choose_engine(args)
     rungs = None if args.rungs is None else parse_rungs(args.rungs)
     if rungs:
         if args.duration is not None and args.duration != rungs[-1]:
@@ -132,7 +136,7 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
                               sampler=args.sampler or DEFAULT_SAMPLER, sigma=args.sigma, top_k=args.top_k,
                               startup_trials=args.startup_trials, lease_s=lease, judge=judge_policy(args, config),
                               audit=AuditPolicy(args.audit, args.audit_tolerance), rungs=rungs or None,
-                              eta=args.eta)
+                              eta=args.eta, engine_choice=choice)
     return config, settings
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 
+from spinefarm.cli import engine_auto
 from spinefarm.cli.robust_args import add_robust_args
 
 
@@ -28,6 +29,7 @@ def search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
     _service_args(p, local)
     _judge_args(p)
     _ladder_args(p)
+    engine_auto.add_arguments(p)
     zenoh_args(p, "tcp/127.0.0.1:<free port>" if local else "tcp/127.0.0.1:7447")
 
 
@@ -57,7 +59,9 @@ def _run_args(p: argparse.ArgumentParser, local: bool) -> None:
 
 
 def _trial_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--engine", default=None, help="physics engine of every trial: bullet (default) or mujoco")
+    p.add_argument("--engine", default=None, help="physics engine of every trial: auto (the default of search: "
+                   "MuJoCo when a calibration finds it ranks the robot's gaits as Bullet does, else Bullet), "
+                   "bullet (the coordinator's default) or mujoco")
     p.add_argument("--engine-option", action="append", default=None, metavar="KEY=VALUE",
                    help="a setting of that engine, e.g. segment_contacts=off; repeatable; stored with the run")
     p.add_argument("--dt", default=None, metavar="S|auto",

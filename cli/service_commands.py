@@ -24,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Embedded Zenoh on loopback, N local worker processes, the HTTP API on "
                                    "localhost and a progress line; Ctrl-C stops with everything stored.")
     search_args(p, local=True)
-    p.set_defaults(func=cmd_search)
+    p.set_defaults(func=cmd_search, engine_default="auto")
 
     p = sub.add_parser("coordinator", help="run only the coordinator (workers connect from elsewhere)")
     search_args(p, local=False)

@@ -14,6 +14,7 @@ from spinefarm.coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sample
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
 from spinefarm.coordinator.tasks import TaskBook
+from spinefarm.protocol.engine_choice import EngineChoice
 from spinefarm.protocol.environment import environment_record
 from spinefarm.protocol.errors import ConfigError, check_range
 from spinefarm.protocol.run import RunConfig
@@ -51,6 +52,7 @@ class SearchSettings:
     audit: AuditPolicy = field(default_factory=AuditPolicy)
     rungs: tuple[float, ...] | None = None   # multi-fidelity screening (successive halving over durations)
     eta: int = 3
+    engine_choice: EngineChoice | None = None   # how --engine auto chose the tier (None: the engine was given)
 
     def __post_init__(self) -> None:
         check_range("trials", self.trials, 1)
@@ -60,7 +62,8 @@ class SearchSettings:
     def run_settings(self, config: RunConfig) -> RunSettings:
         ladder = (Rung(),) if self.rungs is None else tuple(Rung(duration_s=d) for d in self.rungs)
         return RunSettings(scheduler="plain" if self.rungs is None else "halving", ladder=ladder, eta=self.eta,
-                           judge=judge_rung(config, self.judge), audit=self.audit, lease_s=self.lease_s)
+                           judge=judge_rung(config, self.judge), audit=self.audit, lease_s=self.lease_s,
+                           engine_choice=self.engine_choice)
 
 
 def judge_rung(config: RunConfig, judge: JudgePolicy) -> JudgePolicy:

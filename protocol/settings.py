@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, field, replace
 from itertools import pairwise
 from typing import Any, ClassVar
 
+from spinefarm.protocol.engine_choice import EngineChoice
 from spinefarm.protocol.errors import ConfigError, check_range
 
 SCHEDULERS = ("plain", "halving")
@@ -111,7 +112,8 @@ class AuditPolicy:
 class RunSettings:
     """scheduler: plain (every parameter set at the last rung) or halving (successive halving over the
     ladder, keeping 1/eta of each rung); ladder: the screening rungs, the last being the full trial;
-    judge, audit: see their classes; lease_s: how long a worker may hold a task."""
+    judge, audit: see their classes; lease_s: how long a worker may hold a task; engine_choice: how
+    `--engine auto` chose the tier (None: the engine was given)."""
 
     scheduler: str = "plain"
     ladder: tuple[Rung, ...] = (Rung(),)
@@ -119,6 +121,7 @@ class RunSettings:
     judge: JudgePolicy = field(default_factory=JudgePolicy)
     audit: AuditPolicy = field(default_factory=AuditPolicy)
     lease_s: float = 60.0
+    engine_choice: EngineChoice | None = None
 
     SCHEMA: ClassVar[dict[str, str]] = {
         "scheduler": f"one of {', '.join(SCHEDULERS)}",
@@ -128,6 +131,9 @@ class RunSettings:
         "judge": "{enabled, rung, tolerance, perturb, drift}",
         "audit": "{fraction in [0, 1], tolerance >= 0, quarantine}",
         "lease_s": "seconds > 0",
+        "engine_choice": "null, or how --engine auto chose the tier: {engine, mode, cached, rungs_added, spearman, "
+                         "top_overlap, top_k, median_distance_ratio, n_moving, n_random, n_bests, spec_hash, "
+                         "reason, tiers}",
     }
 
     def __post_init__(self) -> None:
@@ -147,6 +153,8 @@ class RunSettings:
         for name, cls in (("judge", JudgePolicy), ("audit", AuditPolicy)):
             if isinstance(getattr(self, name), dict):
                 object.__setattr__(self, name, cls.from_dict(getattr(self, name)))
+        if self.engine_choice is not None and not isinstance(self.engine_choice, EngineChoice):
+            object.__setattr__(self, "engine_choice", EngineChoice.from_dict(self.engine_choice))
 
     @property
     def top(self) -> int:
@@ -171,7 +179,8 @@ class RunSettings:
 
     def to_dict(self) -> dict[str, Any]:
         return {"scheduler": self.scheduler, "ladder": [r.to_dict() for r in self.ladder], "eta": self.eta,
-                "judge": self.judge.to_dict(), "audit": self.audit.to_dict(), "lease_s": self.lease_s}
+                "judge": self.judge.to_dict(), "audit": self.audit.to_dict(), "lease_s": self.lease_s,
+                "engine_choice": None if self.engine_choice is None else self.engine_choice.to_dict()}
 
     @classmethod
     def from_dict(cls, d: Any) -> RunSettings:

@@ -62,4 +62,6 @@ def get_meta(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> dict[str, 
             "param_lows": list(m.param_lows), "param_highs": list(m.param_highs),
             "software_version": m.software_version, "created_at_unix_s": m.created_at_unix_s,
             "physical": bool(m.morphology_spec), "settings": m.settings.to_dict(),
-            "robust": m.run.get("robust") or {}}
+            "robust": m.run.get("robust") or {},
+            # how `search --engine auto` chose the tier, with its calibration's figures (None: engine given)
+            "engine_choice": None if m.settings.engine_choice is None else m.settings.engine_choice.to_dict()}

@@ -206,6 +206,7 @@ async function showRun(runId, gen, first) {
       `${status.audit.audits_agrees} / ${status.audit.audits_disagrees}`)] : []),
     meta.physical ? card("engine, step", `${esc(status.engine || "bullet")}, ${step ? fmt(step * 1000) + " ms" : "not run yet"}`) : "",
     card("sampler", esc(status.sampler || "–")), card("started", fmtDate(status.started_at_unix_s)),
+    meta.engine_choice ? engineChoiceCard(meta.engine_choice) : "",
   ].join("");
   document.getElementById("run-notice").innerHTML = runNotice(status, r);
   const empty = !cols.columns.status.some((x) => x === "complete" || x === "failed");
@@ -227,6 +228,13 @@ async function showRun(runId, gen, first) {
   document.body.dataset.trialsShown = String(cols.n_trials);
   schedule(() => showRun(runId, gen, false).catch((e) => serverGone(e, gen, status.reopen_command)),
     status.state === "running");
+}
+
+// how `search --engine auto` chose the tier: the calibration's figures, its reason on hover
+function engineChoiceCard(c) {
+  const text = `${esc(c.engine)}: ρ ${fmt(c.spearman, 3)}, top-${c.top_k} ${c.top_overlap}, ratio ${fmt(c.median_distance_ratio, 3)}`;
+  return `<div class="card" title="${esc(c.reason || "")}" data-engine-choice="${esc(c.engine)}"><div class="v">${text}</div>`
+    + `<div class="k">engine auto${c.cached ? " (cached calibration)" : ""}</div></div>`;
 }
 
 // ---------------------------------------------------------------- one trial

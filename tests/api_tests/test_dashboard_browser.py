@@ -101,8 +101,8 @@ def runs(tmp_path_factory):
     spinefarm("search", "sphere:200", "--trials", "80", "--workers", "1", "--out", str(d / "wide.h5"),
               "--run-id", "wide-view", "--api-port", "-1", "--quiet")
     write_failing_run(d / "failing.h5")
-    spinefarm("search", "tetraspine", "--trials", "3", "--workers", "1", "--duration", "1", "--out",
-              str(d / "tetra.h5"), "--run-id", "tetra-view", "--api-port", "-1", "--quiet")
+    spinefarm("search", "tetraspine", "--engine", "bullet", "--trials", "3", "--workers", "1", "--duration", "1",
+              "--out", str(d / "tetra.h5"), "--run-id", "tetra-view", "--api-port", "-1", "--quiet")
     return d
 
 

@@ -16,7 +16,7 @@ def test_the_trial_page_shows_each_episode_and_the_spread(browser, tmp_path):  #
     out = tmp_path / "robust.h5"
     spinefarm("search", "tetraspine", "--trials", "2", "--workers", "1", "--duration", "0.3", "--episodes", "3",
               "--randomize", "friction=0.1,start_jitter_cm=0.5", "--robust", "min", "--no-verify",
-              "--run-id", "robust-view", "--api-port", "-1", "--quiet", "--out", str(out))
+              "--run-id", "robust-view", "--api-port", "-1", "--quiet", "--out", str(out), "--engine", "bullet")
     port = free_port()
     server = Server(["api", str(out), "--port", str(port)], port)
     try:

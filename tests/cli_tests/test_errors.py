@@ -150,7 +150,8 @@ def test_api_says_which_files_it_skips_and_why(sphere_run, tmp_path, a_file):
 def test_ctrl_c_while_the_best_is_re_simulated(tmp_path):
     out = tmp_path / "r.h5"
     p = subprocess.Popen([sys.executable, "-m", "spinefarm", "search", "tetraspine", "--trials", "1", "--workers",
-                          "1", "--duration", "3", "--out", str(out), "--api-port", "-1"], cwd=ROOT,
+                          "1", "--duration", "3", "--out", str(out), "--api-port", "-1", "--engine", "bullet"],
+                         cwd=ROOT,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     err = []
     for line in p.stderr:

@@ -47,7 +47,8 @@ def test_a_physics_search_on_a_terminal_keeps_its_progress_line_clean(tmp_path):
         busy.listen()
         taken = busy.getsockname()[1]
         code, out = run_on_a_terminal(["search", "tetraspine", "--trials", "2", "--workers", "1", "--duration",
-                                       "0.5", "--out", str(tmp_path / "r.h5"), "--api-port", str(taken)])
+                                       "0.5", "--out", str(tmp_path / "r.h5"), "--api-port", str(taken),
+                                       "--engine", "bullet"])
     assert code == 0, out
     assert "pybullet build time" not in out  # neither the workers' nor the re-simulation's banner
     assert "Traceback" not in out

@@ -104,7 +104,7 @@ def test_a_folder_with_its_own_cli_worker_api_and_storage_packages_shadows_nothi
         return r
 
     run("-m", "spinefarm", "search", "tetraspine-ntrt", "--trials", "1", "--workers", "1", "--duration", "0.3",
-        "--out", "run.h5", "--api-port", "-1", "--quiet")
+        "--out", "run.h5", "--api-port", "-1", "--quiet", "--engine", "bullet")
     rows = run("-c", "import spinefarm; print(len(spinefarm.load_run('run.h5')))")
     assert int(rows.stdout) >= 1
     port = free_port()

@@ -125,7 +125,7 @@ def test_physics_search_with_two_worker_processes(tmp_path):
     pytest.importorskip("spinefarm.worker.trial")
     out = tmp_path / "tetra.h5"
     proc = spinefarm("search", "tetraspine", "--trials", "4", "--workers", "2", "--duration", "0.5",
-                     "--out", str(out), "--api-port", "-1", "--quiet")
+                     "--out", str(out), "--api-port", "-1", "--quiet", "--engine", "bullet")
     stdout, _ = proc.communicate(timeout=180)
     assert proc.returncode == 0
     assert "best trial" in stdout and str(out) in stdout

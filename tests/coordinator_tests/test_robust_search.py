@@ -31,7 +31,7 @@ def test_episodes_are_stored_and_resumed_exactly(tmp_path):
     out = tmp_path / "robust.h5"
     r = run("search", "tetraspine", "--trials", "3", "--workers", "1", "--duration", "0.2", "--episodes", "2",
             "--randomize", RANDOMIZE, "--robust", "q25", "--no-verify", "--api-port", "-1", "--quiet",
-            "--seed", "4", "--out", str(out))
+            "--seed", "4", "--out", str(out), "--engine", "bullet")
     assert r.returncode == 0, r.stderr
     meta = read_meta(out)
     assert meta.run["robust"] == {"episodes": 2, "randomize": {"friction": 0.1, "mass": 0.05,
@@ -85,7 +85,8 @@ def test_episodes_are_stored_and_resumed_exactly(tmp_path):
 def test_a_robust_best_is_judged_over_all_its_worlds_at_a_finer_step(tmp_path):
     out = tmp_path / "verified.h5"
     r = run("search", "tetraspine", "--trials", "2", "--workers", "1", "--duration", "0.3", "--episodes", "3",
-            "--randomize", RANDOMIZE, "--verify-tolerance", "0.5", "--api-port", "-1", "--quiet", "--out", str(out))
+            "--randomize", RANDOMIZE, "--verify-tolerance", "0.5", "--api-port", "-1", "--quiet", "--out", str(out),
+            "--engine", "bullet")
     assert r.returncode == 0, r.stderr
     meta, cols = read_run(out)
     best = int(np.flatnonzero(cols["verification"] != b"")[0])
@@ -103,7 +104,7 @@ def test_with_rungs_each_rung_runs_its_own_number_of_episodes(tmp_path):
     out = tmp_path / "rungs.h5"
     r = run("search", "tetraspine", "--trials", "4", "--workers", "1", "--rungs", "0.2,0.4", "--eta", "2",
             "--episodes", "1,3", "--randomize", RANDOMIZE, "--no-verify", "--api-port", "-1", "--quiet",
-            "--out", str(out))
+            "--out", str(out), "--engine", "bullet")
     assert r.returncode == 0, r.stderr
     _, cols = read_run(out)
     eps = read_episodes(out)

@@ -45,7 +45,7 @@ def test_a_spec_file_robot_given_by_absolute_path_is_searched_by_two_workers(tmp
     path = spec_copy(tmp_path, "my-spine").resolve()
     out = tmp_path / "run.h5"
     r = spinefarm("search", str(path), "--trials", "4", "--workers", "2", "--duration", "0.3", "--out", str(out),
-                  "--api-port", "-1", "--no-verify")
+                  "--api-port", "-1", "--no-verify", "--engine", "bullet")
     assert r.returncode == 0, r.stderr[-2000:]
     with Hdf5Storage.open_read(out) as st:
         meta = st.run_meta()
@@ -62,7 +62,7 @@ def test_a_file_named_like_a_builtin_is_simulated_as_the_file(tmp_path):
     for label, robot in (("file", str(stiff)), ("builtin", "tetraspine-ntrt")):
         out = tmp_path / f"{label}.h5"
         r = spinefarm("search", robot, "--trials", "1", "--workers", "1", "--duration", "0.5", "--seed", "3",
-                      "--out", str(out), "--api-port", "-1", "--no-verify")
+                      "--out", str(out), "--api-port", "-1", "--no-verify", "--engine", "bullet")
         assert r.returncode == 0, r.stderr[-2000:]
         with Hdf5Storage.open_read(out) as st:
             runs[label] = (st.trial(0), st.run_meta())

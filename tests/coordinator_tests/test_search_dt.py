@@ -25,6 +25,8 @@ def test_tetraspine_hardware_is_searched_with_dt_auto_and_refused_without(tmp_pa
     assert ok.returncode == 0, ok.stderr[-2000:]
     meta, cols = read_run(tmp_path / "b.h5")
     assert meta.trial_config["auto_dt"] is True
+    # engine auto (search's default) cannot calibrate at the engines' default steps: it falls back to Bullet
+    assert "the calibration could not run" in ok.stderr and meta.settings.engine_choice is None
     assert list(cols["status"]) == [b"complete", b"complete"]
     assert np.all(cols["dt_s"] < 5.1e-4)  # the automatic step, below the stable limit, stored per trial
     bad = search(*common, "--dt", "fast", "--out", str(tmp_path / "c.h5"))

@@ -53,7 +53,7 @@ def _forge_numpy_version(path: Path, version: str) -> None:
 def test_a_run_file_records_it_and_trial_run_and_resume_say_what_differs(tmp_path):
     out = tmp_path / "run.h5"
     r = _cli("search", "tetraspine", "--trials", "2", "--workers", "1", "--duration", "0.2", "--out", str(out),
-             "--api-port", "-1", "--no-verify")
+             "--api-port", "-1", "--no-verify", "--engine", "bullet")
     assert r.returncode == 0, r.stderr
     with h5py.File(out, "r") as f:
         stored = json.loads(f.attrs["environment"])

@@ -1,0 +1,83 @@
+"""`spinefarm calibrate ROBOT|FILE`: do the tiers rank this robot's gaits alike? (worker.calibrate)"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("calibrate", help="compare the fast tier (MuJoCo) with Bullet on a robot's gaits",
+                       description="Run seeded random gaits plus the bests of a short search on both tiers and "
+                                   "say whether a search may screen on MuJoCo (Spearman rho >= 0.9, top-10 "
+                                   "overlap >= 8, median distance ratio in [0.9, 1.1]). Cached by the spec's "
+                                   "hash (see --cache-dir; --refresh recomputes, --clear-cache empties it).")
+    p.add_argument("morphology", nargs="?", help="built-in name or a .yaml spec file")
+    add_calibration_arguments(p)
+    p.add_argument("--refresh", action="store_true", help="recompute even if a cached result exists")
+    p.add_argument("--clear-cache", action="store_true", help="delete every cached calibration and exit")
+    p.add_argument("--cache-dir", action="store_true", help="print where calibrations are cached and exit")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_calibrate)
+
+
+def add_calibration_arguments(p: argparse.ArgumentParser, prefix: str = "") -> None:
+    """The calibration's size; `search` takes them as --calibrate-gaits etc."""
+    p.add_argument(f"--{prefix}gaits", type=int, default=40, help="seeded random gaits (default 40)")
+    p.add_argument(f"--{prefix}search-trials", type=int, default=40,
+                   help="trials of the short search on MuJoCo (a hill climb from the best random gait) whose "
+                        "bests join (default 40)")
+    p.add_argument(f"--{prefix}bests", type=int, default=10, help="how many of its bests (default 10)")
+    p.add_argument(f"--{prefix}duration", type=float, default=5.0, help="simulated seconds per trial (default 5)")
+    p.add_argument(f"--{prefix}settle", type=float, default=1.0, help="settle phase before scoring (default 1 s)")
+    if not prefix:
+        p.add_argument("--controller", default=None, help="controller space (default: the robot's first)")
+        p.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
+
+
+def settings_from(args: argparse.Namespace, prefix: str = "", controller: str | None = None, jobs: int = 1):
+    from spinefarm.worker.calibrate import CalibrationSettings
+
+    get = vars(args)
+    key = prefix.replace("-", "_")
+    return CalibrationSettings(gaits=get[f"{key}gaits"], search_trials=get[f"{key}search_trials"],
+                               bests=get[f"{key}bests"], duration_s=get[f"{key}duration"],
+                               settle_s=get[f"{key}settle"], controller=get.get("controller", controller),
+                               jobs=get.get("jobs", jobs))
+
+
+def summary(result: dict, cached: bool) -> str:
+    """The calibration as a few lines of text."""
+    rho = result["spearman"]
+    ratio = result["median_distance_ratio"]
+    lines = [f"calibration of {result['robot']} (spec {result['spec_hash']}){' [cached]' if cached else ''}: "
+             f"{result['n_random']} random gaits + {result['n_bests']} bests of a short search, "
+             f"{result['settings']['duration_s']:g} s after a {result['settings']['settle_s']:g} s settle",
+             f"  Spearman rho {'-' if rho is None else f'{rho:.3f}'}, top-{result['top_k']} overlap "
+             f"{result['top_overlap']}, median distance ratio MuJoCo/Bullet "
+             f"{'-' if ratio is None else f'{ratio:.3f}'} over {result['n_moving']} gaits that move"]
+    for tier, t in result["tiers"].items():
+        err = "-" if t["step_error"] is None else f"{100 * t['step_error']:.2f} %"
+        lines.append(f"  {tier:7s} {t['cpu_s_per_sim_s']:.3f} CPU s per simulated s, step error {err}")
+    lines.append(f"  decision: {result['decision']} ({result['reason']})")
+    return "\n".join(lines)
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from spinefarm.protocol.errors import ParameterError
+    from spinefarm.worker.calibrate import cache_dir, calibration, clean
+
+    if args.cache_dir:
+        print(cache_dir())
+        return 0
+    if args.clear_cache:
+        shutil.rmtree(cache_dir(), ignore_errors=True)
+        print(f"cleared {cache_dir()}")
+        return 0
+    if not args.morphology:
+        raise ParameterError("calibrate needs a robot", received="nothing",
+                             expected="a built-in name (spinefarm morphologies) or a .yaml spec file")
+    result, cached = calibration(args.morphology, settings_from(args), refresh=args.refresh)
+    print(json.dumps(clean({**result, "cached": cached})) if args.json else summary(result, cached))
+    return 0

@@ -1,0 +1,64 @@
+"""`search --engine auto` (search's default): calibrate the tiers on the robot (or use the cached calibration,
+worker.calibrate), then screen on MuJoCo with rungs when it ranks the robot's gaits as Bullet does, else run
+on Bullet. `auto` is no engine: it is resolved here, before the run's trial config is made, and the choice
+with its figures is stored in the run's settings (protocol.engine_choice.EngineChoice)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+AUTO = "auto"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from spinefarm.cli.calibrate_command import add_calibration_arguments
+
+    g = p.add_argument_group("--engine auto", "the calibration that picks the tier (spinefarm calibrate)")
+    add_calibration_arguments(g, prefix="calibrate-")
+
+
+def default_rungs(duration_s: float) -> str:
+    """Successive halving over a third of the trial and the whole of it."""
+    return f"{duration_s / 3:g},{duration_s:g}"
+
+
+def wants_auto(args: argparse.Namespace) -> bool:
+    return args.engine == AUTO or (args.engine is None and getattr(args, "engine_default", None) == AUTO)
+
+
+def choose_engine(args: argparse.Namespace) -> Any:
+    """Resolve --engine auto in place (args.engine, and args.rungs when screening on MuJoCo without rungs):
+    the EngineChoice stored with the run, or None when the engine was given or nothing is simulated. A
+    calibration that cannot run falls back to Bullet (the default engine) and says why."""
+    from spinefarm.coordinator.problem import is_test_objective
+
+    if not wants_auto(args) or args.resume or not args.morphology or is_test_objective(args.morphology):
+        if args.engine == AUTO:
+            args.engine = None
+        return None
+    from spinefarm.cli.calibrate_command import settings_from
+    from spinefarm.protocol.engine_choice import EngineChoice
+    from spinefarm.protocol.errors import SpinefarmError
+    from spinefarm.worker.calibrate import calibration
+
+    settings = settings_from(args, "calibrate-", controller=args.controller,
+                             jobs=max(1, min(2, getattr(args, "workers", 1) or 1)))
+    print(f"engine auto: calibrating the tiers on {args.morphology} (cached after the first time) ...",
+          file=sys.stderr)
+    try:
+        result, cached = calibration(args.morphology, settings)
+    except SpinefarmError as exc:  # e.g. a robot no default step can simulate: the run's own checks say it
+        print(f"engine auto: the calibration could not run ({exc}); bullet", file=sys.stderr)
+        args.engine = None
+        return None
+    args.engine = result["decision"]
+    rungs = None
+    if args.engine == "mujoco" and args.rungs is None:
+        from spinefarm.robot.morphology.registry import load_morphology
+
+        args.rungs = rungs = default_rungs(args.duration or load_morphology(args.morphology).duration_s)
+    choice = EngineChoice.from_calibration(result, cached, rungs)
+    print(choice.describe(), file=sys.stderr)
+    return choice
