@@ -6,6 +6,8 @@ with its figures is stored in the run's settings (protocol.engine_choice.EngineC
 from __future__ import annotations
 
 import argparse
+import json
+import subprocess
 import sys
 from typing import Any
 
@@ -41,14 +43,14 @@ def choose_engine(args: argparse.Namespace) -> Any:
     from spinefarm.cli.calibrate_command import settings_from
     from spinefarm.protocol.engine_choice import EngineChoice
     from spinefarm.protocol.errors import SpinefarmError
-    from spinefarm.worker.calibrate import calibration
 
+    # checked here, so a bad --calibrate-* value is an error, not a fall back to Bullet
     settings = settings_from(args, "calibrate-", controller=args.controller,
                              jobs=max(1, min(2, getattr(args, "workers", 1) or 1)))
     print(f"engine auto: calibrating the tiers on {args.morphology} (cached after the first time) ...",
           file=sys.stderr)
     try:
-        result, cached = calibration(args.morphology, settings)
+        result, cached = calibrate_in_child(args.morphology, settings)
     except SpinefarmError as exc:  # e.g. a robot no default step can simulate: the run's own checks say it
         print(f"engine auto: the calibration could not run ({exc}); bullet", file=sys.stderr)
         args.engine = None
@@ -62,3 +64,22 @@ def choose_engine(args: argparse.Namespace) -> Any:
     choice = EngineChoice.from_calibration(result, cached, rungs)
     print(choice.describe(), file=sys.stderr)
     return choice
+
+
+def calibrate_in_child(morphology: str, settings: Any) -> tuple[dict[str, Any], bool]:
+    """`spinefarm calibrate --json` in its own process: calibrating runs both simulators, and the search's own
+    process (the coordinator) never loads one. (the calibration, whether it came from the cache)"""
+    from spinefarm.protocol.errors import ConfigError
+
+    cmd = [sys.executable, "-P", "-m", "spinefarm", "calibrate", morphology, "--json",
+           "--gaits", str(settings.gaits), "--search-trials", str(settings.search_trials),
+           "--bests", str(settings.bests), "--duration", repr(settings.duration_s),
+           "--settle", repr(settings.settle_s), "--jobs", str(settings.jobs)]
+    if settings.controller:
+        cmd += ["--controller", settings.controller]
+    r = subprocess.run(cmd, capture_output=True, text=True, stdin=subprocess.DEVNULL)
+    if r.returncode != 0:
+        lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()] or [f"exit code {r.returncode}"]
+        raise ConfigError(f"spinefarm calibrate {morphology} failed: {lines[-1][:300]}")
+    result = json.loads(r.stdout.strip().splitlines()[-1])
+    return result, bool(result.pop("cached", False))
