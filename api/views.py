@@ -94,7 +94,8 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "trials_queued": live.get("trials_queued") if state == "running" else None,
         **live_figures(state, live, age, finished_at, max(0, planned - finished)),
         "best": trial_view(storage, best[0]) if best else None,
-        "workers": live.get("workers", []) if state in ("running", "stalled") else [],
+        # a finished run keeps the last the coordinator knew (who ran, who was quarantined); a stopped one shows none
+        "workers": live.get("workers", []) if state in ("running", "stalled", "done") else [],
         "audit": {**storage.audit_counts(), "fraction": meta.settings.audit.fraction,
                   "tolerance": meta.settings.audit.tolerance,
                   "environments": (live.get("audit") or {}).get("environments", [])},
