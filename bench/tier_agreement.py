@@ -26,6 +26,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from spinefarm.worker.calibrate import spearman  # the one rank correlation, shared with calibrate
 
 SPINES = ("tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed")
 # converged steps: Bullet is within ~1.5 % at 0.25 ms (docs/accuracy.md), MuJoCo well within 1 % at 0.5 ms
@@ -72,26 +73,6 @@ def _replay(args: tuple) -> dict:
     rep = replay(NTRT / folder, spine, engine=engine)
     return {"ntrt_distance_cm": rep.result.ntrt_distance_cm, "status": str(rep.result.status),
             "ratio_to_ntrt": rep.ratio, "ntrt_reference_cm": rep.reference.distance_cm if rep.reference else None}
-
-
-def ranks(x: np.ndarray) -> np.ndarray:
-    """Average ranks (ties share their mean rank)."""
-    order = np.argsort(x, kind="mergesort")
-    r = np.empty(len(x))
-    r[order] = np.arange(len(x), dtype=float)
-    for v in np.unique(x):
-        tie = x == v
-        if tie.sum() > 1:
-            r[tie] = r[tie].mean()
-    return r
-
-
-def spearman(a: np.ndarray, b: np.ndarray) -> float:
-    ok = np.isfinite(a) & np.isfinite(b)
-    if ok.sum() < 3:
-        return math.nan
-    ra, rb = ranks(a[ok]), ranks(b[ok])
-    return float(np.corrcoef(ra, rb)[0, 1])
 
 
 def agreement(bullet: np.ndarray, mujoco: np.ndarray, top: int = 10) -> dict:
