@@ -101,6 +101,7 @@ class WorkerService:
             raise ConfigError("minimum trial limit out of range", received=min_trial_limit_s, expected="seconds > 0")
         self.min_trial_limit_s = min_trial_limit_s
         self._sandboxes: list[TrialSandbox] = []
+        self._said_unreachable = False
         # SPINEFARM_ACK_LOG: one line per verdict received (run, trial, verdict, status, distance), for the
         # fault benches to count lost and duplicated results against what the coordinator acknowledged
         ack_log = os.environ.get("SPINEFARM_ACK_LOG")
@@ -249,9 +250,11 @@ class WorkerService:
         where = ", ".join(self._conf_args[0]) or "the configured endpoints"
         while not self.stop.is_set():
             try:
-                return zenoh.open(zenoh_config(*self._conf_args))  # a config is used up by open
+                # an attempt that hangs past the warning time is said to hang, not left silent
+                return self._open_once(since + UNREACHABLE_WARN_S, where if not told else None)
             except zenoh.ZError as exc:
                 log.info("coordinator not reachable yet (%s); retrying", exc)
+                told = "unreachable" if self._said_unreachable and not told else told
                 if time.monotonic() - since >= UNREACHABLE_WARN_S:
                     listening = listening_endpoints(self._conf_args[0])
                     state = "refused" if listening else "unreachable"
@@ -272,6 +275,38 @@ class WorkerService:
                         return None
                 self.stop.wait(backoff.next())
         return None
+
+    def _open_once(self, warn_at: float, where: str | None) -> zenoh.Session | None:
+        """One zenoh.open, in a thread so that Ctrl-C is answered at once even while Zenoh waits on an endpoint
+        that accepts TCP but never answers its handshake; None when stopped first (the attempt is abandoned).
+        Still connecting at monotonic time `warn_at`: say that `where` cannot be reached (once)."""
+        outcome: list = []
+        done = threading.Event()
+
+        def attempt() -> None:
+            try:
+                outcome.append(zenoh.open(zenoh_config(*self._conf_args)))  # a config is used up by open
+            except BaseException as exc:  # handed to the caller's thread
+                outcome.append(exc)
+            done.set()
+
+        threading.Thread(target=attempt, name="zenoh-open", daemon=True).start()
+        while not done.wait(0.1):
+            if self.stop.is_set():
+                return None
+            if where is not None and time.monotonic() >= warn_at:
+                listening = listening_endpoints(self._conf_args[0])
+                if listening:
+                    log.warning("%s accepts connections but no Zenoh session has answered yet (a coordinator "
+                                "that is not one, or TLS settings that do not match); still trying (Ctrl-C to stop)",
+                                ", ".join(listening))
+                else:
+                    log.warning("cannot reach a coordinator at %s; still trying (Ctrl-C to stop)", where)
+                    self._said_unreachable = True
+                where = None
+        if isinstance(outcome[0], BaseException):
+            raise outcome[0]
+        return outcome[0]
 
     def run(self) -> int:
         session = self._open()

@@ -124,11 +124,35 @@ def test_a_worker_that_cannot_reach_its_coordinator_says_so_within_seconds():
     t0 = time.monotonic()
     try:
         line = p.stderr.readline()
+        said_at = time.monotonic() - t0
     finally:
         p.send_signal(signal.SIGINT)
-        p.communicate(timeout=30)
-    assert "cannot reach a coordinator at tcp/127.0.0.1:9" in line
-    assert time.monotonic() - t0 < 8.0
+        _, rest = p.communicate(timeout=30)
+    assert "cannot reach a coordinator at tcp/127.0.0.1:9" in line, line + rest
+    assert said_at < 8.0
+    assert p.returncode == 0, rest
+
+
+def test_ctrl_c_stops_a_worker_whose_coordinator_accepts_tcp_but_never_answers():
+    """zenoh.open waits on a handshake that never comes; Ctrl-C still stops the worker at once."""
+    import socket
+
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(16)
+        port = silent.getsockname()[1]
+        p = subprocess.Popen([sys.executable, "-m", "spinefarm", "worker", "--connect", f"tcp/127.0.0.1:{port}"],
+                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            line = p.stderr.readline()  # it says it is trying
+        finally:
+            p.send_signal(signal.SIGINT)
+            t0 = time.monotonic()
+            _, rest = p.communicate(timeout=30)
+    assert f"tcp/127.0.0.1:{port} accepts connections but no Zenoh session has answered" in line \
+        or f"refused by tcp/127.0.0.1:{port}" in line, line + rest
+    assert p.returncode == 0, rest
+    assert time.monotonic() - t0 < 5.0
 
 
 def test_api_says_which_files_it_skips_and_why(sphere_run, tmp_path, a_file):
