@@ -34,8 +34,9 @@ from spinefarm.cli.service_commands import free_port  # noqa: E402
 from spinefarm.coordinator.problem import build_run_config  # noqa: E402
 from spinefarm.coordinator.service import CoordinatorService  # noqa: E402
 from spinefarm.coordinator.setup import SearchSettings, new_run  # noqa: E402
+from spinefarm.protocol.envelope import decode_message, encode_message  # noqa: E402
 from spinefarm.protocol.errors import MessageError  # noqa: E402
-from spinefarm.protocol.messages import WorkGrant, WorkRequest, decode_message, encode_message  # noqa: E402
+from spinefarm.protocol.work import WorkGrant, WorkRequest  # noqa: E402
 
 
 def spawn_workers(endpoint: str, run_id: str, n: int, batch: int) -> list[subprocess.Popen]:
@@ -120,7 +121,8 @@ def fsync_cost(workers: list[int], batches: list[int], trials: int, tmp: Path) -
 def resume_cost(tmp: Path, rows: int) -> dict:
     """Time to reopen a killed SWMR writer's file for writing (read via SWMR, rewrite, replace)."""
     import numpy as np
-    from spinefarm.protocol.messages import TrialResult, TrialStatus
+    from spinefarm.protocol.results import TrialResult
+    from spinefarm.protocol.states import TrialStatus
     from spinefarm.storage.hdf5 import Hdf5Storage
 
     config = build_run_config("resume-bench", "sphere:116")

@@ -38,8 +38,10 @@ def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) ->
     """The worker protocol (pull, run, carry results with the next request) with an acknowledgement log."""
     import zenoh
     from spinefarm.coordinator.service import zenoh_config
-    from spinefarm.protocol.messages import SubmittedResult, WorkGrant, WorkRequest, decode_message, encode_message
+    from spinefarm.protocol.envelope import decode_message, encode_message
     from spinefarm.protocol.run import RunConfig
+    from spinefarm.protocol.submissions import SubmittedResult
+    from spinefarm.protocol.work import WorkGrant, WorkRequest
     from spinefarm.worker.service import build_evaluator
 
     session = None
@@ -232,15 +234,10 @@ def hostile_peer(tmp: Path, n: int = 500) -> dict:
     from spinefarm.coordinator.problem import build_run_config
     from spinefarm.coordinator.service import CoordinatorService, zenoh_config
     from spinefarm.coordinator.setup import SearchSettings, new_run
-    from spinefarm.protocol.messages import (
-        SCHEMA_VERSION,
-        ResultSubmission,
-        SubmittedResult,
-        TrialResult,
-        TrialStatus,
-        decode,
-        encode_message,
-    )
+    from spinefarm.protocol.envelope import SCHEMA_VERSION, decode, encode_message
+    from spinefarm.protocol.results import TrialResult
+    from spinefarm.protocol.states import TrialStatus
+    from spinefarm.protocol.submissions import ResultSubmission, SubmittedResult
 
     ep = f"tcp/127.0.0.1:{free_port()}"
     core, storage = new_run(build_run_config("hostile", "sphere:4", duration_s=2.0),

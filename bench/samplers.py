@@ -76,7 +76,7 @@ def search(pool: ProcessPoolExecutor, morphology: str, controller: str | None, s
            overrides: dict | None = None, judge_dt_s: float = 0.00025) -> dict:
     from spinefarm.coordinator.problem import build_run_config
     from spinefarm.coordinator.setup import SearchSettings, new_run
-    from spinefarm.protocol.messages import TrialResult
+    from spinefarm.protocol.results import TrialResult
     from spinefarm.protocol.settings import JudgePolicy
 
     overrides = {**(overrides or {}), **({"engine": engine} if engine != "bullet" else {})} or None

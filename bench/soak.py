@@ -145,7 +145,10 @@ def forge(endpoint: str, run_id: str, n: int) -> None:
     import zenoh
     from spinefarm.coordinator.service import zenoh_config
     from spinefarm.protocol import keys
-    from spinefarm.protocol.messages import ResultSubmission, SubmittedResult, TrialResult, TrialStatus, encode_message
+    from spinefarm.protocol.envelope import encode_message
+    from spinefarm.protocol.results import TrialResult
+    from spinefarm.protocol.states import TrialStatus
+    from spinefarm.protocol.submissions import ResultSubmission, SubmittedResult
 
     rng = random.Random(7)
     session = zenoh.open(zenoh_config("client", connect=[endpoint]))

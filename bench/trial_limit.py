@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from spinefarm.coordinator.problem import build_run_config  # noqa: E402
-from spinefarm.protocol.messages import TrialAssignment  # noqa: E402
+from spinefarm.protocol.work import TrialAssignment  # noqa: E402
 from spinefarm.worker.evaluators import build_evaluator  # noqa: E402
 from spinefarm.worker.sandbox import TrialLimit, TrialSandbox  # noqa: E402
 

@@ -28,21 +28,13 @@ from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
 from spinefarm.coordinator.tasks import AUDIT, JUDGE, REFEREE, TaskBook, split_key, task_key
+from spinefarm.protocol.envelope import decode_message, encode, encode_message
 from spinefarm.protocol.errors import MessageError
-from spinefarm.protocol.messages import (
-    ResultAck,
-    ResultSubmission,
-    RunInfo,
-    TrialResult,
-    TrialStatus,
-    Verdict,
-    WorkGrant,
-    WorkRequest,
-    decode_message,
-    encode,
-    encode_message,
-)
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.run import RunConfig, WorkerProblem
+from spinefarm.protocol.states import TrialStatus
+from spinefarm.protocol.submissions import ResultAck, ResultSubmission, Verdict
+from spinefarm.protocol.work import RunInfo, WorkGrant, WorkRequest
 
 RETRIED_REASONS = ("timeout:", "crashed:")   # failures on a worker that another worker may not have
 

@@ -9,8 +9,10 @@ import logging
 from typing import Any
 
 from spinefarm.coordinator.tasks import REFEREE, split_key, task_key
-from spinefarm.protocol.messages import TrialAssignment, TrialResult, Verdict
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import TaskFidelity
+from spinefarm.protocol.submissions import Verdict
+from spinefarm.protocol.work import TrialAssignment
 
 log = logging.getLogger("spinefarm.coordinator")
 

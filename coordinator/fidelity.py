@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import TrialStatus
 from spinefarm.protocol.settings import PROMOTED, Rung, RunSettings
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.base import BaseStorage
 
 _PROMOTED = PROMOTED.encode()

@@ -6,7 +6,7 @@ import math
 from collections.abc import Callable
 
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import TrialResult
+from spinefarm.protocol.results import TrialResult
 
 
 def _distance(r: TrialResult) -> float:
@@ -64,7 +64,7 @@ def robust_objective(fn: Callable[[TrialResult], float], name: str) -> Callable[
 
 def episode_result(r: TrialResult, e) -> TrialResult:
     """Episode `e` of result `r` as a TrialResult of its own (the robot's mass and extras of `r`)."""
-    from spinefarm.protocol.messages import TrialStatus
+    from spinefarm.protocol.states import TrialStatus
 
     return TrialResult(TrialStatus(e.status), e.reason, e.distance_m, e.ntrt_distance_cm, e.speed_cm_s, e.work_j,
                        e.cot, e.sim_time_s, e.wall_time_s, r.mass_kg, e.seed, r.trial_id, r.worker_id, r.extras)

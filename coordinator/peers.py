@@ -10,7 +10,7 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
-from spinefarm.protocol.messages import AuditState
+from spinefarm.protocol.states import AuditState
 from spinefarm.storage.base import BaseStorage
 
 

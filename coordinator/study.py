@@ -8,8 +8,8 @@ from collections.abc import Callable
 import numpy as np
 from spinefarm.coordinator.fidelity import BaseTrialScheduler, PlainTrialScheduler
 from spinefarm.coordinator.samplers.base import BaseSampler
-from spinefarm.protocol.messages import TrialResult
 from spinefarm.protocol.params import ParamSpace
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import PROMOTED, RunSettings
 from spinefarm.storage.base import BaseStorage
 

@@ -21,8 +21,9 @@ import logging
 import math
 
 import numpy as np
-from spinefarm.protocol.messages import AuditState, TrialResult, Verification
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings, TaskFidelity
+from spinefarm.protocol.states import AuditState, Verification
 from spinefarm.storage.base import BaseStorage
 
 log = logging.getLogger("spinefarm.coordinator")

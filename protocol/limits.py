@@ -19,6 +19,7 @@ MAX_DEPTH = 32                       # run configs nest spec -> structure -> tag
 MAX_INT_DIGITS = 20                  # int64 and a sign
 MAX_TEXT_CHARS = 1000                # a failure reason
 MAX_EXTRAS = 16
+MAX_BATCH = 4096                     # trials granted or results carried in one message
 ID_PATTERN = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")  # run and worker ids: one Zenoh key chunk
 
 

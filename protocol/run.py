@@ -12,15 +12,14 @@ import json
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from spinefarm.protocol.envelope import finite_or_str, get_field, json_default
 from spinefarm.protocol.errors import MessageError
 from spinefarm.protocol.params import ParamSpace, ParamSpec
 
 
 def json_hash(obj: Any) -> str:
     """16 hex digits of the SHA-256 of obj's canonical JSON (sorted keys, no spaces)."""
-    from spinefarm.protocol.messages import _finite_or_str, _json_default
-
-    blob = json.dumps(_finite_or_str(obj), sort_keys=True, separators=(",", ":"), default=_json_default)
+    blob = json.dumps(finite_or_str(obj), sort_keys=True, separators=(",", ":"), default=json_default)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -74,14 +73,12 @@ class RunConfig:
 
     @classmethod
     def from_dict(cls, data: Any) -> RunConfig:
-        from spinefarm.protocol.messages import _field
-
         what = "run config"
         controller = data.get("controller") if isinstance(data, dict) else None
         if controller is not None and not isinstance(controller, str):
             raise MessageError("run config field 'controller' has the wrong type", received=controller,
                                expected="a string or null")
-        space = _field(data, "param_space", list, what)
+        space = get_field(data, "param_space", list, what)
         if not all(isinstance(p, dict) and {"name", "low", "high"} <= set(p) for p in space):
             raise MessageError("run config has a malformed parameter space", received=space[:2],
                                expected="a list of {name, low, high, unit}")
@@ -97,10 +94,10 @@ class RunConfig:
         except ConfigError as exc:
             raise MessageError(f"run config field 'robust' is malformed: {exc}", received=data.get("robust"),
                                expected="{episodes, randomize, statistic}") from exc
-        return cls(_field(data, "run_id", str, what), _field(data, "morphology", str, what),
-                   _field(data, "morphology_spec", dict, what), controller, tuple(space),
-                   _field(data, "trial_config", dict, what), _field(data, "objective", str, what),
-                   _field(data, "seed", int, what), **hashes, robust=robust)
+        return cls(get_field(data, "run_id", str, what), get_field(data, "morphology", str, what),
+                   get_field(data, "morphology_spec", dict, what), controller, tuple(space),
+                   get_field(data, "trial_config", dict, what), get_field(data, "objective", str, what),
+                   get_field(data, "seed", int, what), **hashes, robust=robust)
 
 
 @dataclass(frozen=True)
@@ -121,8 +118,6 @@ class WorkerProblem:
 
     @classmethod
     def from_dict(cls, data: Any) -> WorkerProblem:
-        from spinefarm.protocol.messages import _field
-
         what = "worker problem"
-        return cls(_field(data, "worker_id", str, what)[:200], _field(data, "reason", str, what)[:2000],
-                   _field(data, "trial_id", int, what), _field(data, "lease_id", int, what))
+        return cls(get_field(data, "worker_id", str, what)[:200], get_field(data, "reason", str, what)[:2000],
+                   get_field(data, "trial_id", int, what), get_field(data, "lease_id", int, what))

@@ -8,15 +8,8 @@ from typing import Any
 
 import numpy as np
 from spinefarm.protocol.errors import StorageError
-from spinefarm.protocol.messages import (
-    RECORDED_EXTRAS,
-    SCORE_NAMES,
-    STORED_STATUSES,
-    AuditState,
-    TrialResult,
-    TrialStatus,
-    Verification,
-)
+from spinefarm.protocol.results import RECORDED_EXTRAS, SCORE_NAMES, TrialResult
+from spinefarm.protocol.states import STORED_STATUSES, AuditState, TrialStatus, Verification
 from spinefarm.storage import pareto
 from spinefarm.storage.schema import RunMeta, TrialRecord
 

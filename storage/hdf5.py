@@ -25,8 +25,8 @@ from typing import Any
 
 import h5py
 import numpy as np
+from spinefarm.protocol.envelope import SCHEMA_VERSION
 from spinefarm.protocol.errors import StorageError
-from spinefarm.protocol.messages import SCHEMA_VERSION
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.storage import episodes as ep
 from spinefarm.storage.file_ops import _fsync_dir, _quiet_failed_deallocs, _reason, _refuse_read_only, _trim

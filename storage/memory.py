@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 from spinefarm.protocol.errors import StorageError
-from spinefarm.protocol.messages import TrialStatus, Verification
+from spinefarm.protocol.states import TrialStatus, Verification
 from spinefarm.storage.base import DISQUALIFYING_AUDITS, BaseStorage
 from spinefarm.storage.episodes import EpisodeTable, rows_of
 from spinefarm.storage.schema import RunMeta

@@ -8,7 +8,7 @@ new result can only join the front and push members off it), so the run file mar
 from __future__ import annotations
 
 import numpy as np
-from spinefarm.protocol.messages import TrialStatus
+from spinefarm.protocol.states import TrialStatus
 
 
 def candidates(status: np.ndarray, speed_cm_s: np.ndarray, cot: np.ndarray) -> np.ndarray:

@@ -10,15 +10,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.messages import (
-    RECORDED_EXTRAS,
-    SCORE_NAMES,
-    SCORE_PARTS,
-    STORED_STATUSES,
-    AuditState,
-    Verification,
-)
+from spinefarm.protocol.results import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS
 from spinefarm.protocol.settings import RunSettings
+from spinefarm.protocol.states import STORED_STATUSES, AuditState, Verification
 
 FILE_SCHEMA_VERSION = 7
 

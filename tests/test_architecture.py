@@ -80,7 +80,7 @@ def test_no_never_of_the_whiteboard_is_broken():
 def test_the_check_sees_a_broken_never(tmp_path):
     """The reader finds lazy imports through the namespace, so a never can fail."""
     path = ROOT / "coordinator" / "core.py"
-    assert ROOT / "protocol" / "messages.py" in imports_of(path)
+    assert ROOT / "protocol" / "work.py" in imports_of(path)
     probe = tmp_path / "probe.py"
     probe.write_text("def f():\n    from spinefarm.worker.engines.bullet import BulletPhysics\n")
     assert imports_of(probe) == {ROOT / "worker" / "engines" / "bullet.py"}

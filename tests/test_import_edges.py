@@ -11,7 +11,9 @@ import pytest
 HEAVY = ("pybullet", "zenoh", "h5py", "fastapi", "numba", "mujoco")
 ALLOWED = {
     "spinefarm.protocol.params": set(),
-    "spinefarm.protocol.messages": set(),
+    "spinefarm.protocol.envelope": set(),
+    "spinefarm.protocol.results": set(),
+    "spinefarm.protocol.work": set(),
     "spinefarm.protocol.errors": set(),
     "spinefarm.robot.morphology.registry": set(),
     "spinefarm.worker.trial": {"numba"},

@@ -9,7 +9,8 @@ from functools import lru_cache
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.protocol.results import TrialResult
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import quaternion_matrix
 from spinefarm.robot.morphology.model import Morphology

@@ -10,9 +10,11 @@ from collections.abc import Callable
 
 import numpy as np
 from spinefarm.protocol.errors import RunMismatchError
-from spinefarm.protocol.messages import TrialAssignment, TrialResult, TrialStatus
 from spinefarm.protocol.params import ParamSpace
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.run import RunConfig
+from spinefarm.protocol.states import TrialStatus
+from spinefarm.protocol.work import TrialAssignment
 from spinefarm.worker.tasks import physics_evaluator, with_fault
 
 Evaluator = Callable[[TrialAssignment], TrialResult | None]  # None: abandoned (the worker is stopping)

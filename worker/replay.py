@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, MorphologySpecError
-from spinefarm.protocol.messages import TrialResult
+from spinefarm.protocol.results import TrialResult
 from spinefarm.robot.engines import DEFAULT_ENGINE
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.spaces import NtrtTableSpace

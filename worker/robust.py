@@ -12,8 +12,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from spinefarm.protocol.messages import SCORE_NAMES, TrialResult, TrialStatus
+from spinefarm.protocol.results import SCORE_NAMES, TrialResult
 from spinefarm.protocol.robust import EpisodeDraw, EpisodeResult, RobustSpec, draw_episode
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.variants import with_density_factor
 from spinefarm.robot.trial_config import TrialConfig

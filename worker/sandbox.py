@@ -26,8 +26,9 @@ from multiprocessing.connection import Connection
 from threading import Event
 
 from spinefarm.protocol.errors import SpinefarmError
-from spinefarm.protocol.messages import TrialAssignment, TrialResult
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.run import RunConfig
+from spinefarm.protocol.work import TrialAssignment
 from spinefarm.worker.evaluators import build_evaluator, failed_result
 
 MIN_LIMIT_S = 30.0

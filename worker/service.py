@@ -20,20 +20,12 @@ from pathlib import Path
 
 import zenoh
 from spinefarm.protocol import keys
+from spinefarm.protocol.envelope import decode_message, encode_message
 from spinefarm.protocol.errors import ConfigError, MessageError, SpinefarmError
-from spinefarm.protocol.messages import (
-    ResultAck,
-    ResultSubmission,
-    RunInfo,
-    SubmittedResult,
-    TrialAssignment,
-    TrialResult,
-    WorkGrant,
-    WorkRequest,
-    decode_message,
-    encode_message,
-)
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.run import RunConfig, WorkerProblem
+from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult
+from spinefarm.protocol.work import RunInfo, TrialAssignment, WorkGrant, WorkRequest
 from spinefarm.worker.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
 from spinefarm.worker.pacing import (
     EXIT_REFUSED,

@@ -17,7 +17,8 @@ from collections.abc import Callable
 from typing import Any
 
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import TrialAssignment, TrialResult
+from spinefarm.protocol.results import TrialResult
+from spinefarm.protocol.work import TrialAssignment
 
 FAULT_SCALE_ENV = "SPINEFARM_FAULT_DISTANCE_SCALE"
 _REPORTED_PACKAGES = ("numpy", "numba", "pybullet", "mujoco", "spinefarm")

@@ -19,7 +19,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 from spinefarm.protocol.errors import ParameterError
-from spinefarm.protocol.messages import TrialResult
+from spinefarm.protocol.results import TrialResult
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.trial_config import TrialConfig

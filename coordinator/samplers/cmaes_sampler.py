@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from spinefarm.coordinator.samplers.base import CMAES, BaseSampler, FinishedPrefix, Proposal, trial_seed32
 from spinefarm.protocol.errors import ConfigError, check_range
-from spinefarm.protocol.messages import TrialStatus
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.base import BaseStorage
 
 _FAILED_VALUE = 1e30  # minimised: a failed trial is worse than any complete one

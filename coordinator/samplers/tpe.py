@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from spinefarm.coordinator.samplers.base import TPE, BaseSampler, FinishedPrefix, Proposal, trial_seed32
 from spinefarm.protocol.errors import check_range
-from spinefarm.protocol.messages import TrialStatus
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.base import BaseStorage
 
 _COT_CAP = 1e6  # no motion gives COT = inf; Optuna needs finite values

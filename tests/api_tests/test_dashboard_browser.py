@@ -77,7 +77,7 @@ FAILURES = {"diverged": 3, "error": 1}  # reasons are grouped by what precedes t
 
 def write_failing_run(path: Path) -> None:
     """A run file with failed trials (what a real search writes when trials diverge or raise)."""
-    from spinefarm.protocol.messages import TrialStatus
+    from spinefarm.protocol.states import TrialStatus
     from spinefarm.storage.hdf5 import Hdf5Storage
 
     from tests.storage_tests.conftest import make_meta, result

@@ -6,22 +6,12 @@ import json
 
 import pytest
 from spinefarm.coordinator.setup import build_core
-from spinefarm.protocol.messages import (
-    ResultAck,
-    ResultSubmission,
-    RunInfo,
-    SubmittedResult,
-    TrialResult,
-    TrialStatus,
-    Verdict,
-    WorkGrant,
-    WorkRequest,
-    decode,
-    decode_message,
-    encode,
-    encode_message,
-)
+from spinefarm.protocol.envelope import decode, decode_message, encode, encode_message
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.run import RunConfig
+from spinefarm.protocol.states import TrialStatus
+from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult, Verdict
+from spinefarm.protocol.work import RunInfo, WorkGrant, WorkRequest
 
 from tests.coordinator_tests.helpers import sphere_core
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from spinefarm.coordinator.fidelity import HalvingTrialScheduler, parse_rungs
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.protocol.results import TrialResult
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.hdf5 import Hdf5Storage, read_run
 from spinefarm.storage.memory import InMemoryStorage
 

@@ -9,8 +9,11 @@ import math
 import pytest
 from spinefarm.coordinator.scheduler import MAX_GRANT, Scheduler
 from spinefarm.protocol import limits
+from spinefarm.protocol.envelope import SCHEMA_VERSION, decode, encode
 from spinefarm.protocol.errors import MessageError
-from spinefarm.protocol.messages import SCHEMA_VERSION, TrialResult, TrialStatus, Verdict, decode, encode
+from spinefarm.protocol.results import TrialResult
+from spinefarm.protocol.states import TrialStatus
+from spinefarm.protocol.submissions import Verdict
 
 from tests.coordinator_tests.helpers import FakeClock, sphere_core
 from tests.coordinator_tests.test_core import ask, assert_unchanged, res, snapshot, submit

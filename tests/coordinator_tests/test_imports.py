@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-OWN = ["protocol/keys.py", "protocol/messages.py", "coordinator", "storage", "api", "cli/service_commands.py",
+OWN = ["protocol/keys.py", "protocol/envelope.py", "protocol/work.py", "protocol/submissions.py", "coordinator",
+       "storage", "api", "cli/service_commands.py",
        "cli/search_loop.py", "cli/run_setup.py", "cli/search_args.py", "cli/report.py", "cli/export_command.py",
        "worker/service.py", "bench/coordinator_throughput.py"]
 
@@ -22,7 +23,8 @@ def loaded_after(statement: str) -> set[str]:
 
 
 @pytest.mark.parametrize(("statement", "forbidden"), [
-    ("import spinefarm.protocol.keys, spinefarm.protocol.messages", {"zenoh", "h5py", "pybullet", "fastapi"}),
+    ("import spinefarm.protocol.keys, spinefarm.protocol.work, spinefarm.protocol.submissions",
+     {"zenoh", "h5py", "pybullet", "fastapi"}),
     ("import spinefarm.coordinator.core, spinefarm.coordinator.setup, spinefarm.coordinator.samplers, "
      "spinefarm.coordinator.problem",
      {"zenoh", "h5py", "pybullet", "mujoco", "numba", "fastapi"}),

@@ -134,13 +134,15 @@ core, storage, clock = sphere_core(trials=10**6, out=sys.argv[1])
 acked, unanswered = [], 0
 for _ in range(10**5):
     grant = ask(core, n=64)
-    from spinefarm.protocol.messages import ResultSubmission, SubmittedResult, encode_message
+    from spinefarm.protocol.envelope import encode_message
+    from spinefarm.protocol.submissions import ResultSubmission, SubmittedResult
     items = tuple(SubmittedResult(a.lease_id, res(a)) for a in grant.assignments)
     reply = core.handle_results(encode_message(ResultSubmission("w1", items)))
     if reply is None:
         unanswered += 1
         break
-    from spinefarm.protocol.messages import ResultAck, decode_message
+    from spinefarm.protocol.envelope import decode_message
+    from spinefarm.protocol.submissions import ResultAck
     acked += [t for t, v in decode_message(reply, ResultAck).verdicts if v.value == "stored"]
 later = [core.handle_work(b"{}") is None, core.handle_results(b"{}") is None]
 print(json.dumps({"acked": acked, "failure": core.write_failure, "silent_after": later}), flush=True)

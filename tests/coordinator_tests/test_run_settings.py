@@ -11,18 +11,14 @@ from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.samplers import SAMPLERS
 from spinefarm.coordinator.samplers.base import BaseSampler, Proposal, trial_rng
 from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
+from spinefarm.protocol.envelope import decode_message
+from spinefarm.protocol.envelope import encode_message as enc
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import (
-    ResultSubmission,
-    SubmittedResult,
-    TrialResult,
-    TrialStatus,
-    WorkGrant,
-    WorkRequest,
-    decode_message,
-)
-from spinefarm.protocol.messages import encode_message as enc
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import JudgePolicy, Rung, RunSettings
+from spinefarm.protocol.states import TrialStatus
+from spinefarm.protocol.submissions import ResultSubmission, SubmittedResult
+from spinefarm.protocol.work import WorkGrant, WorkRequest
 from spinefarm.storage.hdf5 import read_meta
 
 from tests.coordinator_tests.helpers import FakeClock

@@ -86,7 +86,7 @@ def test_samples_are_clipped_to_the_cube(storage):
 
 
 def test_failed_trials_are_never_centres(storage):
-    from spinefarm.protocol.messages import TrialStatus
+    from spinefarm.protocol.states import TrialStatus
 
     s = GaussianHillClimbSampler(3, seed=5, startup_trials=1)
     record(storage, s, 1.0)

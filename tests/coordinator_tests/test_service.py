@@ -10,15 +10,9 @@ import pytest
 import zenoh
 from spinefarm.coordinator.service import CoordinatorService, zenoh_config
 from spinefarm.protocol import keys
-from spinefarm.protocol.messages import (
-    ResultAck,
-    RunInfo,
-    WorkGrant,
-    WorkRequest,
-    decode,
-    decode_message,
-    encode_message,
-)
+from spinefarm.protocol.envelope import decode, decode_message, encode_message
+from spinefarm.protocol.submissions import ResultAck
+from spinefarm.protocol.work import RunInfo, WorkGrant, WorkRequest
 from spinefarm.storage.status import read_status
 from spinefarm.worker.service import WorkerService
 
@@ -145,7 +139,9 @@ def test_worker_discovers_the_run_without_being_told(endpoint):
 
 
 def test_results_ack_over_zenoh_is_idempotent(endpoint, client):
-    from spinefarm.protocol.messages import ResultSubmission, SubmittedResult, TrialResult, TrialStatus
+    from spinefarm.protocol.results import TrialResult
+    from spinefarm.protocol.states import TrialStatus
+    from spinefarm.protocol.submissions import ResultSubmission, SubmittedResult
 
     core, storage, _ = sphere_core(trials=5, clock=time.monotonic)
     service = CoordinatorService(core, storage, listen=[endpoint]).start()

@@ -8,16 +8,11 @@ import dataclasses
 import pytest
 from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
-from spinefarm.protocol.messages import (
-    ResultAck,
-    ResultSubmission,
-    SubmittedResult,
-    WorkGrant,
-    WorkRequest,
-    decode_message,
-)
-from spinefarm.protocol.messages import encode_message as enc
+from spinefarm.protocol.envelope import decode_message
+from spinefarm.protocol.envelope import encode_message as enc
 from spinefarm.protocol.settings import JudgePolicy
+from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult
+from spinefarm.protocol.work import WorkGrant, WorkRequest
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.worker.service import build_evaluator
 

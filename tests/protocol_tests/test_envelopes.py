@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from spinefarm.protocol.messages import decode
+from spinefarm.protocol.envelope import decode
 
 from tests.coordinator_tests.helpers import sphere_core
 from tests.coordinator_tests.test_core import ask

@@ -8,16 +8,12 @@ import numpy as np
 import pytest
 from spinefarm.cli.main import main
 from spinefarm.coordinator.objectives import objective_fn, robust_objective
+from spinefarm.protocol.envelope import decode_message, encode_message
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import (
-    ResultSubmission,
-    SubmittedResult,
-    TrialResult,
-    TrialStatus,
-    decode_message,
-    encode_message,
-)
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.robust import EpisodeResult, RobustSpec, draw_episode, parse_randomize, statistic
+from spinefarm.protocol.states import TrialStatus
+from spinefarm.protocol.submissions import ResultSubmission, SubmittedResult
 
 BAD_RANDOMIZE = [
     ("", "--randomize is empty"),

@@ -3,8 +3,9 @@ from __future__ import annotations
 import time
 
 import pytest
-from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.schema import RunMeta

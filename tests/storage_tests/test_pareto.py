@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 from spinefarm.api.app import create_app
-from spinefarm.protocol.messages import TrialResult, TrialStatus
+from spinefarm.protocol.results import TrialResult
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage import pareto
 from spinefarm.storage.export import write_csv
 from spinefarm.storage.hdf5 import Hdf5Storage

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from spinefarm.protocol.errors import StorageError
-from spinefarm.protocol.messages import TrialStatus
+from spinefarm.protocol.states import TrialStatus
 
 from tests.storage_tests.conftest import result
 

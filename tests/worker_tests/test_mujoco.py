@@ -11,7 +11,7 @@ import mujoco
 import numpy as np
 import pytest
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import TrialStatus
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import GroundSpec, SceneConfig, build_terrain, surface_height_cm

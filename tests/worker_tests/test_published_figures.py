@@ -97,8 +97,9 @@ def test_the_judge_runs_and_counts_its_perturbed_half():
     +10 %), returns its distance, and the verdict counts it. The stored distance is the judge's own, so only the
     perturbed half can fail it."""
     from spinefarm.coordinator.tasks import judge_verdict
-    from spinefarm.protocol.messages import TrialAssignment, Verification
     from spinefarm.protocol.settings import TaskFidelity
+    from spinefarm.protocol.states import Verification
+    from spinefarm.protocol.work import TrialAssignment
     from spinefarm.worker.tasks import physics_evaluator
 
     morph = load_morphology("tetraspine-ntrt")

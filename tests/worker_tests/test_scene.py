@@ -6,7 +6,7 @@ import numpy as np
 import pybullet as pb
 import pytest
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import TrialStatus
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig, build_terrain, pairs_off, surface_height_cm

@@ -9,8 +9,9 @@ import time
 import numpy as np
 import pytest
 from spinefarm.coordinator.service import CoordinatorService
-from spinefarm.protocol.messages import TrialAssignment, TrialStatus
 from spinefarm.protocol.run import RunConfig
+from spinefarm.protocol.states import TrialStatus
+from spinefarm.protocol.work import TrialAssignment
 from spinefarm.worker.service import Backoff, WorkerService, build_evaluator, default_worker_id, sphere_result
 
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
@@ -119,7 +120,8 @@ class HandRolledCoordinator:
         import zenoh
         from spinefarm.coordinator.service import zenoh_config
         from spinefarm.protocol import keys
-        from spinefarm.protocol.messages import RunInfo, TrialAssignment, WorkGrant, encode, encode_message
+        from spinefarm.protocol.envelope import encode, encode_message
+        from spinefarm.protocol.work import RunInfo, TrialAssignment, WorkGrant
 
         self.config, self.granted, self.submissions = config, False, 0
         h = config.config_hash()

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.messages import TrialStatus
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.model import ControlSpec, Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_density_factor, with_gains, with_strings

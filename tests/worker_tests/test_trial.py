@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 from spinefarm.protocol.errors import ParameterError
-from spinefarm.protocol.messages import TrialStatus
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.structure import StringMaterial
 from spinefarm.robot.morphology.variants import with_strings

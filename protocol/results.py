@@ -1,0 +1,148 @@
+"""What a trial measured: the parts of a score, declared once, and TrialResult.
+
+Messages, storage columns, API schemas and exports all derive from SCORE_PARTS and RECORDED_EXTRAS.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from spinefarm.protocol import limits
+from spinefarm.protocol.errors import MessageError
+from spinefarm.protocol.robust import MAX_EPISODES, EpisodeResult
+from spinefarm.protocol.states import TrialStatus
+
+
+@dataclass(frozen=True)
+class ScorePart:
+    """One measured part of a trial's score: messages, storage columns, API schemas and exports all
+    derive from SCORE_PARTS, so a part is declared here once."""
+
+    name: str
+    unit: str
+    description: str
+
+
+SCORE_PARTS: tuple[ScorePart, ...] = (
+    ScorePart("distance_m", "m", "displacement of the robot's centre of mass in the ground plane"),
+    ScorePart("ntrt_distance_cm", "cm", "displacement of the segment NTRT scores, from the start pose"),
+    ScorePart("speed_cm_s", "cm/s", "mean ground speed"),
+    ScorePart("work_j", "J", "actuator work shortening strings under tension"),
+    ScorePart("cot", "1", "cost of transport, work / (m g d)"),
+    ScorePart("mass_kg", "kg", "robot mass"),
+    ScorePart("sim_time_s", "s", "simulated time"),
+    ScorePart("wall_time_s", "s", "wall-clock time the worker spent on the trial"),
+)
+SCORE_NAMES = tuple(p.name for p in SCORE_PARTS)
+
+
+@dataclass(frozen=True)
+class ExtraPart:
+    """A TrialResult.extras entry that storage keeps as a column: how the trial was computed."""
+
+    name: str
+    dtype: str   # numpy dtype of the column ("f8", or "S16" for a short string)
+    unit: str
+    description: str
+
+
+RECORDED_EXTRAS: tuple[ExtraPart, ...] = (
+    ExtraPart("engine", "S16", "", "physics engine that ran the trial (bullet, mujoco)"),
+    ExtraPart("dt_s", "f8", "s", "physics step the trial used (the automatic choice under --dt auto)"),
+    ExtraPart("settle_s", "f8", "s", "settle phase before locomotion was scored (0: scored from the start)"),
+    ExtraPart("time_limit_s", "f8", "s", "wall-clock limit the worker gave the trial (past it: failed, timeout)"),
+)
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    """What one trial measured. Distances are in the ground plane; units are in the names.
+
+    distance_m: displacement of the whole robot's centre of mass.
+    ntrt_distance_cm: displacement of the segment NTRT scores (spec section 5).
+    work_j: work done shortening strings under tension (relaxation is passive).
+    cot: work_j / (mass_kg * g * distance_m), dimensionless (inf when distance is 0).
+    status: complete, or failed with `reason` (diverged: ..., error: ...); partial metrics kept.
+    episodes: a robust run's episodes (protocol.robust), each in its own randomised world; the parts
+    above are then their medians.
+    """
+
+    status: TrialStatus
+    reason: str
+    distance_m: float
+    ntrt_distance_cm: float
+    speed_cm_s: float
+    work_j: float
+    cot: float
+    sim_time_s: float
+    wall_time_s: float
+    mass_kg: float
+    seed: int
+    trial_id: int = -1
+    worker_id: str = ""
+    extras: dict[str, float] = field(default_factory=dict)
+    episodes: tuple[EpisodeResult, ...] = ()
+
+    @property
+    def ok(self) -> bool:
+        return self.status == TrialStatus.COMPLETE
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["status"] = str(self.status)
+        if not self.episodes:
+            del d["episodes"]
+        return d
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrialResult:
+        if not isinstance(data, dict):
+            raise MessageError("trial result is not an object", received=type(data).__name__,
+                               expected="a JSON object")
+        kwargs: dict[str, Any] = {}
+        for f in fields(cls):
+            if f.name not in data:
+                if f.name in ("trial_id", "worker_id", "extras", "episodes"):
+                    continue
+                raise MessageError(f"trial result lacks field {f.name!r}", received=sorted(data),
+                                   expected=[g.name for g in fields(cls)])
+            kwargs[f.name] = data[f.name]
+        try:
+            kwargs["status"] = TrialStatus(kwargs["status"])
+        except ValueError as exc:
+            raise MessageError("trial result has an unknown status", received=kwargs["status"],
+                               expected=[s.value for s in TrialStatus]) from exc
+        for name in SCORE_NAMES:
+            v = kwargs[name]
+            if isinstance(v, bool) or not isinstance(v, int | float):
+                raise MessageError(f"trial result field {name!r} is not a number", received=v,
+                                   expected="a number")
+            kwargs[name] = float(v)
+        for name in ("seed", "trial_id"):
+            if name in kwargs and (isinstance(kwargs[name], bool) or not isinstance(kwargs[name], int)):
+                raise MessageError(f"trial result field {name!r} is not an integer", received=kwargs[name],
+                                   expected="an integer")
+        limits.check_text(kwargs["reason"], "trial result field 'reason'")
+        if kwargs.get("worker_id"):
+            limits.check_id(kwargs["worker_id"], "trial result field 'worker_id'")
+        if not _extras_ok(kwargs.get("extras", {})):
+            raise MessageError("trial result field 'extras' is malformed", received=str(kwargs["extras"])[:80],
+                               expected=f"at most {limits.MAX_EXTRAS} name: number or short text pairs")
+        episodes = kwargs.get("episodes", [])
+        if not isinstance(episodes, list | tuple) or len(episodes) > MAX_EPISODES:
+            raise MessageError("trial result field 'episodes' is malformed", received=str(episodes)[:80],
+                               expected=f"a list of at most {MAX_EPISODES} episode results")
+        kwargs["episodes"] = tuple(EpisodeResult.from_dict(e) for e in episodes)
+        return cls(**kwargs)
+
+
+def _extras_ok(extras: Any) -> bool:
+    def value_ok(v: Any) -> bool:
+        if isinstance(v, str):
+            return len(v) <= 64
+        return isinstance(v, int | float) and not isinstance(v, bool)
+
+    return (isinstance(extras, dict) and len(extras) <= limits.MAX_EXTRAS
+            and all(isinstance(k, str) and len(k) <= 32 and value_ok(v) for k, v in extras.items()))
+

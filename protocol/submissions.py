@@ -1,0 +1,85 @@
+"""Finished trials on their way back: a result with its lease, a batch of them, and the verdicts that
+acknowledge each one."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any
+
+from spinefarm.protocol import limits
+from spinefarm.protocol.envelope import get_field
+from spinefarm.protocol.errors import MessageError
+from spinefarm.protocol.results import TrialResult
+
+
+@dataclass(frozen=True)
+class SubmittedResult:
+    """A TrialResult with the lease it answers."""
+
+    lease_id: int
+    result: TrialResult
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"lease_id": self.lease_id, "result": self.result.to_dict()}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> SubmittedResult:
+        result = TrialResult.from_dict(get_field(data, "result", dict, "submitted result"))
+        if result.trial_id < 0:
+            raise MessageError("submitted result has no trial id", received=result.trial_id,
+                               expected="a trial id >= 0")
+        return cls(get_field(data, "lease_id", int, "submitted result"), result)
+
+
+@dataclass(frozen=True)
+class ResultSubmission:
+    """A worker returns finished trials; it resends them until each is acknowledged."""
+
+    KIND = "result_submission"
+    worker_id: str
+    items: tuple[SubmittedResult, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"worker_id": self.worker_id, "items": [i.to_dict() for i in self.items]}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ResultSubmission:
+        items = get_field(data, "items", list, "result submission")
+        if len(items) > limits.MAX_BATCH:
+            raise MessageError("result submission is too large", received=len(items),
+                               expected=f"at most {limits.MAX_BATCH} results")
+        worker_id = limits.check_id(get_field(data, "worker_id", str, "result submission"),
+                                    "result submission worker id")
+        return cls(worker_id, tuple(SubmittedResult.from_dict(i) for i in items))
+
+
+class Verdict(StrEnum):
+    """What the coordinator did with one submitted result. Every verdict is final for the worker."""
+
+    STORED = "stored"          # new, stored now
+    DUPLICATE = "duplicate"    # already stored (a resend after a lost ack)
+    STALE = "stale"            # the lease expired or the trial was re-issued: dropped
+    UNKNOWN = "unknown"        # no such trial in this run: dropped
+    INVALID = "invalid"        # the result does not fit the trial (e.g. seed mismatch): dropped
+    REQUEUED = "requeued"      # timed out or crashed on its worker: issued again (up to 3 attempts in all)
+
+
+@dataclass(frozen=True)
+class ResultAck:
+    KIND = "result_ack"
+    verdicts: tuple[tuple[int, Verdict], ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"verdicts": [[t, str(v)] for t, v in self.verdicts]}
+
+    @classmethod
+    def from_dict(cls, data: Any) -> ResultAck:
+        raw = get_field(data, "verdicts", list, "result ack")
+        try:
+            verdicts = tuple((int(t), Verdict(v)) for t, v in raw)
+        except (TypeError, ValueError) as exc:
+            raise MessageError("result ack has malformed verdicts", received=raw[:4],
+                               expected=f"[trial_id, one of {[v.value for v in Verdict]}] pairs") from exc
+        return cls(verdicts)
+
