@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 from spinefarm.cli.service_commands import free_port  # noqa: E402
 from spinefarm.protocol import keys  # noqa: E402
-from spinefarm.storage.hdf5 import read_run  # noqa: E402
+from spinefarm.storage.hdf5_reader import read_run  # noqa: E402
 
 
 # --- a worker that logs what was acknowledged ----------------------------------------------------------

@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 
 from spinefarm.coordinator.problem import build_run_config  # noqa: E402
 from spinefarm.coordinator.setup import SearchSettings, new_run  # noqa: E402
-from spinefarm.storage.hdf5 import read_run  # noqa: E402
+from spinefarm.storage.hdf5_reader import read_run  # noqa: E402
 
 POISON = {"hang": [0.0, 0.015], "crash": [0.015, 0.03]}   # on the first unit parameter
 FORGED_M = 1234.5

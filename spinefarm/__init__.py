@@ -36,7 +36,7 @@ def load_run(path: str | Path, episodes: bool = False) -> pd.DataFrame:
     import numpy as np
     import pandas as pd
 
-    from spinefarm.storage.hdf5 import read_run
+    from spinefarm.storage.hdf5_reader import read_run
     from spinefarm.storage.probe import probe
     from spinefarm.storage.schema import COLUMNS, VECTOR_COLUMNS
 
@@ -77,7 +77,7 @@ def load_episodes(path: str | Path) -> pd.DataFrame:
     import pandas as pd
 
     from spinefarm.storage.episodes import EPISODE_COLUMNS
-    from spinefarm.storage.hdf5 import read_episodes
+    from spinefarm.storage.hdf5_reader import read_episodes
 
     cols = read_episodes(path)
     data = {c.name: ([x.decode("utf-8", "replace") for x in cols[c.name].tolist()] if c.dtype[0] == "S"

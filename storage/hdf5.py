@@ -1,9 +1,7 @@
-"""Hdf5Storage: one self-describing HDF5 file per run, single writer, SWMR readers.
+"""Hdf5Storage: the single writer of one run file (layout: storage.hdf5_layout; readers: storage.hdf5_reader).
 
-Layout: root attributes hold the run metadata (JSON strings for nested values); group /trials holds
-one chunked, resizable dataset per column (see storage.schema), row i = trial i, with `unit` and
-`description` attributes. The writer keeps the table in memory, writes changed rows at `flush()`
-and runs in SWMR mode, so readers (the API, a notebook) see every flushed row while the run goes on.
+The writer keeps the table in memory, writes changed rows at `flush()` and runs in SWMR mode, so
+readers (the API, a notebook) see every flushed row while the run goes on.
 
 `flush()` ends with fsync: what it wrote is on the disk when it returns (it survives a power cut or
 a crashed machine, not only a killed process), so the coordinator acknowledges a result only then.
@@ -16,182 +14,33 @@ instead of relying on external tools to clear the flags.
 from __future__ import annotations
 
 import errno
-import json
 import os
 from collections.abc import Callable
-from dataclasses import fields, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import h5py
 import numpy as np
-from spinefarm.protocol.envelope import SCHEMA_VERSION
 from spinefarm.protocol.errors import StorageError
-from spinefarm.protocol.settings import RunSettings
 from spinefarm.storage import episodes as ep
 from spinefarm.storage.file_ops import _fsync_dir, _quiet_failed_deallocs, _reason, _refuse_read_only, _trim
+from spinefarm.storage.hdf5_layout import write_run
+from spinefarm.storage.hdf5_reader import read_episodes, read_run
 from spinefarm.storage.memory import InMemoryStorage
-from spinefarm.storage.probe import check_eof, probe, stored_eof
+from spinefarm.storage.probe import probe, stored_eof
 from spinefarm.storage.runlock import RunLock
-from spinefarm.storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
-from spinefarm.storage.table import EMPTY_STATUS, TrialTable, empty_value
+from spinefarm.storage.schema import COLUMNS, RunMeta
+from spinefarm.storage.table import TrialTable
 
-CHUNK_ROWS = 1024
 # A file handle whose writes failed: closing it makes HDF5 retry the failed writes (and crash at exit),
 # so it is kept here, never closed, and the process leaves with os._exit (see CoordinatorCore.write_failure).
 _ABANDONED: list[h5py.File] = []
-# Chunks are mostly fill values and repeated bytes early in a run: gzip (with byte shuffling, which
-# groups the bytes of floats) shrinks an 8-trial file from 2.5 MB to about 0.1 MB; readers need nothing extra.
-COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
 # The space a file grows into is written (zeros) and synced before HDF5 uses it. On ext4 a sync writes the
 # data first and commits a new file size or new blocks afterwards: a disk dying in between would leave
 # HDF5's new superblock in a file shorter than it says (seen: "truncated", every row unreadable). Inside
 # the reserve a sync only overwrites blocks the file already has. Trimmed to HDF5's end at close.
 RESERVE_B = 8 << 20      # reserved beyond HDF5's end when it is topped up
 RESERVE_LOW_B = 4 << 20  # topped up when less than this is left (one flush grows the file far less)
-_JSON_FIELDS = ("sampler", "settings", "run", "environment")
-_TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
-
-
-def _write_meta(f: h5py.File, meta: RunMeta) -> None:
-    f.attrs["title"] = f"spinefarm run {meta.run_id}"
-    f.attrs["description"] = (
-        "Gait search for a tensegrity robot. Group /trials holds one dataset per column, one row per "
-        "trial (row i = trial i); status 'waiting' rows were sampled but have no result yet. Parameter "
-        "columns are named by param_names with bounds param_lows/param_highs in param_units.")
-    f.attrs["file_schema_version"] = FILE_SCHEMA_VERSION
-    f.attrs["message_schema_version"] = SCHEMA_VERSION
-    for fld in fields(RunMeta):
-        value = getattr(meta, fld.name)
-        if fld.name in _JSON_FIELDS:
-            f.attrs[fld.name] = json.dumps(value.to_dict() if fld.name == "settings" else value, sort_keys=True)
-        elif fld.name in _TUPLE_FIELDS:
-            f.attrs[fld.name] = np.array(value, dtype=h5py.string_dtype() if "names" in fld.name
-                                         or "units" in fld.name else float)
-        elif value is None:
-            f.attrs[fld.name] = ""
-        else:
-            f.attrs[fld.name] = value
-
-
-def _read_meta(f: h5py.File, path: Path) -> RunMeta:
-    if f.attrs.get("file_schema_version") != FILE_SCHEMA_VERSION:
-        raise StorageError(f"{path} is not a spinefarm run file of this version",
-                           received=f.attrs.get("file_schema_version"), expected=FILE_SCHEMA_VERSION)
-    kw: dict[str, Any] = {}
-    for fld in fields(RunMeta):
-        if fld.name == "environment" and fld.name not in f.attrs:
-            continue  # written before runs recorded one
-        raw = f.attrs[fld.name]
-        if fld.name == "settings":
-            kw[fld.name] = RunSettings.from_dict(json.loads(raw))
-        elif fld.name in _JSON_FIELDS:
-            kw[fld.name] = json.loads(raw)
-        elif fld.name in ("param_names", "param_units"):
-            kw[fld.name] = tuple(x.decode("utf-8", "replace") if isinstance(x, bytes) else str(x) for x in raw)
-        elif fld.name in ("param_lows", "param_highs"):
-            kw[fld.name] = tuple(float(x) for x in raw)
-        elif fld.name == "controller":
-            kw[fld.name] = str(raw) or None
-        elif fld.name in ("seed", "trials_budget"):
-            kw[fld.name] = int(raw)
-        elif fld.name == "created_at_unix_s":
-            kw[fld.name] = float(raw)
-        else:
-            kw[fld.name] = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else str(raw)
-    return RunMeta(**kw)
-
-
-def _create_datasets(f: h5py.File, n_params: int, n_rows: int) -> dict[str, h5py.Dataset]:
-    g = f.create_group("trials")
-    out = {}
-    for c in COLUMNS:
-        vec = c.name in VECTOR_COLUMNS
-        ds = g.create_dataset(
-            c.name, shape=(n_rows, n_params) if vec else (n_rows,), dtype=c.dtype,
-            maxshape=(None, n_params) if vec else (None,),
-            chunks=(CHUNK_ROWS, max(n_params, 1)) if vec else (CHUNK_ROWS,),
-            fillvalue=empty_value(c.name), **COMPRESSION)
-        ds.attrs["unit"] = c.unit
-        ds.attrs["description"] = c.description
-        out[c.name] = ds
-    return out
-
-
-def read_run(path: str | Path) -> tuple[RunMeta, dict[str, np.ndarray]]:
-    """Metadata and every complete row of a run file, also while (or after) a writer had it open."""
-    path = Path(path)
-    if not path.is_file():
-        raise StorageError("run file does not exist", received=str(path), expected="an existing .h5 file")
-    check_eof(path)  # a truncated file would hang an SWMR reader
-    try:
-        f = h5py.File(path, "r", libver="latest", swmr=True)
-    except OSError as exc:
-        raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
-    with f:
-        try:
-            meta = _read_meta(f, path)
-            if "trials" not in f:
-                raise StorageError(f"{path} has no /trials group", expected="a spinefarm run file")
-            g = f["trials"]
-            n = min(g[c.name].shape[0] for c in COLUMNS)
-            cols = {c.name: g[c.name][:n] for c in COLUMNS}
-        except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:  # damaged attributes or data
-            raise StorageError(f"cannot read run file {path}: {str(exc).splitlines()[0][:200]}",
-                               expected="an undamaged spinefarm run file") from exc
-    # A row the writer extended but had not filled yet has an empty status: cut the table there.
-    empty = np.flatnonzero(cols["status"] == EMPTY_STATUS)
-    if empty.size:
-        cols = {k: v[: int(empty[0])] for k, v in cols.items()}
-    return meta, cols
-
-
-def read_meta(path: str | Path) -> RunMeta:
-    """Only the run metadata (cheap: attributes, no table)."""
-    path = Path(path)
-    check_eof(path)
-    try:
-        f = h5py.File(path, "r", libver="latest", swmr=True)
-    except (OSError, FileNotFoundError) as exc:
-        raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
-    with f:
-        try:
-            return _read_meta(f, path)
-        except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:
-            raise StorageError(f"cannot read run file {path}: {str(exc).splitlines()[0][:200]}",
-                               expected="an undamaged spinefarm run file") from exc
-
-
-def write_run(path: str | Path, meta: RunMeta, cols: dict[str, np.ndarray],
-              episodes: dict[str, np.ndarray] | None = None) -> None:
-    """Write a complete, closed (non-SWMR) run file: used for snapshots and for resume. episodes: the
-    episodes table (storage.episodes; none: empty)."""
-    n = len(cols["trial_id"])
-    with h5py.File(path, "w", libver="latest") as f:
-        _write_meta(f, meta)
-        for name, ds in _create_datasets(f, meta.n_params, n).items():
-            if n:
-                ds[:] = cols[name]
-        ep.create_datasets(f, ep.empty_columns() if episodes is None else episodes, COMPRESSION)
-
-
-def read_episodes(path: str | Path) -> dict[str, np.ndarray]:
-    """The episodes table of a run file (storage.episodes), of its finished trials; empty for a plain run."""
-    _, cols = read_run(path)
-    try:
-        with h5py.File(path, "r", libver="latest", swmr=True) as f:
-            episodes = ep.read_datasets(f)
-    except (KeyError, ValueError, TypeError, OSError, RuntimeError) as exc:
-        raise StorageError(f"cannot read the episodes of run file {path}: {str(exc).splitlines()[0][:200]}",
-                           expected="an undamaged spinefarm run file") from exc
-    return ep.of_finished(episodes, cols["status"], b"waiting")
-
-
-def snapshot(src: str | Path, dst: str | Path) -> int:
-    """Consistent copy of a (possibly live) run file; returns the number of rows copied."""
-    meta, cols = read_run(src)
-    write_run(dst, meta, cols, read_episodes(src))
-    return len(cols["trial_id"])
 
 
 class Hdf5Storage(InMemoryStorage):

@@ -1,4 +1,9 @@
-"""Hdf5Reader: a read-only, lazy view of a run file for status queries (the API's read path)."""
+"""Reading run files: whole tables (read_run, the loader behind spinefarm.load_run), metadata alone, the
+episodes, a consistent snapshot; and Hdf5Reader, a lazy view for status queries (the API's read path).
+
+Every read opens the file as an SWMR reader after checking its superblock's end of file, so a live
+writer's file reads consistently and a truncated one fails at once instead of hanging.
+"""
 
 from __future__ import annotations
 
@@ -8,11 +13,83 @@ from pathlib import Path
 import h5py
 import numpy as np
 from spinefarm.protocol.errors import StorageError
+from spinefarm.storage import episodes as ep
 from spinefarm.storage.base import BaseStorage
-from spinefarm.storage.hdf5 import _read_meta
+from spinefarm.storage.hdf5_layout import meta_of, write_run
 from spinefarm.storage.probe import check_eof
 from spinefarm.storage.schema import COLUMNS, RunMeta, TrialRecord
 from spinefarm.storage.table import EMPTY_STATUS
+
+# what damaged attributes or data raise from h5py
+_DAMAGED = (KeyError, ValueError, TypeError, OSError, RuntimeError)
+
+
+def _open(path: Path) -> h5py.File:
+    check_eof(path)  # a truncated file would hang an SWMR reader
+    try:
+        return h5py.File(path, "r", libver="latest", swmr=True)
+    except OSError as exc:
+        raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
+
+
+def _damaged(path: Path, exc: BaseException, what: str = "") -> StorageError:
+    return StorageError(f"cannot read {what}run file {path}: {str(exc).splitlines()[0][:200]}",
+                        expected="an undamaged spinefarm run file")
+
+
+def _must_exist(path: Path) -> None:
+    if not path.is_file():
+        raise StorageError("run file does not exist", received=str(path), expected="an existing .h5 file")
+
+
+def read_run(path: str | Path) -> tuple[RunMeta, dict[str, np.ndarray]]:
+    """Metadata and every complete row of a run file, also while (or after) a writer had it open."""
+    path = Path(path)
+    _must_exist(path)
+    with _open(path) as f:
+        try:
+            meta = meta_of(f, path)
+            if "trials" not in f:
+                raise StorageError(f"{path} has no /trials group", expected="a spinefarm run file")
+            g = f["trials"]
+            n = min(g[c.name].shape[0] for c in COLUMNS)
+            cols = {c.name: g[c.name][:n] for c in COLUMNS}
+        except _DAMAGED as exc:
+            raise _damaged(path, exc) from exc
+    # A row the writer extended but had not filled yet has an empty status: cut the table there.
+    empty = np.flatnonzero(cols["status"] == EMPTY_STATUS)
+    if empty.size:
+        cols = {k: v[: int(empty[0])] for k, v in cols.items()}
+    return meta, cols
+
+
+def read_meta(path: str | Path) -> RunMeta:
+    """Only the run metadata (cheap: attributes, no table)."""
+    path = Path(path)
+    with _open(path) as f:
+        try:
+            return meta_of(f, path)
+        except _DAMAGED as exc:
+            raise _damaged(path, exc) from exc
+
+
+def read_episodes(path: str | Path) -> dict[str, np.ndarray]:
+    """The episodes table of a run file (storage.episodes), of its finished trials; empty for a plain run."""
+    path = Path(path)
+    _, cols = read_run(path)
+    try:
+        with h5py.File(path, "r", libver="latest", swmr=True) as f:
+            episodes = ep.read_datasets(f)
+    except _DAMAGED as exc:
+        raise _damaged(path, exc, "the episodes of ") from exc
+    return ep.of_finished(episodes, cols["status"], b"waiting")
+
+
+def snapshot(src: str | Path, dst: str | Path) -> int:
+    """Consistent copy of a (possibly live) run file; returns the number of rows copied."""
+    meta, cols = read_run(src)
+    write_run(dst, meta, cols, read_episodes(src))
+    return len(cols["trial_id"])
 
 
 class _LazyColumns(Mapping):
@@ -45,15 +122,10 @@ class Hdf5Reader(BaseStorage):
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        if not self.path.is_file():
-            raise StorageError("run file does not exist", received=str(path), expected="an existing .h5 file")
-        check_eof(self.path)  # a truncated file would hang the SWMR open below
+        _must_exist(self.path)
+        self._file = _open(self.path)
         try:
-            self._file = h5py.File(self.path, "r", libver="latest", swmr=True)
-        except OSError as exc:
-            raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
-        try:
-            self._meta = _read_meta(self._file, self.path)
+            self._meta = meta_of(self._file, self.path)
             group = self._file["trials"]
             n = min(group[c.name].shape[0] for c in COLUMNS)
             status = group["status"][:n]
@@ -92,8 +164,6 @@ class Hdf5Reader(BaseStorage):
         return [TrialRecord.from_columns(cols, at[tid]) for tid in ids]
 
     def episodes(self, trial_id: int | None = None) -> dict[str, np.ndarray]:
-        from spinefarm.storage import episodes as ep
-
         cols = ep.of_finished(ep.read_datasets(self._file), self._cols["status"], b"waiting")
         return cols if trial_id is None else ep.rows_of(cols, trial_id)
 

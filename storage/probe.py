@@ -28,7 +28,7 @@ PROBE_TIMEOUT_S = 10.0
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 _PROBE_CODE = (
     "import sys\n"
-    "from spinefarm.storage.hdf5 import read_run\n"
+    "from spinefarm.storage.hdf5_reader import read_run\n"
     "meta, cols = read_run(sys.argv[1])\n"
     "print(meta.run_id)\n"
 )

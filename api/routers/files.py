@@ -12,8 +12,7 @@ from fastapi import APIRouter, Depends
 from fastapi.responses import FileResponse, Response
 from spinefarm.api.deps import run_path, run_storage
 from spinefarm.storage.export import write_csv
-from spinefarm.storage.hdf5 import snapshot
-from spinefarm.storage.hdf5_reader import Hdf5Reader
+from spinefarm.storage.hdf5_reader import Hdf5Reader, snapshot
 from starlette.background import BackgroundTask
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["files"])

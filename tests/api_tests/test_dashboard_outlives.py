@@ -113,7 +113,7 @@ def test_the_state_comes_from_the_file_alone(tmp_path):
     killed = tmp_path / "killed.h5"
     proc = search("--trials", "100000", "--duration", "0.1", "--out", str(killed), "--run-id", "killed-run",
                   "--api-port", "-1")
-    from spinefarm.storage.hdf5 import read_run
+    from spinefarm.storage.hdf5_reader import read_run
 
     wait_for(lambda: killed.exists() and _finished(killed, read_run) >= 5, timeout_s=120, poll_s=0.2,
              what="a few results")

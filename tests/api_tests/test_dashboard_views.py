@@ -13,7 +13,7 @@ import urllib.request
 
 import numpy as np
 import pytest
-from spinefarm.storage.hdf5 import read_run
+from spinefarm.storage.hdf5_reader import read_run
 
 from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, chromium_path, free_port, spinefarm
 from tests.coordinator_tests.helpers import wait_for

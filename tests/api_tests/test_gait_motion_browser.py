@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.storage.hdf5 import read_run
+from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.worker.render import rod_segments, string_segments
 
 from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, chromium_path, free_port, spinefarm

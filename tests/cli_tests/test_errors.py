@@ -192,7 +192,7 @@ def test_ctrl_c_while_the_best_is_re_simulated(tmp_path):
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
     assert "the best is reported unverified" in stderr
     assert "best trial 0" in stdout
-    from spinefarm.storage.hdf5 import read_run
+    from spinefarm.storage.hdf5_reader import read_run
 
     _, cols = read_run(out)
     assert cols["status"].tolist() == [b"complete"]

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from spinefarm.cli.local_workers import LocalWorkers
-from spinefarm.storage.hdf5 import read_run
+from spinefarm.storage.hdf5_reader import read_run
 
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT

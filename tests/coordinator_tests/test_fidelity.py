@@ -12,7 +12,8 @@ from spinefarm.coordinator.fidelity import HalvingTrialScheduler, parse_rungs
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import TrialStatus
-from spinefarm.storage.hdf5 import Hdf5Storage, read_run
+from spinefarm.storage.hdf5 import Hdf5Storage
+from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.storage.memory import InMemoryStorage
 
 from tests.coordinator_tests.helpers import free_endpoint

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 import pytest
-from spinefarm.storage.hdf5 import read_run
+from spinefarm.storage.hdf5_reader import read_run
 
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT, status

@@ -11,8 +11,7 @@ from fastapi.testclient import TestClient
 from spinefarm.api.app import create_app
 from spinefarm.protocol.robust import RobustSpec
 from spinefarm.robot.morphology.model import Morphology
-from spinefarm.storage.hdf5 import read_episodes, read_meta, read_run
-from spinefarm.storage.hdf5_reader import Hdf5Reader
+from spinefarm.storage.hdf5_reader import Hdf5Reader, read_episodes, read_meta, read_run
 from spinefarm.worker.robust import run_episodes
 from spinefarm.worker.trial import TrialConfig
 

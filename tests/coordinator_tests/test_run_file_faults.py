@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from spinefarm.coordinator.setup import resume_run
 from spinefarm.protocol.errors import StorageError
-from spinefarm.storage.hdf5 import read_run
+from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.storage.status import read_status
 
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core

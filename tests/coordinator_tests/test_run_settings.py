@@ -19,7 +19,7 @@ from spinefarm.protocol.settings import JudgePolicy, Rung, RunSettings
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.protocol.submissions import ResultSubmission, SubmittedResult
 from spinefarm.protocol.work import WorkGrant, WorkRequest
-from spinefarm.storage.hdf5 import read_meta
+from spinefarm.storage.hdf5_reader import read_meta
 
 from tests.coordinator_tests.helpers import FakeClock
 

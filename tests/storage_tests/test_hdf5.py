@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from spinefarm.protocol.errors import StorageError
 from spinefarm.storage.export import best_table, write_csv
-from spinefarm.storage.hdf5 import Hdf5Storage, read_meta, read_run, snapshot
+from spinefarm.storage.hdf5 import Hdf5Storage
+from spinefarm.storage.hdf5_reader import read_meta, read_run, snapshot
 
 from tests.storage_tests.conftest import make_meta, result
 

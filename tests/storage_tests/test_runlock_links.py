@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from spinefarm.coordinator.setup import resume_run
 from spinefarm.protocol.errors import StorageError
-from spinefarm.storage.hdf5 import read_run
+from spinefarm.storage.hdf5_reader import read_run
 
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core
 from tests.coordinator_tests.procs import ROOT, coordinator, stop, wait_status

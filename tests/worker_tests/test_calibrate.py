@@ -14,7 +14,7 @@ from spinefarm.protocol.engine_choice import EngineChoice
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.robot.morphology.registry import builtin_path, load_morphology
-from spinefarm.storage.hdf5 import read_run
+from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.worker.calibrate import agreement, decide
 
 from tests.coordinator_tests.procs import ROOT

@@ -116,7 +116,7 @@ def test_scene_from_the_command_line_and_into_the_run_file(tmp_path):
     from spinefarm.coordinator.setup import SearchSettings, new_run
     from spinefarm.protocol.settings import JudgePolicy
     from spinefarm.robot.scene import parse_scene
-    from spinefarm.storage.hdf5 import read_meta
+    from spinefarm.storage.hdf5_reader import read_meta
 
     scene = parse_scene("rough, rough_amplitude_cm=3, rough_seed=7, collision_filter=auto")
     assert scene["kind"] == "rough" and scene["rough_amplitude_cm"] == 3.0 and scene["rough_seed"] == 7

@@ -12,7 +12,7 @@ import time
 from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.protocol.work import TrialAssignment
-from spinefarm.storage.hdf5 import read_run
+from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.worker.sandbox import TrialLimit, TrialSandbox
 
 from tests.coordinator_tests.helpers import free_endpoint
