@@ -26,15 +26,9 @@ from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.run import RunConfig, WorkerProblem
 from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult
 from spinefarm.protocol.work import RunInfo, TrialAssignment, WorkGrant, WorkRequest
+from spinefarm.worker.connect import Connector
 from spinefarm.worker.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
-from spinefarm.worker.pacing import (
-    EXIT_REFUSED,
-    Backoff,
-    BatchSizer,
-    default_worker_id,
-    listening_endpoints,
-    mark_ready,
-)
+from spinefarm.worker.pacing import Backoff, BatchSizer, default_worker_id, mark_ready
 from spinefarm.worker.sandbox import MIN_LIMIT_S, TrialLimit, TrialSandbox
 from spinefarm.worker.tasks import available_engines, environment
 
@@ -46,8 +40,8 @@ WORKER_LEASE_MS = 2000
 # With --exit-when-done: a run whose coordinator stays silent this long has ended (it may have ended
 # while this worker was frozen or cut off, and then nobody is left to say "done").
 COORDINATOR_TIMEOUT_S = 30.0
-# A worker still without its coordinator after this long says so (then keeps trying).
-UNREACHABLE_WARN_S = 3.0
+
+
 def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
                  config_file: str | Path | None = None, credentials_file: str | Path | None = None) -> zenoh.Config:
     """Client of the coordinator/router at `connect`; multicast scouting off; short transport lease;
@@ -93,7 +87,6 @@ class WorkerService:
             raise ConfigError("minimum trial limit out of range", received=min_trial_limit_s, expected="seconds > 0")
         self.min_trial_limit_s = min_trial_limit_s
         self._sandboxes: list[TrialSandbox] = []
-        self._said_unreachable = False
         # SPINEFARM_ACK_LOG: one line per verdict received (run, trial, verdict, status, distance), for the
         # fault benches to count lost and duplicated results against what the coordinator acknowledged
         ack_log = os.environ.get("SPINEFARM_ACK_LOG")
@@ -235,74 +228,14 @@ class WorkerService:
         return replace(result, trial_id=a.trial_id, worker_id=self.worker_id, seed=a.seed)
 
     # --- main loop --------------------------------------------------------------------------------
-    def _open(self) -> zenoh.Session | None:
-        """A client session opens only once its router is reachable: retry with back-off until stopped."""
-        backoff = Backoff(0.1, 2.0)
-        since, told, refused_since = time.monotonic(), "", time.monotonic()
-        where = ", ".join(self._conf_args[0]) or "the configured endpoints"
-        while not self.stop.is_set():
-            try:
-                # an attempt that hangs past the warning time is said to hang, not left silent
-                return self._open_once(since + UNREACHABLE_WARN_S, where if not told else None)
-            except zenoh.ZError as exc:
-                log.info("coordinator not reachable yet (%s); retrying", exc)
-                told = "unreachable" if self._said_unreachable and not told else told
-                if time.monotonic() - since >= UNREACHABLE_WARN_S:
-                    listening = listening_endpoints(self._conf_args[0])
-                    state = "refused" if listening else "unreachable"
-                    if state == "refused" and told != state:
-                        refused_since = time.monotonic()
-                        log.error("refused by %s: it accepts connections but not this worker's Zenoh session "
-                                  "(missing or wrong --credentials, or TLS settings that do not match)",
-                                  ", ".join(listening))
-                    elif state != told:
-                        log.warning("cannot reach a coordinator at %s; still trying (Ctrl-C to stop)", where)
-                    told = state
-                    # a proxy in front of a restarting coordinator refuses for a few seconds too: give up only
-                    # after --coordinator-timeout of refusals
-                    if (state == "refused" and self.exit_when_done
-                            and time.monotonic() - refused_since >= self.coordinator_timeout_s):
-                        log.error("giving up (--exit-when-done): refused for %.0f s", time.monotonic() - refused_since)
-                        self.exit_code = EXIT_REFUSED
-                        return None
-                self.stop.wait(backoff.next())
-        return None
-
-    def _open_once(self, warn_at: float, where: str | None) -> zenoh.Session | None:
-        """One zenoh.open, in a thread so that Ctrl-C is answered at once even while Zenoh waits on an endpoint
-        that accepts TCP but never answers its handshake; None when stopped first (the attempt is abandoned).
-        Still connecting at monotonic time `warn_at`: say that `where` cannot be reached (once)."""
-        outcome: list = []
-        done = threading.Event()
-
-        def attempt() -> None:
-            try:
-                outcome.append(zenoh.open(zenoh_config(*self._conf_args)))  # a config is used up by open
-            except BaseException as exc:  # handed to the caller's thread
-                outcome.append(exc)
-            done.set()
-
-        threading.Thread(target=attempt, name="zenoh-open", daemon=True).start()
-        while not done.wait(0.1):
-            if self.stop.is_set():
-                return None
-            if where is not None and time.monotonic() >= warn_at:
-                listening = listening_endpoints(self._conf_args[0])
-                if listening:
-                    log.warning("%s accepts connections but no Zenoh session has answered yet (a coordinator "
-                                "that is not one, or TLS settings that do not match); still trying (Ctrl-C to stop)",
-                                ", ".join(listening))
-                else:
-                    log.warning("cannot reach a coordinator at %s; still trying (Ctrl-C to stop)", where)
-                    self._said_unreachable = True
-                where = None
-        if isinstance(outcome[0], BaseException):
-            raise outcome[0]
-        return outcome[0]
-
     def run(self) -> int:
-        session = self._open()
+        # a config is used up by open: a fresh one for every attempt
+        connector = Connector(lambda: zenoh.open(zenoh_config(*self._conf_args)), zenoh.ZError, self._conf_args[0],
+                              self.stop, exit_when_done=self.exit_when_done,
+                              coordinator_timeout_s=self.coordinator_timeout_s)
+        session = connector.open()
         if session is None:
+            self.exit_code = connector.exit_code or self.exit_code
             return self.exit_code
         token = session.liveliness().declare_token(keys.worker_token(self.worker_id))
         mark_ready(self.worker_id)
