@@ -166,47 +166,15 @@ def result_summary(result: Any, morph_name: str, controller: str | None) -> dict
 
 
 def cmd_trial(args: argparse.Namespace) -> int:
-    from spinefarm.cli.environment_notes import note_environment, recorded_environment
     from spinefarm.protocol.environment import environment_record
-    from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
+    from spinefarm.worker.trial import simulate
 
     if args.record is not None:
         checks.output_path("--record", args.record, (".npz",))
     if args.trial_id is not None and args.run is None:
         raise ParameterError("--trial-id needs --run", received=args.trial_id, expected="--run RUN.h5 --trial-id N")
-    base: dict[str, Any] = {}
-    if args.run is not None:
-        morphology, controller, params, seed, base, stored_id = _stored_trial(args.run, args.trial_id)
-        if args.morphology is not None:
-            raise ParameterError("--run names its own robot", received=args.morphology,
-                                 expected="no morphology with --run")
-        morph = load_morphology(morphology)
-        controller = args.controller or controller
-        seed = args.seed if args.seed is not None else seed
-        note_environment(args.run, recorded_environment(args.run))
-    else:
-        if args.morphology is None:
-            raise ParameterError("no robot to run", received="nothing", expected="a morphology or --run RUN.h5")
-        morph = load_morphology(args.morphology)
-        controller = args.controller
-        if args.params is not None:
-            params, file_controller = load_params_file(args.params)
-            controller = controller or file_controller
-        else:
-            rseed = 0 if args.random_seed is None else args.random_seed
-            params = random_unit_params(morph, rseed, controller)
-        seed = args.seed if args.seed is not None else (args.random_seed or 0)
-    overrides = trial_overrides(args)
-    if "engine" in overrides and overrides["engine"] != base.get("engine", DEFAULT_ENGINE):
-        base.pop("engine_options", None)  # the run's options belong to its own engine
-        base.pop("dt_s", None)  # and so does its step: the new engine's default unless --dt says
-    overrides = {**base, **overrides, "controller": controller}
-    if args.duration is not None:
-        overrides["duration_s"] = args.duration
-    if args.record is not None:
-        overrides["record_every_s"] = args.record_every
-    cfg = TrialConfig.from_dict(overrides)
+    morph, controller, params, seed, base, stored_id = _trial_inputs(args)
+    cfg = _trial_config(args, base, controller)
     say_if_compiling()
     outcome = simulate(morph, params, cfg, seed)
     r = outcome.result
@@ -222,20 +190,71 @@ def cmd_trial(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({**summary, "environment": environment_record()}))
     else:
-        if args.run is not None:
-            length = "the robot's trial length" if cfg.duration_s is None else f"{cfg.duration_s:g} s"
-            print(f"trial {stored_id} of {args.run}: {length} after a {cfg.settle_s:g} s settle")
-        print(f"{morph.name}: {r.status}{' (' + r.reason + ')' if r.reason else ''}")
-        print(f"  distance      {r.distance_m * 100:9.2f} cm  (robot centre of mass, ground plane)")
-        print(f"  NTRT distance {r.ntrt_distance_cm:9.2f} cm  (segment {morph.scored_segment})")
-        print(f"  speed         {r.speed_cm_s:9.3f} cm/s")
-        print(f"  work          {r.work_j:9.3f} J")
-        print(f"  COT           {r.cot:9.3f}")
-        print(f"  simulated     {r.sim_time_s:9.3f} s in {r.wall_time_s:.2f} s wall "
-              f"({r.extras.get('engine')}, dt {r.extras.get('dt_s', 0) * 1e3:g} ms)")
-        if args.record is not None:
-            print(f"  trajectory -> {args.record}")
+        _print_trial(args, r, morph, cfg, stored_id)
     return 0 if r.ok else 1
+
+
+def _trial_inputs(args: argparse.Namespace) -> tuple[Any, str | None, np.ndarray, int, dict[str, Any], int | None]:
+    """(morphology, controller, unit parameters, seed, stored trial config, stored trial id) of what
+    `trial` runs: a stored trial of --run, or a robot with --params or random parameters."""
+    from spinefarm.cli.environment_notes import note_environment, recorded_environment
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.trial import random_unit_params
+
+    if args.run is not None:
+        morphology, controller, params, seed, base, stored_id = _stored_trial(args.run, args.trial_id)
+        if args.morphology is not None:
+            raise ParameterError("--run names its own robot", received=args.morphology,
+                                 expected="no morphology with --run")
+        morph = load_morphology(morphology)
+        controller = args.controller or controller
+        seed = args.seed if args.seed is not None else seed
+        note_environment(args.run, recorded_environment(args.run))
+        return morph, controller, params, seed, base, stored_id
+    if args.morphology is None:
+        raise ParameterError("no robot to run", received="nothing", expected="a morphology or --run RUN.h5")
+    morph = load_morphology(args.morphology)
+    controller = args.controller
+    if args.params is not None:
+        params, file_controller = load_params_file(args.params)
+        controller = controller or file_controller
+    else:
+        rseed = 0 if args.random_seed is None else args.random_seed
+        params = random_unit_params(morph, rseed, controller)
+    seed = args.seed if args.seed is not None else (args.random_seed or 0)
+    return morph, controller, params, seed, {}, None
+
+
+def _trial_config(args: argparse.Namespace, base: dict[str, Any], controller: str | None) -> Any:
+    """The TrialConfig: a stored trial's config (`base`, else the defaults) with the flags on top."""
+    from spinefarm.worker.trial import TrialConfig
+
+    overrides = trial_overrides(args)
+    if "engine" in overrides and overrides["engine"] != base.get("engine", DEFAULT_ENGINE):
+        base.pop("engine_options", None)  # the run's options belong to its own engine
+        base.pop("dt_s", None)  # and so does its step: the new engine's default unless --dt says
+    overrides = {**base, **overrides, "controller": controller}
+    if args.duration is not None:
+        overrides["duration_s"] = args.duration
+    if args.record is not None:
+        overrides["record_every_s"] = args.record_every
+    return TrialConfig.from_dict(overrides)
+
+
+def _print_trial(args: argparse.Namespace, r: Any, morph: Any, cfg: Any, stored_id: int | None) -> None:
+    if args.run is not None:
+        length = "the robot's trial length" if cfg.duration_s is None else f"{cfg.duration_s:g} s"
+        print(f"trial {stored_id} of {args.run}: {length} after a {cfg.settle_s:g} s settle")
+    print(f"{morph.name}: {r.status}{' (' + r.reason + ')' if r.reason else ''}")
+    print(f"  distance      {r.distance_m * 100:9.2f} cm  (robot centre of mass, ground plane)")
+    print(f"  NTRT distance {r.ntrt_distance_cm:9.2f} cm  (segment {morph.scored_segment})")
+    print(f"  speed         {r.speed_cm_s:9.3f} cm/s")
+    print(f"  work          {r.work_j:9.3f} J")
+    print(f"  COT           {r.cot:9.3f}")
+    print(f"  simulated     {r.sim_time_s:9.3f} s in {r.wall_time_s:.2f} s wall "
+          f"({r.extras.get('engine')}, dt {r.extras.get('dt_s', 0) * 1e3:g} ms)")
+    if args.record is not None:
+        print(f"  trajectory -> {args.record}")
 
 
 def _stored_trial(path: Path, trial_id: int | None
