@@ -176,48 +176,13 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
     if best is not None:
         sets.extend(best if isinstance(best, list) else [best])
     settings = sweep(quick, base.get("engine", "bullet"))
-    start_dt, floor_dt, tol = (2.5e-4, 2.5e-4, 1e-3) if quick else (2.5e-4, 3.125e-5, 1e-3)
-    with ProcessPoolExecutor(jobs) as pool:
-        ref_jobs = [(morph_src, controller, ps, base, start_dt, floor_dt, tol)
-                    for ps in sets]
-        run_jobs = [(morph_src, controller, ps, _config(base, s.overrides).to_dict()) for s in settings for ps in sets]
-        refs_f = [pool.submit(_reference, j) for j in ref_jobs]
-        runs_f = [pool.submit(_run, j) for j in run_jobs]
-        refs = [f.result() for f in refs_f]
-        progress(f"references done for {len(sets)} parameter sets")
-        runs = [f.result() for f in runs_f]
-    table = []
-    for i, s in enumerate(settings):
-        mine = runs[i * len(sets):(i + 1) * len(sets)]
-        pairs = list(zip(mine, refs, strict=True))
-        d_err = [rel(r.get("distance_m"), ref.get("distance_m"), DISTANCE_FLOOR_M) for r, ref in pairs]
-        d_cm = [abs_cm(r.get("distance_m"), ref.get("distance_m")) for r, ref in pairs]
-        c_err = [rel(r.get("cot"), ref.get("cot")) for r, ref in zip(mine, refs, strict=True)]
-        rms = [scoring.rms_path_error_cm(np.array(r["path"]), np.array(r["path_t"]), np.array(ref["path"]),
-                                         np.array(ref["path_t"])) if "path" in r and "path" in ref else math.inf
-               for r, ref in zip(mine, refs, strict=True)]
-        table.append({
-            "label": s.label, "group": s.group, "numerical": s.numerical, "overrides": s.overrides,
-            "wall_s_per_sim_s": median(r["wall_s_per_sim_s"] for r in mine),
-            "median_distance_error": median(d_err), "max_distance_error": max(d_err),
-            "median_distance_error_cm": median(d_cm),
-            "median_cot_error": median(c_err), "median_rms_path_error_cm": median(rms),
-            "statuses": [r["status"] for r in mine], "reasons": [r["reason"] for r in mine if r["reason"]],
-            "distance_errors": d_err,
-        })
+    refs, runs = _simulate_all(morph_src, controller, sets, settings, base, quick, jobs, progress)
+    table = [_table_row(s, runs[i * len(sets):(i + 1) * len(sets)], refs) for i, s in enumerate(settings)]
     chaos = [rel(ref.get("twin_distance_m"), ref.get("distance_m"), DISTANCE_FLOOR_M) for ref in refs]
     floor = median(chaos)
     front = pareto(table)
-    threshold = max(0.01, floor)
-    ok = [r for r in table if r["label"] in front and r["median_distance_error"] <= threshold
-          and all(st == "complete" for st in r["statuses"])]
+    rec, why = _recommend(table, front, floor)
     baseline = next(r for r in table if r["label"] == baseline_label(base.get("engine", "bullet")))
-    if ok:
-        rec = min(ok, key=lambda r: r["wall_s_per_sim_s"])
-        why = f"fastest setting on the Pareto front with median distance error <= {threshold:.2%}"
-    else:
-        rec = min((r for r in table if r["numerical"]), key=lambda r: r["median_distance_error"])
-        why = f"no setting reaches {threshold:.2%}; the most accurate one"
     return {
         "morphology": morph.name, "engine": base.get("engine", "bullet"), "duration_s": duration, "quick": quick,
         "param_sets": [ps.name for ps in sets],
@@ -230,6 +195,55 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
         "default_distance_error": baseline["median_distance_error"],
         "default_wall_s_per_sim_s": baseline["wall_s_per_sim_s"],
     }
+
+
+def _simulate_all(morph_src: Any, controller: str | None, sets: list[ParamSet], settings: list[Setting],
+                  base: dict[str, Any], quick: bool, jobs: int, progress: Callable[[str], None]
+                  ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """(a converged reference per parameter set, a run per setting and parameter set, setting-major)."""
+    start_dt, floor_dt, tol = (2.5e-4, 2.5e-4, 1e-3) if quick else (2.5e-4, 3.125e-5, 1e-3)
+    with ProcessPoolExecutor(jobs) as pool:
+        ref_jobs = [(morph_src, controller, ps, base, start_dt, floor_dt, tol)
+                    for ps in sets]
+        run_jobs = [(morph_src, controller, ps, _config(base, s.overrides).to_dict()) for s in settings for ps in sets]
+        refs_f = [pool.submit(_reference, j) for j in ref_jobs]
+        runs_f = [pool.submit(_run, j) for j in run_jobs]
+        refs = [f.result() for f in refs_f]
+        progress(f"references done for {len(sets)} parameter sets")
+        runs = [f.result() for f in runs_f]
+    return refs, runs
+
+
+def _table_row(s: Setting, mine: list[dict[str, Any]], refs: list[dict[str, Any]]) -> dict[str, Any]:
+    """One setting's errors against the references, over its runs `mine` (one per parameter set)."""
+    pairs = list(zip(mine, refs, strict=True))
+    d_err = [rel(r.get("distance_m"), ref.get("distance_m"), DISTANCE_FLOOR_M) for r, ref in pairs]
+    d_cm = [abs_cm(r.get("distance_m"), ref.get("distance_m")) for r, ref in pairs]
+    c_err = [rel(r.get("cot"), ref.get("cot")) for r, ref in pairs]
+    rms = [scoring.rms_path_error_cm(np.array(r["path"]), np.array(r["path_t"]), np.array(ref["path"]),
+                                     np.array(ref["path_t"])) if "path" in r and "path" in ref else math.inf
+           for r, ref in pairs]
+    return {
+        "label": s.label, "group": s.group, "numerical": s.numerical, "overrides": s.overrides,
+        "wall_s_per_sim_s": median(r["wall_s_per_sim_s"] for r in mine),
+        "median_distance_error": median(d_err), "max_distance_error": max(d_err),
+        "median_distance_error_cm": median(d_cm),
+        "median_cot_error": median(c_err), "median_rms_path_error_cm": median(rms),
+        "statuses": [r["status"] for r in mine], "reasons": [r["reason"] for r in mine if r["reason"]],
+        "distance_errors": d_err,
+    }
+
+
+def _recommend(table: list[dict[str, Any]], front: list[str], floor: float) -> tuple[dict[str, Any], str]:
+    """The fastest setting on the Pareto front within the chaos floor (at least 1 %), else the most accurate."""
+    threshold = max(0.01, floor)
+    ok = [r for r in table if r["label"] in front and r["median_distance_error"] <= threshold
+          and all(st == "complete" for st in r["statuses"])]
+    if ok:
+        return (min(ok, key=lambda r: r["wall_s_per_sim_s"]),
+                f"fastest setting on the Pareto front with median distance error <= {threshold:.2%}")
+    return (min((r for r in table if r["numerical"]), key=lambda r: r["median_distance_error"]),
+            f"no setting reaches {threshold:.2%}; the most accurate one")
 
 
 def plot(report: dict[str, Any], path: str) -> None:
