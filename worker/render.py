@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
@@ -94,7 +95,6 @@ def render(morph: Morphology, frames: list[Frame], out: str | Path, *, tension_m
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib import cm, colors
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     if not frames:
         raise ConfigError("nothing to draw", received=0, expected="at least one frame")
@@ -102,13 +102,7 @@ def render(morph: Morphology, frames: list[Frame], out: str | Path, *, tension_m
     geom = build_strings(morph.structure, bodies)
     rods = [_to_plot(rod_segments(bodies, f.poses)) for f in frames]
     strs = [_to_plot(string_segments(geom, f.poses)) for f in frames]
-    pts = np.concatenate([r.reshape(-1, 3) for r in rods] + [s.reshape(-1, 3) for s in strs])
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    lo[2] = min(lo[2], GROUND_TOP_CM)
-    span = np.maximum(hi - lo, 1.0)
-    pad = 0.08 * span.max()
-    lo, hi = lo - pad, hi + pad
-    lo[2] = GROUND_TOP_CM
+    lo, hi = _view_box(rods, strs)
     peak = max(float(np.max(f.tension_n)) for f in frames)
     tmax = tension_max_n or (peak if peak > 1e-6 else 1.0)
     norm = colors.Normalize(0.0, tmax)
@@ -120,25 +114,7 @@ def render(morph: Morphology, frames: list[Frame], out: str | Path, *, tension_m
     fig = plt.figure(figsize=(5.6 * cols + 1.0, 3.4 * rows + 0.6))
     for i, frame in enumerate(frames):
         ax = fig.add_subplot(rows, cols, i + 1, projection="3d", computed_zorder=False)
-        ground = np.array([[lo[0], lo[1], GROUND_TOP_CM], [hi[0], lo[1], GROUND_TOP_CM],
-                           [hi[0], hi[1], GROUND_TOP_CM], [lo[0], hi[1], GROUND_TOP_CM]])
-        ax.add_collection3d(Poly3DCollection([ground], facecolor=GROUND_COLOUR, edgecolor="none", alpha=0.5,
-                                             zorder=0))
-        ax.add_collection3d(Line3DCollection(list(strs[i]), colors=cmap(norm(frame.tension_n)), linewidths=1.2,
-                                             zorder=1))
-        ax.add_collection3d(Line3DCollection(list(rods[i]), colors=ROD_COLOUR, linewidths=2.4, zorder=2))
-        ax.set_xlim(lo[0], hi[0])
-        ax.set_ylim(lo[1], hi[1])
-        ax.set_zlim(lo[2], hi[2])
-        ax.set_box_aspect(tuple(hi - lo), zoom=1.2)
-        ax.view_init(elev=28, azim=-72)
-        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
-            axis.set_pane_color((1.0, 1.0, 1.0, 0.0))
-        ax.set_xlabel("z (cm)", fontsize=7, labelpad=-2)
-        ax.set_ylabel("x", fontsize=7, labelpad=-4)
-        ax.set_zlabel("y", fontsize=7, labelpad=-4)
-        ax.tick_params(labelsize=6, pad=-1)
-        ax.text2D(0.02, 0.92, f"{frame.time_s:.2f} s", transform=ax.transAxes, fontsize=10)
+        _draw_panel(ax, lo, hi, rods[i], strs[i], cmap(norm(frame.tension_n)), frame.time_s)
     fig.subplots_adjust(left=0.0, right=0.88, bottom=0.02, top=0.9, wspace=0.0, hspace=0.0)
     cax = fig.add_axes((0.89, 0.2, 0.012, 0.6))
     fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), cax=cax, label="string tension (N)")
@@ -148,3 +124,40 @@ def render(morph: Morphology, frames: list[Frame], out: str | Path, *, tension_m
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
+
+
+def _view_box(rods: list[np.ndarray], strs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) plot corners holding every frame's rods and strings, padded, the ground at the bottom."""
+    pts = np.concatenate([r.reshape(-1, 3) for r in rods] + [s.reshape(-1, 3) for s in strs])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    lo[2] = min(lo[2], GROUND_TOP_CM)
+    span = np.maximum(hi - lo, 1.0)
+    pad = 0.08 * span.max()
+    lo, hi = lo - pad, hi + pad
+    lo[2] = GROUND_TOP_CM
+    return lo, hi
+
+
+def _draw_panel(ax: Any, lo: np.ndarray, hi: np.ndarray, rods: np.ndarray, strs: np.ndarray,
+                string_colours: np.ndarray, time_s: float) -> None:
+    """One keyframe on its 3D axes: the ground, strings in their tension colours, rods over them."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+
+    ground = np.array([[lo[0], lo[1], GROUND_TOP_CM], [hi[0], lo[1], GROUND_TOP_CM],
+                       [hi[0], hi[1], GROUND_TOP_CM], [lo[0], hi[1], GROUND_TOP_CM]])
+    ax.add_collection3d(Poly3DCollection([ground], facecolor=GROUND_COLOUR, edgecolor="none", alpha=0.5,
+                                         zorder=0))
+    ax.add_collection3d(Line3DCollection(list(strs), colors=string_colours, linewidths=1.2, zorder=1))
+    ax.add_collection3d(Line3DCollection(list(rods), colors=ROD_COLOUR, linewidths=2.4, zorder=2))
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_zlim(lo[2], hi[2])
+    ax.set_box_aspect(tuple(hi - lo), zoom=1.2)
+    ax.view_init(elev=28, azim=-72)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_pane_color((1.0, 1.0, 1.0, 0.0))
+    ax.set_xlabel("z (cm)", fontsize=7, labelpad=-2)
+    ax.set_ylabel("x", fontsize=7, labelpad=-4)
+    ax.set_zlabel("y", fontsize=7, labelpad=-4)
+    ax.tick_params(labelsize=6, pad=-1)
+    ax.text2D(0.02, 0.92, f"{time_s:.2f} s", transform=ax.transAxes, fontsize=10)
