@@ -15,43 +15,36 @@ from spinefarm.protocol.states import TrialStatus
 
 
 @dataclass(frozen=True)
-class ScorePart:
-    """One measured part of a trial's score: messages, storage columns, API schemas and exports all
-    derive from SCORE_PARTS, so a part is declared here once."""
+class Column:
+    """A named quantity with its numpy dtype and unit: a part of a trial's score, an extra it records,
+    and every column storage keeps (the trials and episodes tables) are declared as one."""
 
     name: str
+    dtype: str   # numpy dtype ("f8"; "S16": a short string, fixed-width bytes in files)
     unit: str
     description: str
 
 
-SCORE_PARTS: tuple[ScorePart, ...] = (
-    ScorePart("distance_m", "m", "displacement of the robot's centre of mass in the ground plane"),
-    ScorePart("ntrt_distance_cm", "cm", "displacement of the segment NTRT scores, from the start pose"),
-    ScorePart("speed_cm_s", "cm/s", "mean ground speed"),
-    ScorePart("work_j", "J", "actuator work shortening strings under tension"),
-    ScorePart("cot", "1", "cost of transport, work / (m g d)"),
-    ScorePart("mass_kg", "kg", "robot mass"),
-    ScorePart("sim_time_s", "s", "simulated time"),
-    ScorePart("wall_time_s", "s", "wall-clock time the worker spent on the trial"),
+# The measured parts of a trial's score: messages, storage columns, API schemas and exports all derive
+# from SCORE_PARTS, so a part is declared here once.
+SCORE_PARTS: tuple[Column, ...] = (
+    Column("distance_m", "f8", "m", "displacement of the robot's centre of mass in the ground plane"),
+    Column("ntrt_distance_cm", "f8", "cm", "displacement of the segment NTRT scores, from the start pose"),
+    Column("speed_cm_s", "f8", "cm/s", "mean ground speed"),
+    Column("work_j", "f8", "J", "actuator work shortening strings under tension"),
+    Column("cot", "f8", "1", "cost of transport, work / (m g d)"),
+    Column("mass_kg", "f8", "kg", "robot mass"),
+    Column("sim_time_s", "f8", "s", "simulated time"),
+    Column("wall_time_s", "f8", "s", "wall-clock time the worker spent on the trial"),
 )
 SCORE_NAMES = tuple(p.name for p in SCORE_PARTS)
 
-
-@dataclass(frozen=True)
-class ExtraPart:
-    """A TrialResult.extras entry that storage keeps as a column: how the trial was computed."""
-
-    name: str
-    dtype: str   # numpy dtype of the column ("f8", or "S16" for a short string)
-    unit: str
-    description: str
-
-
-RECORDED_EXTRAS: tuple[ExtraPart, ...] = (
-    ExtraPart("engine", "S16", "", "physics engine that ran the trial (bullet, mujoco)"),
-    ExtraPart("dt_s", "f8", "s", "physics step the trial used (the automatic choice under --dt auto)"),
-    ExtraPart("settle_s", "f8", "s", "settle phase before locomotion was scored (0: scored from the start)"),
-    ExtraPart("time_limit_s", "f8", "s", "wall-clock limit the worker gave the trial (past it: failed, timeout)"),
+# TrialResult.extras entries that storage keeps as columns: how the trial was computed.
+RECORDED_EXTRAS: tuple[Column, ...] = (
+    Column("engine", "S16", "", "physics engine that ran the trial (bullet, mujoco)"),
+    Column("dt_s", "f8", "s", "physics step the trial used (the automatic choice under --dt auto)"),
+    Column("settle_s", "f8", "s", "settle phase before locomotion was scored (0: scored from the start)"),
+    Column("time_limit_s", "f8", "s", "wall-clock limit the worker gave the trial (past it: failed, timeout)"),
 )
 
 

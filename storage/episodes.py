@@ -10,43 +10,34 @@ that sees a finished trial sees its episodes.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from spinefarm.protocol.results import Column
 
-
-@dataclass(frozen=True)
-class EpisodeColumn:
-    name: str
-    dtype: str
-    unit: str
-    description: str
-
-
-EPISODE_COLUMNS: tuple[EpisodeColumn, ...] = (
-    EpisodeColumn("trial_id", "i8", "", "the trial (row of /trials) this episode belongs to"),
-    EpisodeColumn("episode", "i8", "", "episode number k, 0..K-1"),
-    EpisodeColumn("seed", "i8", "", "the episode's seed, from (trial seed, k) alone"),
-    EpisodeColumn("status", "S16", "", "complete or failed"),
-    EpisodeColumn("reason", "S160", "", "why the episode failed; empty when complete"),
-    EpisodeColumn("distance_m", "f8", "m", "displacement of the robot's centre of mass in the ground plane"),
-    EpisodeColumn("ntrt_distance_cm", "f8", "cm", "displacement of the segment NTRT scores"),
-    EpisodeColumn("speed_cm_s", "f8", "cm/s", "mean ground speed"),
-    EpisodeColumn("work_j", "f8", "J", "actuator work shortening strings under tension"),
-    EpisodeColumn("cot", "f8", "1", "cost of transport, work / (m g d)"),
-    EpisodeColumn("sim_time_s", "f8", "s", "simulated time"),
-    EpisodeColumn("wall_time_s", "f8", "s", "wall-clock time of the episode"),
-    EpisodeColumn("friction_scale", "f8", "1", "ground friction factor drawn"),
-    EpisodeColumn("mass_scale", "f8", "1", "rod density factor drawn"),
-    EpisodeColumn("start_jitter_cm", "f8", "cm", "standard deviation of the start-position jitter"),
-    EpisodeColumn("rough_seed", "i8", "", "seed of the episode's rough ground; -1: the run's own scene"),
+EPISODE_COLUMNS: tuple[Column, ...] = (
+    Column("trial_id", "i8", "", "the trial (row of /trials) this episode belongs to"),
+    Column("episode", "i8", "", "episode number k, 0..K-1"),
+    Column("seed", "i8", "", "the episode's seed, from (trial seed, k) alone"),
+    Column("status", "S16", "", "complete or failed"),
+    Column("reason", "S160", "", "why the episode failed; empty when complete"),
+    Column("distance_m", "f8", "m", "displacement of the robot's centre of mass in the ground plane"),
+    Column("ntrt_distance_cm", "f8", "cm", "displacement of the segment NTRT scores"),
+    Column("speed_cm_s", "f8", "cm/s", "mean ground speed"),
+    Column("work_j", "f8", "J", "actuator work shortening strings under tension"),
+    Column("cot", "f8", "1", "cost of transport, work / (m g d)"),
+    Column("sim_time_s", "f8", "s", "simulated time"),
+    Column("wall_time_s", "f8", "s", "wall-clock time of the episode"),
+    Column("friction_scale", "f8", "1", "ground friction factor drawn"),
+    Column("mass_scale", "f8", "1", "rod density factor drawn"),
+    Column("start_jitter_cm", "f8", "cm", "standard deviation of the start-position jitter"),
+    Column("rough_seed", "i8", "", "seed of the episode's rough ground; -1: the run's own scene"),
 )
 EPISODE_NAMES = tuple(c.name for c in EPISODE_COLUMNS)
 GROUP = "episodes"
 
 
-def _empty(c: EpisodeColumn) -> Any:
+def _empty(c: Column) -> Any:
     if c.dtype.startswith("S"):
         return b""
     return -1 if c.dtype.startswith("i") else np.nan

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.results import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS
+from spinefarm.protocol.results import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, Column
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.protocol.states import STORED_STATUSES, AuditState, Verification
 
@@ -19,14 +19,6 @@ FILE_SCHEMA_VERSION = 7
 # A sampler names its own phases: any short lower-case name is a valid phase (no list to extend here).
 PHASE_PATTERN = rb"^[a-z][a-z0-9_]{0,15}$"
 STATUSES = tuple(s.value for s in STORED_STATUSES)
-
-
-@dataclass(frozen=True)
-class Column:
-    name: str
-    dtype: str          # numpy dtype in memory; strings are fixed-width bytes in files
-    unit: str
-    description: str
 
 
 # Vector columns (params_unit, params) are (n_trials, n_params); all others are (n_trials,).
@@ -44,7 +36,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("status", "S16", "", "waiting (sampled, no result yet), complete or failed"),
     Column("reason", "S160", "", "why a trial failed (diverged: ..., error: ...); empty when complete"),
     Column("objective", "f8", "see attribute objective", "the score the search maximised"),
-    *(Column(p.name, "f8", p.unit, p.description) for p in SCORE_PARTS),
+    *SCORE_PARTS,
     Column("worker_id", "S64", "", "worker that ran the trial"),
     Column("finished_at_unix_s", "f8", "s since 1970-01-01 UTC", "when the coordinator stored the result"),
     Column("verification", "S16", "", "the judge's re-simulation of a trial that became best: empty (not "
@@ -57,7 +49,7 @@ COLUMNS: tuple[Column, ...] = (
            "pending, agrees or disagrees (then the result never counts as best)"),
     Column("audit_distance_m", "f8", "m", "distance the auditing worker measured"),
     Column("audit_worker_id", "S64", "", "worker that audited the result"),
-    *(Column(e.name, e.dtype, e.unit, e.description) for e in RECORDED_EXTRAS),
+    *RECORDED_EXTRAS,
     Column("pareto_front", "i1", "", "1 if the trial is on the Pareto front of speed (max) and COT (min) among "
            "complete trials, else 0; kept up to date as results arrive"),
 )
