@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -173,11 +174,32 @@ def _params(morph: Any, path: Path | None, seed: int) -> tuple[Any, str | None]:
     return load_params_file(path)
 
 
+def simulate_recorded(args: argparse.Namespace, morph: Any, every_s: Callable[[float], float]
+                      ) -> tuple[Any, dict[str, np.ndarray]]:
+    """(outcome, recorded arrays) of the short trial `render` draws: --params (else random parameters from
+    --random-seed), --duration (else at most 5 s), --engine, --motor-model, recorded every every_s(duration)
+    seconds; saved to --record when given."""
+    from spinefarm.worker.trial import TrialConfig, simulate
+
+    params, controller = _params(morph, args.params, args.random_seed)
+    duration = args.duration or min(morph.duration_s, 5.0)
+    overrides: dict[str, Any] = {"duration_s": duration, "record_every_s": every_s(duration),
+                                 "controller": controller}
+    if args.motor_model:
+        overrides["motor_model"] = args.motor_model
+    if args.engine:
+        overrides["engine"] = args.engine
+    outcome = simulate(morph, params, TrialConfig(**overrides), args.random_seed)
+    record = outcome.trajectory.arrays() if outcome.trajectory else {}
+    if args.record is not None:
+        np.savez_compressed(args.record, **record, morphology=morph.name)
+    return outcome, record
+
+
 def cmd_render(args: argparse.Namespace) -> int:
     from spinefarm.robot.bodies import build_bodies
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.render import frames_from_record, initial_frame, render
-    from spinefarm.worker.trial import TrialConfig, simulate
 
     if render_motion.wants_motion(args):
         return render_motion.cmd_render_motion(args)
@@ -194,20 +216,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     n_strings = len(morph.structure.strings)
     simulate_now = args.duration is not None or args.params is not None
     if simulate_now:
-        params, controller = _params(morph, args.params, args.random_seed)
-        duration = args.duration or min(morph.duration_s, 5.0)
-        overrides: dict[str, Any] = {"duration_s": duration, "record_every_s": max(0.01, duration / 200),
-                                     "controller": controller}
-        if args.motor_model:
-            overrides["motor_model"] = args.motor_model
-        if args.engine:
-            overrides["engine"] = args.engine
-        outcome = simulate(morph, params, TrialConfig(**overrides), args.random_seed)
-        record = outcome.trajectory.arrays() if outcome.trajectory else {}
+        outcome, record = simulate_recorded(args, morph, lambda duration: max(0.01, duration / 200))
         if not outcome.result.ok:
             print(f"note: the trial ended early ({outcome.result.reason}); drawing what was recorded")
-        if args.record is not None:
-            np.savez_compressed(args.record, **record, morphology=morph.name)
         frames = frames_from_record(record, args.frames or 6, n_bodies, n_strings)
     elif args.record is not None:
         frames = frames_from_record(_load_record(args.record, morph.name), args.frames or 6, n_bodies, n_strings)

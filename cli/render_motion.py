@@ -7,7 +7,6 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from spinefarm.cli import checks
 from spinefarm.protocol.errors import ConfigError
 
@@ -40,24 +39,12 @@ def _stored_motion(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
 
 
 def _fresh_motion(args: argparse.Namespace, morph: Any) -> dict[str, Any]:
-    from spinefarm.cli.morph_commands import _load_record, _params
+    from spinefarm.cli.morph_commands import _load_record, simulate_recorded
     from spinefarm.worker.motion import motion_document, record_every_s
-    from spinefarm.worker.trial import TrialConfig, simulate
 
     if args.duration is None and args.params is None and args.record is not None:
         return motion_document(morph, _load_record(args.record, morph.name), None, f"{morph.name}: {args.record}")
-    params, controller = _params(morph, args.params, args.random_seed)
-    duration = args.duration or min(morph.duration_s, 5.0)
-    overrides: dict[str, Any] = {"duration_s": duration, "record_every_s": record_every_s(duration),
-                                 "controller": controller}
-    if args.motor_model:
-        overrides["motor_model"] = args.motor_model
-    if args.engine:
-        overrides["engine"] = args.engine
-    outcome = simulate(morph, params, TrialConfig(**overrides), args.random_seed)
-    record = outcome.trajectory.arrays() if outcome.trajectory else {}
-    if args.record is not None:
-        np.savez_compressed(args.record, **record, morphology=morph.name)
+    outcome, record = simulate_recorded(args, morph, record_every_s)
     return motion_document(morph, record, outcome.result, morph.name)
 
 
