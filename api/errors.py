@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Awaitable, Callable
+
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -27,6 +29,15 @@ def detail(code: str, message: str, **extra: object) -> dict[str, object]:
     return {"detail": {"code": code, "message": message, **extra}}
 
 
+def _own_error(status: int) -> Callable[..., Awaitable[JSONResponse]]:
+    """A handler answering one of spinefarm's errors with `status` and the error's own detail."""
+
+    async def handler(_: Request, exc: SpinefarmError) -> JSONResponse:
+        return JSONResponse(status_code=status, content={"detail": exc.to_detail()})
+
+    return handler
+
+
 def install(app: FastAPI) -> None:
     @app.exception_handler(RequestValidationError)
     async def _invalid(_: Request, exc: RequestValidationError) -> JSONResponse:
@@ -36,22 +47,9 @@ def install(app: FastAPI) -> None:
         message = f"{first['where']}: {first['problem']}; received {first['received']!r}"
         return JSONResponse(status_code=422, content=detail("invalid_query", message, errors=errors))
 
-    @app.exception_handler(NotFound)
-    async def _not_found(_: Request, exc: NotFound) -> JSONResponse:
-        return JSONResponse(status_code=404, content={"detail": exc.to_detail()})
-
-    @app.exception_handler(SimulatorUnavailable)
-    async def _unavailable(_: Request, exc: SimulatorUnavailable) -> JSONResponse:
-        return JSONResponse(status_code=503, content={"detail": exc.to_detail()})
-
-    @app.exception_handler(RenderFailed)
-    async def _render_failed(_: Request, exc: RenderFailed) -> JSONResponse:
-        return JSONResponse(status_code=500, content={"detail": exc.to_detail()})
-
-    @app.exception_handler(StorageError)
-    async def _storage(_: Request, exc: StorageError) -> JSONResponse:
-        # The file exists but cannot be read now (e.g. being replaced on resume): retry later.
-        return JSONResponse(status_code=409, content={"detail": exc.to_detail()})
+    # A StorageError: the file exists but cannot be read now (e.g. being replaced on resume): retry later.
+    for kind, status in ((NotFound, 404), (SimulatorUnavailable, 503), (RenderFailed, 500), (StorageError, 409)):
+        app.add_exception_handler(kind, _own_error(status))
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
