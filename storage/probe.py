@@ -100,31 +100,22 @@ def _rot(x: int, k: int) -> int:
 
 
 def _mix(a: int, b: int, c: int) -> tuple[int, int, int]:
-    m = 0xFFFFFFFF
-    a = ((a - c) & m) ^ _rot(c, 4)
-    c = (c + b) & m
-    b = ((b - a) & m) ^ _rot(a, 6)
-    a = (a + c) & m
-    c = ((c - b) & m) ^ _rot(b, 8)
-    b = (b + a) & m
-    a = ((a - c) & m) ^ _rot(c, 16)
-    c = (c + b) & m
-    b = ((b - a) & m) ^ _rot(a, 19)
-    a = (a + c) & m
-    c = ((c - b) & m) ^ _rot(b, 4)
-    b = (b + a) & m
-    return a, b, c
+    # lookup3's mix: six rounds, each on the next of (a, b, c) with its own rotation
+    m, v = 0xFFFFFFFF, [a, b, c]
+    for i, k in enumerate((4, 6, 8, 16, 19, 4)):
+        t, s, o = i % 3, (i + 2) % 3, (i + 1) % 3
+        v[t] = ((v[t] - v[s]) & m) ^ _rot(v[s], k)
+        v[s] = (v[s] + v[o]) & m
+    return v[0], v[1], v[2]
 
 
 def _final(a: int, b: int, c: int) -> int:
-    m = 0xFFFFFFFF
-    c = ((c ^ b) - _rot(b, 14)) & m
-    a = ((a ^ c) - _rot(c, 11)) & m
-    b = ((b ^ a) - _rot(a, 25)) & m
-    c = ((c ^ b) - _rot(b, 16)) & m
-    a = ((a ^ c) - _rot(c, 4)) & m
-    b = ((b ^ a) - _rot(a, 14)) & m
-    return ((c ^ b) - _rot(b, 24)) & m
+    # lookup3's final: seven rounds on c, a, b, c, ... each with its own rotation
+    m, v = 0xFFFFFFFF, [a, b, c]
+    for i, k in enumerate((14, 11, 25, 16, 4, 14, 24)):
+        t, s = (2 + i) % 3, (1 + i) % 3
+        v[t] = ((v[t] ^ v[s]) - _rot(v[s], k)) & m
+    return v[2]
 
 
 def lookup3(data: bytes, initval: int = 0) -> int:
