@@ -10,24 +10,23 @@ that sees a finished trial sees its episodes.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.results import Column
+from spinefarm.protocol.results import SCORE_PARTS, Column
 
+# an episode's score parts, said of an episode where the trial's words do not fit
+_EPISODE_WORDS = {"ntrt_distance_cm": "displacement of the segment NTRT scores",
+                  "wall_time_s": "wall-clock time of the episode"}
 EPISODE_COLUMNS: tuple[Column, ...] = (
     Column("trial_id", "i8", "", "the trial (row of /trials) this episode belongs to"),
     Column("episode", "i8", "", "episode number k, 0..K-1"),
     Column("seed", "i8", "", "the episode's seed, from (trial seed, k) alone"),
     Column("status", "S16", "", "complete or failed"),
     Column("reason", "S160", "", "why the episode failed; empty when complete"),
-    Column("distance_m", "f8", "m", "displacement of the robot's centre of mass in the ground plane"),
-    Column("ntrt_distance_cm", "f8", "cm", "displacement of the segment NTRT scores"),
-    Column("speed_cm_s", "f8", "cm/s", "mean ground speed"),
-    Column("work_j", "f8", "J", "actuator work shortening strings under tension"),
-    Column("cot", "f8", "1", "cost of transport, work / (m g d)"),
-    Column("sim_time_s", "f8", "s", "simulated time"),
-    Column("wall_time_s", "f8", "s", "wall-clock time of the episode"),
+    *(replace(p, description=_EPISODE_WORDS.get(p.name, p.description)) for p in SCORE_PARTS
+      if p.name != "mass_kg"),  # an episode records its draw (mass_scale), not the mass
     Column("friction_scale", "f8", "1", "ground friction factor drawn"),
     Column("mass_scale", "f8", "1", "rod density factor drawn"),
     Column("start_jitter_cm", "f8", "cm", "standard deviation of the start-position jitter"),
