@@ -130,7 +130,7 @@ ENGINES: dict[str, EngineSpec] = {spec.name: spec for spec in (
         EngineOption("solref_damping_ratio", _F, 1.0, low=0.0, high=100.0),
         EngineOption("solimp", tuple, (0.9, 0.95, 0.001, 0.5, 2.0), length=5),
         EngineOption("contact_geometry", _S, "auto", choices=("auto", "ends", "capsules", "cylinders")),
-        EngineOption("segment_contacts", _S, "auto", choices=("auto", "scene", "off")),
+        EngineOption("segment_contacts", _S, "auto", choices=("auto", "scene", "off", "reach")),
         EngineOption("islands", _B, False),
         EngineOption("noslip_iterations", _I, 0, low=0, high=10_000),
         EngineOption("margin_cm", _F, 0.0, low=0.0, high=10.0),

@@ -16,6 +16,9 @@ trial loop (worker.loop) calls, per batch of trials:
                                   engine may split the run, or take a world out of `active` and put it in
                                   `retries` with the settings it must be run again in (from its start)
   close()                         free the worlds (also via `with`)
+An engine whose wants_rod_pairs(settings) is true is also given rod_pairs=(p, 4) rows (body a, rod of a, body b,
+rod of b): the rod pairs of different segments that can come within reach of each other (robot.reach), so it
+may test only those.
 Attributes every backend sets in __init__: n_worlds, n_bodies, dt_s, and retries = {} (world -> (engine options,
 result extras) of a world to run again; emptied by reset()).
 
@@ -68,6 +71,11 @@ class BasePhysics:
 
     def step(self, active: np.ndarray | None = None) -> None:
         raise NotImplementedError
+
+    @staticmethod
+    def wants_rod_pairs(settings: Any) -> bool:
+        """Whether the constructor wants rod_pairs (robot.reach) with these settings."""
+        return False
 
     def advance(self, run: Callable[[int, np.ndarray], None], n_steps: int, active: np.ndarray,
                 horizon_steps: int) -> None:
