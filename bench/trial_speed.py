@@ -24,7 +24,8 @@ With --spines (all, or names separated by commas) it measures whole trials only,
 gaits at each engine's default step, interleaved, with `bullet_cpu_s_per_sim_s`, `mujoco_cpu_s_per_sim_s`
 (segment-segment contacts by the default "auto": left out while the contact guard finds none can form, the
 trial run again with them when one could; `mujoco_reruns` lists those), `mujoco_speedup`, and for comparison
-MuJoCo with them modelled by MuJoCo's own search ("scene") and left out ("off"), and every trial's distance:
+MuJoCo with them modelled by MuJoCo's own search ("scene"), left out ("off") and modelled only for the rod pairs
+the structure lets come within reach ("reach", `mujoco_reach_rod_pairs` counts them), and every trial's distance:
 
     python bench/trial_speed.py --spines all [--tier-seconds 10] [--repeats 3]
 """
@@ -165,7 +166,8 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
 
 SPEED_TIERS = {"bullet": ("bullet", {}), "mujoco": ("mujoco", {}),
                "mujoco_segment_contacts_scene": ("mujoco", {"segment_contacts": "scene"}),
-               "mujoco_segment_contacts_off": ("mujoco", {"segment_contacts": "off"})}
+               "mujoco_segment_contacts_off": ("mujoco", {"segment_contacts": "off"}),
+               "mujoco_segment_contacts_reach": ("mujoco", {"segment_contacts": "reach"})}
 
 
 def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
@@ -205,8 +207,21 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
             "mujoco_speedup": med["bullet"] / med["mujoco"],
             "mujoco_segment_contacts_scene_cpu_s_per_sim_s": med["mujoco_segment_contacts_scene"],
             "mujoco_segment_contacts_off_cpu_s_per_sim_s": med["mujoco_segment_contacts_off"],
+            "mujoco_segment_contacts_reach_cpu_s_per_sim_s": med["mujoco_segment_contacts_reach"],
+            "mujoco_speedup_segment_contacts_reach": med["bullet"] / med["mujoco_segment_contacts_reach"],
+            "mujoco_reach_rod_pairs": reach_pairs(morph),
             "mujoco_reruns": reruns, "cpu_s_per_sim_s_all": {k: [round(x, 4) for x in v] for k, v in cpu.items()},
             "distance_m": distance}
+
+
+def reach_pairs(morph) -> dict:
+    """How many rod pairs of different segments "reach" models, of all of them."""
+    from spinefarm.worker.setup import TrialSetup
+
+    setup = TrialSetup(morph, TrialConfig(engine="mujoco", engine_options={"segment_contacts": "reach"}), None)
+    sizes = [len(b.rods) for b in setup.bodies]
+    total = sum(sizes[a] * sizes[b] for a in range(len(sizes)) for b in range(a + 1, len(sizes)))
+    return {"modelled": len(setup.rod_pairs()), "of": total}
 
 
 def cpg_cost(morph_name: str, seed: int, updates: int = 5000) -> dict:
