@@ -46,20 +46,6 @@ def mj_step_cfunc():
     return _MJ_STEP
 
 
-def scene_rod_pairs(bodies: list[BodyModel], off: list[tuple[int, int]], rod_pairs: np.ndarray | None
-                    ) -> np.ndarray:
-    """(p, 4) rows (body a, rod of a, body b, rod of b), a < b: the given rod pairs (robot.reach; None: every
-    rod pair of different segments) that the scene's collision filter lets collide."""
-    if rod_pairs is None:
-        rod_pairs = np.array([(a, i, b, j) for a in range(len(bodies)) for b in range(a + 1, len(bodies))
-                              for i in range(len(bodies[a].rods)) for j in range(len(bodies[b].rods))],
-                             dtype=np.int64).reshape(-1, 4)
-    rows = np.asarray(rod_pairs, dtype=np.int64).reshape(-1, 4)
-    blocked = {(min(a, b), max(a, b)) for a, b in off}
-    keep = [(int(a), int(b)) not in blocked and a != b for a, b in zip(rows[:, 0], rows[:, 2], strict=True)]
-    return rows[np.array(keep, dtype=bool)] if len(rows) else rows
-
-
 class MujocoPhysics(BasePhysics):
     """One MuJoCo model holding the segments and the terrain, and B data (worlds) stepped one after another.
 
@@ -78,10 +64,7 @@ class MujocoPhysics(BasePhysics):
         offsets = world_offsets(start_offsets_cm, n_worlds, len(bodies))
         terrain = ground.to_terrain() if isinstance(ground, GroundSpec) else ground
         off = collision_pairs_off if collision_pairs_off is not None else pairs_off(terrain, len(bodies))
-        self.rod_pairs = None
-        if self.settings.segment_contacts == "reach":
-            self.rod_pairs = scene_rod_pairs(bodies, off, rod_pairs)
-        self.xml = model_xml(bodies, terrain, dt_s, self.settings, offsets[0], start_rotation, off, self.rod_pairs)
+        self.xml = model_xml(bodies, terrain, dt_s, self.settings, offsets[0], start_rotation, off, rod_pairs)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         fill_heightfield(self.model, terrain)
         self.dt_s, self.n_bodies, self.n_worlds = dt_s, len(bodies), len(offsets)
