@@ -25,6 +25,9 @@ result extras) of a world to run again; emptied by reset()).
 Optional abilities, declared in the engine's registry entry (spinefarm.robot.engines), never guessed:
   reset(start_offsets_cm)         "reset": back to the start pose at rest, the same state as fresh worlds
   velocities(), set_velocity()    "velocities": world-frame body velocities, for checks and tests
+  snapshot(world), restore(world, state)
+                                  "snapshot": a world's whole state, and putting it back into a world of the same
+                                  model, which then goes on in the same bits (worker.settled)
   compiled_worlds()               "compiled_step": per world (address of a C function void step(uint64 model,
                                   uint64 data), model address, data address, state (nb, k), pose_columns (7,)
                                   int64, wrench (nb, 6)), for the compiled loop of worker.loop
@@ -97,6 +100,14 @@ class BasePhysics:
     def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0), world: int = 0) -> None:
         """ability "velocities": set one body's world-frame velocity."""
         raise NotImplementedError(f"engine {self.name} has no set_velocity")
+
+    def snapshot(self, world: int) -> Any:
+        """ability "snapshot": world `world`'s whole state (opaque; for restore on this engine's model)."""
+        raise NotImplementedError(f"engine {self.name} has no snapshot")
+
+    def restore(self, world: int, state: Any) -> None:
+        """ability "snapshot": world `world` takes a state from snapshot()."""
+        raise NotImplementedError(f"engine {self.name} has no restore")
 
     def compiled_worlds(self) -> list[tuple]:
         """ability "compiled_step": each world's (step function address, model address, data address, state,

@@ -127,6 +127,17 @@ class MujocoPhysics(BasePhysics):
             if active is None or active[b]:
                 mujoco.mj_step(self.model, data)
 
+    def snapshot(self, world: int) -> tuple:
+        """(a copy of the world's MjData, its contact guard's step counts): all a world needs to go on."""
+        data = mujoco.MjData(self.model)
+        mujoco.mj_copyData(data, self.model, self.data[world])
+        return data, self._steps[world], self._safe_until[world]
+
+    def restore(self, world: int, state: tuple) -> None:
+        data, steps, safe_until = state
+        mujoco.mj_copyData(self.data[world], self.model, data)  # in place: the bound views stay valid
+        self._steps[world], self._safe_until[world] = steps, safe_until
+
     def compiled_worlds(self) -> list[tuple]:
         """Per world (address of mj_step, model address, data address, qpos (nb, 7), POSE_COLUMNS, xfrc (nb, 6));
         see worker.loop."""
