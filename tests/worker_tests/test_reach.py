@@ -172,3 +172,38 @@ def test_reach_distances_agree_with_scene_within_the_chaos_floor(name):
     chaos = median(rel(t, s, DISTANCE_FLOOR_M) for t, s in zip(d["twin"], d["scene"], strict=True))
     diff = median(rel(r, s, DISTANCE_FLOOR_M) for r, s in zip(d["reach"], d["scene"], strict=True))
     assert diff <= max(chaos, 0.01), (diff, chaos, d)
+
+
+def _hub_contacts(mode: str, tmp_path: Path) -> dict[tuple[str, str], tuple[float, ...]]:
+    """The hub-and-far-rod robot's segment 1 pushed 9.6 cm toward segment 0, high above the ground (hubs and
+    far rods overlap by 0.6 cm): {(geom, geom): (normal force N, friction, solref, solimp, margin)}."""
+    path = tmp_path / "hub.yaml"
+    path.write_text(HUB_AND_FAR_ROD)
+    rows, bodies = _pairs(load_morphology(str(path)))
+    scene = MujocoPhysics(bodies, build_terrain(SceneConfig(), 0.5, (0, 0)), 1e-3,
+                          MujocoSettings(segment_contacts=mode, contact_geometry="capsules"), rod_pairs=rows)
+    model, data = scene.model, scene.data[0]
+    for b in range(2):
+        data.qpos[7 * b + 1] += 100.0
+    data.qpos[7 + 2] += 9.6
+    mujoco.mj_forward(model, data)
+    force, out = np.zeros(6), {}
+    for n, c in enumerate(data.contact[:data.ncon]):
+        if model.geom_bodyid[c.geom1] == 0 or model.geom_bodyid[c.geom2] == 0:
+            continue
+        mujoco.mj_contactForce(model, data, n, force)
+        key = tuple(sorted((f"s{model.geom_bodyid[g] - 1}r{g - model.body_geomadr[model.geom_bodyid[g]]}")
+                           for g in (c.geom1, c.geom2)))
+        out[key] = (force[0], *c.friction, *c.solref, *c.solimp, c.includemargin)
+    scene.close()
+    return out
+
+
+def test_explicit_pairs_push_back_as_the_search_does(tmp_path: Path):
+    """Where reach gives explicit pairs (the hub-and-far-rod robot), their contacts carry the friction, solver
+    settings and forces of the contacts MuJoCo's own search makes in scene."""
+    scene, reach = _hub_contacts("scene", tmp_path), _hub_contacts("reach", tmp_path)
+    assert set(scene) == {("s0r0", "s1r0"), ("s0r1", "s1r1")} == set(reach)
+    for key, values in scene.items():
+        assert values[0] > 0.0
+        np.testing.assert_allclose(reach[key], values, rtol=1e-9, atol=1e-12)
