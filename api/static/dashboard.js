@@ -71,6 +71,7 @@ const RUN_COLUMNS = [  // [key, label, value of a run for sorting, left-aligned]
   ["verified", "best verified", (r) => r.best && r.best.verification.verdict, true],
 ];
 const runsSort = {key: "started", dir: -1};
+const runsPicked = new Set();  // run ids ticked for comparison; kept while the list refreshes
 
 function runCell(key, r) {
   const best = r.best;
@@ -114,13 +115,33 @@ async function showRuns(gen) {
     if (y === null || y === undefined) return -1;
     return (x < y ? -1 : 1) * runsSort.dir;
   });
-  const rows = runs.map((r) => `<tr class="row" data-run="${esc(r.run_id)}">` + RUN_COLUMNS.map(([key, , , left]) =>
-    `<td${left ? " class=\"l\"" : ""}>${runCell(key, r)}</td>`).join("") + "</tr>").join("");
-  const head = RUN_COLUMNS.map(([key, label, , left]) => `<th data-key="${key}" class="${left ? "l " : ""}${
-    key === runsSort.key ? (runsSort.dir > 0 ? "sorted-asc" : "sorted-desc") : ""}">${label}</th>`).join("");
+  for (const id of [...runsPicked]) if (!runs.some((r) => r.run_id === id)) runsPicked.delete(id);
+  const rows = runs.map((r) => `<tr class="row" data-run="${esc(r.run_id)}"><td class="compare-pick"><input
+    type="checkbox" class="pick" value="${esc(r.run_id)}" title="compare"${runsPicked.has(r.run_id) ? " checked" : ""}></td>`
+    + RUN_COLUMNS.map(([key, , , left]) => `<td${left ? " class=\"l\"" : ""}>${runCell(key, r)}</td>`).join("") + "</tr>").join("");
+  const head = `<th class="compare-pick" title="pick runs to compare"></th>` + RUN_COLUMNS.map(([key, label, , left]) =>
+    `<th data-key="${key}" class="${left ? "l " : ""}${key === runsSort.key ? (runsSort.dir > 0 ? "sorted-asc"
+      : "sorted-desc") : ""}">${label}</th>`).join("");
   view.innerHTML = `<h1>Runs</h1>${damagedList(bad)}${runs.length ? "" : "<p class='muted' id='no-runs'>no run files found</p>"}
+    <div class="buttons"><button type="button" id="compare-runs"></button></div>
     <div class="tablewrap"><table id="runs-table"><thead><tr>${head}</tr></thead><tbody>${rows}</tbody></table></div>`;
-  view.querySelectorAll("#runs-table th").forEach((th) => th.addEventListener("click", () => {
+  const compareButton = document.getElementById("compare-runs");
+  const pickedChanged = () => {
+    compareButton.textContent = `compare the picked runs (${runsPicked.size})`;
+    compareButton.disabled = runsPicked.size < 2;
+    compareButton.title = runsPicked.size < 2 ? "tick two or more runs" : "";
+  };
+  pickedChanged();
+  compareButton.onclick = () => { location.hash = `#/compare/${[...runsPicked].map(enc).join(",")}`; };
+  view.querySelectorAll("#runs-table input.pick").forEach((cb) => {
+    cb.addEventListener("click", (ev) => ev.stopPropagation());  // ticking is not opening the run
+    cb.addEventListener("change", () => {
+      if (cb.checked) runsPicked.add(cb.value); else runsPicked.delete(cb.value);
+      pickedChanged();
+    });
+  });
+  view.querySelectorAll("td.compare-pick").forEach((td) => td.addEventListener("click", (ev) => ev.stopPropagation()));
+  view.querySelectorAll("#runs-table th[data-key]").forEach((th) => th.addEventListener("click", () => {
     if (runsSort.key === th.dataset.key) runsSort.dir *= -1;
     else { runsSort.key = th.dataset.key; runsSort.dir = th.classList.contains("l") ? 1 : -1; }
     showRuns(gen).catch(showError);
@@ -165,8 +186,12 @@ function runSkeleton(runId) {
       <div class="panel"><h2>Best so far against time</h2><div class="plot" id="plot-time"></div></div>
       <div class="panel"><h2>Speed against cost of transport <span class="muted" id="pareto-note"></span></h2><div class="plot" id="plot-pareto"></div></div>
       <div class="panel"><h2>Failed trials by reason</h2><div class="plot" id="plot-failed"></div></div>
-      <div class="panel"><h2>Parallel coordinates <span class="muted">(the 12 most important parameters)</span></h2>
-        <div class="plot" id="plot-parallel"></div></div>
+      <div class="panel wide" id="pc-panel"><h2>Parallel coordinates <span class="muted">(drag along an axis to
+        select a range)</span></h2><div class="pc-controls" id="pc-controls"></div><div class="pc" id="pc-box"></div>
+        <div class="pc-brushed" id="pc-brushed"></div></div>
+      <div class="panel" id="contour-panel"><h2><span id="contour-title">objective</span> over two parameters</h2>
+        <div class="filters" id="contour-controls"></div><div class="contour" id="contour-box"></div>
+        <p class="muted small" id="contour-note"></p></div>
       <div class="panel"><h2>One parameter against the objective <select id="param-select"></select></h2>
         <div class="plot" id="plot-param"></div></div>
       <div class="panel"><h2>Parameter importance <span class="muted" id="importance-note"></span></h2>
@@ -392,13 +417,14 @@ function route() {
   const gen = generation;
   const parts = location.hash.replace(/^#\/?/, "").split("/").map(decodeURIComponent);
   let p;
-  if (parts[0] === "run" && parts[1] && parts[2] === "watch" && parts[3]) {
+  if (parts[0] === "compare") {
+    p = showCompare((parts[1] || "").split(",").filter((x) => x), gen);
+  } else if (parts[0] === "run" && parts[1] && parts[2] === "watch" && parts[3]) {
     p = showWatch(parts[1], parts[3].split(",").map(Number).filter((x) => Number.isInteger(x) && x >= 0), gen);
   } else if (parts[0] === "run" && parts[1] && parts[2] === "trial" && parts[3] !== undefined) {
     p = showTrial(parts[1], Number(parts[3]), gen);
   } else if (parts[0] === "run" && parts[1]) {
-    runState.page = 0;
-    runState.filters = {};
+    resetRunState();
     p = showRun(parts[1], gen, true);
   } else {
     p = showRuns(gen);
