@@ -6,7 +6,7 @@ const COMPARE_COLOURS = ["#3461c1", "#c0392b", "#2e9e5b", "#c27b12", "#8e44ad", 
 // the score each curve follows; COT is better lower
 const COMPARE_METRICS = [["objective", "each run's objective", 1], ["distance_m", "distance (m)", 1],
   ["speed_cm_s", "speed (cm/s)", 1], ["cot", "cost of transport (lower is better)", -1]];
-const compareState = {metric: null};
+const compareState = {ids: "", metric: null};  // the score picked, while the same runs are compared
 
 /** Rows that count (complete, finite score, not refuted at a finer step), in trial order, with the running best. */
 function bestSoFar(cols, key, sense) {
@@ -36,30 +36,37 @@ function extreme(cols, rows, key, sense) {
   return vals.length ? (sense > 0 ? Math.max(...vals) : Math.min(...vals)) : null;
 }
 
-async function showCompare(ids, gen) {
+async function showCompare(ids, gen, first = true) {
   setCrumbs([["#/", "runs"], [`#/compare/${ids.map(enc).join(",")}`, `comparing ${ids.length} runs`]]);
   if (ids.length < 2) throw new Error(`comparing needs two or more runs; received ${ids.length}: pick them on the runs list`);
   const data = await Promise.all(ids.map((id) => Promise.all([api(`/runs/${enc(id)}`),
     api(`/runs/${enc(id)}/columns?params=false`)])));
   if (gen !== generation) return;
   const objectives = [...new Set(data.map(([st]) => st.objective))];
+  if (compareState.ids !== ids.join(",")) Object.assign(compareState, {ids: ids.join(","), metric: null});
   if (!compareState.metric) compareState.metric = objectives.length === 1 ? "objective" : "distance_m";
-  view.innerHTML = `<h1>Comparing ${ids.length} runs</h1>
-    ${objectives.length > 1 ? `<div class="notice" id="mixed-objectives">These runs optimise different objectives
-      (${objectives.map(esc).join(", ")}): compare them on a score they share.</div>` : ""}
-    <div class="filters"><label>score <select id="compare-metric">${COMPARE_METRICS.map(([k, label]) =>
-      `<option value="${k}"${k === compareState.metric ? " selected" : ""}>${esc(label)}</option>`).join("")}</select></label></div>
-    <div class="grid">
-      <div class="panel"><h2>Best so far against trials</h2><div class="plot" id="compare-trials"></div></div>
-      <div class="panel"><h2>Best so far against time</h2><div class="plot" id="compare-time"></div></div>
-    </div>
-    <h2 style="margin-top:1em">The runs</h2><div class="tablewrap"><table id="compare-table"></table></div>`;
-  document.getElementById("compare-metric").onchange = (ev) => {
-    compareState.metric = ev.target.value;
-    showCompare(ids, gen).catch(showError);
-  };
+  if (first) {
+    view.innerHTML = `<h1>Comparing ${ids.length} runs</h1>
+      ${objectives.length > 1 ? `<div class="notice" id="mixed-objectives">These runs optimise different objectives
+        (${objectives.map(esc).join(", ")}): compare them on a score they share.</div>` : ""}
+      <div class="filters"><label>score <select id="compare-metric">${COMPARE_METRICS.map(([k, label]) =>
+        `<option value="${k}"${k === compareState.metric ? " selected" : ""}>${esc(label)}</option>`).join("")}</select></label></div>
+      <div class="grid">
+        <div class="panel"><h2>Best so far against trials</h2><div class="plot" id="compare-trials"></div></div>
+        <div class="panel"><h2>Best so far against time</h2><div class="plot" id="compare-time"></div></div>
+      </div>
+      <h2 style="margin-top:1em">The runs</h2><div class="tablewrap"><table id="compare-table"></table></div>`;
+    document.getElementById("compare-metric").onchange = (ev) => {
+      compareState.metric = ev.target.value;
+      drawCompare(ids, compareData);
+    };
+  }
+  compareData = data;
   drawCompare(ids, data);
+  schedule(() => showCompare(ids, gen, false).catch((e) => serverGone(e, gen)),
+    data.some(([st]) => st.state === "running"));
 }
+let compareData = [];
 
 function drawCompare(ids, data) {
   const [key, label, sense] = COMPARE_METRICS.find((m) => m[0] === compareState.metric);

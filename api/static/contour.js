@@ -4,6 +4,7 @@
 
 const CONTOUR_GRID = 40;
 const CONTOUR_LEVELS = 10;
+const CONTOUR_REFRESH_MS = 10000;
 const CONTOUR_UPSAMPLE = 4;  // pixels per grid cell along each axis: bands with smooth edges
 // light to dark: low to high (viridis-like, reversed so that high reads as strong)
 const CONTOUR_COLOURS = ["#fde725", "#b5de2b", "#6ece58", "#35b779", "#1f9e89", "#26828e", "#31688e", "#3e4989",
@@ -43,13 +44,19 @@ function drawContour(runId, cols, analysis) {
   const key = `${st.x}|${st.y}|${cols.n_trials}`;
   const box = document.getElementById("contour-box");
   if (box.dataset.key === key) return;  // a live refresh without new trials keeps the drawing
+  // a running search redraws at most every CONTOUR_REFRESH_MS: the grid is recomputed from every trial
+  const sameAxes = box.dataset.key && box.dataset.key.startsWith(`${st.x}|${st.y}|`);
+  if (sameAxes && Date.now() - (st.fetchedAt || 0) < CONTOUR_REFRESH_MS) return;
+  st.fetchedAt = Date.now();
   box.dataset.key = key;
   if (st.x === st.y) {
     box.innerHTML = "<p class='muted'>pick two different parameters</p>";
     return;
   }
   api(`/runs/${enc(runId)}/contour?x=${enc(st.x)}&y=${enc(st.y)}&grid=${CONTOUR_GRID}`).then((g) => {
-    if (box.dataset.key === key) contourSvg(runId, box, g, cols);
+    if (box.dataset.key !== key) return;  // another pair was picked meanwhile
+    contourSvg(runId, box, g, cols);
+    box.dataset.drawn = key;
   }).catch((e) => { box.innerHTML = `<p class="error" id="contour-error">${esc(e.message || e)}</p>`; });
 }
 

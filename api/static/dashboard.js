@@ -424,7 +424,7 @@ function route() {
   } else if (parts[0] === "run" && parts[1] && parts[2] === "trial" && parts[3] !== undefined) {
     p = showTrial(parts[1], Number(parts[3]), gen);
   } else if (parts[0] === "run" && parts[1]) {
-    resetRunState();
+    resetRunState(parts[1]);
     p = showRun(parts[1], gen, true);
   } else {
     p = showRuns(gen);

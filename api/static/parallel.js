@@ -137,6 +137,7 @@ function drawParallel(runId, cols, analysis, ok, onBrush) {
   const box = document.getElementById("pc-box");
   const axes = pcAxes(cols, ok);
   const c = cols.columns;
+  runState.redrawParallel = () => drawParallel(runId, cols, analysis, ok, onBrush);
   const svg = svgEl("svg", {id: "pc-svg", width: box.clientWidth || 600});
   box.replaceChildren(svg);
   const L = pcLayout(svg, axes, box.clientWidth || 600);
@@ -222,3 +223,12 @@ function pcList(runId, inside, ok, c) {
   const only = document.getElementById("pc-only");
   if (only) only.onchange = () => { runState.onlyBrushed = only.checked; runState.page = 0; runState.redrawTable(); };
 }
+
+// the axes spread over the panel's width: draw again when it changes
+let pcResizeTimer = null;
+window.addEventListener("resize", () => {
+  clearTimeout(pcResizeTimer);
+  pcResizeTimer = setTimeout(() => {
+    if (document.getElementById("pc-svg") && runState.redrawParallel) runState.redrawParallel();
+  }, 200);
+});

@@ -6,10 +6,13 @@ const PAGE_ROWS = 200;
 const runState = {sortKey: "trial_id", sortDir: 1, page: 0, param: null, filters: {}, paramCols: [],
   pc: {axes: null, brushes: {}}, brushed: null, onlyBrushed: false, redrawTable: () => {}};
 
-/** Forget what was chosen on another run's page. */
-function resetRunState() {
-  Object.assign(runState, {page: 0, filters: {}, paramCols: [], pc: {axes: null, brushes: {}}, brushed: null,
-    onlyBrushed: false, contour: null});
+/** A run page starts on page 1 without filters; what was chosen for its plots and columns stays while the same
+ * run is shown (a visit to one of its trials and back keeps it). */
+function resetRunState(runId) {
+  Object.assign(runState, {page: 0, filters: {}});
+  if (runState.runId === runId) return;
+  Object.assign(runState, {runId, paramCols: [], pc: {axes: null, brushes: {}}, brushed: null, onlyBrushed: false,
+    contour: null});
 }
 
 function runningMax(xs, ys) {
