@@ -13,8 +13,8 @@ GRID_MIN, GRID_MAX = 2, 200
 CONTOUR_VALUES = ("objective", "distance_m", "speed_cm_s", "cot")
 # cells whose summed weight is below this are farther than ~4 bandwidths from every trial: no estimate
 MIN_WEIGHT = math.exp(-8.0)
-# pairs of (trial, cell) evaluated at once, to bound memory on runs of many trials
-CHUNK_PAIRS = 2_000_000
+# kernel weights held at once (cells along one axis × trials), to bound memory on runs of many trials
+CHUNK_ELEMENTS = 4_000_000
 
 
 def bandwidth_for(n_points: int) -> float:
@@ -25,19 +25,22 @@ def bandwidth_for(n_points: int) -> float:
 def kernel_mean(px: np.ndarray, py: np.ndarray, pz: np.ndarray, gx: np.ndarray, gy: np.ndarray,
                 h: float) -> np.ndarray:
     """Gaussian-weighted mean of pz at every (gx[j], gy[i]); inputs in [0, 1] units. Returns (len(gy), len(gx)),
-    NaN where no trial is near."""
-    cx, cy = np.meshgrid(gx, gy)
-    cx, cy = cx.ravel(), cy.ravel()
-    out = np.full(cx.size, np.nan)
-    step = max(1, CHUNK_PAIRS // max(px.size, 1))
-    for start in range(0, cx.size, step):
+    NaN where no trial is near.
+
+    The 2-D Gaussian is the product of one along x and one along y, so the sums over trials are two matrix
+    products: exponentials per (cell column, trial) and (cell row, trial), not per (cell, trial).
+    """
+    total = np.zeros((gy.size, gx.size))
+    sums = np.zeros((gy.size, gx.size))
+    step = max(1, CHUNK_ELEMENTS // max(gx.size, gy.size, 1))
+    for start in range(0, px.size, step):
         sl = slice(start, start + step)
-        d2 = (cx[sl, None] - px[None, :]) ** 2 + (cy[sl, None] - py[None, :]) ** 2
-        w = np.exp(-0.5 * d2 / (h * h))
-        total = w.sum(axis=1)
-        ok = total > MIN_WEIGHT
-        out[sl][ok] = (w[ok] @ pz) / total[ok]
-    return out.reshape(gy.size, gx.size)
+        wx = np.exp(-0.5 * ((gx[:, None] - px[None, sl]) / h) ** 2)  # (len(gx), trials)
+        wy = np.exp(-0.5 * ((gy[:, None] - py[None, sl]) / h) ** 2)  # (len(gy), trials)
+        total += wy @ wx.T
+        sums += wy @ (wx * pz[None, sl]).T
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(total > MIN_WEIGHT, sums / np.where(total > 0, total, 1.0), np.nan)
 
 
 def _param_index(names: list[str], which: str, name: str) -> int:

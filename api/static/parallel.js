@@ -146,6 +146,7 @@ function drawParallel(runId, cols, analysis, ok, onBrush) {
   const refresh = () => {
     const inside = pcInside(axes, ok);
     runState.brushed = Object.keys(pc.brushes).length ? new Set(inside) : null;
+    if (!runState.brushed) runState.onlyBrushed = false;  // the next brush starts with the whole table
     pcLines(lines, axes, ok, inside, L, c);
     pcList(runId, inside, ok, c);
     box.dataset.lines = String(ok.length);
