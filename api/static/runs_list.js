@@ -66,7 +66,7 @@ async function showRuns(gen) {
     `<th data-key="${key}" class="${left ? "l " : ""}${key === runsSort.key ? (runsSort.dir > 0 ? "sorted-asc"
       : "sorted-desc") : ""}">${label}</th>`).join("");
   view.innerHTML = `<h1>Runs</h1>${damagedList(bad)}${runs.length ? "" : "<p class='muted' id='no-runs'>no run files found</p>"}
-    <div class="buttons"><button type="button" id="compare-runs"></button></div>
+    <div class="buttons"><button type="button" class="button" id="compare-runs"></button></div>
     <div class="tablewrap"><table id="runs-table"><thead><tr>${head}</tr></thead><tbody>${rows}</tbody></table></div>`;
   const compareButton = document.getElementById("compare-runs");
   const pickedChanged = () => {
