@@ -23,6 +23,12 @@ class RenderFailed(SpinefarmError):
     code = "render_failed"
 
 
+class InvalidQuery(SpinefarmError):
+    """A query value of the right type that names nothing in the run (a parameter, a size out of range)."""
+
+    code = "invalid_query"
+
+
 def detail(code: str, message: str, **extra: object) -> dict[str, object]:
     return {"detail": {"code": code, "message": message, **extra}}
 
@@ -39,6 +45,10 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(NotFound)
     async def _not_found(_: Request, exc: NotFound) -> JSONResponse:
         return JSONResponse(status_code=404, content={"detail": exc.to_detail()})
+
+    @app.exception_handler(InvalidQuery)
+    async def _invalid_value(_: Request, exc: InvalidQuery) -> JSONResponse:
+        return JSONResponse(status_code=422, content={"detail": exc.to_detail()})
 
     @app.exception_handler(SimulatorUnavailable)
     async def _unavailable(_: Request, exc: SimulatorUnavailable) -> JSONResponse:
