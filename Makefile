@@ -35,7 +35,7 @@ test-all: $(STAMP)
 
 # The compose and SLURM deployments end to end (root only: apt, dockerd, munge, SLURM); docs/deploy.md.
 test-deploy: $(STAMP)
-	$(PY) -m tests.deploy.main
+	$(PY) -m tests.deploy.main $(DEPLOY_ARGS)
 
 bench: $(STAMP)
 	$(PY) bench/trial_speed.py

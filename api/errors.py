@@ -25,6 +25,12 @@ class RenderFailed(SpinefarmError):
     code = "render_failed"
 
 
+class InvalidQuery(SpinefarmError):
+    """A query value of the right type that names nothing in the run (a parameter, a size out of range)."""
+
+    code = "invalid_query"
+
+
 def detail(code: str, message: str, **extra: object) -> dict[str, object]:
     return {"detail": {"code": code, "message": message, **extra}}
 
@@ -48,7 +54,8 @@ def install(app: FastAPI) -> None:
         return JSONResponse(status_code=422, content=detail("invalid_query", message, errors=errors))
 
     # A StorageError: the file exists but cannot be read now (e.g. being replaced on resume): retry later.
-    for kind, status in ((NotFound, 404), (SimulatorUnavailable, 503), (RenderFailed, 500), (StorageError, 409)):
+    for kind, status in ((NotFound, 404), (InvalidQuery, 422), (SimulatorUnavailable, 503), (RenderFailed, 500),
+                         (StorageError, 409)):
         app.add_exception_handler(kind, _own_error(status))
 
     @app.exception_handler(StarletteHTTPException)

@@ -24,9 +24,15 @@ With --spines (all, or names separated by commas) it measures whole trials only,
 gaits at each engine's default step, interleaved, with `bullet_cpu_s_per_sim_s`, `mujoco_cpu_s_per_sim_s`
 (segment-segment contacts by the default "auto": left out while the contact guard finds none can form, the
 trial run again with them when one could; `mujoco_reruns` lists those), `mujoco_speedup`, and for comparison
-MuJoCo with them modelled by MuJoCo's own search ("scene") and left out ("off"), and every trial's distance:
+MuJoCo with them modelled by MuJoCo's own search ("scene"), left out ("off") and modelled only for the rod pairs
+the structure lets come within reach ("reach", `mujoco_reach_rod_pairs` counts them), and every trial's distance:
 
     python bench/trial_speed.py --spines all [--tier-seconds 10] [--repeats 3]
+
+With --settled SETTLE_S, MuJoCo trials of --tier-seconds after a settle phase of SETTLE_S, each starting from the
+settle end kept by the set-up (worker.settled) against each settling again, interleaved (CPU s per trial):
+
+    python bench/trial_speed.py --settled 1 --tier-seconds 3 [--morphology tetraspine] [--repeats 5]
 """
 
 from __future__ import annotations
@@ -165,7 +171,8 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
 
 SPEED_TIERS = {"bullet": ("bullet", {}), "mujoco": ("mujoco", {}),
                "mujoco_segment_contacts_scene": ("mujoco", {"segment_contacts": "scene"}),
-               "mujoco_segment_contacts_off": ("mujoco", {"segment_contacts": "off"})}
+               "mujoco_segment_contacts_off": ("mujoco", {"segment_contacts": "off"}),
+               "mujoco_segment_contacts_reach": ("mujoco", {"segment_contacts": "reach"})}
 
 
 def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
@@ -205,8 +212,49 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
             "mujoco_speedup": med["bullet"] / med["mujoco"],
             "mujoco_segment_contacts_scene_cpu_s_per_sim_s": med["mujoco_segment_contacts_scene"],
             "mujoco_segment_contacts_off_cpu_s_per_sim_s": med["mujoco_segment_contacts_off"],
+            "mujoco_segment_contacts_reach_cpu_s_per_sim_s": med["mujoco_segment_contacts_reach"],
+            "mujoco_speedup_segment_contacts_reach": med["bullet"] / med["mujoco_segment_contacts_reach"],
+            "mujoco_reach_rod_pairs": reach_pairs(morph),
             "mujoco_reruns": reruns, "cpu_s_per_sim_s_all": {k: [round(x, 4) for x in v] for k, v in cpu.items()},
             "distance_m": distance}
+
+
+def reach_pairs(morph) -> dict:
+    """How many rod pairs of different segments "reach" models, of all of them."""
+    from spinefarm.worker.setup import TrialSetup
+
+    setup = TrialSetup(morph, TrialConfig(engine="mujoco", engine_options={"segment_contacts": "reach"}), None)
+    sizes = [len(b.rods) for b in setup.bodies]
+    total = sum(sizes[a] * sizes[b] for a in range(len(sizes)) for b in range(a + 1, len(sizes)))
+    return {"modelled": len(setup.rod_pairs()), "of": total}
+
+
+def settled_cost(morph_name: str, seconds: float, settle_s: float, repeats: int) -> dict:
+    """CPU s per MuJoCo trial (settle_s then seconds of locomotion, set-up reused, seeded random gaits),
+    interleaved: every trial starting from the kept settle end (worker.settled) against every trial settling."""
+    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial import simulate
+
+    morph = load_morphology(morph_name)
+    cfg = TrialConfig(duration_s=seconds, settle_s=settle_s, engine="mujoco")
+    caches = {"settled_start": SetupCache(), "settle_every_trial": SetupCache()}
+    cpu: dict[str, list[float]] = {name: [] for name in caches}
+    distance: dict[str, list[float]] = {name: [] for name in caches}
+    for r in range(repeats + 1):  # the first round warms compiled code and keeps the settle end
+        u = random_unit_params(morph, 1 + r)
+        for name, cache in caches.items():
+            if name == "settle_every_trial":
+                cache.get(morph, cfg, None).settled.size = 0  # keeps nothing
+            t0 = time.process_time()
+            res = simulate(morph, u, cfg, 1 + r, setup=cache).result
+            if r:
+                cpu[name].append(time.process_time() - t0)
+                distance[name].append(res.distance_m)
+    med = {name: float(np.median(v)) for name, v in cpu.items()}
+    return {"morphology": morph_name, "settle_s": settle_s, "duration_s": seconds, "cpu_s_per_trial": med,
+            "settle_every_trial_over_settled_start": med["settle_every_trial"] / med["settled_start"],
+            "same_distances": distance["settled_start"] == distance["settle_every_trial"],
+            "cpu_s_per_trial_all": {k: [round(x, 4) for x in v] for k, v in cpu.items()}}
 
 
 def cpg_cost(morph_name: str, seed: int, updates: int = 5000) -> dict:
@@ -289,7 +337,14 @@ def main() -> None:
     ap.add_argument("--moving", metavar="RUN.h5", help="also the tiers on 3 of the best gaits of this run file, "
                     "all different (gaits that move: their segments come nearer each other than random ones')")
     ap.add_argument("--spines", help="whole trials per spine only: 'all' (every built-in) or names, comma-separated")
+    ap.add_argument("--settled", metavar="SETTLE_S", type=float,
+                    help="MuJoCo trials of --tier-seconds after a settle of SETTLE_S only: started from the kept "
+                         "settle end against settling in every trial")
     args = ap.parse_args()
+    if args.settled:
+        print(json.dumps({"benchmark": "trial_speed", "repeats": args.repeats,
+                          **settled_cost(args.morphology, args.tier_seconds, args.settled, args.repeats)}))
+        return
     if args.spines:
         from spinefarm.robot.morphology.registry import builtin_names
 

@@ -11,6 +11,8 @@ Abilities (what the trial loop may use beyond BasePhysics' required methods):
   velocities     velocities() / set_velocity(), for checks and tests
   compiled_step  compiled_worlds(): each world's state and wrench arrays and a C step function, so the loop
                  can run many steps in one compiled call (worker.loop)
+  snapshot       snapshot(world) / restore(world, state): a world's whole state, put back into any world of the
+                 same model so that it goes on in the same bits (a settled start, worker.settled)
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import Any
 
 from spinefarm.protocol.errors import ConfigError
 
-ABILITIES = frozenset({"reset", "velocities", "compiled_step"})
+ABILITIES = frozenset({"reset", "velocities", "compiled_step", "snapshot"})
 DEFAULT_ENGINE = "bullet"  # the judge: a trial config without an engine runs here
 
 
@@ -130,12 +132,13 @@ ENGINES: dict[str, EngineSpec] = {spec.name: spec for spec in (
         EngineOption("solref_damping_ratio", _F, 1.0, low=0.0, high=100.0),
         EngineOption("solimp", tuple, (0.9, 0.95, 0.001, 0.5, 2.0), length=5),
         EngineOption("contact_geometry", _S, "auto", choices=("auto", "ends", "capsules", "cylinders")),
-        EngineOption("segment_contacts", _S, "auto", choices=("auto", "scene", "off")),
+        EngineOption("segment_contacts", _S, "auto", choices=("auto", "scene", "off", "reach")),
         EngineOption("islands", _B, False),
         EngineOption("noslip_iterations", _I, 0, low=0, high=10_000),
         EngineOption("margin_cm", _F, 0.0, low=0.0, high=10.0),
         _GRAVITY,
-    ), frozenset({"reset", "velocities", "compiled_step"}), "MuJoCo, the fast screen: soft contacts", "mujoco"),
+    ), frozenset({"reset", "velocities", "compiled_step", "snapshot"}), "MuJoCo, the fast screen: soft contacts",
+        "mujoco"),
 )}
 
 

@@ -86,7 +86,8 @@ def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S) -> str:
                            timeout=timeout_s, env=env, stdin=subprocess.DEVNULL)
     except subprocess.TimeoutExpired:
         raise StorageError(f"reading run file {path} did not finish within {timeout_s:g} s",
-                           expected="an undamaged run file (this one is truncated or corrupted)") from None
+                           expected="an undamaged run file (this one is truncated or corrupted, or the machine "
+                                    "was too busy to read it in time)") from None
     if r.returncode != 0:
         lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()]
         last = lines[-1] if lines else f"exit code {r.returncode}"

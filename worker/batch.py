@@ -7,6 +7,7 @@ in other settings (BasePhysics.retries), leaves the batch and the others go on, 
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,6 +18,7 @@ from spinefarm.worker.control.law import ControlLaw
 from spinefarm.worker.engines.base import BasePhysics
 from spinefarm.worker.episode import check_state
 from spinefarm.worker.loop import advance, stepper
+from spinefarm.worker.settled import Settled
 from spinefarm.worker.sim import strings as sk
 
 
@@ -95,9 +97,17 @@ class Batch:
         self._recorded = self.done  # the index of the step the recorder sees next
         self.run_steps = stepper(engine, law, self._record if timing.record_every else None)
 
-    def run(self) -> list[World]:
+    def run(self, settled: Settled | None = None, keep_settled: bool = False) -> list[World]:
+        """Both phases, or with `settled` (every world's start pose and string tables those of its key,
+        worker.settled) locomotion only, every world starting from that settle's end. keep_settled: keep world
+        0's settle end in self.settled (if it settled and its engine can snapshot it)."""
         t = self.timing
-        for phase_steps, every in ((t.n_settle, 0), (t.n_steps, t.cpg_every)):
+        phases = ((t.n_settle, 0), (t.n_steps, t.cpg_every))
+        self.settled: Settled | None = None
+        if settled is not None:
+            self._start_settled(settled)
+            phases = phases[1:]
+        for phase_steps, every in phases:
             self.law.begin_phase(every, t.dt_s)
             start = self.done
             n = 0
@@ -117,8 +127,19 @@ class Batch:
                 for b in np.flatnonzero(self.active):
                     self.worlds[b].settle_poses = poses[b].copy()
                     self.worlds[b].settle_work = self.law.work_internal(b)
+                if keep_settled and self.active[0] and 0 not in self.engine.retries:
+                    self.settled = Settled(self.engine.snapshot(0), self.law.state[0].copy(),
+                                           self.law.work_internal(0), copy.deepcopy(self.worlds[0]), self.done)
         self._finish()
         return self.worlds
+
+    def _start_settled(self, settled: Settled) -> None:
+        for b in range(self.engine.n_worlds):
+            self.engine.restore(b, settled.engine_state)
+            self.law.state[b] = settled.string_state
+            self.law.work[b, 0] = settled.work
+            self.worlds[b] = settled.world_copy()
+        self.done = settled.done
 
     def _record(self, poses: np.ndarray, active: np.ndarray) -> None:
         step = self._recorded

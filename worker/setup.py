@@ -18,11 +18,13 @@ from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.cpg_network import CpgNetwork
 from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.reach import reachable_rod_pairs
 from spinefarm.robot.scene import build_terrain
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.control.law import string_tables
 from spinefarm.worker.engines.base import BasePhysics, EngineFactory, engine_class
 from spinefarm.worker.episode import build_poses, choose_step, start_lift_cm, start_rotation
+from spinefarm.worker.settled import SettledStarts
 
 
 class TrialSetup:
@@ -46,6 +48,8 @@ class TrialSetup:
         self._tables: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         self._scene: BasePhysics | None = None
         self.scenes_built = 0
+        self._rod_pairs: np.ndarray | None = None
+        self.settled = SettledStarts()  # settle ends kept for later trials (worker.settled)
 
     def string_tables(self, network: CpgNetwork) -> tuple[np.ndarray, np.ndarray]:
         """Fresh copies of the packed string parameters and initial state for this network's node map."""
@@ -71,17 +75,29 @@ class TrialSetup:
         """(n_worlds engine worlds at the start pose, offsets (n_worlds, nb, 3) or None; whether the caller owns
         them and must close them). An engine that can reset keeps its worlds for the next call of as many."""
         args = (self.bodies, self.terrain, self.dt, self.settings, offsets, self.rotation)
+        kwargs: dict[str, Any] = {"n_worlds": n_worlds}
+        if factory is None and self.engine_cls.wants_rod_pairs(self.settings):
+            kwargs["rod_pairs"] = self.rod_pairs()  # computed once per set-up
         if factory is not None or not engine_spec(self.cfg.engine).can("reset"):
             self.scenes_built += 1
-            return (factory or self.engine_cls)(*args, n_worlds=n_worlds), True
+            return (factory or self.engine_cls)(*args, **kwargs), True
         if self._scene is not None and self._scene.n_worlds != n_worlds:
             self.close()
         if self._scene is None:
             self.scenes_built += 1
-            self._scene = self.engine_cls(*args, n_worlds=n_worlds)
+            self._scene = self.engine_cls(*args, **kwargs)
         else:
             self._scene.reset(offsets)
         return self._scene, False
+
+    def rod_pairs(self) -> np.ndarray:
+        """(p, 4) rows (body a, rod of a, body b, rod of b): the rod pairs that can come within reach
+        (robot.reach), before the scene's collision filter."""
+        if self._rod_pairs is None:
+            n = len(self.bodies)
+            self._rod_pairs = reachable_rod_pairs(self.morph.structure, self.bodies, self.geom,
+                                                  [(a, b) for a in range(n) for b in range(a + 1, n)])
+        return self._rod_pairs
 
     def close(self) -> None:
         if self._scene is not None:

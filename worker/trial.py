@@ -20,6 +20,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from spinefarm.protocol.errors import ParameterError
 from spinefarm.protocol.results import TrialResult
+from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.trial_config import TrialConfig
@@ -27,6 +28,7 @@ from spinefarm.worker.batch import Batch, Timing, Trajectory, World
 from spinefarm.worker.control.law import ControlLaw, string_tables
 from spinefarm.worker.engines.base import EngineFactory
 from spinefarm.worker.episode import Measured, choose_step, score
+from spinefarm.worker.settled import settle_key
 from spinefarm.worker.setup import SetupCache, TrialSetup, setup_key
 
 __all__ = ["Trajectory", "TrialConfig", "TrialOutcome", "choose_step", "random_unit_params", "run_trial", "simulate",
@@ -112,8 +114,12 @@ def _simulate(morphology, params: list, cfg: TrialConfig, seeds: list[int], cont
     timing = _timing(morph, cfg, setup.dt)
     offsets = [setup.start_offsets(int(s)) for s in seeds]
     scene, owned = setup.scene(None if offsets[0] is None else np.stack(offsets), scene_factory, len(seeds))
+    key = _settle_key(setup, scene_factory, timing, law, offsets)
     try:
-        worlds = Batch(scene, law, timing, cfg, setup.masses, geom.start_length_cm, setup.terrain).run()
+        batch = Batch(scene, law, timing, cfg, setup.masses, geom.start_length_cm, setup.terrain)
+        worlds = batch.run(None if key is None else setup.settled.get(key), keep_settled=key is not None)
+        if key is not None and batch.settled is not None:
+            setup.settled.put(key, batch.settled)
         retries = dict(scene.retries)
     finally:
         if owned:
@@ -121,6 +127,19 @@ def _simulate(morphology, params: list, cfg: TrialConfig, seeds: list[int], cont
     wall_s = (time.perf_counter() - t_wall) / len(seeds)
     return [None if w.retry else _outcome(morph, setup, cfg, timing, w, int(s), wall_s)
             for w, s in zip(worlds, seeds, strict=True)], retries
+
+
+def _settle_key(setup: TrialSetup, scene_factory: EngineFactory | None, timing: Timing, law: ControlLaw,
+                offsets: list) -> str | None:
+    """The settle's key (worker.settled) when this batch may start from a kept settle end: a settle phase, no
+    recording, the set-up's own engine able to snapshot a world, and every world of the batch the same start
+    pose and string tables."""
+    if not timing.n_settle or timing.record_every or scene_factory is not None \
+            or not engine_spec(setup.cfg.engine).can("snapshot"):
+        return None
+    keys = {settle_key(timing.n_settle, timing.check_every, o, law.params[b], law.state[b])
+            for b, o in enumerate(offsets)}
+    return keys.pop() if len(keys) == 1 else None
 
 
 def _timing(morph: Morphology, cfg: TrialConfig, dt: float) -> Timing:

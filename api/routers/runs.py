@@ -7,6 +7,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Query
 from spinefarm.api.analysis import analysis_view, columns_view
+from spinefarm.api.contour import CONTOUR_VALUES, contour_view
 from spinefarm.api.deps import registry, run_path, run_storage
 from spinefarm.api.registry import RunRegistry
 from spinefarm.api.schemas import RunStatus
@@ -65,3 +66,15 @@ def get_meta(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> dict[str, 
             "robust": m.run.get("robust") or {},
             # how `search --engine auto` chose the tier, with its calibration's figures (None: engine given)
             "engine_choice": None if m.settings.engine_choice is None else m.settings.engine_choice.to_dict()}
+
+
+@router.get("/{run_id}/contour",
+            summary="One score over two parameters on a grid (a kernel-weighted mean of the complete trials) and "
+                    "the trials it comes from")
+def get_contour(storage: Annotated[Hdf5Reader, Depends(run_storage)],
+                x: Annotated[str, Query(max_length=200, description="the parameter along x")],
+                y: Annotated[str, Query(max_length=200, description="the parameter along y")],
+                grid: Annotated[int, Query(description="cells along each axis, 2 to 200")] = 40,
+                value: Annotated[str, Query(description="the score drawn: " + ", ".join(CONTOUR_VALUES))] = "objective",
+                ) -> dict[str, Any]:
+    return contour_view(storage, x, y, grid, value)

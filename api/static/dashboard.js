@@ -58,83 +58,6 @@ function serverGone(e, gen, reopen) {
 function card(k, v) { return `<div class="card"><div class="v">${v}</div><div class="k">${esc(k)}</div></div>`; }
 function stateBadge(s) { return `<span class="state ${esc(s)}">${esc(s)}</span>`; }
 
-// ---------------------------------------------------------------- runs
-const RUN_COLUMNS = [  // [key, label, value of a run for sorting, left-aligned]
-  ["run_id", "run", (r) => r.run_id, true], ["morphology", "robot", (r) => r.morphology, true],
-  ["state", "state", (r) => r.state, true], ["started", "started", (r) => r.started_at_unix_s, false],
-  ["controller", "controller", (r) => r.controller, true], ["engine", "engine", (r) => r.engine, true],
-  ["sampler", "sampler", (r) => r.sampler, true], ["objective", "objective", (r) => r.objective, true],
-  ["progress", "progress", (r) => r.trials_done / Math.max(1, r.trials_planned), false],
-  ["failed", "failed", (r) => r.trials_failed, false], ["eta", "ETA", (r) => r.eta_s, false],
-  ["speed", "best speed (cm/s)", (r) => r.best && r.best.scores.speed_cm_s, false],
-  ["cot", "best COT", (r) => r.best && r.best.scores.cot, false],
-  ["verified", "best verified", (r) => r.best && r.best.verification.verdict, true],
-];
-const runsSort = {key: "started", dir: -1};
-
-function runCell(key, r) {
-  const best = r.best;
-  switch (key) {
-    case "run_id": return esc(r.run_id);
-    case "morphology": return esc(r.morphology);
-    case "state": return stateBadge(r.state);
-    case "started": return fmtDate(r.started_at_unix_s);
-    case "controller": return esc(r.controller || (r.engine ? "default" : "–"));
-    case "engine": return esc(r.engine || "–") + (r.rungs_s ? ` <span class="muted">rungs ${r.rungs_s.join(", ")} s</span>` : "");
-    case "sampler": return esc(r.sampler || "–");
-    case "objective": return esc(r.objective);
-    case "progress": {
-      const pct = Math.min(100, 100 * r.trials_done / Math.max(1, r.trials_planned));
-      return `<span class="bar"><span style="width:${pct}%"></span></span> ${r.trials_done}/${r.trials_planned}`;
-    }
-    case "failed": return String(r.trials_failed);
-    case "eta": return r.state === "running" ? fmtDuration(r.eta_s) : "–";
-    case "speed": return best ? fmt(best.scores.speed_cm_s) : "–";
-    case "cot": return best ? fmt(best.scores.cot) : "–";
-    case "verified": return best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.label || best.verification.verdict)}</span>` : "–";
-  }
-  return "";
-}
-
-function damagedList(bad) {
-  if (!bad.length) return "";
-  return `<div class="notice warn" id="damaged"><b>${bad.length} file${bad.length > 1 ? "s" : ""} left out</b>
-    (damaged or not a run file): <ul>${bad.map((b) => `<li><code>${esc(b.file)}</code>: ${esc(b.reason)}</li>`).join("")}</ul></div>`;
-}
-
-async function showRuns(gen) {
-  setCrumbs([["#/", "runs"]]);
-  const [runs, bad] = await Promise.all([api("/runs"), api("/damaged-files").catch(() => [])]);
-  if (gen !== generation) return;
-  const col = RUN_COLUMNS.find((c) => c[0] === runsSort.key);
-  runs.sort((a, b) => {
-    const x = col[2](a), y = col[2](b);
-    if (x === y) return a.run_id < b.run_id ? -1 : 1;
-    if (x === null || x === undefined) return 1;
-    if (y === null || y === undefined) return -1;
-    return (x < y ? -1 : 1) * runsSort.dir;
-  });
-  const rows = runs.map((r) => `<tr class="row" data-run="${esc(r.run_id)}">` + RUN_COLUMNS.map(([key, , , left]) =>
-    `<td${left ? " class=\"l\"" : ""}>${runCell(key, r)}</td>`).join("") + "</tr>").join("");
-  const head = RUN_COLUMNS.map(([key, label, , left]) => `<th data-key="${key}" class="${left ? "l " : ""}${
-    key === runsSort.key ? (runsSort.dir > 0 ? "sorted-asc" : "sorted-desc") : ""}">${label}</th>`).join("");
-  view.innerHTML = `<h1>Runs</h1>${damagedList(bad)}${runs.length ? "" : "<p class='muted' id='no-runs'>no run files found</p>"}
-    <div class="tablewrap"><table id="runs-table"><thead><tr>${head}</tr></thead><tbody>${rows}</tbody></table></div>`;
-  view.querySelectorAll("#runs-table th").forEach((th) => th.addEventListener("click", () => {
-    if (runsSort.key === th.dataset.key) runsSort.dir *= -1;
-    else { runsSort.key = th.dataset.key; runsSort.dir = th.classList.contains("l") ? 1 : -1; }
-    showRuns(gen).catch(showError);
-  }));
-  view.querySelectorAll("tr.row").forEach((tr) => tr.addEventListener("click", () => {
-    location.hash = `#/run/${enc(tr.dataset.run)}`;
-  }));
-  const reopen = runs.length === 1 ? runs[0].reopen_command : "spinefarm api runs/*.h5";
-  // a file whose first read ran out of time (a busy machine) is read again by the server: look again too
-  const pending = bad.some((b) => /did not finish within/.test(b.reason));
-  schedule(() => showRuns(gen).catch((e) => serverGone(e, gen, reopen)),
-    runs.some((r) => r.state === "running") || pending);
-}
-
 // ---------------------------------------------------------------- one run
 function runNotice(status, r) {
   const best = status.best;
@@ -165,8 +88,12 @@ function runSkeleton(runId) {
       <div class="panel"><h2>Best so far against time</h2><div class="plot" id="plot-time"></div></div>
       <div class="panel"><h2>Speed against cost of transport <span class="muted" id="pareto-note"></span></h2><div class="plot" id="plot-pareto"></div></div>
       <div class="panel"><h2>Failed trials by reason</h2><div class="plot" id="plot-failed"></div></div>
-      <div class="panel"><h2>Parallel coordinates <span class="muted">(the 12 most important parameters)</span></h2>
-        <div class="plot" id="plot-parallel"></div></div>
+      <div class="panel wide" id="pc-panel"><h2>Parallel coordinates <span class="muted">(drag along an axis to
+        select a range)</span></h2><div class="pc-controls" id="pc-controls"></div><div class="pc" id="pc-box"></div>
+        <div class="pc-brushed" id="pc-brushed"></div></div>
+      <div class="panel" id="contour-panel"><h2><span id="contour-title">objective</span> over two parameters</h2>
+        <div class="filters" id="contour-controls"></div><div class="contour" id="contour-box"></div>
+        <p class="muted small" id="contour-note"></p></div>
       <div class="panel"><h2>One parameter against the objective <select id="param-select"></select></h2>
         <div class="plot" id="plot-param"></div></div>
       <div class="panel"><h2>Parameter importance <span class="muted" id="importance-note"></span></h2>
@@ -392,13 +319,14 @@ function route() {
   const gen = generation;
   const parts = location.hash.replace(/^#\/?/, "").split("/").map(decodeURIComponent);
   let p;
-  if (parts[0] === "run" && parts[1] && parts[2] === "watch" && parts[3]) {
+  if (parts[0] === "compare") {
+    p = showCompare((parts[1] || "").split(",").filter((x) => x), gen);
+  } else if (parts[0] === "run" && parts[1] && parts[2] === "watch" && parts[3]) {
     p = showWatch(parts[1], parts[3].split(",").map(Number).filter((x) => Number.isInteger(x) && x >= 0), gen);
   } else if (parts[0] === "run" && parts[1] && parts[2] === "trial" && parts[3] !== undefined) {
     p = showTrial(parts[1], Number(parts[3]), gen);
   } else if (parts[0] === "run" && parts[1]) {
-    runState.page = 0;
-    runState.filters = {};
+    resetRunState(parts[1]);
     p = showRun(parts[1], gen, true);
   } else {
     p = showRuns(gen);

@@ -3,7 +3,17 @@
 "use strict";
 
 const PAGE_ROWS = 200;
-const runState = {sortKey: "trial_id", sortDir: 1, page: 0, param: null, filters: {}};
+const runState = {sortKey: "trial_id", sortDir: 1, page: 0, param: null, filters: {}, paramCols: [],
+  pc: {axes: null, brushes: {}}, brushed: null, onlyBrushed: false, redrawTable: () => {}};
+
+/** A run page starts on page 1 without filters; what was chosen for its plots and columns stays while the same
+ * run is shown (a visit to one of its trials and back keeps it). */
+function resetRunState(runId) {
+  Object.assign(runState, {page: 0, filters: {}});
+  if (runState.runId === runId) return;
+  Object.assign(runState, {runId, paramCols: [], pc: {axes: null, brushes: {}}, brushed: null, onlyBrushed: false,
+    contour: null});
+}
 
 function runningMax(xs, ys) {
   const out = []; let best = -Infinity;
@@ -107,29 +117,10 @@ function drawParamPlots(runId, cols, analysis, ok) {
     Plotly.relayout(impEl, {shapes: [{type: "line", x0: analysis.importance_noise, x1: analysis.importance_noise,
       yref: "paper", y0: 0, y1: 1, line: {dash: "dash", color: "#c27b12", width: 1.5}}]});
   }
-  // parallel coordinates of the strongest parameters, lines coloured by objective quantile
-  const axes = order.slice(0, Math.min(12, names.length));
+  runState.redrawTable = () => drawTable(runId, cols);
+  drawParallel(runId, cols, analysis, ok, runState.redrawTable);
+  drawContour(runId, cols, analysis);
   const c = cols.columns;
-  const objs = ok.map((i) => c.objective[i]).sort((a, b) => a - b);
-  const q = (f) => objs.length ? objs[Math.min(objs.length - 1, Math.floor(f * objs.length))] : 0;
-  const bands = [["lower half", -Infinity, q(0.5), "#c9d1de", 0.35], ["50–80 %", q(0.5), q(0.8), "#8fa6cf", 0.5],
-    ["80–95 %", q(0.8), q(0.95), "#4c74c9", 0.7], ["top 5 %", q(0.95), Infinity, "#c0392b", 0.9]];
-  const traces = bands.map(([label, lo, hi, color, opacity]) => {
-    const x = [], y = [];
-    for (const i of ok) {
-      const o = c.objective[i];
-      if (!(o >= lo && (o < hi || hi === Infinity))) continue;
-      axes.forEach((j, k) => {
-        const v = cols.params[names[j]][i];
-        const span = cols.param_highs[j] - cols.param_lows[j];
-        x.push(k); y.push(span > 0 ? (v - cols.param_lows[j]) / span : 0.5);
-      });
-      x.push(null); y.push(null);
-    }
-    return {x, y, mode: "lines", type: "scatter", name: label, line: {color, width: 1}, opacity, hoverinfo: "skip"};
-  });
-  plot("plot-parallel", traces, {xaxis: {tickvals: axes.map((_, k) => k), ticktext: axes.map((j) => names[j]),
-    tickangle: -30, automargin: true}, yaxis: {title: {text: "position in range"}, range: [-0.02, 1.02]}}, ok.length);
   // one parameter against the objective
   const sel = document.getElementById("param-select");
   if (!runState.param || !names.includes(runState.param)) runState.param = names[order[0]];
@@ -242,7 +233,26 @@ function passes(c, i) {
   }
   if (f.min_objective !== undefined && f.min_objective !== "" && !(c.objective[i] >= Number(f.min_objective))) return false;
   if (f.reason && !String(c.reason[i] || "").toLowerCase().includes(f.reason.toLowerCase())) return false;
+  if (runState.onlyBrushed && runState.brushed && !runState.brushed.has(i)) return false;
   return true;
+}
+
+const PARAM_KEY = "param:";  // sort keys of parameter columns
+
+/** The table's columns: the fixed ones, then the chosen parameters (physical values, unit in the header). */
+function tableColumns(cols) {
+  const chosen = runState.paramCols.filter((nm) => cols.param_names.includes(nm)).map((nm) => {
+    const unit = cols.param_units[cols.param_names.indexOf(nm)];
+    return [PARAM_KEY + nm, unit && unit !== "1" ? `${nm} (${unit})` : nm, cols.params[nm]];
+  });
+  return [...TABLE.map(([key, label]) => [key, label, cols.columns[key]]), ...chosen];
+}
+
+function paramColumnPicker(cols) {
+  const left = cols.param_names.filter((nm) => !runState.paramCols.includes(nm));
+  return `<label>parameter columns <select id="add-param-col"><option value="">add…</option>${left.map((nm) =>
+    `<option value="${esc(nm)}">${esc(nm)}</option>`).join("")}</select></label>${runState.paramCols.length
+    ? `<button type="button" id="clear-param-cols">remove all</button>` : ""}`;
 }
 
 function drawTable(runId, cols) {
@@ -250,9 +260,12 @@ function drawTable(runId, cols) {
   const idx = [...Array(cols.n_trials).keys()].filter((i) => passes(c, i));
   const count = document.getElementById("filter-count");
   if (count) count.textContent = idx.length < cols.n_trials ? `${idx.length} of ${cols.n_trials} trials` : "";
+  const columns = tableColumns(cols);
+  if (!columns.some(([key]) => key === runState.sortKey)) { runState.sortKey = "trial_id"; runState.sortDir = 1; }
   const k = runState.sortKey, d = runState.sortDir;
+  const sortCol = columns.find(([key]) => key === k)[2];
   idx.sort((a, b) => {
-    const x = c[k][a], y = c[k][b];
+    const x = sortCol[a], y = sortCol[b];
     if (x === y) return a - b;
     if (x === null) return 1;
     if (y === null) return -1;
@@ -261,27 +274,43 @@ function drawTable(runId, cols) {
   const pages = Math.max(1, Math.ceil(idx.length / PAGE_ROWS));
   runState.page = Math.min(runState.page, pages - 1);
   const rows = idx.slice(runState.page * PAGE_ROWS, (runState.page + 1) * PAGE_ROWS).map((i) =>
-    `<tr class="row" data-trial="${c.trial_id[i]}">` + TABLE.map(([key]) => {
-      const v = c[key][i];
+    `<tr class="row" data-trial="${c.trial_id[i]}">` + columns.map(([key, , values]) => {
+      const v = values[i];
       const cls = typeof v === "number" ? "" : ` class="l${key === "verification" ? " verdict " + esc(v) : ""}"`;
       return `<td${cls}>${key === "verification" && !v ? "–" : fmt(v)}</td>`;
     }).join("") + "</tr>").join("");
-  const head = TABLE.map(([key, label]) => `<th data-key="${key}" class="${["status", "phase", "verification",
-    "worker_id", "reason"].includes(key) ? "l " : ""}${key === k ? (d > 0 ? "sorted-asc" : "sorted-desc") : ""}">${label}</th>`).join("");
+  const head = columns.map(([key, label]) => `<th data-key="${esc(key)}" class="${["status", "phase", "verification",
+    "worker_id", "reason"].includes(key) ? "l " : ""}${key.startsWith(PARAM_KEY) ? "param " : ""}${
+    key === k ? (d > 0 ? "sorted-asc" : "sorted-desc") : ""}">${esc(label)}${key.startsWith(PARAM_KEY)
+    ? ` <span class="drop" title="remove this column" data-drop="${esc(key.slice(PARAM_KEY.length))}">×</span>` : ""}</th>`).join("");
   const box = document.getElementById("trials");
   box.dataset.rows = String(idx.length);
   box.innerHTML = `<div class="pager"><button id="prev" ${runState.page ? "" : "disabled"}>‹</button>
     <span>page ${runState.page + 1} of ${pages} · ${idx.length} trials</span>
-    <button id="next" ${runState.page < pages - 1 ? "" : "disabled"}>›</button></div>
+    <button id="next" ${runState.page < pages - 1 ? "" : "disabled"}>›</button>${paramColumnPicker(cols)}</div>
     <div class="tablewrap"><table id="trial-table"><thead><tr>${head}</tr></thead><tbody>${rows}</tbody></table></div>`;
-  box.querySelectorAll("th").forEach((th) => th.addEventListener("click", () => {
-    if (runState.sortKey === th.dataset.key) runState.sortDir *= -1;
+  bindTable(runId, cols, box);
+}
+
+function bindTable(runId, cols, box) {
+  const redraw = () => drawTable(runId, cols);
+  box.querySelectorAll("th").forEach((th) => th.addEventListener("click", (ev) => {
+    const drop = ev.target.dataset && ev.target.dataset.drop;
+    if (drop) {
+      runState.paramCols = runState.paramCols.filter((nm) => nm !== drop);
+    } else if (runState.sortKey === th.dataset.key) runState.sortDir *= -1;
     else { runState.sortKey = th.dataset.key; runState.sortDir = th.dataset.key === "trial_id" ? 1 : -1; }
-    drawTable(runId, cols);
+    redraw();
   }));
   box.querySelectorAll("tr.row").forEach((tr) => tr.addEventListener("click", () => {
     location.hash = `#/run/${enc(runId)}/trial/${tr.dataset.trial}`;
   }));
-  document.getElementById("prev").onclick = () => { runState.page--; drawTable(runId, cols); };
-  document.getElementById("next").onclick = () => { runState.page++; drawTable(runId, cols); };
+  document.getElementById("prev").onclick = () => { runState.page--; redraw(); };
+  document.getElementById("next").onclick = () => { runState.page++; redraw(); };
+  document.getElementById("add-param-col").onchange = (ev) => {
+    if (ev.target.value) runState.paramCols.push(ev.target.value);
+    redraw();
+  };
+  const clear = document.getElementById("clear-param-cols");
+  if (clear) clear.onclick = () => { runState.paramCols = []; redraw(); };
 }

@@ -6,48 +6,28 @@ without a request leaving the machine, a favicon."""
 from __future__ import annotations
 
 import json
-import signal
-import subprocess
-import sys
 import urllib.request
 
 import numpy as np
 import pytest
 from spinefarm.storage.hdf5_reader import read_run
 
-from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, chromium_path, free_port, spinefarm
+from tests.api_tests.test_dashboard_browser import ARTIFACTS, chromium_path
 from tests.coordinator_tests.helpers import wait_for
-from tests.coordinator_tests.procs import ROOT
 
 pytestmark = pytest.mark.integration
 
-
-@pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    d = tmp_path_factory.mktemp("views")
-    spinefarm("search", "sphere:9", "--trials", "60", "--workers", "2", "--duration", "0.05", "--out",
-              str(d / "two.h5"), "--run-id", "two-workers", "--api-port", "-1", "--quiet", "--seed", "1")
-    spinefarm("search", "sphere:3", "--rungs", "0.05,0.1", "--trials", "30", "--workers", "1", "--out",
-              str(d / "rungs.h5"), "--run-id", "rungs-view", "--api-port", "-1", "--quiet", "--sampler", "random")
-    spinefarm("search", "sphere:40", "--trials", "8", "--workers", "1", "--out", str(d / "few.h5"),
-              "--run-id", "few-trials", "--api-port", "-1", "--quiet", "--objective", "speed")
-    # a search with no workers, stopped: a run file without a finished trial
-    proc = subprocess.Popen([sys.executable, "-m", "spinefarm", "search", "sphere:3", "--trials", "10", "--workers",
-                             "0", "--out", str(d / "empty.h5"), "--run-id", "empty-run", "--api-port", "-1",
-                             "--quiet"], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    wait_for(lambda: (d / "empty.h5.status.json").exists(), timeout_s=60, poll_s=0.1, what="the run file")
-    proc.send_signal(signal.SIGINT)
-    proc.wait(60)
-    (d / "broken.h5").write_bytes(b"not a run file at all\n" * 10)
-    return d
+RUNS = ["empty-run", "few-trials", "rungs-view", "spec-robot", "two-workers"]  # the run files of views_runs
 
 
 @pytest.fixture(scope="module")
-def server(runs):
-    port = free_port()
-    s = Server(["api", "--runs-dir", str(runs), "--port", str(port)], port)
-    yield s
-    s.stop()
+def runs(views_runs):
+    return views_runs
+
+
+@pytest.fixture(scope="module")
+def server(views_server):
+    return views_server
 
 
 @pytest.fixture(scope="module")
@@ -86,18 +66,17 @@ def column(page, key: str) -> list[str]:
 
 def test_runs_list_sortable_with_damaged_files_named(page, server):
     # on a busy machine a first read of a file can run out of time: the server tries it again
-    wait_for(lambda: len(get(server.url + "/runs")) == 4, timeout_s=120, poll_s=1.0, what="every run file read")
+    wait_for(lambda: len(get(server.url + "/runs")) == len(RUNS), timeout_s=120, poll_s=1.0, what="every run file read")
     page.goto(server.url + "/")
-    page.wait_for_selector("#runs-table tr.row >> nth=3")
+    page.wait_for_selector(f"#runs-table tr.row >> nth={len(RUNS) - 1}")
     heads = page.eval_on_selector_all("#runs-table th", "ths => ths.map(t => t.innerText.replace(/[▲▼]/, '').trim())")
     for name in ("run", "robot", "state", "started", "controller", "engine", "sampler", "objective", "ETA"):
         assert name in heads
     col = {h: str(i + 1) for i, h in enumerate(heads)}
     started = [float(r["started_at_unix_s"]) for r in sorted(get(server.url + "/runs"), key=lambda r: r["run_id"])]
-    assert column(page, col["run"]) == [n for _, n in sorted(zip(started, sorted(
-        ["empty-run", "few-trials", "rungs-view", "two-workers"]), strict=True), reverse=True)]  # newest first
-    for order in (["empty-run", "few-trials", "rungs-view", "two-workers"],
-                  ["two-workers", "rungs-view", "few-trials", "empty-run"]):
+    assert column(page, col["run"]) == [n for _, n in sorted(zip(started, sorted(RUNS), strict=True),
+                                                             reverse=True)]  # newest first
+    for order in (sorted(RUNS), sorted(RUNS, reverse=True)):
         page.click("#runs-table th[data-key=run_id]")
         mark = "sorted-asc" if order[0] == "empty-run" else "sorted-desc"
         wait_for(lambda mark=mark: page.locator("#runs-table th[data-key=run_id]").get_attribute("class").endswith(
@@ -106,7 +85,8 @@ def test_runs_list_sortable_with_damaged_files_named(page, server):
     by_run = dict(zip(column(page, col["run"]), column(page, col["sampler"]), strict=True))
     assert by_run["rungs-view"] == "random" and by_run["two-workers"] == "cmaes"
     states = dict(zip(column(page, col["run"]), column(page, col["state"]), strict=True))
-    assert states == {"two-workers": "done", "rungs-view": "done", "few-trials": "done", "empty-run": "empty"}
+    assert states == {"two-workers": "done", "rungs-view": "done", "few-trials": "done", "empty-run": "empty",
+                      "spec-robot": "done"}
     assert "speed" in column(page, col["objective"])
     damaged = page.locator("#damaged").inner_text()
     assert "broken.h5" in damaged and "1 file left out" in damaged

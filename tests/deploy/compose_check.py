@@ -111,7 +111,8 @@ def refused_intruder(compose: Compose, runs: Path) -> dict[str, Any]:
            "spinefarm-worker", "worker", "--connect", "tls/router:7447", "--zenoh-config", "/secrets/worker.json5",
            "--worker-id", "intruder")
     try:
-        said = ("refused by", "cannot reach")  # the worker names the refusal; older ones only said unreachable
+        # the worker names the refusal (or, while the handshake hangs, that nothing answers it)
+        said = ("refused by", "no Zenoh session has answered", "cannot reach")
         logs = wait_until(lambda: any(s in (text := docker("logs", name).stderr) for s in said) and text, 60,
                           "the intruder worker to report that the router refuses it")
         listed = [w["worker_id"] for w in run_status(runs).get("workers", [])]

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -27,6 +28,22 @@ BASE_INCLUDE = "python3,python3-venv,python3-pip,ca-certificates"
 
 class DeployError(RuntimeError):
     """A step of the deployment test failed; the message says which and why, in one line."""
+
+
+class HostUnfit(DeployError):
+    """This host cannot run the deployment at all (no packages, no container runtime, no daemons): nothing of
+    ours was tested, which is said as such rather than as a failure of the deployment."""
+
+
+@contextmanager
+def host_prerequisite(what: str):
+    """A failure inside is the host's, not the deployment's: re-raised as HostUnfit naming `what`."""
+    try:
+        yield
+    except HostUnfit:
+        raise
+    except DeployError as exc:
+        raise HostUnfit(f"{what}: {exc}") from exc
 
 
 def log(message: str) -> None:
@@ -69,8 +86,9 @@ def install_packages() -> float:
     if missing:
         log(f"installing {' '.join(missing)}")
         env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-        sh("apt-get", "update", "-q", timeout_s=600, env=env)
-        sh("apt-get", "install", "-y", "-q", "--no-install-recommends", *missing, timeout_s=1200, env=env)
+        with host_prerequisite("cannot install the packages the deployment needs"):
+            sh("apt-get", "update", "-q", timeout_s=600, env=env)
+            sh("apt-get", "install", "-y", "-q", "--no-install-recommends", *missing, timeout_s=1200, env=env)
     return time.monotonic() - t0
 
 
@@ -118,8 +136,15 @@ def start_dockerd(driver: str) -> subprocess.Popen[bytes]:
             raise DeployError(f"dockerd exited {proc.returncode}; see {CACHE_DIR / 'dockerd.log'}")
         return docker("info", "--format", "{{.Driver}}", check=False, timeout_s=10).returncode == 0
 
-    wait_until(ready, 60, "dockerd to answer")
+    with host_prerequisite("this host cannot run dockerd"):
+        wait_until(ready, 60, "dockerd to answer")
     return proc
+
+
+def probe_containers(image: str) -> None:
+    """One throw-away container of `image`: a host whose kernel or sandbox forbids containers says so here."""
+    with host_prerequisite(f"this host cannot start a container of {image}"):
+        docker("run", "--rm", "--network", "none", image, "true", timeout_s=120)
 
 
 def _stop_stale(pidfile: Path) -> None:

@@ -17,10 +17,15 @@ from typing import Any
 
 from tests.deploy import host
 
+NOT_RUN = 3  # the exit code when the host, not the deployment, is what failed (0 with --allow-unfit-host)
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="test-deploy", description=__doc__.splitlines()[0])
     parser.add_argument("--only", choices=("compose", "slurm"), help="run one of the two deployments")
+    parser.add_argument("--allow-unfit-host", action="store_true",
+                        help="exit 0 (saying NOT RUN) when this host cannot run containers or the SLURM daemons at "
+                             "all; a deployment that runs and fails still fails")
     args = parser.parse_args(argv)
     if os.geteuid() != 0:
         print("test-deploy skipped: it needs root (it installs packages with apt and starts dockerd, munge and "
@@ -30,6 +35,10 @@ def main(argv: list[str] | None = None) -> int:
     report: dict[str, Any] = {"host": os.uname().nodename, "cpus": os.cpu_count()}
     try:
         report.update(run(args.only))
+    except host.HostUnfit as exc:
+        print(f"test-deploy: NOT RUN, this host cannot run it ({time.monotonic() - t0:.0f} s): {exc}",
+              file=sys.stderr)
+        return 0 if args.allow_unfit_host else NOT_RUN
     except host.DeployError as exc:
         print(f"test-deploy: FAILED after {time.monotonic() - t0:.0f} s: {exc}", file=sys.stderr)
         return 1
@@ -49,6 +58,7 @@ def run(only: str | None) -> dict[str, Any]:
             dockerd = host.start_dockerd(driver)
             stack.callback(host.stop_dockerd, dockerd)
             report["base_image"] = host.base_image()
+            host.probe_containers(host.BASE_IMAGE)
             wheels = host.ROOT / "deploy" / "wheels"
             report["wheelhouse"] = host.wheelhouse(sys.executable, wheels, ("worker", "coordinator", "api"))
             stack.callback(_empty, wheels)

@@ -15,7 +15,7 @@ from contextlib import ExitStack, suppress
 from pathlib import Path
 from typing import Any
 
-from tests.deploy.host import ROOT, RUN_DIR, DeployError, log, sh, wait_until
+from tests.deploy.host import ROOT, RUN_DIR, DeployError, host_prerequisite, log, sh, wait_until
 from tests.deploy.run_file import check_run_file
 
 RUN_ID = "deploy-slurm"
@@ -77,6 +77,10 @@ class Slurm:
         return sh(*args, env=self.env, check=check, timeout_s=timeout_s).stdout
 
     def start(self) -> None:
+        with host_prerequisite("this host cannot run munge and the SLURM daemons"):
+            self._start()
+
+    def _start(self) -> None:
         self._munge()
         for daemon in (["slurmctld", "-D", "-i"], ["slurmd", "-D", "-N", self.host]):
             log_file = open(self.dir / f"{daemon[0]}.out", "wb")  # noqa: SIM115 (lives as long as the daemon)

@@ -14,7 +14,7 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.engines.base import BasePhysics, engine_class
 
 ABILITY_METHODS = {"reset": ("reset",), "velocities": ("velocities", "set_velocity"),
-                   "compiled_step": ("compiled_worlds",)}
+                   "compiled_step": ("compiled_worlds",), "snapshot": ("snapshot", "restore")}
 
 
 @pytest.mark.parametrize("name", engine_names())

@@ -16,12 +16,18 @@ trial loop (worker.loop) calls, per batch of trials:
                                   engine may split the run, or take a world out of `active` and put it in
                                   `retries` with the settings it must be run again in (from its start)
   close()                         free the worlds (also via `with`)
+An engine whose wants_rod_pairs(settings) is true is also given rod_pairs=(p, 4) rows (body a, rod of a, body b,
+rod of b): the rod pairs of different segments that can come within reach of each other (robot.reach), so it
+may test only those.
 Attributes every backend sets in __init__: n_worlds, n_bodies, dt_s, and retries = {} (world -> (engine options,
 result extras) of a world to run again; emptied by reset()).
 
 Optional abilities, declared in the engine's registry entry (spinefarm.robot.engines), never guessed:
   reset(start_offsets_cm)         "reset": back to the start pose at rest, the same state as fresh worlds
   velocities(), set_velocity()    "velocities": world-frame body velocities, for checks and tests
+  snapshot(world), restore(world, state)
+                                  "snapshot": a world's whole state, and putting it back into a world of the same
+                                  model, which then goes on in the same bits (worker.settled)
   compiled_worlds()               "compiled_step": per world (address of a C function void step(uint64 model,
                                   uint64 data), model address, data address, state (nb, k), pose_columns (7,)
                                   int64, wrench (nb, 6)), for the compiled loop of worker.loop
@@ -69,6 +75,11 @@ class BasePhysics:
     def step(self, active: np.ndarray | None = None) -> None:
         raise NotImplementedError
 
+    @staticmethod
+    def wants_rod_pairs(settings: Any) -> bool:
+        """Whether the constructor wants rod_pairs (robot.reach) with these settings."""
+        return False
+
     def advance(self, run: Callable[[int, np.ndarray], None], n_steps: int, active: np.ndarray,
                 horizon_steps: int) -> None:
         """n_steps of the active worlds through run(k, active) (the loop's steps); see the module docstring."""
@@ -89,6 +100,14 @@ class BasePhysics:
     def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0), world: int = 0) -> None:
         """ability "velocities": set one body's world-frame velocity."""
         raise NotImplementedError(f"engine {self.name} has no set_velocity")
+
+    def snapshot(self, world: int) -> Any:
+        """ability "snapshot": world `world`'s whole state (opaque; for restore on this engine's model)."""
+        raise NotImplementedError(f"engine {self.name} has no snapshot")
+
+    def restore(self, world: int, state: Any) -> None:
+        """ability "snapshot": world `world` takes a state from snapshot()."""
+        raise NotImplementedError(f"engine {self.name} has no restore")
 
     def compiled_worlds(self) -> list[tuple]:
         """ability "compiled_step": each world's (step function address, model address, data address, state,

@@ -58,12 +58,13 @@ class MujocoPhysics(BasePhysics):
     def __init__(self, bodies: list[BodyModel], ground: GroundSpec | Terrain, dt_s: float = 1e-3,
                  settings: MujocoSettings | None = None, start_offsets_cm: np.ndarray | None = None,
                  start_rotation: tuple[float, float, float, float] | None = None,
-                 collision_pairs_off: list[tuple[int, int]] | None = None, n_worlds: int | None = None) -> None:
+                 collision_pairs_off: list[tuple[int, int]] | None = None, n_worlds: int | None = None,
+                 rod_pairs: np.ndarray | None = None) -> None:
         self.settings = settings or MujocoSettings()
         offsets = world_offsets(start_offsets_cm, n_worlds, len(bodies))
         terrain = ground.to_terrain() if isinstance(ground, GroundSpec) else ground
         off = collision_pairs_off if collision_pairs_off is not None else pairs_off(terrain, len(bodies))
-        self.xml = model_xml(bodies, terrain, dt_s, self.settings, offsets[0], start_rotation, off)
+        self.xml = model_xml(bodies, terrain, dt_s, self.settings, offsets[0], start_rotation, off, rod_pairs)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         fill_heightfield(self.model, terrain)
         self.dt_s, self.n_bodies, self.n_worlds = dt_s, len(bodies), len(offsets)
@@ -79,6 +80,10 @@ class MujocoPhysics(BasePhysics):
         for b in range(1, self.n_worlds):
             self._place(b, offsets[b])
         self._start_trial()
+
+    @staticmethod
+    def wants_rod_pairs(settings: MujocoSettings) -> bool:
+        return settings.segment_contacts == "reach"
 
     def _bind(self) -> None:
         nb = self.n_bodies
@@ -121,6 +126,17 @@ class MujocoPhysics(BasePhysics):
         for b, data in enumerate(self.data):
             if active is None or active[b]:
                 mujoco.mj_step(self.model, data)
+
+    def snapshot(self, world: int) -> tuple:
+        """(a copy of the world's MjData, its contact guard's step counts): all a world needs to go on."""
+        data = mujoco.MjData(self.model)
+        mujoco.mj_copyData(data, self.model, self.data[world])
+        return data, self._steps[world], self._safe_until[world]
+
+    def restore(self, world: int, state: tuple) -> None:
+        data, steps, safe_until = state
+        mujoco.mj_copyData(self.data[world], self.model, data)  # in place: the bound views stay valid
+        self._steps[world], self._safe_until[world] = steps, safe_until
 
     def compiled_worlds(self) -> list[tuple]:
         """Per world (address of mj_step, model address, data address, qpos (nb, 7), POSE_COLUMNS, xfrc (nb, 6));
