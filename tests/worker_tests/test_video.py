@@ -38,7 +38,8 @@ def test_mp4_decodes_with_one_frame_per_recorded_frame(tmp_path: Path):
 def test_gif_of_a_stored_trial(tmp_path: Path, capsys):
     run = tmp_path / "run.h5"
     r = subprocess.run([sys.executable, "-m", "spinefarm", "search", "tetraspine", "--trials", "1", "--workers", "1",
-                        "--duration", "0.5", "--out", str(run), "--api-port", "-1", "--quiet", "--no-verify"],
+                        "--engine", "bullet", "--duration", "0.5", "--out", str(run), "--api-port", "-1", "--quiet",
+                        "--no-verify"],
                        cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     # the search's report names the command this test runs next
