@@ -90,3 +90,52 @@ def test_a_status_file_with_a_lone_surrogate_is_served(tmp_path):
     with TestClient(create_app(runs_dir=tmp_path)) as client:
         assert client.get("/runs").status_code == 200
         assert client.get("/runs/odd").status_code == 200
+
+
+# The probe's reading child, slowed as a busy machine slows a child's start: 8 s the first time, 6 s after
+# (longer than the first deadline of 5 s, shorter than the second of 10 s); a marker file counts the reads.
+SLOW_FIRST_READ = """
+import sys
+import spinefarm.storage.probe as probe
+probe._PROBE_CODE = (
+    "import os, sys, time\\n"
+    "marker = sys.argv[1] + '.first-read'\\n"
+    "first = not os.path.exists(marker)\\n"
+    "open(marker, 'w').close()\\n"
+    "time.sleep(8 if first else 6)\\n"
+) + probe._PROBE_CODE
+"""
+
+
+def test_a_file_read_too_slowly_once_is_served_when_read_again(tmp_path):
+    """Out of time is not damaged: the file is read again in the background with a longer deadline, and
+    served from then on, while requests keep answering at once."""
+    from spinefarm.cli.service_commands import free_port
+
+    d = tmp_path / "runs"
+    d.mkdir()
+    run_file(d / "slow.h5", "slow")
+    port = free_port()
+    args = ["api", "--runs-dir", str(d), "--port", str(port)]
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_FIRST_READ + f"from spinefarm.cli.main import main\n"
+                             f"sys.exit(main({args!r}))"], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        url = f"http://127.0.0.1:{port}"
+        wait_for(lambda: _ok(url + "/health"), timeout_s=30, what="the API")
+        assert httpx.get(url + "/runs", timeout=30).json() == []  # the first read ran out of time (5 s)
+        t0 = time.monotonic()
+
+        def listed() -> bool:
+            t = time.monotonic()
+            runs = httpx.get(url + "/runs", timeout=30).json()
+            assert time.monotonic() - t < 3, "a request waited on the background read"
+            return [r["run_id"] for r in runs] == ["slow"]
+
+        wait_for(listed, timeout_s=60, poll_s=0.5, what="the slow file to be served")
+        assert time.monotonic() - t0 >= 4  # read again after the back-off, not at once
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(30)
+    err = proc.stderr.read()
+    assert "did not finish within 5 s" in err and "machine was too busy" in err
