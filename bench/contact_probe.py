@@ -2,7 +2,8 @@
 
 A spine's first segment is dropped on flat ground from its build pose, left to settle, then pushed
 by a constant horizontal force at its COM (a multiple of the Coulomb limit mu * m * g, mu the friction
-product of rod and ground) along x or z, or turned by a constant torque about the vertical; each engine
+product of rod and ground) along x, z or the diagonal between them (where a friction pyramid and a
+friction box differ most from Coulomb's circle), or turned by a constant torque about the vertical; each engine
 at its default step and settings. Prints one JSON object: per engine and push, how far the segment slid
 (cm), how far it turned (rad) and its height change (cm). Below the limit a rigid Coulomb contact does
 not slide at all; above it the segment accelerates at (F - mu m g) / m.
@@ -43,8 +44,9 @@ def probe(spine: str, engine: str, factors: list[float], settle_s: float, push_s
     limit = mu * body.mass_kg * GRAVITY_CM_S2
     n_settle, n_push = round(settle_s / setup.dt), round(push_s / setup.dt)
     out = {}
-    pushes = [(f"{axis}x{f:g}", np.eye(3)[i] * f * limit, np.zeros(3)) for f in factors
-              for axis, i in (("x", 0), ("z", 2))]
+    diagonal = np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)  # between the friction directions of both engines
+    pushes = [(f"{axis}x{f:g}", direction * f * limit, np.zeros(3)) for f in factors
+              for axis, direction in (("x", np.eye(3)[0]), ("z", np.eye(3)[2]), ("xz", diagonal))]
     # a torque about the vertical: the force limit times the segment's half width as a lever
     half_width = float(np.ptp([r.centre_cm[0] for r in body.rods])) / 2 or 1.0
     pushes += [(f"yaw_x{f:g}", np.zeros(3), np.array([0.0, f * limit * half_width, 0.0])) for f in factors]

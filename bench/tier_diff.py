@@ -154,7 +154,11 @@ def run(spine: str, engine: str, seed: int, duration_s: float, settle_s: float, 
                    controller=controller, scene_factory=factory)
     eng, facts = built[-1]
     r = out.result
+    moving = [x for x in eng.samples if x["t_s"] > settle_s]  # after the settle: the gait's contacts
     return {"engine": engine, "options": options, "status": str(r.status), "distance_m": r.distance_m,
+            "mean_segments_on_ground": float(np.mean([x["segments_on_ground"] for x in moving])) if moving else None,
+            "mean_ground_contacts": float(np.mean([x["ground_contacts"] for x in moving])) if moving else None,
+            "mean_segment_contacts": float(np.mean([x["segment_contacts"] for x in moving])) if moving else None,
             "cpu_s": time.process_time() - t0, "model": facts[0], "model_same_for_all_segments": all(
                 f == facts[0] for f in facts), "samples": eng.samples}
 
