@@ -121,6 +121,9 @@ def main() -> None:
     ap.add_argument("--mujoco-options", default="{}", help="MuJoCo engine options (JSON), e.g. "
                     "'{\"contact_geometry\": \"capsules\"}'")
     ap.add_argument("--bullet-options", default="{}", help="Bullet engine options (JSON)")
+    ap.add_argument("--mujoco-dt", type=float, default=None,
+                    help="MuJoCo's step in the default tier (s; default: its default step), e.g. to test "
+                         "contacts stiffer than its 1 ms step allows (solref_time_s >= 2 steps)")
     ap.add_argument("--mujoco-ground-friction", type=float, default=None,
                     help="ground friction of the MuJoCo runs (default: the morphology's)")
     ap.add_argument("--controller", action="append", default=[], metavar="SPINE=SPACE",
@@ -136,7 +139,7 @@ def main() -> None:
         extra["mujoco"]["ground_friction"] = args.mujoco_ground_friction
     sets = args.sets or (12 if args.quick else 100)
     duration = args.duration or (3.0 if args.quick else 10.0)
-    tiers = {"default": {"bullet": None, "mujoco": None}}
+    tiers = {"default": {"bullet": None, "mujoco": args.mujoco_dt}}
     if not (args.quick or args.no_converged):
         tiers["converged"] = dict(CONVERGED_DT_S)
     if not args.no_screen:

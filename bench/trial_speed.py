@@ -25,7 +25,8 @@ gaits at each engine's default step, interleaved, with `bullet_cpu_s_per_sim_s`,
 (segment-segment contacts by the default "auto": left out while the contact guard finds none can form, the
 trial run again with them when one could; `mujoco_reruns` lists those), `mujoco_speedup`, and for comparison
 MuJoCo with them modelled by MuJoCo's own search ("scene"), left out ("off") and modelled only for the rod pairs
-the structure lets come within reach ("reach", `mujoco_reach_rod_pairs` counts them), and every trial's distance:
+the structure lets come within reach ("reach", `mujoco_reach_rod_pairs` counts them), with the pyramidal friction
+cone (`mujoco_pyramidal_cone`, the default before the elliptic one), and every trial's distance:
 
     python bench/trial_speed.py --spines all [--tier-seconds 10] [--repeats 3]
 
@@ -172,7 +173,8 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
 SPEED_TIERS = {"bullet": ("bullet", {}), "mujoco": ("mujoco", {}),
                "mujoco_segment_contacts_scene": ("mujoco", {"segment_contacts": "scene"}),
                "mujoco_segment_contacts_off": ("mujoco", {"segment_contacts": "off"}),
-               "mujoco_segment_contacts_reach": ("mujoco", {"segment_contacts": "reach"})}
+               "mujoco_segment_contacts_reach": ("mujoco", {"segment_contacts": "reach"}),
+               "mujoco_pyramidal_cone": ("mujoco", {"cone": "pyramidal"})}  # the default before the elliptic
 
 
 def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:

@@ -123,7 +123,7 @@ ENGINES: dict[str, EngineSpec] = {spec.name: spec for spec in (
     ), frozenset({"velocities"}), "pybullet, the judge: hard contacts, 1 ms default step", "pybullet"),
     EngineSpec("mujoco", "spinefarm.worker.engines.mujoco", "MujocoPhysics", 1e-3, (
         EngineOption("integrator", _S, "implicitfast", choices=("euler", "implicit", "implicitfast", "rk4")),
-        EngineOption("cone", _S, "pyramidal", choices=("pyramidal", "elliptic")),
+        EngineOption("cone", _S, "elliptic", choices=("pyramidal", "elliptic")),
         EngineOption("solver", _S, "newton", choices=("newton", "cg", "pgs")),
         EngineOption("iterations", _I, 100, low=1, high=10_000),
         EngineOption("ls_iterations", _I, 50, low=1, high=10_000),

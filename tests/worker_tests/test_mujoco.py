@@ -167,6 +167,41 @@ def test_friction_is_the_product_of_ground_and_rod(engine):
     assert moved[10.0, 2.0] - moved[10.0, 1.0] < 0.01, moved
 
 
+def _pushed_segment_slides_cm(engine: str, force: np.ndarray, options: dict | None = None) -> float:
+    """One octahedral segment dropped on flat ground, settled 0.3 s, then pushed 0.4 s by `force` at its COM."""
+    from spinefarm.worker.engines.base import engine_class
+    from spinefarm.worker.setup import TrialSetup
+
+    setup = TrialSetup(load_morphology("octahedral-complex"), TrialConfig(engine=engine,
+                                                                          engine_options=options or {}), None)
+    zero = np.zeros((1, 1, 3))
+    with engine_class(engine)(setup.bodies[:1], setup.terrain, setup.dt, setup.settings) as world:
+        for k in range(700):
+            world.read_poses()
+            if k == 300:
+                start = world.read_poses()[0, 0, [0, 2]].copy()
+            world.apply_wrenches(force[None, None] if k >= 300 else zero, zero)
+            world.step()
+        return float(np.hypot(*(world.read_poses()[0, 0, [0, 2]] - start)))
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_friction_is_coulombs_in_every_direction(engine):
+    """A push of 0.8 of the Coulomb limit mu m g holds in every horizontal direction, and under 1.2 of it the
+    segment slides against mu = 0.25 (from its slide, (F - m a) / (m g)), also on the diagonal between MuJoCo's
+    contact axes, where its pyramidal cone gives only mu / sqrt(2) (and slides at 0.8)."""
+    body = build_bodies(load_morphology("octahedral-complex").structure)[0]
+    weight = body.mass_kg * 981.0
+    diagonal = np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)
+    for direction in (np.array([1.0, 0.0, 0.0]), diagonal):
+        assert _pushed_segment_slides_cm(engine, 0.8 * 0.25 * weight * direction) < 0.05
+        slid_cm = _pushed_segment_slides_cm(engine, 1.2 * 0.25 * weight * direction)
+        mu = (1.2 * 0.25 * weight - body.mass_kg * 2.0 * slid_cm / 0.4 ** 2) / weight
+        assert mu == pytest.approx(0.25, rel=0.05), (direction, slid_cm)
+    if engine == "mujoco":  # the pyramid MuJoCo offers is a diamond: the diagonal push slides
+        assert _pushed_segment_slides_cm(engine, 0.8 * 0.25 * weight * diagonal, {"cone": "pyramidal"}) > 1.0
+
+
 def test_filtered_pairs_pass_through_each_other():
     bodies = build_bodies(load_morphology("tetraspine-ntrt").structure)
     terrain = build_terrain(SceneConfig(collision_filter="neighbours"), 0.5, (0, 0))

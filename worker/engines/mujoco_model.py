@@ -18,7 +18,9 @@ Friction: MuJoCo takes the larger of two geoms' coefficients (or the one of high
 multiplies them. Terrain geoms get priority and the coefficient mu_terrain * mu_rod, rod geoms mu_rod^2,
 so terrain and segment-segment contacts see the same products as in Bullet (exact while every segment
 has the same rod friction, as every built-in does). Sliding friction only (condim 3): Bullet's rolling
-friction is the product with the ground's 0, its spinning friction 0.
+friction is the product with the ground's 0, its spinning friction 0. The friction cone is elliptic by
+default: Coulomb's mu * N against sliding in any direction, as in Bullet; MuJoCo's pyramidal cone (four
+edges) gives only mu / sqrt(2) between a contact's two axes.
 """
 
 from __future__ import annotations
@@ -77,7 +79,7 @@ class MujocoSettings:
     """
 
     integrator: str = "implicitfast"
-    cone: str = "pyramidal"
+    cone: str = "elliptic"
     solver: str = "newton"
     iterations: int = 100
     ls_iterations: int = 50
