@@ -81,7 +81,7 @@ def test_a_trial_that_keeps_losing_its_worker_is_stored_as_failed_after_three_tr
             core.tick()
     cols = storage.columns()
     assert cols["status"][0] == b"failed"
-    assert cols["reason"][0].decode() == "lost its worker 3 times (last: worker w2 vanished)"
+    assert cols["reason"][0].decode() == "lost its worker 3 times (last: worker w2 vanished) on 3 workers: w0, w1, w2"
     assert ask(core, "w9").assignments[0].trial_id == 1  # the run goes on with the next trial
 
 
@@ -89,7 +89,7 @@ def test_max_attempts_is_a_setting():
     s = Scheduler(FakeClock(0.0), lease_s=1.0, max_attempts=1)
     s.grant("w1", 1, iter([0, None]).__next__)
     s.worker_lost("w1")
-    assert s.given_up == [(0, "lost its worker 1 times (last: worker w1 vanished)")] and s.n_queued == 0
+    assert s.given_up == [(0, "lost its worker 1 times (last: worker w1 vanished) on 1 worker: w1")] and s.n_queued == 0
 
 
 def envelope(body, kind="work_request") -> bytes:
