@@ -23,6 +23,7 @@ import json
 import math
 import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -286,11 +287,18 @@ def audit(path: Path, tmp: Path, budget: int) -> dict:
             "failed_timeout": sum(r.startswith("timeout:") for r in reasons),
             "failed_crashed": sum(r.startswith("crashed:") for r in reasons),
             "failed_lost_worker": sum(r.startswith("lost its worker") for r in reasons),
+            "given_up_on_n_workers": distinct_workers(reasons),
             "failed_outside_bands": sum(1 for i, s in enumerate(status)
                                         if s == "failed" and cols["params_unit"][i, 0] >= POISON["crash"][1]),
             "acknowledged": sum(stored.values()), "lost": lost,
             "duplicated": sum(c - 1 for c in stored.values() if c > 1), "forged_complete": forged,
             "exact_budget": int((cols["rung"] == 0).sum()) == budget and "waiting" not in status}
+
+
+def distinct_workers(reasons: list[str]) -> dict[str, int]:
+    """How many given-up trials failed on 1, 2, 3 ... distinct workers (their reasons end "on N workers: ...")."""
+    found = (re.search(r" on (\d+) workers?: ", r) for r in reasons)
+    return dict(sorted(Counter(m.group(1) for m in found if m).items()))
 
 
 def soak(minutes: float, seed: int, workdir: Path, netns: bool = True) -> dict:
