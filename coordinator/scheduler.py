@@ -15,8 +15,10 @@ A re-issued trial goes to a worker that has not failed it yet: one it timed out 
 gets it again only when no other live worker may run it (then the cap still ends it); one whose lease
 expired or whose worker vanished gets it only once it has nothing else to run (no queued trial, no new
 one), or when no other live worker may run it. "Live": its liveliness token is up and it spoke within
-lease_s (a worker that never asks does not hold a trial back). Kept in memory with the attempt count,
-so both start again after a coordinator restart.
+lease_s (a worker that never asks does not hold a trial back). For `start_grace_s` after the scheduler
+starts, while workers are still (re)connecting, a timed-out or crashed trial waits for another worker
+rather than going back to the only one known. Kept in memory with the attempt count, so both start
+again after a coordinator restart.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from spinefarm.protocol.errors import check_range
 MAX_GRANT = 64       # trials per request and per worker at a time
 MAX_ATTEMPTS = 3     # lost leases before a trial is stored as failed
 _TRIAL_TIME_MARGIN = 4.0
+START_GRACE_S = 10.0  # after a (re)start, workers reconnect within a few seconds
 
 
 @dataclass(frozen=True)
@@ -54,7 +57,7 @@ class Scheduler:
     """Not thread-safe: the coordinator calls it under its own lock."""
 
     def __init__(self, clock: Callable[[], float], lease_s: float = 60.0, *, max_grant: int = MAX_GRANT,
-                 max_attempts: int = MAX_ATTEMPTS) -> None:
+                 max_attempts: int = MAX_ATTEMPTS, start_grace_s: float = START_GRACE_S) -> None:
         check_range("lease_s", lease_s, 0.0, low_inclusive=False)
         check_range("max_grant", max_grant, 1)
         check_range("max_attempts", max_attempts, 1)
@@ -62,6 +65,7 @@ class Scheduler:
         self.lease_s = float(lease_s)
         self.max_grant = int(max_grant)
         self.max_attempts = int(max_attempts)
+        self.grace_until_s = clock() + start_grace_s
         self.expected_trial_s = self.lease_s       # until trials are measured (observe_trial)
         self._measured = False
         self._queue: deque[int] = deque()          # trials waiting to be (re-)issued
@@ -153,8 +157,9 @@ class Scheduler:
             return True
         if again and not failed[worker_id]:
             return True
-        return not any(w.alive and w.worker_id not in failed and now - w.last_contact_s <= self.lease_s
-                       and ok(key, w.worker_id) for w in self.workers.values())
+        others = any(w.alive and w.worker_id not in failed and now - w.last_contact_s <= self.lease_s
+                     and ok(key, w.worker_id) for w in self.workers.values())
+        return not others and now >= self.grace_until_s
 
     def failed_on(self, key: int) -> list[str]:
         """Workers this unfinished trial has timed out, crashed or lost its lease on, in that order."""

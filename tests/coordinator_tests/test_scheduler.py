@@ -111,7 +111,7 @@ def test_a_timed_out_trial_goes_to_a_worker_that_has_not_failed_it():
 
 
 def test_with_one_worker_a_timed_out_trial_comes_back_to_it_and_is_still_capped():
-    s = Scheduler(FakeClock(0.0), lease_s=5.0)
+    s = Scheduler(FakeClock(0.0), lease_s=5.0, start_grace_s=0.0)
     ids = new_ids(limit=3)
     s.grant("w0", 1, ids)
     for _ in range(2):
@@ -130,14 +130,14 @@ def test_a_worker_that_is_gone_or_silent_does_not_hold_a_retried_trial_back():
     s.grant("w0", 1, ids)
     _fail(s, "w0")
     s.worker_lost("w1")            # its token vanished
-    clock.advance(5.1)             # w2 has not spoken for longer than a lease
+    clock.advance(10.0)            # w2 has not spoken for longer than a lease (and the start grace is over)
     s.contact("w0")
     assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]
     assert s.failed_on(0) == ["w0"]
 
 
 def test_a_retried_trial_skips_a_worker_that_may_not_run_it():
-    s = Scheduler(FakeClock(0.0), lease_s=5.0)
+    s = Scheduler(FakeClock(0.0), lease_s=5.0, start_grace_s=0.0)
     ids = new_ids(limit=1)
     s.contact("w1")  # live, but it does not run this trial's engine
     s.grant("w0", 1, ids)
@@ -168,3 +168,20 @@ def test_given_up_after_lost_leases_names_the_workers():
     s.grant("w1", 1, ids)
     s.worker_lost("w1")
     assert s.given_up == [(0, "lost its worker 2 times (last: worker w1 vanished) on 2 workers: w0, w1")]
+
+
+def test_just_after_a_start_a_timed_out_trial_waits_for_other_workers_to_reconnect():
+    clock = FakeClock(0.0)
+    s = Scheduler(clock, lease_s=5.0, start_grace_s=10.0)
+    ids = new_ids(limit=2)
+    s.grant("w0", 1, ids)
+    _fail(s, "w0")
+    assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [1]  # the only worker known so far
+    assert s.grant("w0", 1, ids) == []
+    s.release(1)
+    s.contact("w1")  # reconnected
+    assert [ls.trial_id for ls in s.grant("w1", 1, ids)] == [0]
+    _fail(s, "w1")
+    s.worker_lost("w1")
+    clock.advance(10.0)  # grace over, nobody else: back to a worker that failed it
+    assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]
