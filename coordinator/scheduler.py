@@ -24,6 +24,7 @@ again after a coordinator restart.
 from __future__ import annotations
 
 import heapq
+import logging
 import secrets
 from collections import deque
 from collections.abc import Callable
@@ -31,6 +32,7 @@ from dataclasses import dataclass, field
 
 from spinefarm.protocol.errors import check_range
 
+log = logging.getLogger("spinefarm.coordinator")
 MAX_GRANT = 64       # trials per request and per worker at a time
 MAX_ATTEMPTS = 3     # lost leases before a trial is stored as failed
 _TRIAL_TIME_MARGIN = 4.0
@@ -157,9 +159,14 @@ class Scheduler:
             return True
         if again and not failed[worker_id]:
             return True
-        others = any(w.alive and w.worker_id not in failed and now - w.last_contact_s <= self.lease_s
-                     and ok(key, w.worker_id) for w in self.workers.values())
-        return not others and now >= self.grace_until_s
+        live = [w.worker_id for w in self.workers.values() if w.alive and now - w.last_contact_s <= self.lease_s
+                and ok(key, w.worker_id)]
+        if any(w not in failed for w in live) or now < self.grace_until_s:
+            return False
+        if failed[worker_id]:
+            log.warning("trial %s goes back to worker %s, which it timed out or crashed on: no other live worker "
+                        "may run it (live: %s)", key, worker_id, ", ".join(live) or "none")
+        return True
 
     def failed_on(self, key: int) -> list[str]:
         """Workers this unfinished trial has timed out, crashed or lost its lease on, in that order."""

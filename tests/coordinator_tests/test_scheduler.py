@@ -110,7 +110,7 @@ def test_a_timed_out_trial_goes_to_a_worker_that_has_not_failed_it():
     assert s.n_queued == 0 and s.failed_on(0) == []
 
 
-def test_with_one_worker_a_timed_out_trial_comes_back_to_it_and_is_still_capped():
+def test_with_one_worker_a_timed_out_trial_comes_back_to_it_and_is_still_capped(caplog):
     s = Scheduler(FakeClock(0.0), lease_s=5.0, start_grace_s=0.0)
     ids = new_ids(limit=3)
     s.grant("w0", 1, ids)
@@ -119,6 +119,9 @@ def test_with_one_worker_a_timed_out_trial_comes_back_to_it_and_is_still_capped(
         assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]  # before new trials: nobody else can run it
     _fail(s, "w0")
     assert s.given_up == [(0, "timeout: no result within its 1 s wall-clock limit (3 attempts) on 1 worker: w0")]
+    said = [r.getMessage() for r in caplog.records]
+    assert said == ["trial 0 goes back to worker w0, which it timed out or crashed on: no other live worker may "
+                    "run it (live: w0)"] * 2
 
 
 def test_a_worker_that_is_gone_or_silent_does_not_hold_a_retried_trial_back():
