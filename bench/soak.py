@@ -1,7 +1,7 @@
 """Soak: a multi-fidelity search on 4 workers under a random schedule of faults runs to its exact budget.
 
---minutes sizes the budget (about 3.5 parameter sets a second on 2 shared cores); faults go on until the
-run is over: worker SIGKILLs and SIGSTOPs (3-8 s), coordinator SIGKILLs, each
+--minutes sizes the budget (--rate parameter sets a second: 3.5 on 2 shared cores under heavy load); faults
+go on until the run is over: worker SIGKILLs and SIGSTOPs (3-8 s), coordinator SIGKILLs, each
 process restarted automatically whenever it exits before the run is over (as compose's restart policies
 do; nothing is restarted by hand), hang- and crash-poison trials (the
 test objective's fault bands: a trial there sleeps for ever or segfaults its trial process), a forging
@@ -13,7 +13,7 @@ Checked from the run file and the workers' acknowledgement logs (SPINEFARM_ACK_L
 of the budget evaluated, no row left waiting, 0 lost (acknowledged as stored, absent or different in
 the file), 0 duplicated (acknowledged as stored twice), 0 forged rows stored as complete, no process
 left running once the run is over, no exit the schedule did not cause.
-usage: python bench/soak.py [--minutes 30] [--seed 1] [--dir DIR]      (one JSON object)
+usage: python bench/soak.py [--minutes 30] [--rate 3.5] [--seed 1] [--dir DIR]      (one JSON object)
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import json
 import math
 import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -192,10 +193,23 @@ def inject(kind: str, rng: random.Random, coord: Proc, workers: list[Proc], net:
     return None
 
 
-def run_done(path: Path) -> bool:
+# Faults done at least once (also in a short soak): at this fraction of the planned time, or of the run's
+# rows finished if the run goes faster than planned (so a run that ends early still gets each of them).
+ONCE = {"forge": (0.2, 0.2), "coordinator_kill": (0.35, 0.35), "partition": (0.5, 0.5)}
+
+
+def due_once(pending: set[str], elapsed_frac: float, progress: float) -> list[str]:
+    """Which of the once-only faults still pending are due."""
+    return [k for k in ONCE if k in pending and (elapsed_frac >= ONCE[k][0] or progress >= ONCE[k][1])]
+
+
+def run_state(path: Path) -> tuple[bool, float]:
+    """(the run is done, the fraction of its planned rows finished) from the coordinator's status file."""
     from spinefarm.storage.status import read_status
 
-    return (read_status(path) or {}).get("state") == "done"
+    st = read_status(path) or {}
+    finished = int(st.get("trials_complete", 0)) + int(st.get("trials_failed", 0))
+    return st.get("state") == "done", finished / max(1, int(st.get("trials_planned", 0) or 1))
 
 
 def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int, path: Path) -> dict:
@@ -203,8 +217,7 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
     rng = random.Random(seed)
     t0 = time.monotonic()
     hard_end = t0 + 60.0 * minutes * 4 + 300.0
-    once = {"forge": t0 + 0.2 * 60.0 * minutes, "coordinator_kill": t0 + 0.35 * 60.0 * minutes,
-            "partition": t0 + 0.5 * 60.0 * minutes}   # each at least once, also in a short soak
+    once = set(ONCE)
     next_fault = t0 + rng.uniform(2.0, 5.0)
     counts: Counter = Counter(unexpected_coordinator_exits=0, unexpected_worker_exits=0)
     forger: list = []
@@ -218,7 +231,7 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
         if code is not None:
             counts["unexpected_coordinator_exits"] += coord.restart()
             coordinator_restarts += 1
-        done = run_done(path)
+        done, progress = run_state(path)
         for w in workers:
             w.resume_if_due(now, force=done)  # frozen workers hear "done" before the coordinator leaves
             code = w.proc.poll()
@@ -228,13 +241,12 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
                 counts["unexpected_worker_exits"] += w.restart()
                 worker_restarts += 1
                 w.exited_at = 0.0
-        if heal_at is not None and now >= heal_at:
+        if heal_at is not None and (now >= heal_at or done):  # a run over while cut off: heal at once
             net.cut(False)
             heal_at = None
-        for kind, at in list(once.items()):
-            if now >= at:
-                heal_at = inject(kind, rng, coord, workers, net, now, counts, forger) or heal_at
-                del once[kind]
+        for kind in due_once(once, (now - t0) / (60.0 * minutes), progress):
+            heal_at = inject(kind, rng, coord, workers, net, now, counts, forger) or heal_at
+            once.discard(kind)
         if now >= next_fault:  # faults until the run is over
             kind = rng.choices(["worker_kill", "worker_stop", "coordinator_kill"], [3, 3, 1])[0]
             inject(kind, rng, coord, workers, net, now, counts, forger)
@@ -289,6 +301,7 @@ def audit(path: Path, tmp: Path, budget: int) -> dict:
             "failed_timeout": sum(r.startswith("timeout:") for r in reasons),
             "failed_crashed": sum(r.startswith("crashed:") for r in reasons),
             "failed_lost_worker": sum(r.startswith("lost its worker") for r in reasons),
+            "given_up_on_n_workers": distinct_workers(reasons),
             "failed_outside_bands": sum(1 for i, s in enumerate(status)
                                         if s == "failed" and cols["params_unit"][i, 0] >= POISON["crash"][1]),
             "acknowledged": sum(stored.values()), "lost": lost,
@@ -296,8 +309,14 @@ def audit(path: Path, tmp: Path, budget: int) -> dict:
             "exact_budget": int((cols["rung"] == 0).sum()) == budget and "waiting" not in status}
 
 
-def soak(minutes: float, seed: int, workdir: Path, netns: bool = True) -> dict:
-    budget = max(40, int(minutes * 60 * 3.5))   # about 3.5 parameter sets per second under the faults
+def distinct_workers(reasons: list[str]) -> dict[str, int]:
+    """How many given-up trials failed on 1, 2, 3 ... distinct workers (their reasons end "on N workers: ...")."""
+    found = (re.search(r" on (\d+) workers?: ", r) for r in reasons)
+    return dict(sorted(Counter(m.group(1) for m in found if m).items()))
+
+
+def soak(minutes: float, seed: int, workdir: Path, netns: bool = True, rate: float = 3.5) -> dict:
+    budget = max(40, int(minutes * 60 * rate))   # `rate` parameter sets per second under the faults
     path, run_id = workdir / "soak.h5", f"soak-{seed}"
     make_run(path, run_id, budget, seed)
     net = Net(netns)
@@ -313,7 +332,7 @@ def soak(minutes: float, seed: int, workdir: Path, netns: bool = True) -> dict:
     finally:
         net.close()
     out.update(audit(path, workdir, budget))
-    out.update({"minutes": minutes, "seed": seed, "workers": N_WORKERS, "rungs_s": list(RUNGS_S),
+    out.update({"minutes": minutes, "rate_sets_s": rate, "seed": seed, "workers": N_WORKERS, "rungs_s": list(RUNGS_S),
                 "poison_bands": POISON, "hung_processes": hung,
                 "network": "namespaces" if net.hosts is not None else f"loopback (partition skipped: {net.why_not})"})
     return out
@@ -323,20 +342,24 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=30.0)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--rate", type=float, default=3.5,
+                    help="parameter sets a second the budget is sized for (3.5: 2 shared cores under heavy load)")
     ap.add_argument("--dir", type=Path, default=None, help="keep the run file and logs here")
     ap.add_argument("--no-netns", action="store_true", help="all on loopback, no partition")
     ap.add_argument("--forge", nargs=2, metavar=("ENDPOINT", "RUN_ID"), help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if not (args.rate > 0 and args.minutes > 0):
+        ap.error(f"--minutes {args.minutes:g} --rate {args.rate:g}: expected both > 0")
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # a stopped soak still deletes its namespaces
     if args.forge:
         forge(args.forge[0], args.forge[1], 300)
         return
     if args.dir is not None:
         args.dir.mkdir(parents=True, exist_ok=True)
-        print(json.dumps(soak(args.minutes, args.seed, args.dir, not args.no_netns)))
+        print(json.dumps(soak(args.minutes, args.seed, args.dir, not args.no_netns, args.rate)))
         return
     with tempfile.TemporaryDirectory(prefix="spinefarm-soak-") as tmp:
-        print(json.dumps(soak(args.minutes, args.seed, Path(tmp), not args.no_netns)))
+        print(json.dumps(soak(args.minutes, args.seed, Path(tmp), not args.no_netns, args.rate)))
 
 
 if __name__ == "__main__":

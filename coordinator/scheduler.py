@@ -10,11 +10,21 @@ Bounds against a greedy or broken worker: at most `max_grant` trials per request
 time; the i-th lease of a batch lasts lease_s + i x the expected trial time (not (i + 1) x lease_s);
 a trial whose lease is lost `max_attempts` times (it keeps killing or freezing its workers) is given
 up and handed to the caller to be stored as failed.
+
+A re-issued trial goes to a worker that has not failed it yet: one it timed out or crashed on (`retry`)
+gets it again only when no other live worker may run it (then the cap still ends it); one whose lease
+expired or whose worker vanished gets it only once it has nothing else to run (no queued trial, no new
+one), or when no other live worker may run it. "Live": its liveliness token is up and it spoke within
+lease_s (a worker that never asks does not hold a trial back). For `start_grace_s` after the scheduler
+starts, while workers are still (re)connecting, a timed-out or crashed trial waits for another worker
+rather than going back to the only one known. Kept in memory with the attempt count, so both start
+again after a coordinator restart.
 """
 
 from __future__ import annotations
 
 import heapq
+import logging
 import secrets
 from collections import deque
 from collections.abc import Callable
@@ -22,9 +32,11 @@ from dataclasses import dataclass, field
 
 from spinefarm.protocol.errors import check_range
 
+log = logging.getLogger("spinefarm.coordinator")
 MAX_GRANT = 64       # trials per request and per worker at a time
 MAX_ATTEMPTS = 3     # lost leases before a trial is stored as failed
 _TRIAL_TIME_MARGIN = 4.0
+START_GRACE_S = 10.0  # after a (re)start, workers reconnect within a few seconds
 
 
 @dataclass(frozen=True)
@@ -47,7 +59,7 @@ class Scheduler:
     """Not thread-safe: the coordinator calls it under its own lock."""
 
     def __init__(self, clock: Callable[[], float], lease_s: float = 60.0, *, max_grant: int = MAX_GRANT,
-                 max_attempts: int = MAX_ATTEMPTS) -> None:
+                 max_attempts: int = MAX_ATTEMPTS, start_grace_s: float = START_GRACE_S) -> None:
         check_range("lease_s", lease_s, 0.0, low_inclusive=False)
         check_range("max_grant", max_grant, 1)
         check_range("max_attempts", max_attempts, 1)
@@ -55,6 +67,7 @@ class Scheduler:
         self.lease_s = float(lease_s)
         self.max_grant = int(max_grant)
         self.max_attempts = int(max_attempts)
+        self.grace_until_s = clock() + start_grace_s
         self.expected_trial_s = self.lease_s       # until trials are measured (observe_trial)
         self._measured = False
         self._queue: deque[int] = deque()          # trials waiting to be (re-)issued
@@ -62,6 +75,7 @@ class Scheduler:
         self._deadlines: list[tuple[float, int, int]] = []  # heap (deadline, trial, lease); lazy deletion
         self._issued: dict[int, dict[int, str]] = {}  # unfinished trial -> {lease id: worker} ever issued
         self._attempts: dict[int, int] = {}        # unfinished trial -> leases lost so far
+        self._failed_on: dict[int, dict[str, bool]] = {}  # unfinished trial -> {worker: it timed out/crashed there}
         self.given_up: list[tuple[int, str]] = []  # (trial, reason) to be stored as failed by the caller
         self.workers: dict[str, WorkerState] = {}
         self.reissued = 0
@@ -105,13 +119,17 @@ class Scheduler:
         capacity = min(capacity, self.max_grant - len(worker.leases))
         ok = eligible or (lambda key, wid: True)
         out: list[Lease] = []
+        fresh = True   # new trials may still come (before a trial this worker lost goes back to it)
         while len(out) < capacity:
-            tid = self._next_queued(worker_id, ok)
-            if tid is None:
+            tid = self._next_queued(worker_id, ok, now, again=False)
+            if tid is None and fresh:
                 tid = new_trial()
                 if tid is not None and not ok(tid, worker_id):
                     self._queue.append(tid)
                     tid = None
+                fresh = tid is not None
+            if tid is None:
+                tid = self._next_queued(worker_id, ok, now, again=True)
             if tid is None:
                 break
             lease_id = secrets.randbits(62)
@@ -123,13 +141,36 @@ class Scheduler:
             out.append(lease)
         return out
 
-    def _next_queued(self, worker_id: str, ok: Callable[[int, str], bool]) -> int | None:
-        """The first queued key this worker may run, taken out of the queue (the others keep their order)."""
+    def _next_queued(self, worker_id: str, ok: Callable[[int, str], bool], now: float, *,
+                     again: bool) -> int | None:
+        """The first queued key this worker may run, taken out of the queue (the others keep their order).
+        again=False: only keys it has not failed, or failed with no other live worker to take them;
+        again=True: also keys whose lease it lost (expired, vanished) while others could take them."""
         for i, key in enumerate(self._queue):
-            if ok(key, worker_id):
+            if ok(key, worker_id) and self._may_take(key, worker_id, ok, now, again):
                 del self._queue[i]
                 return key
         return None
+
+    def _may_take(self, key: int, worker_id: str, ok: Callable[[int, str], bool], now: float,
+                  again: bool) -> bool:
+        failed = self._failed_on.get(key)
+        if not failed or worker_id not in failed:
+            return True
+        if again and not failed[worker_id]:
+            return True
+        live = [w.worker_id for w in self.workers.values() if w.alive and now - w.last_contact_s <= self.lease_s
+                and ok(key, w.worker_id)]
+        if any(w not in failed for w in live) or now < self.grace_until_s:
+            return False
+        if failed[worker_id]:
+            log.warning("trial %s goes back to worker %s, which it timed out or crashed on: no other live worker "
+                        "may run it (live: %s)", key, worker_id, ", ".join(live) or "none")
+        return True
+
+    def failed_on(self, key: int) -> list[str]:
+        """Workers this unfinished trial has timed out, crashed or lost its lease on, in that order."""
+        return list(self._failed_on.get(key, {}))
 
     def push_front(self, key: int) -> None:
         """Issue `key` (a task) before anything queued."""
@@ -145,6 +186,7 @@ class Scheduler:
             self._queue.remove(key)
         self._drop_lease(key)
         self._attempts.pop(key, None)
+        self._failed_on.pop(key, None)
 
     def queued_keys(self) -> list[int]:
         return list(self._queue)
@@ -167,18 +209,26 @@ class Scheduler:
         self._drop_lease(trial_id)
         self._issued.pop(trial_id, None)
         self._attempts.pop(trial_id, None)
+        self._failed_on.pop(trial_id, None)
 
-    def _reissue(self, trial_ids: list[int], why: str) -> None:
+    def _reissue(self, trial_ids: list[int], why: str, *, hard: bool = False) -> None:
         """Put trials at the head of the queue, in order: re-issues go before new trials; a trial that
-        lost its lease max_attempts times goes to `given_up` instead."""
+        lost its lease max_attempts times goes to `given_up` instead. Each lease's worker is remembered
+        as one that failed the trial (hard: it timed out or crashed there)."""
         again = []
         for tid in trial_ids:
+            lease = self._leases.get(tid)
+            if lease is not None:
+                failed = self._failed_on.setdefault(tid, {})
+                failed[lease.worker_id] = failed.get(lease.worker_id, False) or hard
             self._drop_lease(tid)
             n = self._attempts[tid] = self._attempts.get(tid, 0) + 1
             if n >= self.max_attempts:
-                self.given_up.append((tid, f"lost its worker {n} times (last: {why})"))
+                given = f"{why[:120]} ({n} attempts)" if hard else f"lost its worker {n} times (last: {why})"
+                self.given_up.append((tid, given + self._on_whom(tid)))
                 self._issued.pop(tid, None)
                 self._attempts.pop(tid, None)
+                self._failed_on.pop(tid, None)
             else:
                 again.append(tid)
         self._queue.extendleft(reversed(again))
@@ -187,10 +237,13 @@ class Scheduler:
     def retry(self, trial_id: int, why: str) -> None:
         """The lease holder gave the trial back unfinished (it timed out or crashed its simulator there):
         re-queued like a lost lease, and given up after max_attempts with `why` leading its reason."""
-        before = len(self.given_up)
-        self._reissue([trial_id], why)
-        if len(self.given_up) > before:
-            self.given_up[-1] = (trial_id, f"{why[:120]} ({self.max_attempts} attempts)")
+        self._reissue([trial_id], why, hard=True)
+
+    def _on_whom(self, key: int) -> str:
+        """' on 2 workers: w1, w2': the distinct workers the trial failed on, for its reason."""
+        names = list(self._failed_on.get(key, {}))
+        text = ", ".join(n[:24] for n in names)
+        return f" on {len(names)} worker{'s' if len(names) != 1 else ''}: {text}" if names else ""
 
     def expire(self) -> list[int]:
         """Re-queue every trial whose lease deadline has passed; returns their ids."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import pytest
 from spinefarm.coordinator.scheduler import MAX_GRANT, Scheduler
@@ -84,15 +85,30 @@ def test_a_trial_that_keeps_losing_its_worker_is_stored_as_failed_after_three_tr
             core.tick()
     cols = storage.columns()
     assert cols["status"][0] == b"failed"
-    assert cols["reason"][0].decode() == "lost its worker 3 times (last: worker w2 vanished)"
+    assert cols["reason"][0].decode() == "lost its worker 3 times (last: worker w2 vanished) on 3 workers: w0, w1, w2"
     assert ask(core, "w9").assignments[0].trial_id == 1  # the run goes on with the next trial
+
+
+def test_a_trial_that_times_out_is_issued_again_only_to_workers_it_has_not_failed_on():
+    core, storage, _ = sphere_core(trials=10, lease_s=5.0)
+    for w in ("w0", "w1", "w2"):
+        core.worker_seen(w)
+    (a,) = ask(core, "w0").assignments
+    for w in ("w0", "w1", "w2"):
+        timeout = replace(res(a, worker=w), status=TrialStatus.FAILED, reason="timeout: no result within 1 s")
+        assert submit(core, [(a.lease_id, timeout)], worker=w) == {a.trial_id: Verdict.REQUEUED}
+        if w != "w2":
+            assert a.trial_id not in [x.trial_id for x in ask(core, w, n=3).assignments]  # new trials instead
+            (a,) = [x for x in ask(core, {"w0": "w1", "w1": "w2"}[w]).assignments if x.trial_id == a.trial_id]
+    assert storage.columns()["reason"][a.trial_id].decode() == \
+        "timeout: no result within 1 s (3 attempts) on 3 workers: w0, w1, w2"
 
 
 def test_max_attempts_is_a_setting():
     s = Scheduler(FakeClock(0.0), lease_s=1.0, max_attempts=1)
     s.grant("w1", 1, iter([0, None]).__next__)
     s.worker_lost("w1")
-    assert s.given_up == [(0, "lost its worker 1 times (last: worker w1 vanished)")] and s.n_queued == 0
+    assert s.given_up == [(0, "lost its worker 1 times (last: worker w1 vanished) on 1 worker: w1")] and s.n_queued == 0
 
 
 def envelope(body, kind="work_request") -> bytes:

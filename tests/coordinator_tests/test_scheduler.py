@@ -84,3 +84,107 @@ def test_contact_tracks_last_contact_on_the_clock():
 def test_lease_must_be_positive():
     with pytest.raises(ConfigError, match="lease_s"):
         Scheduler(FakeClock(), lease_s=0.0)
+
+
+def _fail(s: Scheduler, worker_id: str, trial_id: int = 0) -> None:
+    """The lease holder gives the trial back: it timed out there."""
+    assert s.lease_of(trial_id).worker_id == worker_id
+    s.retry(trial_id, "timeout: no result within its 1 s wall-clock limit")
+
+
+def test_a_timed_out_trial_goes_to_a_worker_that_has_not_failed_it():
+    s = Scheduler(FakeClock(0.0), lease_s=5.0)
+    ids = new_ids(limit=1)
+    for w in ("w0", "w1", "w2"):
+        s.contact(w)
+    assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]
+    _fail(s, "w0")
+    assert s.grant("w0", 1, ids) == []  # w1 and w2 are live and have not failed it
+    assert [ls.trial_id for ls in s.grant("w1", 1, ids)] == [0]
+    _fail(s, "w1")
+    assert s.grant("w0", 1, ids) == [] and s.grant("w1", 1, ids) == []
+    assert [ls.trial_id for ls in s.grant("w2", 1, ids)] == [0]
+    _fail(s, "w2")
+    assert s.given_up == [(0, "timeout: no result within its 1 s wall-clock limit (3 attempts) on 3 workers: "
+                              "w0, w1, w2")]
+    assert s.n_queued == 0 and s.failed_on(0) == []
+
+
+def test_with_one_worker_a_timed_out_trial_comes_back_to_it_and_is_still_capped(caplog):
+    s = Scheduler(FakeClock(0.0), lease_s=5.0, start_grace_s=0.0)
+    ids = new_ids(limit=3)
+    s.grant("w0", 1, ids)
+    for _ in range(2):
+        _fail(s, "w0")
+        assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]  # before new trials: nobody else can run it
+    _fail(s, "w0")
+    assert s.given_up == [(0, "timeout: no result within its 1 s wall-clock limit (3 attempts) on 1 worker: w0")]
+    said = [r.getMessage() for r in caplog.records]
+    assert said == ["trial 0 goes back to worker w0, which it timed out or crashed on: no other live worker may "
+                    "run it (live: w0)"] * 2
+
+
+def test_a_worker_that_is_gone_or_silent_does_not_hold_a_retried_trial_back():
+    clock = FakeClock(0.0)
+    s = Scheduler(clock, lease_s=5.0)
+    ids = new_ids(limit=1)
+    s.contact("w1")
+    s.contact("w2")
+    s.grant("w0", 1, ids)
+    _fail(s, "w0")
+    s.worker_lost("w1")            # its token vanished
+    clock.advance(10.0)            # w2 has not spoken for longer than a lease (and the start grace is over)
+    s.contact("w0")
+    assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]
+    assert s.failed_on(0) == ["w0"]
+
+
+def test_a_retried_trial_skips_a_worker_that_may_not_run_it():
+    s = Scheduler(FakeClock(0.0), lease_s=5.0, start_grace_s=0.0)
+    ids = new_ids(limit=1)
+    s.contact("w1")  # live, but it does not run this trial's engine
+    s.grant("w0", 1, ids)
+    _fail(s, "w0")
+    only_w0 = lambda key, wid: wid == "w0"  # noqa: E731
+    assert [ls.trial_id for ls in s.grant("w0", 1, ids, only_w0)] == [0]
+
+
+def test_a_lost_lease_prefers_another_worker_and_comes_back_when_nothing_else_is_left():
+    clock = FakeClock(0.0)
+    s = Scheduler(clock, lease_s=5.0)
+    ids = new_ids(limit=2)
+    s.contact("w1")
+    s.grant("w0", 1, ids)
+    clock.advance(5.0)
+    assert s.expire() == [0]
+    s.contact("w1")
+    assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [1]  # a new trial first; trial 0 waits for w1
+    assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]  # no new trial left: it may run it again
+    assert s.failed_on(0) == ["w0"]
+
+
+def test_given_up_after_lost_leases_names_the_workers():
+    s = Scheduler(FakeClock(0.0), lease_s=5.0, max_attempts=2)
+    ids = new_ids(limit=1)
+    s.grant("w0", 1, ids)
+    s.worker_lost("w0")
+    s.grant("w1", 1, ids)
+    s.worker_lost("w1")
+    assert s.given_up == [(0, "lost its worker 2 times (last: worker w1 vanished) on 2 workers: w0, w1")]
+
+
+def test_just_after_a_start_a_timed_out_trial_waits_for_other_workers_to_reconnect():
+    clock = FakeClock(0.0)
+    s = Scheduler(clock, lease_s=5.0, start_grace_s=10.0)
+    ids = new_ids(limit=2)
+    s.grant("w0", 1, ids)
+    _fail(s, "w0")
+    assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [1]  # the only worker known so far
+    assert s.grant("w0", 1, ids) == []
+    s.release(1)
+    s.contact("w1")  # reconnected
+    assert [ls.trial_id for ls in s.grant("w1", 1, ids)] == [0]
+    _fail(s, "w1")
+    s.worker_lost("w1")
+    clock.advance(10.0)  # grace over, nobody else: back to a worker that failed it
+    assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]

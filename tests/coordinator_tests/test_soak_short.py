@@ -3,6 +3,7 @@ nothing lost, duplicated or forged, nothing left running, nothing restarted but 
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -28,3 +29,14 @@ def test_a_short_soak_reaches_its_exact_budget_through_every_fault(tmp_path):
     assert out["failed_outside_bands"] == 0, out
     if netns:
         assert faults.get("partition") == 1, out
+
+
+def test_a_run_faster_than_planned_still_gets_each_once_only_fault():
+    spec = importlib.util.spec_from_file_location("soak", ROOT / "bench" / "soak.py")
+    soak = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(soak)
+    every = set(soak.ONCE)
+    assert soak.due_once(every, 0.0, 0.0) == []
+    assert soak.due_once(every, 0.36, 0.0) == ["forge", "coordinator_kill"]   # on time
+    assert soak.due_once(every, 0.05, 0.5) == ["forge", "coordinator_kill", "partition"]  # the run is ahead
+    assert soak.due_once({"partition"}, 0.05, 0.5) == ["partition"]
