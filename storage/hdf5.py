@@ -203,6 +203,9 @@ class Hdf5Storage(InMemoryStorage):
             for run in runs:
                 a, b = int(run[0]), int(run[-1]) + 1
                 self._datasets[c.name][a:b] = cols[c.name][a:b]
+        # The rows' data reach the file before their status says complete: one flush of both could land
+        # its chunks in any order, and a process killed inside it left a "complete" row of NaNs.
+        self._file.flush()
         status = self._datasets["status"]
         if status.shape[0] < n:
             status.resize(n, axis=0)
