@@ -8,12 +8,15 @@ each tier its cost (CPU s per simulated s) and its step error (median relative c
 half the step, over a few gaits that move). The fast tier passes when rho >= 0.9, the overlap >= 8 of 10
 and the ratio is within [0.9, 1.1]; a search then screens on MuJoCo, otherwise it runs on Bullet.
 
-Results are cached as JSON by the spec's hash and the calibration's settings (cache_dir()).
+Results are cached as JSON by the spec's hash, the calibration's settings and a digest of the simulating
+code and engine versions (cache_dir()): a change of either engine's model calibrates again.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import hashlib
 import json
 import math
 import os
@@ -231,8 +234,38 @@ def cache_dir() -> Path:
     return Path(root) / "calibration"
 
 
+# what decides how a trial moves: the model, the control law and both engines' code and versions
+SIMULATING_CODE = ("robot", "worker/engines", "worker/sim", "worker/control", "worker/loop.py", "worker/trial.py")
+ENGINE_PACKAGES = ("mujoco", "pybullet", "numpy", "numba")
+
+
+def code_digest(paths: list[Path], packages: tuple[str, ...] = ()) -> str:
+    """A digest of the contents of the .py files under `paths` (files or folders) and the packages' versions."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    h = hashlib.sha256()
+    for path in paths:
+        files = sorted(path.rglob("*.py")) if path.is_dir() else [path]
+        for f in files:
+            if f.is_file():
+                h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    for name in packages:
+        try:
+            h.update(f"{name}=={version(name)}".encode())
+        except PackageNotFoundError:
+            h.update(f"{name} absent".encode())
+    return h.hexdigest()[:12]
+
+
+@functools.lru_cache(maxsize=1)
+def simulating_code_digest() -> str:
+    root = Path(__file__).resolve().parents[1]  # the installed spinefarm package (or the checkout)
+    return code_digest([root / p for p in SIMULATING_CODE], ENGINE_PACKAGES)
+
+
 def cache_path(source: str, settings: CalibrationSettings) -> Path:
-    return cache_dir() / f"{load_morphology(source).spec_hash()}-{settings.key()}.json"
+    return cache_dir() / (f"{load_morphology(source).spec_hash()}-{settings.key()}-"
+                          f"{simulating_code_digest()}.json")
 
 
 def calibration(source: str, settings: CalibrationSettings, refresh: bool = False) -> tuple[dict[str, Any], bool]:

@@ -111,3 +111,26 @@ def test_the_choice_is_typed_settings_that_round_trip_and_refuse_bad_fields():
         EngineChoice.from_dict({**choice.to_dict(), "colour": "red"})
     with pytest.raises(ConfigError, match="unknown tier"):
         EngineChoice.from_dict({**choice.to_dict(), "engine": "auto"})
+
+
+def test_a_change_of_the_simulating_code_calibrates_again(tmp_path):
+    """The cache is keyed by the simulating code's contents: an engine's model that changes (a friction cone,
+    say) is not judged by a calibration of the old one."""
+    from spinefarm.worker.calibrate import (
+        CalibrationSettings,
+        cache_path,
+        code_digest,
+        simulating_code_digest,
+    )
+
+    engines = tmp_path / "engines"
+    engines.mkdir()
+    (engines / "mujoco.py").write_text("CONE = 'pyramidal'\n")
+    (engines / "notes.txt").write_text("not code\n")
+    before = code_digest([engines], ("numpy",))
+    (engines / "notes.txt").write_text("still not code\n")
+    assert code_digest([engines], ("numpy",)) == before
+    (engines / "mujoco.py").write_text("CONE = 'elliptic'\n")
+    assert code_digest([engines], ("numpy",)) != before
+    assert code_digest([engines], ("numpy", "no-such-package")) != code_digest([engines], ("numpy",))
+    assert cache_path("tetraspine-ntrt", CalibrationSettings()).stem.endswith(simulating_code_digest())
