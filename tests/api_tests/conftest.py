@@ -10,11 +10,23 @@ import sys
 
 import pytest
 
-from tests.api_tests.test_dashboard_browser import Server, free_port, spinefarm
+from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, chromium_path, free_port, spinefarm
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
 
 SPEC_ROBOT = "explore-spine"  # the name the spec file gives its robot
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """One headless Chromium per test module (Debian's, driven by Playwright)."""
+    from playwright.sync_api import sync_playwright
+
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
+        yield b
+        b.close()
 
 
 @pytest.fixture(scope="session")

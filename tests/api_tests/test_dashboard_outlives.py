@@ -13,7 +13,7 @@ import urllib.request
 
 import pytest
 
-from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, chromium_path, free_port
+from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, free_port
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
 
@@ -23,17 +23,6 @@ pytestmark = pytest.mark.integration
 def get(url: str) -> dict:
     with urllib.request.urlopen(url, timeout=30) as r:
         return json.loads(r.read())
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
-        yield b
-        b.close()
 
 
 def search(*args: str) -> subprocess.Popen:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from spinefarm.storage.hdf5_reader import read_run
 
-from tests.api_tests.test_dashboard_browser import ARTIFACTS, chromium_path
+from tests.api_tests.test_dashboard_browser import ARTIFACTS
 from tests.coordinator_tests.helpers import wait_for
 
 pytestmark = pytest.mark.integration
@@ -28,17 +28,6 @@ def runs(views_runs):
 @pytest.fixture(scope="module")
 def server(views_server):
     return views_server
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
-        yield b
-        b.close()
 
 
 @pytest.fixture

@@ -7,12 +7,12 @@ import urllib.request
 
 import pytest
 
-from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, browser, free_port, spinefarm  # noqa: F401
+from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, free_port, spinefarm
 
 pytestmark = pytest.mark.integration
 
 
-def test_the_trial_page_shows_each_episode_and_the_spread(browser, tmp_path):  # noqa: F811
+def test_the_trial_page_shows_each_episode_and_the_spread(browser, tmp_path):
     out = tmp_path / "robust.h5"
     spinefarm("search", "tetraspine", "--trials", "2", "--workers", "1", "--duration", "0.3", "--episodes", "3",
               "--randomize", "friction=0.1,start_jitter_cm=0.5", "--robust", "min", "--no-verify",

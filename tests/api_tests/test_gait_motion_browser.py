@@ -13,7 +13,7 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.worker.render import rod_segments, string_segments
 
-from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, chromium_path, free_port, spinefarm
+from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, free_port, spinefarm
 from tests.coordinator_tests.helpers import wait_for
 
 pytestmark = pytest.mark.integration
@@ -40,17 +40,6 @@ def server(run_file, tmp_path_factory):
     s = Server(["api", str(run_file), "--port", str(port)], port)
     yield s
     s.stop()
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=chromium_path(), args=["--no-sandbox"])
-        yield b
-        b.close()
 
 
 @pytest.fixture
