@@ -30,7 +30,8 @@ PAPER_SPEED_CM_S = 9.46
 MEASURE_SEED = 1_000_000_007  # the fresh episodes' seed: no trial of a search has it
 
 
-def search(out: Path, args: argparse.Namespace, robust: bool) -> dict:
+def search(out: Path, args: argparse.Namespace, robust: bool, reuse: str | None = None) -> dict:
+    """Run one search into `out` (or, given `reuse`, take a finished run file as it is) and read its bests."""
     cmd = [sys.executable, "-m", "spinefarm", "search", args.morphology, "--controller", args.controller,
            "--sampler", args.sampler, "--objective", "speed", "--duration", str(args.duration), "--trials",
            str(args.trials), "--workers", str(args.workers), "--seed", str(args.seed), "--no-verify", "--api-port",
@@ -40,15 +41,18 @@ def search(out: Path, args: argparse.Namespace, robust: bool) -> dict:
     if robust:
         cmd += ["--episodes", str(args.episodes), "--randomize", args.randomize, "--robust", args.statistic]
     t0 = time.perf_counter()
-    r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
-    if r.returncode != 0:
-        sys.exit(f"robust bench: search failed: {r.stderr[-2000:]}")
+    if reuse:
+        out, cmd = Path(reuse), ["", f"(an earlier run: {reuse})"]
+    else:
+        r = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+        if r.returncode != 0:
+            sys.exit(f"robust bench: search failed: {r.stderr[-2000:]}")
     from spinefarm.storage.hdf5 import Hdf5Storage
 
     storage = Hdf5Storage.open_read(out)
     bests = storage.best(args.measure_top)
     meta = storage.run_meta()
-    return {"file": str(out), "command": " ".join(cmd[1:]), "wall_time_s": time.perf_counter() - t0,
+    return {"file": str(out), "command": " ".join(cmd[1:]), "wall_time_s": None if reuse else time.perf_counter() - t0,
             "best_trial": bests[0].trial_id, "best_objective": bests[0].objective,
             "best_speed_cm_s": bests[0].speed_cm_s,
             "bests": [{"trial": b.trial_id, "objective": b.objective, "speed_cm_s": b.speed_cm_s,
@@ -110,13 +114,15 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out-dir", default="runs/bench-robust")
     ap.add_argument("--skip-search", action="store_true", help="only measure the --gait files")
+    ap.add_argument("--plain-run", metavar="RUN.h5", help="take this finished run as the plain search")
+    ap.add_argument("--robust-run", metavar="RUN.h5", help="take this finished run as the robust search")
     args = ap.parse_args()
     t0 = time.perf_counter()
     out_dir = ROOT / args.out_dir
     out_dir.mkdir(parents=True, exist_ok=True)
     searches = {} if args.skip_search else {
-        "plain": search(out_dir / "plain.h5", args, robust=False),
-        "robust": search(out_dir / "robust.h5", args, robust=True)}
+        "plain": search(out_dir / "plain.h5", args, robust=False, reuse=args.plain_run),
+        "robust": search(out_dir / "robust.h5", args, robust=True, reuse=args.robust_run)}
     from spinefarm.cli.sim_commands import load_params_file
 
     table = []
