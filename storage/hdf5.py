@@ -14,6 +14,7 @@ instead of relying on external tools to clear the flags.
 from __future__ import annotations
 
 import errno
+import logging
 import os
 from collections.abc import Callable
 from dataclasses import replace
@@ -32,6 +33,7 @@ from spinefarm.storage.runlock import RunLock
 from spinefarm.storage.schema import COLUMNS, RunMeta
 from spinefarm.storage.table import TrialTable
 
+log = logging.getLogger(__name__)
 # A file handle whose writes failed: closing it makes HDF5 retry the failed writes (and crash at exit),
 # so it is kept here, never closed, and the process leaves with os._exit (see CoordinatorCore.write_failure).
 _ABANDONED: list[h5py.File] = []
@@ -73,7 +75,7 @@ class Hdf5Storage(InMemoryStorage):
             _refuse_read_only(path)
             path.unlink(missing_ok=True)
             status_path(path).unlink(missing_ok=True)
-            write_run(path, meta, TrialTable(meta.n_params).columns())
+            write_run(path, meta, TrialTable(meta.n_params).columns(), live=True)
             lock.bind(path)  # the new file's identity: a link to it is refused too
             _fsync_dir(path)  # the new name too must survive a power cut
             return cls._open_writer(path, meta, TrialTable(meta.n_params), lock)
@@ -109,9 +111,10 @@ class Hdf5Storage(InMemoryStorage):
                 meta = replace(meta, trials_budget=trials_budget)
             episodes = read_episodes(path)
             real = path.resolve()  # a symlink stays a symlink: its target is what gets replaced
+            real.with_name(real.name + ".compress-tmp").unlink(missing_ok=True)  # a close cut short
             tmp = real.with_name(real.name + ".resume-tmp")
             try:
-                write_run(tmp, meta, cols, episodes)
+                write_run(tmp, meta, cols, episodes, live=True)
                 with open(tmp, "rb") as fh:
                     os.fsync(fh.fileno())
                 lock.bind(tmp)  # held on the new file before it takes the name
@@ -238,6 +241,24 @@ class Hdf5Storage(InMemoryStorage):
             # HDF5's own write fails with "No space left on device" and the run stops.
         os.fsync(fd)
 
+    def _compress(self) -> None:
+        """Replace the closed live file by a compressed copy of what it holds (atomically, under the lock). The
+        live file stays as it is if the copy cannot be made: it is complete, only larger."""
+        real = self.path.resolve()
+        tmp = real.with_name(real.name + ".compress-tmp")
+        try:
+            meta, cols = read_run(real)
+            write_run(tmp, meta, cols, read_episodes(real))
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+            if self._lock is not None:
+                self._lock.bind(tmp)
+            os.replace(tmp, real)
+            _fsync_dir(real)
+        except (OSError, StorageError, ValueError) as exc:
+            tmp.unlink(missing_ok=True)
+            log.warning("run file %s left uncompressed: %s", self.path, _reason(exc))
+
     def close(self) -> None:
         try:
             if self._file is not None:
@@ -245,6 +266,7 @@ class Hdf5Storage(InMemoryStorage):
                     self.flush()
                     self._file.close()
                     _trim(self.path)
+                    self._compress()
                 else:
                     _ABANDONED.append(self._file)
                     self._datasets = {}
