@@ -12,7 +12,10 @@ and the partition is skipped, said in the JSON).
 Checked from the run file and the workers' acknowledgement logs (SPINEFARM_ACK_LOG): every parameter set
 of the budget evaluated, no row left waiting, 0 lost (acknowledged as stored, absent or different in
 the file), 0 duplicated (acknowledged as stored twice), 0 forged rows stored as complete, no process
-left running once the run is over, no exit the schedule did not cause.
+left running once the run is over, no exit the schedule did not cause, and how the workers left: each
+frozen one is woken when the run is done and the coordinator waits for it, so none should have to wait
+out its --coordinator-timeout (`workers_timed_out`; `workers_exit_s`: from the coordinator's exit to the
+last worker's).
 usage: python bench/soak.py [--minutes 30] [--rate 3.5] [--seed 1] [--dir DIR]      (one JSON object)
 """
 
@@ -262,19 +265,27 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
             "coordinator_restarts": coordinator_restarts, "worker_restarts": worker_restarts}
 
 
-def finish(workers: list[Proc], timeout_s: float = COORDINATOR_TIMEOUT_S + 30.0) -> list[str]:
-    """Once the run is over every worker must exit by itself; the names of those that did not."""
+def finish(workers: list[Proc], timeout_s: float = COORDINATOR_TIMEOUT_S + 30.0) -> tuple[list[str], float]:
+    """Once the run is over every worker must exit by itself: the names of those that did not, and the
+    seconds until the last one exited."""
+    t0 = time.monotonic()
     for w in workers:
         w.resume_if_due(0.0, force=True)
-    end = time.monotonic() + timeout_s
+    end = t0 + timeout_s
     while time.monotonic() < end and any(w.proc.poll() is None for w in workers):
         time.sleep(0.1)
+    waited_s = time.monotonic() - t0
     hung = [w.name for w in workers if w.proc.poll() is None]
     for w in workers:
         if w.proc.poll() is None:
             w.proc.kill()
             w.proc.wait(10)
-    return hung
+    return hung, waited_s
+
+
+def silent_exits(workdir: Path) -> int:
+    """Workers that ended by --coordinator-timeout (nobody told them the run was done), from their logs."""
+    return sum(log.read_text(errors="replace").count("has been silent for") for log in workdir.glob("w*.log"))
 
 
 def audit(path: Path, tmp: Path, budget: int) -> dict:
@@ -325,7 +336,7 @@ def soak(minutes: float, seed: int, workdir: Path, netns: bool = True, rate: flo
         try:
             out = drive(coord, workers, net, minutes, seed, path)
         finally:
-            hung = finish(workers)
+            hung, out_s = finish(workers)
             if coord.proc.poll() is None:
                 hung.append("coordinator")
                 coord.proc.kill()
@@ -333,7 +344,8 @@ def soak(minutes: float, seed: int, workdir: Path, netns: bool = True, rate: flo
         net.close()
     out.update(audit(path, workdir, budget))
     out.update({"minutes": minutes, "rate_sets_s": rate, "seed": seed, "workers": N_WORKERS, "rungs_s": list(RUNGS_S),
-                "poison_bands": POISON, "hung_processes": hung,
+                "poison_bands": POISON, "hung_processes": hung, "workers_exit_s": round(out_s, 1),
+                "workers_timed_out": silent_exits(workdir),
                 "network": "namespaces" if net.hosts is not None else f"loopback (partition skipped: {net.why_not})"})
     return out
 

@@ -22,6 +22,7 @@ def test_a_short_soak_reaches_its_exact_budget_through_every_fault(tmp_path):
     assert not out["timed_out"] and out["exact_budget"], out
     assert out["lost"] == 0 and out["duplicated"] == 0 and out["forged_complete"] == 0, out
     assert out["hung_processes"] == [] and out["waiting"] == 0, out
+    assert out["workers_timed_out"] == 0, out  # every worker heard "done", none waited out its timeout
     faults = out["faults"]
     assert faults["unexpected_coordinator_exits"] == 0 and faults["unexpected_worker_exits"] == 0, out
     assert faults.get("coordinator_kill", 0) >= 1 and faults.get("forge") == 1, out
