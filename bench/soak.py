@@ -5,9 +5,10 @@ go on until the run is over: worker SIGKILLs and SIGSTOPs (3-8 s), coordinator S
 process restarted automatically whenever it exits before the run is over (as compose's restart policies
 do; nothing is restarted by hand), hang- and crash-poison trials (the
 test objective's fault bands: a trial there sleeps for ever or segfaults its trial process), a forging
-peer (results for leases it was never given, also under other workers' ids) and a 10 s network
+peer (results for leases it was never given, also under other workers' ids), a 10 s network
 partition of two workers (network namespaces, tests/netns.py; without root the workers share loopback
-and the partition is skipped, said in the JSON).
+and the partition is skipped, said in the JSON) and a worker frozen from 80 % of the rows finished
+until the run is done.
 
 Checked from the run file and the workers' acknowledgement logs (SPINEFARM_ACK_LOG): every parameter set
 of the budget evaluated, no row left waiting, 0 lost (acknowledged as stored, absent or different in
@@ -181,6 +182,10 @@ def inject(kind: str, rng: random.Random, coord: Proc, workers: list[Proc], net:
         w.stopped_until = now + rng.uniform(3.0, 8.0)
     elif kind == "coordinator_kill":
         coord.signal(signal.SIGKILL)
+    elif kind == "end_stop":
+        w = rng.choice([w for w in workers if w.stopped_until is None] or workers)
+        w.signal(signal.SIGSTOP)
+        w.stopped_until = math.inf  # woken when the run is done
     elif kind == "forge":
         prefix, ep = net.worker_args(0)
         forger.append(subprocess.Popen([*prefix, sys.executable, __file__, "--forge", ep, coord.run_id],
@@ -198,7 +203,10 @@ def inject(kind: str, rng: random.Random, coord: Proc, workers: list[Proc], net:
 
 # Faults done at least once (also in a short soak): at this fraction of the planned time, or of the run's
 # rows finished if the run goes faster than planned (so a run that ends early still gets each of them).
-ONCE = {"forge": (0.2, 0.2), "coordinator_kill": (0.35, 0.35), "partition": (0.5, 0.5)}
+# end_stop freezes a worker near the end until the run is done (only by progress): once the coordinator is
+# gone nobody could tell it the run ended, so the coordinator must wait for it.
+ONCE = {"forge": (0.2, 0.2), "coordinator_kill": (0.35, 0.35), "partition": (0.5, 0.5),
+        "end_stop": (math.inf, 0.8)}
 
 
 def due_once(pending: set[str], elapsed_frac: float, progress: float) -> list[str]:

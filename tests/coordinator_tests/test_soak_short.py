@@ -26,6 +26,7 @@ def test_a_short_soak_reaches_its_exact_budget_through_every_fault(tmp_path):
     faults = out["faults"]
     assert faults["unexpected_coordinator_exits"] == 0 and faults["unexpected_worker_exits"] == 0, out
     assert faults.get("coordinator_kill", 0) >= 1 and faults.get("forge") == 1, out
+    assert faults.get("end_stop") == 1, out  # a worker frozen as the run ended: it too heard "done"
     assert out["failed_timeout"] >= 1 and out["failed_crashed"] >= 1, out  # the poison bands were hit
     assert out["failed_outside_bands"] == 0, out
     if netns:
@@ -41,3 +42,5 @@ def test_a_run_faster_than_planned_still_gets_each_once_only_fault():
     assert soak.due_once(every, 0.36, 0.0) == ["forge", "coordinator_kill"]   # on time
     assert soak.due_once(every, 0.05, 0.5) == ["forge", "coordinator_kill", "partition"]  # the run is ahead
     assert soak.due_once({"partition"}, 0.05, 0.5) == ["partition"]
+    assert "end_stop" not in soak.due_once(every, 5.0, 0.79)  # near the end by progress only, however late
+    assert "end_stop" in soak.due_once(every, 0.0, 0.8)
