@@ -42,5 +42,6 @@ def test_a_run_faster_than_planned_still_gets_each_once_only_fault():
     assert soak.due_once(every, 0.36, 0.0) == ["forge", "coordinator_kill"]   # on time
     assert soak.due_once(every, 0.05, 0.5) == ["forge", "coordinator_kill", "partition"]  # the run is ahead
     assert soak.due_once({"partition"}, 0.05, 0.5) == ["partition"]
-    assert "end_stop" not in soak.due_once(every, 5.0, 0.79)  # near the end by progress only, however late
-    assert "end_stop" in soak.due_once(every, 0.0, 0.8)
+    # a worker frozen as the run ends: a few seconds before, by the coordinator's ETA, from half way on
+    assert not soak.end_stop_due(0.4, 1.0) and not soak.end_stop_due(0.6, 30.0) and not soak.end_stop_due(0.6, None)
+    assert soak.end_stop_due(0.6, 9.0) and soak.end_stop_due(0.9, None)
