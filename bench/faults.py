@@ -2,9 +2,9 @@
 forged and malformed messages rejected, a full disk, a disk that dies mid-run (as in a power cut),
 damaged files.
 
-Real processes, real Zenoh on loopback, real HDF5 files. Workers here are "witness" workers: they
-speak the real protocol and log every result the coordinator acknowledged as stored, so "lost" means
-acknowledged but absent from the file and "duplicated" means acknowledged as stored twice.
+Real processes, real Zenoh on loopback, real HDF5 files. Workers here are "witness" workers
+(bench/fault_witness.py): they speak the real protocol and log every result the coordinator acknowledged as
+stored, so "lost" means acknowledged but absent from the file and "duplicated" means acknowledged as stored twice.
 
 Prints one JSON object per part; the last line is one JSON object with everything.
 usage: python bench/faults.py [--runs 4] [--trials 300] [--seed 1] [--power-cuts 1] [--skip disk,power_cut]
@@ -22,7 +22,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,104 +29,8 @@ sys.path.insert(0, str(ROOT))
 
 from spinefarm.cli.service_commands import free_port  # noqa: E402
 from spinefarm.protocol import keys  # noqa: E402
-from spinefarm.storage.hdf5_reader import read_run  # noqa: E402
 
-
-# --- a worker that logs what was acknowledged ----------------------------------------------------------
-def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) -> int:
-    """The worker protocol (pull, run, carry results with the next request) with an acknowledgement log."""
-    import zenoh
-    from spinefarm.coordinator.service import zenoh_config
-    from spinefarm.protocol.envelope import decode_message, encode_message
-    from spinefarm.protocol.run import RunConfig
-    from spinefarm.protocol.submissions import SubmittedResult
-    from spinefarm.protocol.work import WorkGrant, WorkRequest
-    from spinefarm.worker.service import build_evaluator
-
-    session = None
-    while session is None:
-        try:
-            session = zenoh.open(zenoh_config("client", connect=[endpoint]))
-        except zenoh.ZError:
-            time.sleep(0.1)
-    evaluators: dict[str, object] = {}
-    pending: dict[int, SubmittedResult] = {}
-    with open(log_path, "a") as log:
-        while True:
-            req = encode_message(WorkRequest(worker_id, 4, tuple(pending.values())))
-            grants = [decode_message(r.ok.payload.to_bytes(), WorkGrant)
-                      for r in session.get(keys.work(run_id), payload=req, timeout=5.0) if r.ok]
-            if not grants:
-                time.sleep(0.1)
-                continue
-            g = grants[0]
-            for tid, verdict in g.verdicts:
-                if tid in pending:
-                    if verdict.value == "stored":
-                        log.write(json.dumps([tid, pending[tid].result.distance_m]) + "\n")
-                        log.flush()
-                    del pending[tid]
-            if g.run_done:
-                session.close()
-                return 0
-            if g.config_hash not in evaluators:
-                cfgs = [decode_message(r.ok.payload.to_bytes(), RunConfig)
-                        for r in session.get(keys.config(run_id, g.config_hash), timeout=5.0) if r.ok]
-                if not cfgs:
-                    continue
-                evaluators[g.config_hash] = build_evaluator(cfgs[0])
-            for a in g.assignments:
-                r = evaluators[g.config_hash](a)
-                pending[a.trial_id] = SubmittedResult(a.lease_id, replace(r, trial_id=a.trial_id, worker_id=worker_id))
-
-
-def spawn(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, *args], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True)
-
-
-def coordinator(ep: str, out: Path, *args: str) -> subprocess.Popen:
-    tail = ("--resume", str(out)) if not args else (*args, "--out", str(out))
-    return spawn("-m", "spinefarm", "coordinator", *tail, "--listen", ep, "--api-port", "-1", "--quiet")
-
-
-def witness(ep: str, run_id: str, wid: str, log: Path) -> subprocess.Popen:
-    return spawn(str(Path(__file__).resolve()), "_witness", ep, run_id, wid, str(log))
-
-
-def acked(logs: list[Path]) -> list[tuple[int, float]]:
-    out = []
-    for p in logs:
-        if p.exists():
-            out += [tuple(json.loads(ln)) for ln in p.read_text().splitlines() if ln.strip()]
-    return out
-
-
-def wait(pred, timeout_s: float, what: str) -> None:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if pred():
-            return
-        time.sleep(0.05)
-    raise TimeoutError(what)
-
-
-def check_file(out: Path, budget: int, acks: list[tuple[int, float]]) -> dict:
-    import numpy as np
-    from spinefarm.protocol.errors import StorageError
-
-    try:
-        _, cols = read_run(out)
-    except StorageError as exc:  # a file that cannot be read has lost everything acknowledged
-        ids = [t for t, _ in acks]
-        return {"rows": 0, "complete": 0, "budget": budget, "acknowledged": len(ids), "lost": len(ids),
-                "duplicated": len(ids) - len(set(ids)), "unreadable": str(exc)[:200]}
-    stored = {int(i): float(cols["distance_m"][i]) for i in np.flatnonzero(cols["status"] == b"complete")}
-    ids = [t for t, _ in acks]
-    return {"rows": len(cols["trial_id"]), "complete": len(stored), "budget": budget,
-            "acknowledged": len(ids),
-            "lost": sum(1 for t, d in acks if stored.get(t) != d),
-            "duplicated": len(ids) - len(set(ids))}
+from bench.fault_witness import acked, check_file, coordinator, spawn, wait, witness  # noqa: E402
 
 
 # --- parts ---------------------------------------------------------------------------------------------
@@ -429,8 +332,6 @@ def damaged_files(tmp: Path) -> dict:
 
 
 def main() -> None:
-    if len(sys.argv) > 1 and sys.argv[1] == "_witness":
-        sys.exit(witness_worker(*sys.argv[2:6]))
     import logging
 
     logging.getLogger("spinefarm").setLevel(logging.ERROR)  # rejected messages are counted, not printed

@@ -9,7 +9,7 @@ object (last line).
     python bench/robust.py [--trials 300] [--duration 10] [--episodes 8] [--measure-episodes 32] \
         [--gait examples/gaits/tetraspine.json] [--workers 2]
 
-Targets (issue 19): the robust best's median speed over the 32 fresh episodes >= 9.46 cm/s (the paper's
+Targets: the robust best's median speed over the 32 fresh episodes >= 9.46 cm/s (the paper's
 Tetraspine) with its q25 within 10 % of its median.
 """
 
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import subprocess
 import sys
 import time
@@ -34,6 +35,8 @@ def search(out: Path, args: argparse.Namespace, robust: bool) -> dict:
            "--sampler", args.sampler, "--objective", "speed", "--duration", str(args.duration), "--trials",
            str(args.trials), "--workers", str(args.workers), "--seed", str(args.seed), "--no-verify", "--api-port",
            "-1", "--quiet", "--out", str(out), "--overwrite"]
+    for extra in args.search_arg:
+        cmd += shlex.split(extra)
     if robust:
         cmd += ["--episodes", str(args.episodes), "--randomize", args.randomize, "--robust", args.statistic]
     t0 = time.perf_counter()
@@ -43,11 +46,13 @@ def search(out: Path, args: argparse.Namespace, robust: bool) -> dict:
     from spinefarm.storage.hdf5 import Hdf5Storage
 
     storage = Hdf5Storage.open_read(out)
-    best = storage.best(1)[0]
+    bests = storage.best(args.measure_top)
     meta = storage.run_meta()
     return {"file": str(out), "command": " ".join(cmd[1:]), "wall_time_s": time.perf_counter() - t0,
-            "best_trial": best.trial_id, "best_objective": best.objective, "best_speed_cm_s": best.speed_cm_s,
-            "params": dict(zip(meta.param_names, best.params, strict=True))}
+            "best_trial": bests[0].trial_id, "best_objective": bests[0].objective,
+            "best_speed_cm_s": bests[0].speed_cm_s,
+            "bests": [{"trial": b.trial_id, "objective": b.objective, "speed_cm_s": b.speed_cm_s,
+                       "params": dict(zip(meta.param_names, b.params, strict=True))} for b in bests]}
 
 
 def measure_one(morphology: str, controller: str, params: dict, randomize: str, k: int, duration_s: float | None
@@ -90,10 +95,15 @@ def main() -> None:
     ap.add_argument("--sampler", default="cmaes")
     ap.add_argument("--trials", type=int, default=300, help="parameter sets per search (default 300)")
     ap.add_argument("--duration", type=float, default=10.0, help="search trial length, s (default 10)")
-    ap.add_argument("--episodes", type=int, default=8, help="episodes per parameter set of the robust search")
+    ap.add_argument("--episodes", default="8",
+                    help="episodes per parameter set of the robust search: K, or one K per rung (e.g. 1,2,8)")
+    ap.add_argument("--search-arg", action="append", default=[], metavar="ARGS",
+                    help="more `spinefarm search` arguments for both searches, e.g. "
+                         "'--engine mujoco --rungs 3,10,30' (repeatable)")
     ap.add_argument("--randomize", default="friction=0.1,start_jitter_cm=0.5")
     ap.add_argument("--statistic", default="q25", help="the robust search's --robust (default q25)")
     ap.add_argument("--measure-episodes", type=int, default=32)
+    ap.add_argument("--measure-top", type=int, default=1, help="measure each search's K best (default 1)")
     ap.add_argument("--measure-duration", type=float, default=None, help="default: the morphology's (30 s)")
     ap.add_argument("--gait", action="append", default=[], help="also measure this --params gait file")
     ap.add_argument("--seed", type=int, default=1)
@@ -112,8 +122,9 @@ def main() -> None:
     table = []
     with ProcessPoolExecutor(args.workers) as pool:
         for name, s in searches.items():
-            table.append(measure(pool, f"{name} search best (trial {s['best_trial']})", args.morphology,
-                                 args.controller, s["params"], args))
+            for rank, b in enumerate(s["bests"], 1):
+                table.append(measure(pool, f"{name} search best {rank} (trial {b['trial']})", args.morphology,
+                                     args.controller, b["params"], args))
         for g in args.gait:
             params, controller = load_params_file(Path(g))
             morphology = json.loads(Path(g).read_text())["morphology"]

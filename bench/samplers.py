@@ -34,11 +34,14 @@ import os
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from spinefarm.protocol.results import TrialResult
 
 # The paper's table (speed cm/s) for the 80 % mark.
 PAPER_SPEED_CM_S = {"tetraspine": 9.46, "tetrahedral-complex": 6.13, "octahedral-complex": 4.6, "ribbed": 5.37}
@@ -71,94 +74,110 @@ def _judge(morphology: str, controller: str | None, trial_config: dict, params_u
     return {"holds": bool(r.ok), "speed_cm_s": float(r.speed_cm_s), "distance_m": float(r.distance_m)}
 
 
-def search(pool: ProcessPoolExecutor, morphology: str, controller: str | None, sampler: str, seed: int,
-           budget: int, checkpoints: list[int], duration_s: float | None, engine: str, workers: int,
-           overrides: dict | None = None, judge_dt_s: float = 0.00025) -> dict:
-    from spinefarm.coordinator.problem import build_run_config
-    from spinefarm.coordinator.setup import SearchSettings, new_run
-    from spinefarm.protocol.results import TrialResult
-    from spinefarm.protocol.settings import JudgePolicy
+class _Search:
+    """One search of the bench: the study asks, the pool runs `workers` trials at once, a judge (or the run's
+    verification) checks the best ones. Verdicts are kept by trial id, so a trial is judged once."""
 
-    overrides = {**(overrides or {}), **({"engine": engine} if engine != "bullet" else {})} or None
-    screened = engine != "bullet"
-    config = build_run_config(f"bench-{sampler}-{seed}", morphology, objective="speed", seed=seed,
-                              controller=controller, duration_s=duration_s, trial_overrides=overrides)
-    core, storage = new_run(config, SearchSettings(trials=budget, sampler=sampler,
-                                                   judge=JudgePolicy(enabled=False)), None)
-    study = core.study
-    target = 0.8 * PAPER_SPEED_CM_S.get(morphology, float("nan"))
-    running: dict = {}
-    verdicts: dict[int, dict] = {}
-    out: dict = {"seed": seed, "best_verified_speed_cm_s": {}, "trials_to_80pct": None}
-    finished = 0
-    t0 = time.perf_counter()
+    def __init__(self, pool: ProcessPoolExecutor, morphology: str, controller: str | None, sampler: str, seed: int,
+                 budget: int, duration_s: float | None, engine: str, overrides: dict | None,
+                 judge_dt_s: float) -> None:
+        from spinefarm.coordinator.problem import build_run_config
+        from spinefarm.coordinator.setup import SearchSettings, new_run
+        from spinefarm.protocol.settings import JudgePolicy
 
-    def submit() -> None:
-        tid = study.ask()
-        if tid is None:
-            return
-        cols = storage.columns()
-        running[pool.submit(_trial, config.morphology_spec, controller, config.trial_config,
-                            cols["params_unit"][tid].tolist(), int(cols["seed"][tid]))] = tid
+        overrides = {**(overrides or {}), **({"engine": engine} if engine != "bullet" else {})} or None
+        self.pool, self.controller, self.judge_dt_s = pool, controller, judge_dt_s
+        self.screened = engine != "bullet"
+        self.config = build_run_config(f"bench-{sampler}-{seed}", morphology, objective="speed", seed=seed,
+                                       controller=controller, duration_s=duration_s, trial_overrides=overrides)
+        core, self.storage = new_run(self.config, SearchSettings(trials=budget, sampler=sampler,
+                                                                 judge=JudgePolicy(enabled=False)), None)
+        self.study = core.study
+        self.target = 0.8 * PAPER_SPEED_CM_S.get(morphology, float("nan"))
+        self.running: dict = {}
+        self.verdicts: dict[int, dict] = {}
+        self.screen_best = -np.inf
 
-    def verified_best(n: int) -> float | None:
-        cols = storage.columns()
+    def _args(self, tid: int) -> tuple:
+        cols = self.storage.columns()
+        return (self.config.morphology_spec, self.controller, self.config.trial_config,
+                cols["params_unit"][tid].tolist(), int(cols["seed"][tid]))
+
+    def submit(self) -> None:
+        tid = self.study.ask()
+        if tid is not None:
+            self.running[self.pool.submit(_trial, *self._args(tid))] = tid
+
+    def tell(self, fut) -> TrialResult:
+        tid = self.running.pop(fut)
+        result = fut.result()
+        self.study.tell(replace(result, trial_id=tid, worker_id="bench"))
+        return result
+
+    def judge(self, tid: int) -> dict:
+        if tid not in self.verdicts:
+            args = self._args(tid)
+            self.verdicts[tid] = (self.pool.submit(_judge, *args, self.judge_dt_s) if self.screened else
+                                  self.pool.submit(_verify, *args,
+                                                   float(self.storage.columns()["distance_m"][tid]))).result()
+        return self.verdicts[tid]
+
+    def verified_best(self, n: int) -> float | None:
+        cols = self.storage.columns()
         done = np.flatnonzero(cols["status"][:n] == b"complete")
-        for tid in done[np.argsort(-cols["objective"][done], kind="stable")][:3]:
-            tid = int(tid)
-            judge(tid)
-        held = [verdicts[int(t)] for t in done if int(t) in verdicts and verdicts[int(t)]["holds"]]
-        if screened:  # the judge's speed counts; the best of the three judged
+        best3 = done[np.argsort(-cols["objective"][done], kind="stable")][:3]
+        for tid in best3:
+            self.judge(int(tid))
+        if self.screened:  # the judge's speed counts; the best of the three judged
+            held = [self.verdicts[int(t)] for t in done if int(t) in self.verdicts and self.verdicts[int(t)]["holds"]]
             return max((v["speed_cm_s"] for v in held), default=None)
-        for tid in done[np.argsort(-cols["objective"][done], kind="stable")][:3]:
-            if verdicts[int(tid)]["holds"]:
+        for tid in best3:
+            if self.verdicts[int(tid)]["holds"]:
                 return float(cols["speed_cm_s"][int(tid)])
         return None
 
-    def judge(tid: int) -> dict:
-        if tid not in verdicts:
-            cols = storage.columns()
-            args = (config.morphology_spec, controller, config.trial_config, cols["params_unit"][tid].tolist(),
-                    int(cols["seed"][tid]))
-            verdicts[tid] = (pool.submit(_judge, *args, judge_dt_s) if screened else
-                             pool.submit(_verify, *args, float(cols["distance_m"][tid]))).result()
-        return verdicts[tid]
-
-    screen_best = [-np.inf]
-
-    def reaches_target(tid: int, result: TrialResult) -> bool:
+    def reaches_target(self, tid: int, result: TrialResult) -> bool:
         """A new best past the mark (as the search's own verification, only new bests are judged)."""
-        if not (result.ok and result.speed_cm_s >= target and result.speed_cm_s > screen_best[0]):
+        if not (result.ok and result.speed_cm_s >= self.target and result.speed_cm_s > self.screen_best):
             return False
-        screen_best[0] = result.speed_cm_s
-        if not screened:
+        self.screen_best = result.speed_cm_s
+        if not self.screened:
             return True
-        v = judge(tid)
-        return v["holds"] and v["speed_cm_s"] >= target
+        v = self.judge(tid)
+        return v["holds"] and v["speed_cm_s"] >= self.target
 
+    def finish_first(self, n: int) -> int:
+        """Wait for every trial among the first n still running; how many were finished."""
+        told = 0
+        while self.storage.columns()["status"][:n].tolist().count(b"waiting"):
+            self.tell(next(iter(self.running)))
+            told += 1
+        return told
+
+
+def search(pool: ProcessPoolExecutor, morphology: str, controller: str | None, sampler: str, seed: int,
+           budget: int, checkpoints: list[int], duration_s: float | None, engine: str, workers: int,
+           overrides: dict | None = None, judge_dt_s: float = 0.00025) -> dict:
+    run = _Search(pool, morphology, controller, sampler, seed, budget, duration_s, engine, overrides, judge_dt_s)
+    out: dict = {"seed": seed, "best_verified_speed_cm_s": {}, "trials_to_80pct": None}
+    finished = 0
+    t0 = time.perf_counter()
     for _ in range(workers):
-        submit()
-    while running:
-        done, _ = wait(list(running), return_when=FIRST_COMPLETED)
+        run.submit()
+    while run.running:
+        done, _ = wait(list(run.running), return_when=FIRST_COMPLETED)
         for fut in done:
-            tid = running.pop(fut)
-            result: TrialResult = fut.result()
-            from dataclasses import replace
-
-            study.tell(replace(result, trial_id=tid, worker_id="bench"))
+            tid = run.running[fut]
+            result = run.tell(fut)
             finished += 1
-            if out["trials_to_80pct"] is None and reaches_target(tid, result):
+            if out["trials_to_80pct"] is None and run.reaches_target(tid, result):
                 out["trials_to_80pct"] = finished
             if finished in checkpoints:
                 # checkpoints count trials in id order: the first n trials are the ones sampled first
                 n = finished
-                while storage.columns()["status"][:n].tolist().count(b"waiting"):
-                    fut2 = next(iter(running))
-                    tid2 = running.pop(fut2)
-                    study.tell(replace(fut2.result(), trial_id=tid2, worker_id="bench"))
-                    finished += 1
-                out["best_verified_speed_cm_s"][str(n)] = verified_best(n)
-            submit()
+                finished += run.finish_first(n)
+                out["best_verified_speed_cm_s"][str(n)] = run.verified_best(n)
+            run.submit()
     out["wall_time_s"] = time.perf_counter() - t0
     return out
 

@@ -107,7 +107,7 @@ def _best_sets(path: str, n: int, controller: str | None) -> list[tuple[tuple[fl
         return [(tuple(float(x) for x in t["params_unit"][i]), int(t["seed"][i])) for i in best]
 
 
-def main() -> None:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="12 sets per spine, 3 s trials, defaults only")
     ap.add_argument("--sets", type=int, default=None, help="random parameter sets per spine (default 100)")
@@ -132,13 +132,15 @@ def main() -> None:
     ap.add_argument("--screen-dt", type=float, default=0.002)
     ap.add_argument("--screen-options", default='{"segment_contacts": "off"}')
     ap.add_argument("--jobs", type=int, default=2)
-    args = ap.parse_args()
+    return ap
+
+
+def _tiers(args: argparse.Namespace) -> tuple[dict, dict]:
+    """The tiers to run ({tier: {engine: step or None}}) and each one's trial settings (`options`)."""
     extra = {"bullet": {"engine_options": json.loads(args.bullet_options)},
              "mujoco": {"engine_options": json.loads(args.mujoco_options)}}
     if args.mujoco_ground_friction is not None:
         extra["mujoco"]["ground_friction"] = args.mujoco_ground_friction
-    sets = args.sets or (12 if args.quick else 100)
-    duration = args.duration or (3.0 if args.quick else 10.0)
     tiers = {"default": {"bullet": None, "mujoco": args.mujoco_dt}}
     if not (args.quick or args.no_converged):
         tiers["converged"] = dict(CONVERGED_DT_S)
@@ -146,12 +148,15 @@ def main() -> None:
         tiers["screen"] = {"mujoco": args.screen_dt}
         extra["screen"] = {"engine_options": {**extra["mujoco"]["engine_options"], **json.loads(args.screen_options)},
                            **{k: v for k, v in extra["mujoco"].items() if k != "engine_options"}}
-    controllers = dict(c.split("=", 1) for c in args.controller)
-    best_of = dict(b.split("=", 1) for b in args.best_of)
+    return tiers, extra
+
+
+def _jobs(args: argparse.Namespace, tiers: dict, extra: dict, sets: int, duration: float, controllers: dict,
+          best_of: dict) -> list[tuple]:
+    """One job per spine, tier, engine and parameter set: (spine, tier, engine, index, _trial's arguments)."""
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.trial import random_unit_params
 
-    t0 = time.time()
     jobs: list[tuple] = []
     for spine in args.spines.split(","):
         morph = load_morphology(spine)
@@ -164,6 +169,46 @@ def main() -> None:
                 opts = extra["screen" if tier == "screen" else engine]
                 jobs += [(spine, tier, engine, i, (spine, u, s, engine, dt, duration, args.settle, opts, controller))
                          for i, (u, s) in enumerate(cases)]
+    return jobs
+
+
+def _spine_figures(by_tier: dict, duration: float) -> dict:
+    """One spine's figures from its rows ({tier: {engine: {index: row}}}): cost, step, agreements."""
+    res: dict = {}
+    dist = {}
+    for tier, by_engine in by_tier.items():
+        for engine, cases in by_engine.items():
+            dist[tier, engine] = np.array([cases[i]["distance_m"] for i in sorted(cases)])
+            res.setdefault("cpu_s_per_sim_s", {})[f"{engine}@{tier}"] = float(
+                np.median([c["cpu_s"] for c in cases.values()]) / duration)
+            res.setdefault("dt_s", {})[f"{engine}@{tier}"] = float(np.median([c["dt_s"] for c in cases.values()]))
+    for tier in ("default", "converged"):
+        if tier not in by_tier:
+            continue
+        res[f"mujoco_vs_bullet@{tier}"] = agreement(dist[tier, "bullet"], dist[tier, "mujoco"])
+    if "converged" in by_tier:
+        for name, ref, other in (("mujoco_default_vs_bullet_converged", "bullet", "mujoco"),
+                                 ("bullet_default_vs_bullet_converged", "bullet", "bullet"),
+                                 ("mujoco_default_vs_mujoco_converged", "mujoco", "mujoco")):
+            res[name] = agreement(dist["converged", ref], dist["default", other])
+        if "screen" in by_tier:
+            res["mujoco_screen_vs_bullet_converged"] = agreement(dist["converged", "bullet"],
+                                                                 dist["screen", "mujoco"])
+    if "screen" in by_tier:
+        res["mujoco_screen_vs_bullet_default"] = agreement(dist["default", "bullet"], dist["screen", "mujoco"])
+    return res
+
+
+def main() -> None:
+    args = _parser().parse_args()
+    tiers, extra = _tiers(args)
+    sets = args.sets or (12 if args.quick else 100)
+    duration = args.duration or (3.0 if args.quick else 10.0)
+    controllers = dict(c.split("=", 1) for c in args.controller)
+    best_of = dict(b.split("=", 1) for b in args.best_of)
+
+    t0 = time.time()
+    jobs = _jobs(args, tiers, extra, sets, duration, controllers, best_of)
     replays = [] if args.no_replays else [(s, f, e) for s, f in REPLAYS.items() if (NTRT / f).is_dir()
                                           for e in ("bullet", "mujoco")]
     with ProcessPoolExecutor(args.jobs) as pool:
@@ -176,31 +221,8 @@ def main() -> None:
         table.setdefault(spine, {}).setdefault(tier, {}).setdefault(engine, {})[i] = row
     out: dict = {"benchmark": "tier_agreement", "sets_per_spine": sets, "duration_s": duration,
                  "settle_s": args.settle, "options": extra, "controllers": controllers,
-                 "best_of": best_of, "spines": {}}
-    for spine, by_tier in table.items():
-        res = {}
-        dist = {}
-        for tier, by_engine in by_tier.items():
-            for engine, cases in by_engine.items():
-                dist[tier, engine] = np.array([cases[i]["distance_m"] for i in sorted(cases)])
-                res.setdefault("cpu_s_per_sim_s", {})[f"{engine}@{tier}"] = float(
-                    np.median([c["cpu_s"] for c in cases.values()]) / duration)
-                res.setdefault("dt_s", {})[f"{engine}@{tier}"] = float(np.median([c["dt_s"] for c in cases.values()]))
-        for tier in ("default", "converged"):
-            if tier not in by_tier:
-                continue
-            res[f"mujoco_vs_bullet@{tier}"] = agreement(dist[tier, "bullet"], dist[tier, "mujoco"])
-        if "converged" in by_tier:
-            for name, ref, other in (("mujoco_default_vs_bullet_converged", "bullet", "mujoco"),
-                                     ("bullet_default_vs_bullet_converged", "bullet", "bullet"),
-                                     ("mujoco_default_vs_mujoco_converged", "mujoco", "mujoco")):
-                res[name] = agreement(dist["converged", ref], dist["default", other])
-            if "screen" in by_tier:
-                res["mujoco_screen_vs_bullet_converged"] = agreement(dist["converged", "bullet"],
-                                                                     dist["screen", "mujoco"])
-        if "screen" in by_tier:
-            res["mujoco_screen_vs_bullet_default"] = agreement(dist["default", "bullet"], dist["screen", "mujoco"])
-        out["spines"][spine] = res
+                 "best_of": best_of, "spines": {spine: _spine_figures(by_tier, duration)
+                                                for spine, by_tier in table.items()}}
     out["replays"] = [{"morphology": s, "folder": f, "engine": e, **r}
                       for (s, f, e), r in zip(replays, rrows, strict=True)]
     out["wall_s"] = time.time() - t0

@@ -44,10 +44,19 @@ def _summary(rows: list[tuple[int, int, float, float, float, float]], n_bodies: 
 
 
 class _Sampler:
-    """Samples the state every `every` steps after the engine's step (its subclasses' step())."""
+    """Samples the state every `every` steps after the engine's step: mixed in ahead of an engine class, whose
+    constructor and step() it wraps."""
 
     every = 1
-    samples: list
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.samples, self._n = [], 0
+
+    def step(self, active=None) -> None:
+        super().step(active)
+        self._n += 1
+        self._sample(self._n)
 
     def _sample(self, steps: int) -> None:
         if steps % self.every:
@@ -60,16 +69,7 @@ class _Sampler:
                              **_summary(self.contacts(), len(poses))})
 
 
-class BulletSampled(BulletPhysics, _Sampler):
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self.samples, self._n = [], 0
-
-    def step(self, active=None) -> None:
-        super().step(active)
-        self._n += 1
-        self._sample(self._n)
-
+class BulletSampled(_Sampler, BulletPhysics):
     def contacts(self) -> list[tuple[int, int, float, float, float, float]]:
         w = self.worlds[0]
         index = {bid: i for i, bid in enumerate(w.body_ids)}
@@ -93,16 +93,7 @@ class BulletSampled(BulletPhysics, _Sampler):
         return out
 
 
-class MujocoSampled(MujocoPhysics, _Sampler):
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self.samples, self._n = [], 0
-
-    def step(self, active=None) -> None:
-        super().step(active)
-        self._n += 1
-        self._sample(self._n)
-
+class MujocoSampled(_Sampler, MujocoPhysics):
     def contacts(self) -> list[tuple[int, int, float, float, float, float]]:
         m, d = self.model, self.data[0]
         f = np.zeros(6)

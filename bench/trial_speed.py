@@ -103,6 +103,29 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
             "n_cpg_nodes": net.n_nodes, "n_couplings": net.n_couplings, "dt_s": dt}
 
 
+def _tier_configs(seconds: float, mujoco_options: dict) -> dict[str, TrialConfig]:
+    off = {**mujoco_options, "segment_contacts": "off"}
+    modelled = {**mujoco_options, "segment_contacts": "scene"}
+    return {"bullet": TrialConfig(duration_s=seconds, engine="bullet"),
+            "mujoco": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=mujoco_options),
+            "mujoco_segment_contacts_modelled": TrialConfig(duration_s=seconds, engine="mujoco",
+                                                            engine_options=modelled),
+            "mujoco_segment_contacts_off": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=off),
+            "mujoco_screen_2ms": TrialConfig(duration_s=seconds, engine="mujoco", dt_s=2e-3, engine_options=off),
+            "bullet_0.25ms": TrialConfig(duration_s=seconds, engine="bullet", dt_s=2.5e-4)}
+
+
+def _bare_mj_step_us(scene, steps: int = 200) -> float:
+    """A bare mj_step from the trial's last state with its last string wrenches held, in CPU time (MuJoCo's own
+    timers count wall time, which a shared machine inflates)."""
+    import mujoco
+
+    t1 = time.process_time()
+    for _ in range(steps):
+        mujoco.mj_step(scene.model, scene.data[0])
+    return (time.process_time() - t1) / steps * 1e6
+
+
 def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
           gaits: list[np.ndarray] | None = None, controller: str | None = None) -> dict:
     """CPU s per simulated second of whole trials, interleaved: both engines at their default steps, and for
@@ -111,20 +134,11 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
     segment-segment contacts) and Bullet at 0.25 ms (about MuJoCo's default-step accuracy, docs/accuracy.md).
     gaits: unit parameter vectors (of `controller`'s space) to run, one per round after a warm-up round;
     default: seeded random ones."""
-    import mujoco
     from spinefarm.worker.setup import SetupCache
     from spinefarm.worker.trial import simulate
 
     morph = load_morphology(morph_name)
-    off = {**mujoco_options, "segment_contacts": "off"}
-    modelled = {**mujoco_options, "segment_contacts": "scene"}
-    configs = {"bullet": TrialConfig(duration_s=seconds, engine="bullet"),
-               "mujoco": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=mujoco_options),
-               "mujoco_segment_contacts_modelled": TrialConfig(duration_s=seconds, engine="mujoco",
-                                                               engine_options=modelled),
-               "mujoco_segment_contacts_off": TrialConfig(duration_s=seconds, engine="mujoco", engine_options=off),
-               "mujoco_screen_2ms": TrialConfig(duration_s=seconds, engine="mujoco", dt_s=2e-3, engine_options=off),
-               "bullet_0.25ms": TrialConfig(duration_s=seconds, engine="bullet", dt_s=2.5e-4)}
+    configs = _tier_configs(seconds, mujoco_options)
     caches = {e: SetupCache() for e in configs}
     cpu: dict[str, list[float]] = {e: [] for e in configs}
     mj_step_us, mj_step_2ms_us, dts, contacts, fallbacks = [], [], {}, [], []
@@ -143,17 +157,12 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
                 cpu[name].append(el / res.sim_time_s)
                 distances[name].append(res.distance_m)
             if name in ("mujoco", "mujoco_screen_2ms") and r:
-                # bare mj_step from the trial's last state with its last string wrenches held (CPU time;
-                # MuJoCo's own timers count wall time, which a shared machine inflates)
                 ran = cfg if "segment_contacts" not in res.extras else dataclasses.replace(  # re-run with them
                     cfg, engine_options={**cfg.engine_options, "segment_contacts": "scene"})
                 scene = caches[name].get(morph, ran, controller)._scene
                 if name == "mujoco":
                     contacts.append(scene.contact_count())
-                t1 = time.process_time()
-                for _ in range(200):
-                    mujoco.mj_step(scene.model, scene.data[0])
-                (mj_step_us if name == "mujoco" else mj_step_2ms_us).append((time.process_time() - t1) / 200 * 1e6)
+                (mj_step_us if name == "mujoco" else mj_step_2ms_us).append(_bare_mj_step_us(scene))
     med = {e: float(np.median(v)) for e, v in cpu.items()}
     mj = float(np.median(mj_step_us))
     return {"tier_seconds": seconds, "cpu_s_per_sim_s": med, "dt_s": dts, "mujoco_options": mujoco_options,

@@ -10,6 +10,7 @@ from typing import Any
 
 from spinefarm.protocol import limits
 from spinefarm.protocol.errors import MessageError
+from spinefarm.protocol.measured import Measured
 from spinefarm.protocol.robust import MAX_EPISODES, EpisodeResult
 from spinefarm.protocol.states import TrialStatus
 
@@ -49,7 +50,7 @@ RECORDED_EXTRAS: tuple[Column, ...] = (
 
 
 @dataclass(frozen=True)
-class TrialResult:
+class TrialResult(Measured):
     """What one trial measured. Distances are in the ground plane; units are in the names.
 
     distance_m: displacement of the whole robot's centre of mass.
@@ -61,15 +62,7 @@ class TrialResult:
     above are then their medians.
     """
 
-    status: TrialStatus
-    reason: str
-    distance_m: float
-    ntrt_distance_cm: float
-    speed_cm_s: float
-    work_j: float
-    cot: float
-    sim_time_s: float
-    wall_time_s: float
+    status: TrialStatus  # Measured's first field, typed as a trial's state; it keeps its place
     mass_kg: float
     seed: int
     trial_id: int = -1

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, MessageError
+from spinefarm.protocol.measured import MEASURED_NUMBERS, Measured
 
 STATISTICS = ("mean", "q25", "min")
 SCENES = ("flat", "rough")
@@ -176,25 +177,22 @@ def statistic(values: Any, name: str) -> float:
 
 
 # --- one episode's result on the wire ---------------------------------------------------------------
-EPISODE_NUMBERS = ("distance_m", "ntrt_distance_cm", "speed_cm_s", "work_j", "cot", "sim_time_s", "wall_time_s",
-                   "friction_scale", "mass_scale", "start_jitter_cm")
+EPISODE_NUMBERS = (*MEASURED_NUMBERS, "friction_scale", "mass_scale", "start_jitter_cm")
 
 
 @dataclass(frozen=True)
-class EpisodeResult:
-    """What one episode measured, with its draw. status: complete | failed; reason as a trial's."""
+class EpisodeKey:
+    """Which episode (k) and its seed: an episode result's first fields."""
 
     episode: int
     seed: int
-    status: str
-    reason: str
-    distance_m: float
-    ntrt_distance_cm: float
-    speed_cm_s: float
-    work_j: float
-    cot: float
-    sim_time_s: float
-    wall_time_s: float
+
+
+@dataclass(frozen=True)
+class EpisodeResult(Measured, EpisodeKey):
+    """What one episode measured, with its draw: fields episode, seed (EpisodeKey), then what was measured
+    (Measured: status complete | failed, reason as a trial's, the score parts), then the draw."""
+
     friction_scale: float
     mass_scale: float
     start_jitter_cm: float

@@ -87,6 +87,16 @@ class String:
     tag: str
 
 
+def _known_ends(kind: str, i: int, pair: Rod | String, n_nodes: int) -> str:
+    """How errors name rods[i] or strings[i]; raises when either end is not a node."""
+    where = f"{kind}[{i}] ({pair.a}->{pair.b}, tag {pair.tag!r})"
+    for end in (pair.a, pair.b):
+        if not 0 <= end < n_nodes:
+            raise MorphologySpecError(f"{where} names an unknown node", received=end,
+                                      expected=f"a node index in [0, {n_nodes - 1}]")
+    return where
+
+
 @dataclass(frozen=True)
 class StructureSpec:
     """A tensegrity structure as data. Nodes are in cm, world frame, Y up.
@@ -122,11 +132,7 @@ class StructureSpec:
             raise MorphologySpecError("nodes must be finite (x, y, z) triples in cm", received=pts.shape,
                                       expected=f"({n}, 3) finite values")
         for i, rod in enumerate(self.rods):
-            where = f"rods[{i}] ({rod.a}->{rod.b}, tag {rod.tag!r})"
-            for end in (rod.a, rod.b):
-                if not 0 <= end < n:
-                    raise MorphologySpecError(f"{where} names an unknown node", received=end,
-                                              expected=f"a node index in [0, {n - 1}]")
+            where = _known_ends("rods", i, rod, n)
             if self.node_segment[rod.a] != self.node_segment[rod.b]:
                 raise MorphologySpecError(f"{where} joins two segments",
                                           received=(self.node_segment[rod.a], self.node_segment[rod.b]),
@@ -138,11 +144,7 @@ class StructureSpec:
                                           expected=f"one of {sorted(rod_tags)}")
         segs_with_rods = {self.node_segment[r.a] for r in self.rods}
         for i, s in enumerate(self.strings):
-            where = f"strings[{i}] ({s.a}->{s.b}, tag {s.tag!r})"
-            for end in (s.a, s.b):
-                if not 0 <= end < n:
-                    raise MorphologySpecError(f"{where} names an unknown node", received=end,
-                                              expected=f"a node index in [0, {n - 1}]")
+            where = _known_ends("strings", i, s, n)
             if self.node_segment[s.a] == self.node_segment[s.b]:
                 raise MorphologySpecError(f"{where} joins a body to itself", received=self.node_segment[s.a],
                                           expected="ends on two different segments")
