@@ -5,14 +5,18 @@ go on until the run is over: worker SIGKILLs and SIGSTOPs (3-8 s), coordinator S
 process restarted automatically whenever it exits before the run is over (as compose's restart policies
 do; nothing is restarted by hand), hang- and crash-poison trials (the
 test objective's fault bands: a trial there sleeps for ever or segfaults its trial process), a forging
-peer (results for leases it was never given, also under other workers' ids) and a 10 s network
+peer (results for leases it was never given, also under other workers' ids), a 10 s network
 partition of two workers (network namespaces, tests/netns.py; without root the workers share loopback
-and the partition is skipped, said in the JSON).
+and the partition is skipped, said in the JSON) and a worker frozen a few seconds before the run ends
+until it is done.
 
 Checked from the run file and the workers' acknowledgement logs (SPINEFARM_ACK_LOG): every parameter set
 of the budget evaluated, no row left waiting, 0 lost (acknowledged as stored, absent or different in
 the file), 0 duplicated (acknowledged as stored twice), 0 forged rows stored as complete, no process
-left running once the run is over, no exit the schedule did not cause.
+left running once the run is over, no exit the schedule did not cause, and how the workers left: each
+frozen one is woken when the run is done and the coordinator waits for it, so none should have to wait
+out its --coordinator-timeout (`workers_timed_out`; `workers_exit_s`: from the coordinator's exit to the
+last worker's).
 usage: python bench/soak.py [--minutes 30] [--rate 3.5] [--seed 1] [--dir DIR]      (one JSON object)
 """
 
@@ -178,6 +182,10 @@ def inject(kind: str, rng: random.Random, coord: Proc, workers: list[Proc], net:
         w.stopped_until = now + rng.uniform(3.0, 8.0)
     elif kind == "coordinator_kill":
         coord.signal(signal.SIGKILL)
+    elif kind == "end_stop":
+        w = rng.choice([w for w in workers if w.stopped_until is None] or workers)
+        w.signal(signal.SIGSTOP)
+        w.stopped_until = math.inf  # woken when the run is done
     elif kind == "forge":
         prefix, ep = net.worker_args(0)
         forger.append(subprocess.Popen([*prefix, sys.executable, __file__, "--forge", ep, coord.run_id],
@@ -196,6 +204,11 @@ def inject(kind: str, rng: random.Random, coord: Proc, workers: list[Proc], net:
 # Faults done at least once (also in a short soak): at this fraction of the planned time, or of the run's
 # rows finished if the run goes faster than planned (so a run that ends early still gets each of them).
 ONCE = {"forge": (0.2, 0.2), "coordinator_kill": (0.35, 0.35), "partition": (0.5, 0.5)}
+# Once, a worker is frozen a few seconds before the run ends and woken when it is done: once the
+# coordinator is gone nobody could tell it the run ended, so the coordinator must wait for it. "A few
+# seconds" comes from the coordinator's ETA (longer than the worker's 2 s transport lease, so it is gone,
+# not live, when the run ends), from half way on; at 90 % of the rows in any case.
+END_STOP_ETA_S = 10.0
 
 
 def due_once(pending: set[str], elapsed_frac: float, progress: float) -> list[str]:
@@ -203,13 +216,20 @@ def due_once(pending: set[str], elapsed_frac: float, progress: float) -> list[st
     return [k for k in ONCE if k in pending and (elapsed_frac >= ONCE[k][0] or progress >= ONCE[k][1])]
 
 
-def run_state(path: Path) -> tuple[bool, float]:
-    """(the run is done, the fraction of its planned rows finished) from the coordinator's status file."""
+def end_stop_due(progress: float, eta_s: float | None) -> bool:
+    return progress >= 0.9 or (progress >= 0.5 and eta_s is not None and eta_s <= END_STOP_ETA_S)
+
+
+def run_state(path: Path) -> tuple[bool, float, float | None]:
+    """(the run is done, the fraction of its planned rows finished, its ETA in s) from the coordinator's status
+    file."""
     from spinefarm.storage.status import read_status
 
     st = read_status(path) or {}
     finished = int(st.get("trials_complete", 0)) + int(st.get("trials_failed", 0))
-    return st.get("state") == "done", finished / max(1, int(st.get("trials_planned", 0) or 1))
+    eta = st.get("eta_s")
+    return (st.get("state") == "done", finished / max(1, int(st.get("trials_planned", 0) or 1)),
+            float(eta) if isinstance(eta, (int, float)) else None)
 
 
 def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int, path: Path) -> dict:
@@ -217,7 +237,7 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
     rng = random.Random(seed)
     t0 = time.monotonic()
     hard_end = t0 + 60.0 * minutes * 4 + 300.0
-    once = set(ONCE)
+    once = {*ONCE, "end_stop"}
     next_fault = t0 + rng.uniform(2.0, 5.0)
     counts: Counter = Counter(unexpected_coordinator_exits=0, unexpected_worker_exits=0)
     forger: list = []
@@ -231,7 +251,7 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
         if code is not None:
             counts["unexpected_coordinator_exits"] += coord.restart()
             coordinator_restarts += 1
-        done, progress = run_state(path)
+        done, progress, eta_s = run_state(path)
         for w in workers:
             w.resume_if_due(now, force=done)  # frozen workers hear "done" before the coordinator leaves
             code = w.proc.poll()
@@ -244,7 +264,8 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
         if heal_at is not None and (now >= heal_at or done):  # a run over while cut off: heal at once
             net.cut(False)
             heal_at = None
-        for kind in due_once(once, (now - t0) / (60.0 * minutes), progress):
+        due = due_once(once, (now - t0) / (60.0 * minutes), progress)
+        for kind in due + (["end_stop"] if "end_stop" in once and not done and end_stop_due(progress, eta_s) else []):
             heal_at = inject(kind, rng, coord, workers, net, now, counts, forger) or heal_at
             once.discard(kind)
         if now >= next_fault:  # faults until the run is over
@@ -262,19 +283,27 @@ def drive(coord: Proc, workers: list[Proc], net: Net, minutes: float, seed: int,
             "coordinator_restarts": coordinator_restarts, "worker_restarts": worker_restarts}
 
 
-def finish(workers: list[Proc], timeout_s: float = COORDINATOR_TIMEOUT_S + 30.0) -> list[str]:
-    """Once the run is over every worker must exit by itself; the names of those that did not."""
+def finish(workers: list[Proc], timeout_s: float = COORDINATOR_TIMEOUT_S + 30.0) -> tuple[list[str], float]:
+    """Once the run is over every worker must exit by itself: the names of those that did not, and the
+    seconds until the last one exited."""
+    t0 = time.monotonic()
     for w in workers:
         w.resume_if_due(0.0, force=True)
-    end = time.monotonic() + timeout_s
+    end = t0 + timeout_s
     while time.monotonic() < end and any(w.proc.poll() is None for w in workers):
         time.sleep(0.1)
+    waited_s = time.monotonic() - t0
     hung = [w.name for w in workers if w.proc.poll() is None]
     for w in workers:
         if w.proc.poll() is None:
             w.proc.kill()
             w.proc.wait(10)
-    return hung
+    return hung, waited_s
+
+
+def silent_exits(workdir: Path) -> int:
+    """Workers that ended by --coordinator-timeout (nobody told them the run was done), from their logs."""
+    return sum(log.read_text(errors="replace").count("has been silent for") for log in workdir.glob("w*.log"))
 
 
 def audit(path: Path, tmp: Path, budget: int) -> dict:
@@ -325,7 +354,7 @@ def soak(minutes: float, seed: int, workdir: Path, netns: bool = True, rate: flo
         try:
             out = drive(coord, workers, net, minutes, seed, path)
         finally:
-            hung = finish(workers)
+            hung, exit_wait_s = finish(workers)
             if coord.proc.poll() is None:
                 hung.append("coordinator")
                 coord.proc.kill()
@@ -333,7 +362,8 @@ def soak(minutes: float, seed: int, workdir: Path, netns: bool = True, rate: flo
         net.close()
     out.update(audit(path, workdir, budget))
     out.update({"minutes": minutes, "rate_sets_s": rate, "seed": seed, "workers": N_WORKERS, "rungs_s": list(RUNGS_S),
-                "poison_bands": POISON, "hung_processes": hung,
+                "poison_bands": POISON, "hung_processes": hung, "workers_exit_s": round(exit_wait_s, 1),
+                "workers_timed_out": silent_exits(workdir),
                 "network": "namespaces" if net.hosts is not None else f"loopback (partition skipped: {net.why_not})"})
     return out
 

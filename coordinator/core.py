@@ -232,9 +232,14 @@ class CoordinatorCore(TaskDispatch):
                                         trial_id=tid))
 
     def workers_released(self) -> bool:
-        """Every live worker has heard that the run is done (so it can exit before we do)."""
+        """Every worker that may still ask has heard that the run is done (so it can exit before we do):
+        the live ones and those gone within the last lease without hearing it. A worker frozen, restarting
+        or cut off as the run ends comes back to nobody once we are gone and waits out its
+        --coordinator-timeout; one that is back while we wait hears "done" and exits at once."""
         with self.lock:
-            return all(w.worker_id in self.told_done for w in self.scheduler.workers.values() if w.alive)
+            now, lease_s = self.clock(), self.scheduler.lease_s
+            return all(w.worker_id in self.told_done for w in self.scheduler.workers.values()
+                       if w.alive or now - w.last_contact_s <= lease_s)
 
     def handle_config(self, config_hash: str) -> bytes:
         if config_hash != self.config_hash:

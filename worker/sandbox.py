@@ -79,6 +79,13 @@ def _child(conn: Connection, config: RunConfig) -> None:
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the worker's to handle
     try:
+        _serve(conn, config)
+    except (BrokenPipeError, ConnectionResetError):
+        return  # the worker died or gave up on this process (e.g. killed while it started): nobody to answer
+
+
+def _serve(conn: Connection, config: RunConfig) -> None:
+    try:
         evaluate = build_evaluator(config)
     except Exception as exc:
         conn.send(("problem", str(exc) if isinstance(exc, SpinefarmError) else f"{type(exc).__name__}: {exc}"))

@@ -162,6 +162,25 @@ def test_budget_is_met_exactly_then_the_run_says_done():
     assert storage.n_trials() == 5 and storage.counts()["complete"] == 5
 
 
+def test_a_done_run_waits_for_workers_gone_within_a_lease_until_they_hear_done():
+    core, _, clock = sphere_core(trials=2, lease_s=10.0)
+    grant = ask(core, "w1", n=2)
+    ask(core, "frozen")
+    core.worker_lost("frozen")  # its token vanished (frozen, restarting or cut off)
+    clock.advance(3.0)
+    submit(core, [(a.lease_id, res(a)) for a in grant.assignments])
+    assert core.done and ask(core, "w1").run_done
+    assert not core.workers_released()  # it may be back any moment and would never hear it
+    assert ask(core, "frozen").run_done and core.workers_released()
+    core, _, clock = sphere_core(trials=1, lease_s=10.0)
+    ask(core, "gone")
+    core.worker_lost("gone")
+    grant = ask(core, "w1")
+    submit(core, [(a.lease_id, res(a)) for a in grant.assignments])
+    clock.advance(10.5)  # gone longer than a lease: not waited for
+    assert ask(core, "w1").run_done and core.workers_released()
+
+
 def test_unknown_config_hash_is_an_error():
     core, _, _ = sphere_core()
     kind, body = decode(core.handle_config("0" * 16))

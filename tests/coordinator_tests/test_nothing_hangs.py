@@ -9,31 +9,48 @@ import subprocess
 import sys
 import time
 
+from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.storage.probe import check_eof
 
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import ROOT, coordinator, spinefarm, stop, wait_status
 from tests.coordinator_tests.test_run_file_faults import finished_run
 
+TRIALS = 150  # of 0.05 s: the two frozen workers cannot run them all before they are frozen
+
 
 def test_a_worker_frozen_until_its_run_ended_exits_after_waking(tmp_path):
+    # Two workers frozen until the run is done (their tokens gone: not live). One wakes as the run ends:
+    # the coordinator waits for it, so it hears "done" instead of waiting out its 60 s --coordinator-timeout.
+    # The other wakes only after the coordinator has left: nobody is there to tell it, its 3 s timeout ends it.
     ep, out = free_endpoint(), tmp_path / "run.h5"
-    coord = coordinator(ep, out, "sphere:4", "--trials", "30", "--duration", "0.05", "--run-id", "ended")
-    frozen = spinefarm("worker", "--connect", ep, "--run", "ended", "--worker-id", "frozen", "--exit-when-done",
-                       "--coordinator-timeout", "3")
-    other = spinefarm("worker", "--connect", ep, "--run", "ended", "--worker-id", "other", "--exit-when-done")
+    coord = coordinator(ep, out, "sphere:4", "--trials", str(TRIALS), "--duration", "0.05", "--run-id", "ended")
+    woken, late = (spinefarm("worker", "--connect", ep, "--run", "ended", "--worker-id", name, "--exit-when-done",
+                             "--coordinator-timeout", timeout_s)
+                   for name, timeout_s in (("woken", "60"), ("late", "3")))
+    other = None
     try:
-        wait_status(out, lambda st: any(w["worker_id"] == "frozen" for w in st["workers"]), "the worker to join")
-        frozen.send_signal(signal.SIGSTOP)
-        assert coord.wait(60) == 0 and other.wait(30) == 0  # the run ends without it
-        frozen.send_signal(signal.SIGCONT)
+        wait_status(out, lambda st: {"woken", "late"} <= {w["worker_id"] for w in st["workers"]}, "workers to join")
+        woken.send_signal(signal.SIGSTOP)
+        late.send_signal(signal.SIGSTOP)
+        # the rest of the run (seconds of trials) outlasts their 2 s transport lease
+        other = spinefarm("worker", "--connect", ep, "--run", "ended", "--worker-id", "other", "--exit-when-done")
+        st = wait_status(out, lambda st: st["state"] == "done", "the run to end without them")
+        assert not any(w["alive"] for w in st["workers"] if w["worker_id"] in ("woken", "late")), st["workers"]
+        woken.send_signal(signal.SIGCONT)
+        assert woken.wait(30) == 0  # well inside its 60 s coordinator timeout: it was told
+        assert coord.wait(60) == 0 and other.wait(30) == 0
+        late.send_signal(signal.SIGCONT)
         t0 = time.monotonic()
-        assert frozen.wait(30) == 0
+        assert late.wait(30) == 0
         assert time.monotonic() - t0 < 20
     finally:
-        if frozen.poll() is None:
-            frozen.send_signal(signal.SIGCONT)
-        stop(coord, frozen, other)
+        for p in (woken, late):
+            if p.poll() is None:
+                p.send_signal(signal.SIGCONT)
+        stop(coord, woken, late, *([other] if other else []))
+    _, cols = read_run(out)
+    assert int((cols["status"] == b"complete").sum()) == TRIALS
 
 
 def test_resuming_a_truncated_file_is_a_clear_error_within_seconds(tmp_path):

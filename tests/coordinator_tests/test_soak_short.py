@@ -22,9 +22,11 @@ def test_a_short_soak_reaches_its_exact_budget_through_every_fault(tmp_path):
     assert not out["timed_out"] and out["exact_budget"], out
     assert out["lost"] == 0 and out["duplicated"] == 0 and out["forged_complete"] == 0, out
     assert out["hung_processes"] == [] and out["waiting"] == 0, out
+    assert out["workers_timed_out"] == 0, out  # every worker heard "done", none waited out its timeout
     faults = out["faults"]
     assert faults["unexpected_coordinator_exits"] == 0 and faults["unexpected_worker_exits"] == 0, out
     assert faults.get("coordinator_kill", 0) >= 1 and faults.get("forge") == 1, out
+    assert faults.get("end_stop") == 1, out  # a worker frozen as the run ended: it too heard "done"
     assert out["failed_timeout"] >= 1 and out["failed_crashed"] >= 1, out  # the poison bands were hit
     assert out["failed_outside_bands"] == 0, out
     if netns:
@@ -40,3 +42,6 @@ def test_a_run_faster_than_planned_still_gets_each_once_only_fault():
     assert soak.due_once(every, 0.36, 0.0) == ["forge", "coordinator_kill"]   # on time
     assert soak.due_once(every, 0.05, 0.5) == ["forge", "coordinator_kill", "partition"]  # the run is ahead
     assert soak.due_once({"partition"}, 0.05, 0.5) == ["partition"]
+    # a worker frozen as the run ends: a few seconds before, by the coordinator's ETA, from half way on
+    assert not soak.end_stop_due(0.4, 1.0) and not soak.end_stop_due(0.6, 30.0) and not soak.end_stop_due(0.6, None)
+    assert soak.end_stop_due(0.6, 9.0) and soak.end_stop_due(0.9, None)

@@ -36,6 +36,6 @@ def test_a_resume_that_fails_on_a_full_disk_leaves_no_temporary_file(small_fs, t
         pass
     finally:
         os.close(fd)
-    with pytest.raises(StorageError):
+    with pytest.raises(StorageError, match="cannot write the resumed copy"):
         resume_run(path)
     assert not (small_fs / "run.h5.resume-tmp").exists()

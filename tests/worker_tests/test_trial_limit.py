@@ -4,6 +4,7 @@ trial that times out on 3 attempts is stored as failed(timeout) and not issued a
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing as mp
 import os
 import signal
 import threading
@@ -13,7 +14,7 @@ from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.protocol.work import TrialAssignment
 from spinefarm.storage.hdf5_reader import read_run
-from spinefarm.worker.sandbox import TrialLimit, TrialSandbox
+from spinefarm.worker.sandbox import TrialLimit, TrialSandbox, _child
 
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, spinefarm, stop
@@ -48,6 +49,19 @@ def test_hung_and_crashing_trials_end_in_bounded_time_and_the_sandbox_goes_on():
         assert box.run(at(0.05)) is None and time.monotonic() - t0 < 1.5
     finally:
         box.close()
+
+
+def test_a_trial_process_whose_worker_is_gone_before_it_is_ready_exits_quietly(capfd):
+    # A worker killed while its trial process starts: the process finds no one to say "ready" to.
+    ctx = mp.get_context("spawn")
+    parent, child = ctx.Pipe()
+    proc = ctx.Process(target=_child, args=(child, poisoned("gone", 0.05)), daemon=True)
+    proc.start()
+    child.close()
+    parent.close()
+    proc.join(60)
+    assert proc.exitcode == 0
+    assert "Traceback" not in capfd.readouterr().err
 
 
 def test_a_frozen_physics_trial_times_out_from_its_measured_cost_and_the_next_one_runs():
