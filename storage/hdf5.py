@@ -45,6 +45,24 @@ RESERVE_B = 8 << 20      # reserved beyond HDF5's end when it is topped up
 RESERVE_LOW_B = 4 << 20  # topped up when less than this is left (one flush grows the file far less)
 
 
+
+def _replace_with_copy(real: Path, suffix: str, meta: RunMeta, cols: dict[str, np.ndarray],
+                       episodes: dict[str, np.ndarray], live: bool, lock: RunLock | None) -> None:
+    """Write the run to `real` + suffix, sync it and rename it over `real`: atomic, so the old file stays
+    intact until the new one is complete. The lock moves to the new file before it takes the name. A failed
+    copy is removed and the error raised; the caller syncs the directory."""
+    tmp = real.with_name(real.name + suffix)
+    try:
+        write_run(tmp, meta, cols, episodes, live=live)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        if lock is not None:
+            lock.bind(tmp)
+        os.replace(tmp, real)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
 class Hdf5Storage(InMemoryStorage):
     """The single writer of one run file. Use `create`, `resume` or `open_read`."""
 
@@ -112,19 +130,11 @@ class Hdf5Storage(InMemoryStorage):
             episodes = read_episodes(path)
             real = path.resolve()  # a symlink stays a symlink: its target is what gets replaced
             real.with_name(real.name + ".compress-tmp").unlink(missing_ok=True)  # a close cut short
-            tmp = real.with_name(real.name + ".resume-tmp")
             try:
-                write_run(tmp, meta, cols, episodes, live=True)
-                with open(tmp, "rb") as fh:
-                    os.fsync(fh.fileno())
-                lock.bind(tmp)  # held on the new file before it takes the name
-                os.replace(tmp, real)  # atomic: the old file stays intact until the new one is complete
-            except BaseException as exc:
-                tmp.unlink(missing_ok=True)
-                if isinstance(exc, OSError):
-                    raise StorageError(f"cannot write the resumed copy of {path}: {_reason(exc)}",
-                                       expected="room for a copy of the run file beside it") from exc
-                raise
+                _replace_with_copy(real, ".resume-tmp", meta, cols, episodes, live=True, lock=lock)
+            except OSError as exc:
+                raise StorageError(f"cannot write the resumed copy of {path}: {_reason(exc)}",
+                                   expected="room for a copy of the run file beside it") from exc
             _fsync_dir(real)
             table = TrialTable(meta.n_params, capacity=max(1024, len(cols["trial_id"])))
             table.load(cols)
@@ -245,18 +255,11 @@ class Hdf5Storage(InMemoryStorage):
         """Replace the closed live file by a compressed copy of what it holds (atomically, under the lock). The
         live file stays as it is if the copy cannot be made: it is complete, only larger."""
         real = self.path.resolve()
-        tmp = real.with_name(real.name + ".compress-tmp")
         try:
-            meta, cols = read_run(real)
-            write_run(tmp, meta, cols, read_episodes(real))
-            with open(tmp, "rb") as fh:
-                os.fsync(fh.fileno())
-            if self._lock is not None:
-                self._lock.bind(tmp)
-            os.replace(tmp, real)
+            meta, cols = read_run(real)  # what the file holds, not what memory says it should
+            _replace_with_copy(real, ".compress-tmp", meta, cols, read_episodes(real), live=False, lock=self._lock)
             _fsync_dir(real)
         except (OSError, StorageError, ValueError) as exc:
-            tmp.unlink(missing_ok=True)
             log.warning("run file %s left uncompressed: %s", self.path, _reason(exc))
 
     def close(self) -> None:
