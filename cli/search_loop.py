@@ -111,10 +111,12 @@ class SearchSession:
             failure = core.failure or (None if core.done else self.workers.check())
             if failure:
                 return failure
-            if core.search_done and not judging:
+            kinds = core.pending_task_kinds() if core.search_done and not judging else set()
+            if kinds:  # only when a judge or an audit is still running: with --no-verify there is none
                 judging = True
-                self.progress.write("the search is done; the judge re-simulates the best before it is reported "
-                                    "(Ctrl-C skips) ...")
+                what = ("the judge re-simulates the best before it is reported" if "judge" in kinds
+                        else "the last audits run")
+                self.progress.write(f"the search is done; {what} (Ctrl-C skips) ...")
             self.progress.update(*progress(core))
         end = time.monotonic() + 5.0
         while core.done and not core.workers_released() and time.monotonic() < end:

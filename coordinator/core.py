@@ -87,6 +87,11 @@ class CoordinatorCore(TaskDispatch):
         with self.lock:
             return self.study.done and not self.tasks.pending
 
+    def pending_task_kinds(self) -> set[str]:
+        """What still runs after the search: "judge", "audit", "referee" (empty: nothing)."""
+        with self.lock:
+            return {split_key(k)[0] for k in self.tasks.pending}
+
     # --- handlers (transport calls these) ---------------------------------------------------------
     def _error(self, what: str, exc: MessageError) -> bytes:
         self.rejected_messages += 1

@@ -28,6 +28,7 @@ def test_tetraspine_hardware_is_searched_with_dt_auto_and_refused_without(tmp_pa
     # engine auto (search's default) cannot calibrate at the engines' default steps: it falls back to Bullet
     assert "the calibration could not run" in ok.stderr and meta.settings.engine_choice is None
     assert list(cols["status"]) == [b"complete", b"complete"]
+    assert "re-simulates" not in ok.stderr  # --no-verify: no judge runs, so none is announced
     assert np.all(cols["dt_s"] < 5.1e-4)  # the automatic step, below the stable limit, stored per trial
     bad = search(*common, "--dt", "fast", "--out", str(tmp_path / "c.h5"))
     assert bad.returncode == 2 and "--dt is not a number" in bad.stderr
