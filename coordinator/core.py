@@ -114,16 +114,13 @@ class CoordinatorCore(TaskDispatch):
 
     def handle_work(self, payload: bytes) -> bytes | None:
         """A WorkGrant (or an error); None: no answer, the run file can no longer be written."""
-        if self.write_failure is not None:
-            return None
-        try:
-            req = decode_message(payload, WorkRequest)
-        except MessageError as exc:
-            return self._error("work request", exc)
+        req = self._receive(payload, WorkRequest, "work request")
+        if not isinstance(req, WorkRequest):
+            return req
         with self.lock:
             self.peers.heard(req.worker_id, req.engines, req.environment)
             verdicts = self._settle_all(req.worker_id, req.results)  # before "done": they may finish it
-            if verdicts and not self.commit():
+            if verdicts is None:
                 return None
             if self.study.done:
                 self._drop_unservable_tasks()
@@ -142,20 +139,26 @@ class CoordinatorCore(TaskDispatch):
 
     def handle_results(self, payload: bytes) -> bytes | None:
         """A ResultAck (or an error); None: no answer, the run file can no longer be written."""
+        sub = self._receive(payload, ResultSubmission, "result submission")
+        if not isinstance(sub, ResultSubmission):
+            return sub
+        with self.lock:
+            verdicts = self._settle_all(sub.worker_id, sub.items)
+        return None if verdicts is None else encode_message(ResultAck(verdicts))
+
+    def _receive(self, payload: bytes, cls: type, what: str) -> Any:
+        """The decoded message; else the answer to give: an error for a malformed one, None (no answer) once
+        the run file can no longer be written."""
         if self.write_failure is not None:
             return None
         try:
-            sub = decode_message(payload, ResultSubmission)
+            return decode_message(payload, cls)
         except MessageError as exc:
-            return self._error("result submission", exc)
-        with self.lock:
-            verdicts = self._settle_all(sub.worker_id, sub.items)
-            if verdicts and not self.commit():
-                return None
-        return encode_message(ResultAck(verdicts))
+            return self._error(what, exc)
 
-    def _settle_all(self, worker_id: str, items: tuple) -> tuple[tuple[int, Verdict], ...]:
-        """Verdicts for submitted results (caller holds the lock)."""
+    def _settle_all(self, worker_id: str, items: tuple) -> tuple[tuple[int, Verdict], ...] | None:
+        """Verdicts for submitted results, written out (caller holds the lock); None if the run file can no
+        longer be written."""
         self.scheduler.contact(worker_id)
         verdicts = []
         for item in items:
@@ -165,7 +168,7 @@ class CoordinatorCore(TaskDispatch):
                 self._finish_times.append(self.clock())
             else:
                 self.dropped_results[v.value] += 1
-        return tuple(verdicts)
+        return None if verdicts and not self.commit() else tuple(verdicts)
 
     def _settle(self, worker_id: str, lease_id: int, result: Any) -> Verdict:
         storage = self.study.storage

@@ -45,6 +45,8 @@ class BaseSampler:
     """
 
     name: ClassVar[str] = ""
+    # the keyword settings of __init__, stored with the run and read back by from_dict: (name, type)
+    settings: ClassVar[tuple[tuple[str, type], ...]] = ()
 
     def __init__(self, n_params: int, seed: int) -> None:
         self.n_params = n_params
@@ -55,12 +57,13 @@ class BaseSampler:
 
     def describe(self) -> dict[str, Any]:
         """JSON-able settings, stored with the run."""
-        return {"name": self.name, "kind": type(self).__name__, "seed": self.seed}
+        return {"name": self.name, "kind": type(self).__name__, "seed": self.seed,
+                **{k: getattr(self, k) for k, _ in self.settings}}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], n_params: int) -> BaseSampler:
         """Rebuild from describe() output (the stored run's `sampler` attribute)."""
-        return cls(n_params, int(d["seed"]))
+        return cls(n_params, int(d["seed"]), **{k: kind(d[k]) for k, kind in cls.settings})
 
 
 class FinishedPrefix:

@@ -25,6 +25,7 @@ _FAILED_VALUE = 1e30  # minimised: a failed trial is worse than any complete one
 
 class CmaEsSampler(BaseSampler):
     name = "cmaes"
+    settings = (("sigma0", float), ("population_size", int), ("population_growth", float))
 
     def __init__(self, n_params: int, seed: int, *, sigma0: float = 0.3, population_size: int | None = None,
                  population_growth: float = 2.0) -> None:
@@ -81,11 +82,3 @@ class CmaEsSampler(BaseSampler):
         x = np.clip(self._cma.ask(), 0.0, 1.0)
         return Proposal(x, CMAES, -1)
 
-    def describe(self) -> dict[str, Any]:
-        return {**super().describe(), "sigma0": self.sigma0, "population_size": self.population_size,
-                "population_growth": self.population_growth}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any], n_params: int) -> CmaEsSampler:
-        return cls(n_params, int(d["seed"]), sigma0=float(d["sigma0"]), population_size=int(d["population_size"]),
-                   population_growth=float(d["population_growth"]))

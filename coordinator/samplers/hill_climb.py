@@ -8,8 +8,6 @@ and a restarted coordinator continues from the same centre.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from spinefarm.coordinator.samplers.base import GAUSSIAN, MONTE_CARLO, BaseSampler, Proposal, trial_rng
 from spinefarm.protocol.errors import check_range
@@ -18,6 +16,7 @@ from spinefarm.storage.base import BaseStorage
 
 class GaussianHillClimbSampler(BaseSampler):
     name = "paper"
+    settings = (("sigma", float), ("top_k", int), ("startup_trials", int))
 
     def __init__(self, n_params: int, seed: int, *, sigma: float = 0.005, top_k: int = 1,
                  startup_trials: int = 0) -> None:
@@ -40,11 +39,3 @@ class GaussianHillClimbSampler(BaseSampler):
         step = self.sigma * rng.standard_normal(self.n_params)
         return Proposal(np.clip(centre + step, 0.0, 1.0), GAUSSIAN, parent)
 
-    def describe(self) -> dict[str, Any]:
-        return {**super().describe(), "sigma": self.sigma, "top_k": self.top_k,
-                "startup_trials": self.startup_trials}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any], n_params: int) -> GaussianHillClimbSampler:
-        return cls(n_params, int(d["seed"]), sigma=float(d["sigma"]), top_k=int(d["top_k"]),
-                   startup_trials=int(d["startup_trials"]))

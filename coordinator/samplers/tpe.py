@@ -25,6 +25,7 @@ _COT_CAP = 1e6  # no motion gives COT = inf; Optuna needs finite values
 
 class TpeSampler(BaseSampler):
     name = "tpe"
+    settings = (("startup_trials", int), ("multivariate", bool), ("multi_objective", bool))
 
     def __init__(self, n_params: int, seed: int, *, startup_trials: int = 10, multivariate: bool = True,
                  multi_objective: bool = False) -> None:
@@ -103,11 +104,3 @@ class TpeSampler(BaseSampler):
             self._study.sampler = optuna.samplers.TPESampler(seed=seed, n_startup_trials=self.startup_trials,
                                                              multivariate=self.multivariate)
 
-    def describe(self) -> dict[str, Any]:
-        return {**super().describe(), "startup_trials": self.startup_trials, "multivariate": self.multivariate,
-                "multi_objective": self.multi_objective}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any], n_params: int) -> TpeSampler:
-        return cls(n_params, int(d["seed"]), startup_trials=int(d["startup_trials"]),
-                   multivariate=bool(d["multivariate"]), multi_objective=bool(d["multi_objective"]))
