@@ -293,9 +293,7 @@ def _stored_trial(path: Path, trial_id: int | None
 
 
 def _physical(morph, params, controller) -> np.ndarray:
-    from spinefarm.worker.trial import resolve_params
-
-    return resolve_params(morph, params, controller)
+    return morph.param_space(controller).physical(params)
 
 
 def _best_of_run(path: Path, n: int = 1):

@@ -96,6 +96,14 @@ class ParamSpace:
         u = self.check_unit(unit_vector)
         return self.lows + u * (self.highs - self.lows)
 
+    def physical(self, params: Sequence[float] | np.ndarray | Mapping[str, float]) -> np.ndarray:
+        """Physical values of a unit-cube vector, or of a mapping of named physical values (bounds checked)."""
+        if isinstance(params, Mapping):
+            physical = self.from_named(params)
+            self.to_unit(physical)  # bounds check with a named error
+            return physical
+        return self.from_unit(params)
+
     def to_unit(self, physical: Sequence[float] | np.ndarray) -> np.ndarray:
         """Unit-cube coordinates of physical values (a zero-width parameter maps to 0)."""
         x = self._check_vector(physical, "physical vector")

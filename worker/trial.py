@@ -43,17 +43,6 @@ class TrialOutcome:
     com_path_time_s: np.ndarray  # (n_checks,) the times of those checks
 
 
-def resolve_params(morph: Morphology, params: np.ndarray | Mapping[str, float] | list,
-                   controller: str | None) -> np.ndarray:
-    """Physical parameter vector from a unit-cube vector or a mapping of named physical values."""
-    space = morph.param_space(controller)
-    if isinstance(params, Mapping):
-        physical = space.from_named(params)
-        space.to_unit(physical)  # bounds check with a named error
-        return physical
-    return space.from_unit(params)
-
-
 def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mapping[str, float] | list,
              config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None,
              scene_factory: EngineFactory | None = None, setup: TrialSetup | SetupCache | None = None
@@ -98,7 +87,7 @@ def _simulate(morphology, params: list, cfg: TrialConfig, seeds: list[int], cont
     morph = load_morphology(morphology)
     controller = controller or cfg.controller
     space = morph.controller_space(controller)
-    networks = [space.network(resolve_params(morph, p, controller)) for p in params]
+    networks = [space.network(space.param_space.physical(p)) for p in params]
     for seed in seeds:
         if not isinstance(seed, int | np.integer):
             raise ParameterError("seed is not an integer", received=seed, expected="an integer")
