@@ -74,6 +74,19 @@ def describe_best(core: Any, path: Path, verbose: bool = False) -> str:
     return final_report(storage, path, verdict=verdict, done=core.done, verbose=verbose, notes=tuple(notes))
 
 
+def _objective_text(meta: Any, b: Any) -> str:
+    """The objective ahead of the score's parts, named so that it is not mistaken for one of them: a robust
+    run's is a statistic over episodes, and its parts are the episodes' medians."""
+    robust = meta.run.get("robust") or {}
+    if robust:
+        k = robust.get("episodes", 1)
+        if b.duration_s in robust.get("rung_durations_s", ()):
+            k = robust["rung_episodes"][list(robust["rung_durations_s"]).index(b.duration_s)]
+        return (f"objective {_g(b.objective)} ({robust.get('statistic', 'mean')} of {meta.objective} over "
+                f"{k} episodes) · medians: ")
+    return "" if meta.objective in ("distance", "speed") else f"{meta.objective} {_g(b.objective)} · "
+
+
 def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose: bool = False,
                  notes: tuple[str, ...] = ()) -> str:
     """The whole report as text (ends without a newline); verdict: the judge's word on the best, notes: lines
@@ -94,7 +107,7 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
         b = best[0]
         engine = f" in {b.engine} at {b.dt_s * 1e3:g} ms" if b.engine and math.isfinite(b.dt_s) else ""
         lines += [f"best trial {b.trial_id} ({b.phase}, {b.sim_time_s:g} s{engine})",
-                  "  " + ("" if meta.objective == "distance" else f"{meta.objective} {_g(b.objective)} · ")
+                  "  " + _objective_text(meta, b)
                   + f"distance {_g(b.distance_m)} m · speed {_g(b.speed_cm_s)} cm/s · COT {_g(b.cot)} · "
                   f"work {_g(b.work_j)} J",
                   f"  verdict: {verdict}"]

@@ -32,6 +32,8 @@ def test_episodes_are_stored_and_resumed_exactly(tmp_path):
             "--randomize", RANDOMIZE, "--robust", "q25", "--no-verify", "--api-port", "-1", "--quiet",
             "--seed", "4", "--out", str(out), "--engine", "bullet")
     assert r.returncode == 0, r.stderr
+    # the report names the objective as a statistic over the episodes, apart from the episodes' medians
+    assert "(q25 of distance over 2 episodes) · medians: distance" in r.stdout + r.stderr
     meta = read_meta(out)
     assert meta.run["robust"] == {"episodes": 2, "randomize": {"friction": 0.1, "mass": 0.05,
                                                               "start_jitter_cm": 0.5}, "statistic": "q25"}
