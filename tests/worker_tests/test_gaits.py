@@ -1,4 +1,5 @@
-"""Every shipped gait (examples/gaits/<morphology>.json) loads as a --params file and runs for 1 s."""
+"""Every shipped gait (examples/gaits/<morphology>.json, and those of a robust search in examples/gaits/robust/)
+loads as a --params file and runs for 1 s."""
 
 from __future__ import annotations
 
@@ -10,14 +11,15 @@ from spinefarm.cli.sim_commands import load_params_file
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.trial import TrialConfig, run_trial
 
-GAITS = sorted((Path(__file__).resolve().parents[2] / "examples" / "gaits").glob("*.json"))
+ROOT = Path(__file__).resolve().parents[2] / "examples" / "gaits"
+GAITS = sorted(ROOT.rglob("*.json"))
 
 
 def test_gaits_are_shipped():
     assert GAITS, "examples/gaits holds no gait"
 
 
-@pytest.mark.parametrize("path", GAITS, ids=[p.stem for p in GAITS])
+@pytest.mark.parametrize("path", GAITS, ids=[p.relative_to(ROOT).with_suffix("").as_posix() for p in GAITS])
 def test_a_shipped_gait_loads_and_runs_for_one_second(path):
     params, controller = load_params_file(path)
     record = json.loads(path.read_text())
