@@ -158,7 +158,7 @@ def run_trial(morphology: Morphology | str | Mapping, params: np.ndarray | Mappi
     """One trial -> TrialResult. `params`: unit-cube vector of the controller space, or a mapping of
     named physical values. Divergence is a failed result, never an exception; bad parameters raise
     ParameterError."""
-    return simulate(morphology, params, config, seed, controller=controller, setup=setup).result
+    return simulate_batch(morphology, [params], config, [seed], controller=controller, setup=setup)[0].result
 
 
 def random_unit_params(morph: Morphology, seed: int, controller: str | None = None) -> np.ndarray:
