@@ -225,16 +225,16 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
             "mujoco_segment_contacts_off_cpu_s_per_sim_s": med["mujoco_segment_contacts_off"],
             "mujoco_segment_contacts_reach_cpu_s_per_sim_s": med["mujoco_segment_contacts_reach"],
             "mujoco_speedup_segment_contacts_reach": med["bullet"] / med["mujoco_segment_contacts_reach"],
-            "mujoco_reach_rod_pairs": reach_pairs(morph),
+            "mujoco_reach_rod_pairs": reach_pairs(morph, configs["mujoco_segment_contacts_reach"]),
             "mujoco_reruns": reruns, "cpu_s_per_sim_s_all": {k: [round(x, 4) for x in v] for k, v in cpu.items()},
             "distance_m": distance}
 
 
-def reach_pairs(morph) -> dict:
-    """How many rod pairs of different segments "reach" models, of all of them."""
+def reach_pairs(morph, cfg: TrialConfig) -> dict:
+    """How many rod pairs of different segments "reach" (cfg's segment_contacts) models, of all of them."""
     from spinefarm.worker.setup import TrialSetup
 
-    setup = TrialSetup(morph, TrialConfig(engine="mujoco", engine_options={"segment_contacts": "reach"}), None)
+    setup = TrialSetup(morph, cfg, None)
     sizes = [len(b.rods) for b in setup.bodies]
     total = sum(sizes[a] * sizes[b] for a in range(len(sizes)) for b in range(a + 1, len(sizes)))
     return {"modelled": len(setup.rod_pairs()), "of": total}
