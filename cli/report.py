@@ -77,13 +77,12 @@ def describe_best(core: Any, path: Path, verbose: bool = False) -> str:
 def _objective_text(meta: Any, b: Any) -> str:
     """The objective ahead of the score's parts, named so that it is not mistaken for one of them: a robust
     run's is a statistic over episodes, and its parts are the episodes' medians."""
-    robust = meta.run.get("robust") or {}
-    if robust:
-        k = robust.get("episodes", 1)
-        if b.duration_s in robust.get("rung_durations_s", ()):
-            k = robust["rung_episodes"][list(robust["rung_durations_s"]).index(b.duration_s)]
-        return (f"objective {_g(b.objective)} ({robust.get('statistic', 'mean')} of {meta.objective} over "
-                f"{k} episodes) · medians: ")
+    if meta.run.get("robust"):
+        from spinefarm.protocol.robust import RobustSpec
+
+        spec = RobustSpec.from_dict(meta.run["robust"])
+        return (f"objective {_g(b.objective)} ({spec.statistic} of {meta.objective} over "
+                f"{spec.episodes_for(b.duration_s)} episodes) · medians: ")
     return "" if meta.objective in ("distance", "speed") else f"{meta.objective} {_g(b.objective)} · "
 
 
