@@ -79,11 +79,14 @@ def test_results_are_resent_until_the_coordinator_acknowledges_them():
     # Trials take a while (stand-in for physics) so the coordinator can vanish mid-batch.
     core, storage, _ = sphere_core(trials=3, clock=time.monotonic, morphology="sphere:2", duration_s=0.3)
     first = CoordinatorService(core, storage, listen=[endpoint]).start()
+    # No result is handed in mid-batch (submit interval 60 s): they ride along with the next work request.
     w = WorkerService(connect=[endpoint], run_id=core.run_id, batch=3, exit_when_done=True,
-                      query_timeout_s=1.0)
+                      query_timeout_s=1.0, submit_interval_s=60.0)
     t = threading.Thread(target=w.run, daemon=True)
     t.start()
-    wait_for(lambda: core.scheduler.n_leased == 3, what="the batch to be leased")
+    # Closing once the batch is leased raced the worker's fetch of the run's config (it then had leases it
+    # could not run): close once a trial has run, so the worker holds the config and the rest of its batch.
+    wait_for(lambda: core.scheduler.n_leased == 3 and w.trials_run >= 1, what="the batch to be leased and started")
     first.close()  # gone before any result could be returned
     wait_for(lambda: w.trials_run == 3, what="the worker to finish its batch")
     assert storage.counts()["complete"] == 0
