@@ -107,11 +107,20 @@ def cmd_api(args: argparse.Namespace) -> int:
                           expected="spinefarm run files (.h5) written by `spinefarm search`")
     if args.runs_dir is not None and not Path(args.runs_dir).is_dir():
         raise ConfigError("--runs-dir is not a folder", received=args.runs_dir, expected="an existing folder")
-    print(f"dashboard on http://{args.host}:{args.port}/ ({len(served)} file(s)"
-          + (f", every *.h5 in {args.runs_dir}" if args.runs_dir else "") + ")", file=sys.stderr)
+    announcement = (f"dashboard on http://{args.host}:{args.port}/ ({len(served)} file(s)"
+                    + (f", every *.h5 in {args.runs_dir}" if args.runs_dir else "") + ")")
+
+    class AnnouncingServer(uvicorn.Server):
+        # The URL is printed once the server listens and answers Ctrl-C itself: a user (or script) that
+        # stops it on that line never lands in the start-up, before its signal handlers exist.
+        async def startup(self, sockets: list | None = None) -> None:
+            await super().startup(sockets)
+            if self.started:
+                print(announcement, file=sys.stderr, flush=True)
+
     # A bounded graceful shutdown: SIGTERM stops the server even while a request is still running.
-    uvicorn.run(create_app(served, args.runs_dir), host=args.host, port=args.port, log_level="warning",
-                timeout_graceful_shutdown=5)
+    AnnouncingServer(uvicorn.Config(create_app(served, args.runs_dir), host=args.host, port=args.port,
+                                    log_level="warning", timeout_graceful_shutdown=5)).run()
     return 0
 
 

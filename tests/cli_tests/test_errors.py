@@ -156,7 +156,8 @@ def test_ctrl_c_stops_a_worker_whose_coordinator_accepts_tcp_but_never_answers()
 
 
 def test_api_says_which_files_it_skips_and_why(sphere_run, tmp_path, a_file):
-    p = subprocess.Popen([sys.executable, "-m", "spinefarm", "api", str(sphere_run), str(tmp_path / "gone.h5"),
+    p = subprocess.Popen([sys.executable, "-X", "faulthandler", "-m", "spinefarm", "api", str(sphere_run),
+                          str(tmp_path / "gone.h5"),
                           str(a_file), "--port", "18731"], cwd=ROOT, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
     try:
@@ -166,9 +167,9 @@ def test_api_says_which_files_it_skips_and_why(sphere_run, tmp_path, a_file):
         try:
             p.communicate(timeout=60)  # Ctrl-C stops it (well within this on a loaded machine)
         except subprocess.TimeoutExpired:
-            p.kill()
+            p.send_signal(signal.SIGABRT)  # faulthandler prints where every thread stands
             _, rest = p.communicate()
-            pytest.fail(f"spinefarm api did not stop within 60 s of Ctrl-C; it printed: {rest[-2000:]}")
+            pytest.fail(f"spinefarm api did not stop within 60 s of Ctrl-C; it printed: {rest[-6000:]}")
     assert f"skipping {tmp_path / 'gone.h5'}: no such file" in lines[0]
     assert f"skipping {a_file}: cannot open run file" in lines[1]
     assert "dashboard on http://127.0.0.1:18731/ (1 file(s))" in lines[2]
