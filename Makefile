@@ -25,7 +25,7 @@ test: $(STAMP)
 	sh .ci/ensure-netns-tools
 	sh .ci/ensure-qemu-user
 	$(PY) -m ruff check .
-	$(PY) -m pytest -q -ra --durations=25
+	$(PY) -m pytest -q -ra --durations=25 -n 2 --dist loadfile
 
 test-all: $(STAMP)
 	sh .ci/ensure-chromium
