@@ -76,7 +76,9 @@ def analysis_view(storage: BaseStorage) -> dict[str, Any]:
     meta = storage.run_meta()
     cols = storage.columns()
     status = np.asarray(cols["status"])
-    complete = status == b"complete"
+    # first-rung rows only: every parameter set once, at one trial length (a promoted row's longer trial
+    # would rank the parameters that were promoted, not those that matter)
+    complete = (status == b"complete") & (np.asarray(cols["rung"]) == 0)
     objective = np.where(complete, np.asarray(cols["objective"], dtype=float), np.nan)
     imp = importance(np.asarray(cols["params_unit"], dtype=float), objective)
     reasons = Counter(r.decode("utf-8", "replace").split(":")[0] or "unknown"

@@ -57,9 +57,16 @@ def _param_index(names: list[str], which: str, name: str) -> int:
     return names.index(name)
 
 
-def contour_view(storage: BaseStorage, x: str, y: str, grid: int, value: str = "objective") -> dict[str, Any]:
-    """The grid of `value` over parameters x and y (physical units), and the trials it is made from."""
+def contour_view(storage: BaseStorage, x: str, y: str, grid: int, value: str = "objective",
+                 rung: int = 0) -> dict[str, Any]:
+    """The grid of `value` over parameters x and y (physical units), and the trials it is made from: those of
+    one rung of a multi-fidelity run (default the first, where every parameter set is scored once at one trial
+    length; mixing rungs would mix 3 s distances with 30 s ones)."""
     meta = storage.run_meta()
+    n_rungs = len(meta.settings.ladder)
+    if not 0 <= rung < n_rungs:
+        raise InvalidQuery("rung out of range", received=rung,
+                           expected=f"an integer in [0, {n_rungs - 1}] (this run has {n_rungs} rung(s))")
     names = list(meta.param_names)
     jx, jy = _param_index(names, "x", x), _param_index(names, "y", y)
     if jx == jy:
@@ -78,7 +85,7 @@ def contour_view(storage: BaseStorage, x: str, y: str, grid: int, value: str = "
         params = np.asarray(cols["params"], dtype=float)
         z = np.asarray(cols[value], dtype=float)
         used = (np.asarray(cols["status"]) == b"complete") & np.isfinite(z) \
-            & (np.asarray(cols["verification"]) != b"not_reproduced")
+            & (np.asarray(cols["verification"]) != b"not_reproduced") & (np.asarray(cols["rung"]) == rung)
         ids = np.flatnonzero(used)
         px, py, pz = params[ids, jx], params[ids, jy], z[ids]
     else:
@@ -90,7 +97,7 @@ def contour_view(storage: BaseStorage, x: str, y: str, grid: int, value: str = "
     return {
         "run_id": meta.run_id, "x": x, "y": y, "value": value,
         "value_name": meta.objective if value == "objective" else value,
-        "grid": grid, "bandwidth": h,
+        "grid": grid, "bandwidth": h, "rung": rung, "rungs": n_rungs,
         "method": "Gaussian-kernel mean of the complete trials, bandwidth as a fraction of each parameter's range",
         "x_range": [float(lo[0]), float(hi[0])], "y_range": [float(lo[1]), float(hi[1])],
         "x_centres": (lo[0] + centres * span[0]).tolist(), "y_centres": (lo[1] + centres * span[1]).tolist(),

@@ -76,5 +76,7 @@ def get_contour(storage: Annotated[Hdf5Reader, Depends(run_storage)],
                 y: Annotated[str, Query(max_length=200, description="the parameter along y")],
                 grid: Annotated[int, Query(description="cells along each axis, 2 to 200")] = 40,
                 value: Annotated[str, Query(description="the score drawn: " + ", ".join(CONTOUR_VALUES))] = "objective",
+                rung: Annotated[int, Query(description="the rung of a multi-fidelity run whose trials are drawn "
+                                                       "(0, the default: the first, every parameter set once)")] = 0,
                 ) -> dict[str, Any]:
-    return contour_view(storage, x, y, grid, value)
+    return contour_view(storage, x, y, grid, value, rung)

@@ -89,7 +89,8 @@ function runSkeleton(runId) {
       <div class="panel"><h2>Speed against cost of transport <span class="muted" id="pareto-note"></span></h2><div class="plot" id="plot-pareto"></div></div>
       <div class="panel"><h2>Failed trials by reason</h2><div class="plot" id="plot-failed"></div></div>
       <div class="panel wide" id="pc-panel"><h2>Parallel coordinates <span class="muted">(drag along an axis to
-        select a range)</span></h2><div class="pc-controls" id="pc-controls"></div><div class="pc" id="pc-box"></div>
+        select a range)</span></h2><p class="muted small" id="params-rung-note" hidden></p>
+        <div class="pc-controls" id="pc-controls"></div><div class="pc" id="pc-box"></div>
         <div class="pc-brushed" id="pc-brushed"></div></div>
       <div class="panel" id="contour-panel"><h2><span id="contour-title">objective</span> over two parameters</h2>
         <div class="filters" id="contour-controls"></div><div class="contour" id="contour-box"></div>

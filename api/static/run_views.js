@@ -80,7 +80,15 @@ function drawRunPlots(runId, cols, analysis, meta) {
   const complete = c.status.filter((s) => s === "complete").length;
   document.getElementById("pareto-note").textContent = complete > sc.length
     ? `${complete - sc.length} without a finite COT not shown` : "";
-  drawParamPlots(runId, cols, analysis, ok);
+  // parameter views take the first rung of a multi-fidelity run: every parameter set once, at one trial length
+  // (a promoted row repeats its set at a longer trial, whose distance is not comparable)
+  const firstRung = analysis.rungs ? ok.filter((i) => c.rung[i] === 0) : ok;
+  const rungNote = document.getElementById("params-rung-note");
+  rungNote.hidden = !analysis.rungs;
+  rungNote.textContent = analysis.rungs ? `Parameter views (parallel coordinates, the contour, one parameter, ` +
+    `importance) show the first rung only (${fmt(analysis.rungs[0].duration_s, 3)} s trials): every parameter ` +
+    `set once, at one trial length.` : "";
+  drawParamPlots(runId, cols, analysis, firstRung);
   drawTimeline(cols);
   if (analysis.rungs) drawRungs(runId, cols, analysis.rungs);
   // failures by reason

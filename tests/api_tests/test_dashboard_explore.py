@@ -176,7 +176,7 @@ def test_the_new_views_on_a_multi_fidelity_run_and_a_robot_from_a_spec_file(page
                                                                              file):
     meta, cols = read_run(views_runs / file)
     open_run(page, views_server.url, run_id)
-    n = int(counted(cols).sum())
+    n = int((counted(cols) & (cols["rung"] == 0)).sum())  # a multi-fidelity run's first rung (one rung: all)
     assert n > 0
     assert page.locator("#pc-box").get_attribute("data-lines") == str(n)
     assert page.locator("#pc-svg .pc-axis").count() == min(8, meta.n_params) + 1
@@ -239,3 +239,33 @@ def test_a_parameter_column_in_the_trials_table(page, views_server, views_runs):
                                              key=lambda t: -cols["params"][t, j])
     page.locator(f'#trial-table th[data-key="param:{name}"] .drop').click()
     assert page.locator(f'#trial-table th[data-key="param:{name}"]').count() == 0
+
+
+def test_parameter_views_of_a_multi_fidelity_run_take_its_first_rung(page, views_server, views_runs):
+    meta, cols = read_run(views_runs / "rungs.h5")
+    ok = counted(cols)
+    first, second = ok & (cols["rung"] == 0), ok & (cols["rung"] == 1)
+    assert first.sum() and second.sum()  # both rungs finished trials: mixing them would show
+    x, y = meta.param_names[0], meta.param_names[1]
+    base = f"{views_server.url}/runs/rungs-view/contour?x={x}&y={y}&grid=5"
+    g = get(base)
+    assert g["rung"] == 0 and g["rungs"] == 2
+    assert g["points"]["trial_id"] == cols["trial_id"][first].tolist()
+    assert get(base + "&rung=1")["points"]["trial_id"] == cols["trial_id"][second].tolist()
+    for bad, words in (("2", ["rung out of range", "received 2", "[0, 1]"]), ("-1", ["received -1"]),
+                       ("one", ["rung", "received 'one'"])):
+        status, message = error_of(f"{base}&rung={bad}")
+        assert status == 422 and all(w in message for w in words), message
+    # importance ranks each parameter set once: from the first rung's finished trials
+    assert get(f"{views_server.url}/runs/rungs-view/analysis")["importance_trials"] == int(first.sum())
+    # the page: parallel coordinates draw one line per first-rung trial and say why
+    open_run(page, views_server.url, "rungs-view")
+    wait_for(lambda: page.locator("#pc-box").get_attribute("data-lines") == str(int(first.sum())), timeout_s=10,
+             poll_s=0.05, what="one line per first-rung trial")
+    note = page.locator("#params-rung-note")
+    assert note.is_visible() and "first rung only (0.05 s trials)" in note.inner_text()
+    open_run(page, views_server.url, "two-workers")  # one rung: every finished trial, no note
+    every = str(int(counted(read_run(views_runs / "two.h5")[1]).sum()))
+    wait_for(lambda: page.locator("#pc-box").get_attribute("data-lines") == every, timeout_s=10, poll_s=0.05,
+             what="one line per finished trial")
+    assert page.locator("#params-rung-note").is_hidden()
