@@ -123,10 +123,21 @@ class TrialResult(Measured):
         return cls(**kwargs)
 
 
+MAX_EXTRA_TEXT_CHARS = 64   # a text in TrialResult.extras (a note on how the trial was computed)
+
+
+def fit_extras(extras: dict[str, Any]) -> dict[str, Any]:
+    """`extras` with every text cut to what the protocol carries (ending in "…"): a long note must not make the
+    coordinator refuse the whole result."""
+    cut = MAX_EXTRA_TEXT_CHARS - 1
+    return {k: v[:cut] + "…" if isinstance(v, str) and len(v) > MAX_EXTRA_TEXT_CHARS else v
+            for k, v in extras.items()}
+
+
 def _extras_ok(extras: Any) -> bool:
     def value_ok(v: Any) -> bool:
         if isinstance(v, str):
-            return len(v) <= 64
+            return len(v) <= MAX_EXTRA_TEXT_CHARS
         return isinstance(v, int | float) and not isinstance(v, bool)
 
     return (isinstance(extras, dict) and len(extras) <= limits.MAX_EXTRAS

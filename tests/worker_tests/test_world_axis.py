@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from spinefarm.protocol.results import TrialResult
 from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.engines import engine_names
 from spinefarm.robot.morphology.registry import load_morphology
@@ -98,3 +99,5 @@ def test_worlds_handed_back_are_run_again_with_the_engines_settings():
     for one, alone in zip(batch, singles, strict=True):
         assert one.result.distance_m == alone.result.distance_m and one.result.work_j == alone.result.work_j
         assert one.result.extras["segment_contacts"].startswith("modelled: gap")
+        # the note fits the protocol: the coordinator takes the result as it is (a longer one was refused)
+        assert TrialResult.from_dict(one.result.to_dict()).extras == one.result.extras

@@ -173,7 +173,7 @@ class MujocoPhysics(BasePhysics):
                 continue
             steps, why = self.contact_free_steps(horizon_steps, b)
             if steps == 0:
-                why = f"{why} at t={self._steps[b] * self.dt_s:.3f} s"
+                why = f"{why}, t={self._steps[b] * self.dt_s:.3f} s"
                 self.retries[b] = ({"segment_contacts": "scene"}, {"segment_contacts": f"modelled: {why}"})
                 active[b] = False
             self._safe_until[b] = self._steps[b] + steps
@@ -186,7 +186,8 @@ class MujocoPhysics(BasePhysics):
             return max_steps, ""
         t_free, gap = self.guard.free_time_s(self.qpos[world], self.qvel[world], max_steps * self.dt_s)
         steps = min(max_steps, int(t_free / self.dt_s * (1.0 + 1e-12)))
-        return steps, "" if steps else f"gap {gap:.3g} cm could close within one {self.dt_s * 1e3:g} ms step"
+        # short: it travels in the result's extras (protocol.results.MAX_EXTRA_TEXT_CHARS)
+        return steps, "" if steps else f"gap {gap:.3g} cm < one {self.dt_s * 1e3:g} ms step"
 
     def velocities(self) -> np.ndarray:
         """(B, n_bodies, 6): linear (cm/s) and angular (rad/s) velocity in the world frame; for checks."""
