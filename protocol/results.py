@@ -5,7 +5,7 @@ Messages, storage columns, API schemas and exports all derive from SCORE_PARTS a
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
 from spinefarm.protocol import limits
@@ -126,12 +126,19 @@ class TrialResult(Measured):
 MAX_EXTRA_TEXT_CHARS = 64   # a text in TrialResult.extras (a note on how the trial was computed)
 
 
+def _cut(text: str, max_chars: int) -> str:
+    return text if len(text) <= max_chars else text[:max_chars - 1] + "…"
+
+
 def fit_extras(extras: dict[str, Any]) -> dict[str, Any]:
-    """`extras` with every text cut to what the protocol carries (ending in "…"): a long note must not make the
-    coordinator refuse the whole result."""
-    cut = MAX_EXTRA_TEXT_CHARS - 1
-    return {k: v[:cut] + "…" if isinstance(v, str) and len(v) > MAX_EXTRA_TEXT_CHARS else v
-            for k, v in extras.items()}
+    """`extras` with every text cut to what the protocol carries (ending in "…")."""
+    return {k: _cut(v, MAX_EXTRA_TEXT_CHARS) if isinstance(v, str) else v for k, v in extras.items()}
+
+
+def fit_for_protocol(result: TrialResult) -> TrialResult:
+    """`result` with its failure reason and notes cut to what the protocol carries: one long text (an
+    exception's message, an engine's note) must not make the coordinator refuse the worker's whole batch."""
+    return replace(result, reason=_cut(result.reason, limits.MAX_TEXT_CHARS), extras=fit_extras(result.extras))
 
 
 def _extras_ok(extras: Any) -> bool:

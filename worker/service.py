@@ -22,7 +22,7 @@ import zenoh
 from spinefarm.protocol import keys
 from spinefarm.protocol.envelope import decode_message, encode_message
 from spinefarm.protocol.errors import ConfigError, MessageError, SpinefarmError
-from spinefarm.protocol.results import TrialResult, fit_extras
+from spinefarm.protocol.results import TrialResult, fit_for_protocol
 from spinefarm.protocol.run import RunConfig, WorkerProblem
 from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult
 from spinefarm.protocol.work import RunInfo, TrialAssignment, WorkGrant, WorkRequest
@@ -225,8 +225,7 @@ class WorkerService:
         except Exception as exc:  # a bug in one trial must not take the worker down
             log.exception("trial %d raised", a.trial_id)
             result = failed_result(a, f"error: {type(exc).__name__}: {exc}", time.perf_counter() - t0)
-        return replace(result, trial_id=a.trial_id, worker_id=self.worker_id, seed=a.seed,
-                       extras=fit_extras(result.extras))
+        return fit_for_protocol(replace(result, trial_id=a.trial_id, worker_id=self.worker_id, seed=a.seed))
 
     # --- main loop --------------------------------------------------------------------------------
     def run(self) -> int:
