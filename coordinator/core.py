@@ -162,7 +162,7 @@ class CoordinatorCore(TaskDispatch):
         self.scheduler.contact(worker_id)
         verdicts = []
         for item in items:
-            v = self._settle(worker_id, item.lease_id, item.result)
+            v = self._settle(worker_id, item.lease_id, item.result, item.unreadable)
             verdicts.append((item.result.trial_id, v))
             if v == Verdict.STORED:
                 self._finish_times.append(self.clock())
@@ -170,11 +170,13 @@ class CoordinatorCore(TaskDispatch):
                 self.dropped_results[v.value] += 1
         return None if verdicts and not self.commit() else tuple(verdicts)
 
-    def _settle(self, worker_id: str, lease_id: int, result: Any) -> Verdict:
+    def _settle(self, worker_id: str, lease_id: int, result: Any, unreadable: str = "") -> Verdict:
         storage = self.study.storage
         tid = result.trial_id
         if not 0 <= tid < storage.n_trials():
             return Verdict.UNKNOWN
+        if unreadable:  # a failed stand-in (protocol.submissions): it answers the trial's own seed
+            result = replace(result, seed=int(storage.columns()["seed"][tid]))
         for kind in (JUDGE, AUDIT, REFEREE):  # a task's result quotes the task's lease and the row it checks
             key = task_key(kind, tid)
             if self.scheduler.is_current(key, lease_id, worker_id):
@@ -192,6 +194,9 @@ class CoordinatorCore(TaskDispatch):
         refused = self._refuse_quarantined(tid, worker_id)
         if refused is not None:
             return refused
+        if unreadable:
+            log.warning("result for trial %d from %s cannot be read (%s): stored as failed", tid, worker_id,
+                        unreadable)
         if result.seed != int(storage.columns()["seed"][tid]):
             log.warning("result for trial %d has seed %d, expected %d: dropped", tid, result.seed,
                         int(storage.columns()["seed"][tid]))

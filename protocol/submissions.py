@@ -3,6 +3,7 @@ acknowledge each one."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
@@ -11,25 +12,45 @@ from spinefarm.protocol import limits
 from spinefarm.protocol.envelope import get_field
 from spinefarm.protocol.errors import MessageError
 from spinefarm.protocol.results import TrialResult
+from spinefarm.protocol.states import TrialStatus
 
 
 @dataclass(frozen=True)
 class SubmittedResult:
-    """A TrialResult with the lease it answers."""
+    """A TrialResult with the lease it answers. `unreadable`: set when decoding, why the result itself could not
+    be read although the trial and lease it answers could; `result` is then a failed stand-in with that reason,
+    so the coordinator stores the trial as failed instead of refusing the whole batch (and the worker running the
+    trial again for ever)."""
 
     lease_id: int
     result: TrialResult
+    unreadable: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return {"lease_id": self.lease_id, "result": self.result.to_dict()}
 
     @classmethod
     def from_dict(cls, data: Any) -> SubmittedResult:
-        result = TrialResult.from_dict(get_field(data, "result", dict, "submitted result"))
+        raw = get_field(data, "result", dict, "submitted result")
+        try:
+            result = TrialResult.from_dict(raw)
+        except MessageError as exc:
+            trial_id = raw.get("trial_id")
+            if isinstance(trial_id, bool) or not isinstance(trial_id, int) or trial_id < 0:
+                raise  # not even the trial it answers: the message is malformed
+            why = str(exc)[:300]
+            return cls(get_field(data, "lease_id", int, "submitted result"), unreadable_result(trial_id, why), why)
         if result.trial_id < 0:
             raise MessageError("submitted result has no trial id", received=result.trial_id,
                                expected="a trial id >= 0")
         return cls(get_field(data, "lease_id", int, "submitted result"), result)
+
+
+def unreadable_result(trial_id: int, why: str) -> TrialResult:
+    """A failed stand-in for a result that could not be read (its seed is the coordinator's to fill in)."""
+    nan = math.nan
+    return TrialResult(TrialStatus.FAILED, f"unreadable result: {why}", nan, nan, nan, nan, nan, 0.0, nan, nan, -1,
+                       trial_id=trial_id)
 
 
 @dataclass(frozen=True)

@@ -120,16 +120,18 @@ def test_malformed_work_requests_get_an_error_and_change_nothing(payload):
     assert core.rejected_messages == 1
 
 
+# Results that name no trial: nothing to attribute them to (one that names its trial and lease is stored as
+# failed instead, test_hostile_peers.py)
 @pytest.mark.parametrize("items", [
     "not a list",
     [{"lease_id": 1}],
     [{"lease_id": 1, "result": {"status": "complete"}}],
     [{"lease_id": 1, "result": {"status": "exploded", "reason": "", "distance_m": 1, "ntrt_distance_cm": 0,
                                 "speed_cm_s": 0, "work_j": 0, "cot": 0, "sim_time_s": 0, "wall_time_s": 0,
-                                "mass_kg": 1, "seed": 0, "trial_id": 0}}],
+                                "mass_kg": 1, "seed": 0}}],
     [{"lease_id": 1, "result": {"status": "complete", "reason": "", "distance_m": "far", "ntrt_distance_cm": 0,
                                 "speed_cm_s": 0, "work_j": 0, "cot": 0, "sim_time_s": 0, "wall_time_s": 0,
-                                "mass_kg": 1, "seed": 0, "trial_id": 0}}],
+                                "mass_kg": 1, "seed": 0, "trial_id": "0"}}],
     [{"lease_id": 1, "result": {"status": "complete", "reason": "", "distance_m": 1.0, "ntrt_distance_cm": 0,
                                 "speed_cm_s": 0, "work_j": 0, "cot": 0, "sim_time_s": 0, "wall_time_s": 0,
                                 "mass_kg": 1, "seed": 0}}],

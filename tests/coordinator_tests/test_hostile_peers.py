@@ -126,9 +126,9 @@ MALFORMED = {
     "long id": envelope({"worker_id": "w" * 65, "capacity": 1}),
     "id with a slash": envelope({"worker_id": "a/b", "capacity": 1}),
     "not UTF-8": b'{"schema":1,"kind":"work_request","body":{"worker_id":"\xff\xfe","capacity":1}}',
-    "huge reason": envelope({"worker_id": "w", "items": [{"lease_id": 1, "result": {
+    "huge reason, no trial id": envelope({"worker_id": "w", "items": [{"lease_id": 1, "result": {
         "status": "complete", "reason": "x" * 5000, "distance_m": 1, "ntrt_distance_cm": 1, "speed_cm_s": 1,
-        "work_j": 1, "cot": 1, "sim_time_s": 1, "wall_time_s": 1, "mass_kg": 1, "seed": 1, "trial_id": 0}}]},
+        "work_j": 1, "cot": 1, "sim_time_s": 1, "wall_time_s": 1, "mass_kg": 1, "seed": 1}}]},
         kind="result_submission"),
     "string capacity": envelope({"worker_id": "w", "capacity": "4096"}),
     "huge verdict list": envelope({"worker_id": "w", "capacity": 1, "results": [1] * 5000}),
@@ -154,3 +154,47 @@ def test_limits_in_isolation():
         limits.loads(b" " * (limits.MAX_MESSAGE_BYTES + 1))
     assert limits.loads(b'{"a": [1, 2.5, "inf"]}') == {"a": [1, 2.5, "inf"]}
     assert decode(encode("x", {"d": math.inf}))[1]["d"] == math.inf  # our own encoding of inf still travels
+
+
+def unreadable_item(a, reason: str = "x" * 5000) -> dict:
+    """A submitted result whose trial and lease can be read but whose result cannot (a reason too long)."""
+    return {"lease_id": a.lease_id, "result": {
+        "status": "complete", "reason": reason, "distance_m": 1, "ntrt_distance_cm": 1, "speed_cm_s": 1,
+        "work_j": 1, "cot": 1, "sim_time_s": 1, "wall_time_s": 1, "mass_kg": 1, "seed": a.seed,
+        "trial_id": a.trial_id}}
+
+
+def test_a_result_that_cannot_be_read_is_stored_as_failed_and_the_rest_of_its_batch_as_sent():
+    """One unreadable result used to void its whole batch: the worker dropped them all and the trials ran
+    again, the unreadable one for ever."""
+    core, storage, _ = sphere_core(trials=10)
+    a, b = ask(core, n=2).assignments
+    good = res(b).to_dict()
+    payload = envelope({"worker_id": "w1", "items": [unreadable_item(a), {"lease_id": b.lease_id, "result": good}]},
+                       kind="result_submission")
+    kind, body = decode(core.handle_results(payload))
+    assert kind == "result_ack", body
+    assert dict(body["verdicts"]) == {a.trial_id: "stored", b.trial_id: "stored"}
+    cols = storage.columns()
+    assert cols["status"][a.trial_id] == b"failed" and cols["status"][b.trial_id] == b"complete"
+    reason = cols["reason"][a.trial_id].decode()
+    assert reason.startswith("unreadable result: trial result field 'reason' is too long"), reason
+    assert cols["seed"][a.trial_id] == a.seed
+    # carried with a work request, the same
+    c, = ask(core).assignments
+    req = envelope({"worker_id": "w1", "capacity": 1, "results": [unreadable_item(c, reason=7)]})
+    kind, body = decode(core.handle_work(req))
+    assert kind == "work_grant" and dict(body["verdicts"]) == {c.trial_id: "stored"}, body
+    assert storage.columns()["status"][c.trial_id] == b"failed"
+
+
+def test_an_unreadable_result_quoting_a_lease_it_was_never_given_changes_nothing():
+    core, storage, _ = sphere_core(trials=10)
+    a, = ask(core).assignments
+    before = snapshot(storage)
+    forged = dict(unreadable_item(a), lease_id=a.lease_id + 1)
+    kind, body = decode(core.handle_results(envelope({"worker_id": "w1", "items": [forged]},
+                                                      kind="result_submission")))
+    assert kind == "result_ack" and dict(body["verdicts"]) == {a.trial_id: "stale"}
+    assert_unchanged(before, storage)
+    assert core.status()["forged_results"] == 1
