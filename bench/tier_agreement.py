@@ -23,15 +23,15 @@ import json
 import math
 import time
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
 import numpy as np
 from spinefarm.worker.calibrate import spearman  # the one rank correlation, shared with calibrate
+from spinefarm.worker.replay import PUBLISHED_DIR
 
 SPINES = ("tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed")
 # converged steps: Bullet is within ~1.5 % at 0.25 ms (docs/accuracy.md), MuJoCo well within 1 % at 0.5 ms
 CONVERGED_DT_S = {"bullet": 2.5e-4, "mujoco": 5e-4}
-NTRT = Path("/work/shared/ntrt-reference")
+NTRT = PUBLISHED_DIR  # NTRT's published parameter sets, shipped with the package
 REPLAYS = {"octahedral-complex": "OctahedralComplex/paper-2014-06-07",
            "tetrahedral-complex": "TetrahedralComplex/paper-2014-06-07",
            "tetraspine-ntrt": "TetraSpine/paper-2014-06-07", "ribbed": "Ribbed/paper-2014-06-07"}
