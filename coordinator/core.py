@@ -239,10 +239,8 @@ class CoordinatorCore(TaskDispatch):
                 self.tasks.drop(tid)
                 continue
             seed = int(self.study.storage.columns()["seed"][tid])
-            nan = math.nan
             log.warning("trial %d %s: stored as failed", tid, reason)
-            self.study.tell(TrialResult(TrialStatus.FAILED, reason, nan, nan, nan, nan, nan, 0.0, nan, nan, seed,
-                                        trial_id=tid))
+            self.study.tell(TrialResult.failed(reason, seed, trial_id=tid))
 
     def workers_released(self) -> bool:
         """Every worker that may still ask has heard that the run is done (so it can exit before we do):

@@ -5,6 +5,7 @@ Messages, storage columns, API schemas and exports all derive from SCORE_PARTS a
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
@@ -73,6 +74,13 @@ class TrialResult(Measured):
     @property
     def ok(self) -> bool:
         return self.status == TrialStatus.COMPLETE
+
+    @classmethod
+    def failed(cls, reason: str, seed: int, trial_id: int = -1, wall_time_s: float = math.nan) -> TrialResult:
+        """A failure with nothing measured (a trial that raised, was given up, or whose result was unreadable)."""
+        nan = math.nan
+        return cls(TrialStatus.FAILED, reason, nan, nan, nan, nan, nan, 0.0, wall_time_s, nan, seed,
+                   trial_id=trial_id)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

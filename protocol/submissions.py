@@ -3,7 +3,6 @@ acknowledge each one."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
@@ -12,7 +11,6 @@ from spinefarm.protocol import limits
 from spinefarm.protocol.envelope import get_field
 from spinefarm.protocol.errors import MessageError
 from spinefarm.protocol.results import TrialResult
-from spinefarm.protocol.states import TrialStatus
 
 
 @dataclass(frozen=True)
@@ -48,9 +46,7 @@ class SubmittedResult:
 
 def unreadable_result(trial_id: int, why: str) -> TrialResult:
     """A failed stand-in for a result that could not be read (its seed is the coordinator's to fill in)."""
-    nan = math.nan
-    return TrialResult(TrialStatus.FAILED, f"unreadable result: {why}", nan, nan, nan, nan, nan, 0.0, nan, nan, -1,
-                       trial_id=trial_id)
+    return TrialResult.failed(f"unreadable result: {why}", -1, trial_id=trial_id)
 
 
 @dataclass(frozen=True)

@@ -92,6 +92,4 @@ def build_evaluator(config: RunConfig) -> Evaluator:
 
 
 def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:
-    nan = float("nan")
-    return TrialResult(TrialStatus.FAILED, reason[:150], nan, nan, nan, nan, nan, 0.0, wall_time_s, nan,
-                       a.seed)
+    return TrialResult.failed(reason[:150], a.seed, wall_time_s=wall_time_s)
