@@ -36,8 +36,9 @@ def _cpu() -> tuple[str, str]:
 
 
 def _blas() -> dict[str, str | None]:
-    """numpy's BLAS: library, version and the kernel OpenBLAS picked for this CPU (None where unknown)."""
-    out: dict[str, str | None] = {"library": None, "version": None, "kernel": None}
+    """numpy's BLAS: library, version, the kernel OpenBLAS picked for this CPU and its threads (None where
+    unknown)."""
+    out: dict[str, str | int | None] = {"library": None, "version": None, "kernel": None, "threads": None}
     if "numpy" not in sys.modules:
         return out
     try:
@@ -46,6 +47,12 @@ def _blas() -> dict[str, str | None]:
         maps = Path("/proc/self/maps").read_text()
         for lib in sorted(set(re.findall(r"(/\S*openblas\S*\.so\S*)", maps))):
             handle = ctypes.CDLL(lib)
+            for name in ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads",
+                         "openblas_get_num_threads"):
+                threads = getattr(handle, name, None)
+                if threads is not None:
+                    out["threads"] = int(threads())
+                    break
             for name in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename", "openblas_get_corename"):
                 fn = getattr(handle, name, None)
                 if fn is not None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -38,9 +39,10 @@ def test_differences_name_what_changed_and_nothing_else():
     assert differences(None, rec) == ["the run file records no environment (written before spinefarm recorded one)"]
 
 
-def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+def _cli(*args: str, timeout: float = 300, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    base = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
     return subprocess.run([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, capture_output=True, text=True,
-                          timeout=timeout)
+                          timeout=timeout, env={**base, **(env or {})})
 
 
 def _forge_numpy_version(path: Path, version: str) -> None:
@@ -58,9 +60,12 @@ def test_a_run_file_records_it_and_trial_run_and_resume_say_what_differs(tmp_pat
     with h5py.File(out, "r") as f:
         stored = json.loads(f.attrs["environment"])
     assert stored["packages"]["numpy"] == np.__version__ and stored["python"] == platform.python_version()
+    assert stored["blas"]["threads"] == 1  # the command's processes run BLAS on one thread each
     same = _cli("trial", "--run", str(out), "--json")
     assert same.returncode == 0 and "environment differs" not in same.stderr, same.stderr
     assert json.loads(same.stdout.splitlines()[-1])["environment"]["packages"]["numpy"] == np.__version__
+    told = _cli("trial", "--run", str(out), "--json", env={"OPENBLAS_NUM_THREADS": "2"})  # a user's choice stays
+    assert json.loads(told.stdout.splitlines()[-1])["environment"]["blas"]["threads"] == 2, told.stderr
     _forge_numpy_version(out, "1.26.0")
     rerun = _cli("trial", "--run", str(out), "--json")
     assert rerun.returncode == 0, rerun.stderr
