@@ -7,9 +7,10 @@
   stored; it fails only when the judge's run fails.
 - The audit re-simulates a fraction of the results (and every new best) on another worker at the same
   fidelity; a disagreement marks the result (it never counts as best), and its worker (PeerBook).
-- The judge watches the screen: once three judged ratios in a row (trial-id order) have a median
-  outside [1 - drift, 1 + drift], the ladder's fidelity is raised for every trial leased from then on
-  (the judge's engine at 4x the judge's step when the judge is another engine, else half the step).
+- The judge watches the screen: once three judged ratios in a row (trial-id order; bests that move 10 cm or
+  more in either run) have a median outside [1 - drift, 1 + drift], the ladder's fidelity is raised for every
+  trial leased from then on (the judge's engine at 4x the judge's step when the judge is another engine, else
+  half the step).
 
 Task state lives in storage (verification and audit columns: pending, then the verdict), so a restarted
 coordinator issues pending tasks again. In the lease scheduler a task is a negative key, never a row id.
@@ -31,6 +32,9 @@ JUDGE, AUDIT, REFEREE = 1, 2, 3
 _KINDS = {JUDGE: "judge", AUDIT: "audit", REFEREE: "referee"}
 _KEY_STRIDE = 4
 _DRIFT_WINDOW = 3
+# a best that barely moves says nothing of the screen: a few millimetres of step error are a factor of 4 on the
+# first bests of a search, which move a few centimetres, and once halved the step stays halved all run
+_DRIFT_MIN_DISTANCE_M = 0.1
 
 
 def task_key(kind: int, trial_id: int) -> int:
@@ -86,7 +90,8 @@ class TaskBook:
     def drift(self) -> str | None:
         """Why the screen is no longer trusted (three judged ratios in a row drifted), or None."""
         cols = self.storage.columns()
-        ratios = cols["judge_ratio"][np.isfinite(cols["judge_ratio"])]
+        moved = np.fmax(cols["distance_m"], cols["verify_distance_m"]) >= _DRIFT_MIN_DISTANCE_M
+        ratios = cols["judge_ratio"][np.isfinite(cols["judge_ratio"]) & moved]
         d = self.settings.judge.drift
         for i in range(len(ratios) - _DRIFT_WINDOW + 1):
             m = float(np.median(ratios[i:i + _DRIFT_WINDOW]))

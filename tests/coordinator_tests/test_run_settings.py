@@ -113,6 +113,27 @@ def test_drifting_judged_ratios_raise_the_screens_fidelity_and_a_resumed_run_kee
         storage.close()
 
 
+def test_bests_that_barely_move_do_not_raise_the_fidelity(tmp_path):
+    """The first bests of a search move a few cm, where a step's error of millimetres is a factor: their judged
+    ratios (here 4) must not halve the step for the whole run."""
+    config = build_run_config("still", "sphere:3", trial_overrides={"engine": "mujoco"})
+    judge = JudgePolicy(rung=Rung("bullet", 2.5e-4), drift=0.2)
+    core, storage = new_run(config, SearchSettings(trials=20, judge=judge), tmp_path / "r.h5", FakeClock())
+    judged = 0
+    try:
+        for _ in range(40):
+            grant = _answer(core, "w1", 1, lambda a: 0.00025 * (a.trial_id + 1) if a.fidelity.task == "judge"
+                            else 0.001 * (a.trial_id + 1))  # every trial a new best, 1-20 mm; the judge a quarter
+            judged += sum(a.fidelity.task == "judge" for a in grant.assignments)
+            if judged >= 6:
+                break
+        ratios = storage.columns()["judge_ratio"]
+        assert judged >= 6 and np.allclose(ratios[np.isfinite(ratios)], 4.0)
+        assert core.drift is None and core.status()["fidelity_raised"] is None
+    finally:
+        storage.close()
+
+
 def _r(distance: float, ok: bool = True) -> TrialResult:
     status = TrialStatus.COMPLETE if ok else TrialStatus.FAILED
     return TrialResult(status, "" if ok else "diverged: x", distance, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 0)
