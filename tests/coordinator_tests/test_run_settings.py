@@ -79,12 +79,17 @@ def test_a_sampler_with_its_own_phase_needs_no_storage_edit_and_resumes(tmp_path
         del SAMPLERS["stripes"]
 
 
+def _screened_run(tmp_path, run_id: str):
+    """A new 20-trial run screened in MuJoCo, its bests judged in Bullet at 0.25 ms, drift 0.2."""
+    config = build_run_config(run_id, "sphere:3", trial_overrides={"engine": "mujoco"})
+    judge = JudgePolicy(rung=Rung("bullet", 2.5e-4), drift=0.2)
+    return new_run(config, SearchSettings(trials=20, judge=judge), tmp_path / "r.h5", FakeClock())
+
+
 def test_drifting_judged_ratios_raise_the_screens_fidelity_and_a_resumed_run_keeps_it(tmp_path):
     """A MuJoCo screen judged in Bullet whose judge keeps measuring half the screen's distance: after three
     judged bests the screen is no longer trusted and new trials run in Bullet at 4x the judge's step."""
-    config = build_run_config("drift", "sphere:3", trial_overrides={"engine": "mujoco"})
-    judge = JudgePolicy(rung=Rung("bullet", 2.5e-4), drift=0.2)
-    core, storage = new_run(config, SearchSettings(trials=20, judge=judge), tmp_path / "r.h5", FakeClock())
+    core, storage = _screened_run(tmp_path, "drift")
     judged = 0
     try:
         for _ in range(40):
@@ -116,9 +121,7 @@ def test_drifting_judged_ratios_raise_the_screens_fidelity_and_a_resumed_run_kee
 def test_bests_that_barely_move_do_not_raise_the_fidelity(tmp_path):
     """The first bests of a search move a few cm, where a step's error of millimetres is a factor: their judged
     ratios (here 4) must not halve the step for the whole run."""
-    config = build_run_config("still", "sphere:3", trial_overrides={"engine": "mujoco"})
-    judge = JudgePolicy(rung=Rung("bullet", 2.5e-4), drift=0.2)
-    core, storage = new_run(config, SearchSettings(trials=20, judge=judge), tmp_path / "r.h5", FakeClock())
+    core, storage = _screened_run(tmp_path, "still")
     judged = 0
     try:
         for _ in range(40):
