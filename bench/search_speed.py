@@ -73,7 +73,9 @@ def main() -> None:
     args = ap.parse_args()
     rungs = args.rungs or f"{args.duration / 3:g},{args.duration:g}"
     with tempfile.TemporaryDirectory() as tmp:
-        bullet = search("bullet", Path(tmp) / "bullet.h5", args, ["--duration", str(args.duration)])
+        # Bullet named, not left to `auto`: a calibration would add its minutes to this run's wall time.
+        bullet = search("bullet", Path(tmp) / "bullet.h5", args,
+                        ["--engine", "bullet", "--duration", str(args.duration)])
         options = [x for o in (args.screen_option or ["segment_contacts=off"]) for x in ("--engine-option", o)]
         multi = search("multi-fidelity", Path(tmp) / "multi.h5", args,
                        ["--engine", "mujoco", "--dt", str(args.screen_dt), *options, "--rungs", rungs,

@@ -73,7 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 # --- worker, api, export ---------------------------------------------------------------------------
 def cmd_worker(args: argparse.Namespace) -> int:
-    from spinefarm.worker.service import WorkerService
+    from spinefarm.worker.service import WorkerService, WorkerTimings, ZenohAccess
     from spinefarm.worker.tasks import parse_engines
 
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
@@ -81,11 +81,10 @@ def cmd_worker(args: argparse.Namespace) -> int:
     checks.endpoints("--listen", args.listen)
     if not args.connect and not args.zenoh_config:
         args.connect = ["tcp/127.0.0.1:7447"]
-    service = WorkerService(connect=args.connect or (), run_id=args.run_id, worker_id=args.worker_id,
-                            batch=args.batch, listen=args.listen or (), zenoh_config_file=args.zenoh_config,
-                            exit_when_done=args.exit_when_done, coordinator_timeout_s=args.coordinator_timeout,
-                            credentials_file=args.credentials, engines=parse_engines(args.engines),
-                            min_trial_limit_s=args.min_trial_limit)
+    access = ZenohAccess(args.connect or (), args.listen or (), args.zenoh_config, args.credentials)
+    timings = WorkerTimings(coordinator_timeout_s=args.coordinator_timeout, min_trial_limit_s=args.min_trial_limit)
+    service = WorkerService(access, run_id=args.run_id, worker_id=args.worker_id, batch=args.batch,
+                            engines=parse_engines(args.engines), exit_when_done=args.exit_when_done, timings=timings)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: service.stop.set())
     return service.run()

@@ -15,7 +15,7 @@ import os
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import zenoh
@@ -32,8 +32,8 @@ from spinefarm.worker.pacing import Backoff, BatchSizer, default_worker_id, mark
 from spinefarm.worker.sandbox import MIN_LIMIT_S, TrialLimit, TrialSandbox
 from spinefarm.worker.tasks import available_engines, environment
 
-__all__ = ["Backoff", "BatchSizer", "WorkerService", "build_evaluator", "default_worker_id", "sphere_result",
-           "zenoh_config"]
+__all__ = ["Backoff", "BatchSizer", "WorkerService", "WorkerTimings", "ZenohAccess", "build_evaluator",
+           "default_worker_id", "sphere_result"]
 log = logging.getLogger("spinefarm.worker")
 # A 2 s transport lease lets the coordinator notice a frozen (SIGSTOPped) worker in ~2 s, not 10 s.
 WORKER_LEASE_MS = 2000
@@ -42,38 +42,66 @@ WORKER_LEASE_MS = 2000
 COORDINATOR_TIMEOUT_S = 30.0
 
 
-def zenoh_config(connect: Sequence[str], listen: Sequence[str] = (),
-                 config_file: str | Path | None = None, credentials_file: str | Path | None = None) -> zenoh.Config:
-    """Client of the coordinator/router at `connect`; multicast scouting off; short transport lease;
-    with a credentials file (protocol.credentials) it authenticates, and as a listening peer checks others."""
-    try:
-        conf = zenoh.Config.from_file(str(config_file)) if config_file else zenoh.Config()
-    except Exception as exc:
-        raise ConfigError(f"cannot read Zenoh config {config_file}: {exc}", expected="a JSON5 file") from exc
-    conf.insert_json5("mode", json.dumps("peer" if listen else "client"))
-    if connect:
-        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
-    if listen:
-        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("transport/link/tx/lease", str(WORKER_LEASE_MS))
-    if credentials_file is not None:
-        from spinefarm.protocol.credentials import load_credentials
+@dataclass(frozen=True)
+class ZenohAccess:
+    """How a worker reaches its coordinator: endpoints to connect to, endpoints to listen on (a peer), a Zenoh
+    config file and a credentials file (protocol.credentials)."""
 
-        for key, value in load_credentials(credentials_file).zenoh_settings(accept=bool(listen)).items():
-            conf.insert_json5(key, value)
-    return conf
+    connect: Sequence[str] = ()
+    listen: Sequence[str] = ()
+    config_file: str | Path | None = None
+    credentials_file: str | Path | None = None
+
+    def config(self) -> zenoh.Config:
+        """Client of the coordinator/router at `connect`; multicast scouting off; short transport lease;
+        with a credentials file it authenticates, and as a listening peer checks others."""
+        try:
+            conf = zenoh.Config.from_file(str(self.config_file)) if self.config_file else zenoh.Config()
+        except Exception as exc:
+            raise ConfigError(f"cannot read Zenoh config {self.config_file}: {exc}", expected="a JSON5 file") from exc
+        conf.insert_json5("mode", json.dumps("peer" if self.listen else "client"))
+        if self.connect:
+            conf.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        if self.listen:
+            conf.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("transport/link/tx/lease", str(WORKER_LEASE_MS))
+        if self.credentials_file is not None:
+            from spinefarm.protocol.credentials import load_credentials
+
+            for key, value in load_credentials(self.credentials_file).zenoh_settings(accept=bool(self.listen)).items():
+                conf.insert_json5(key, value)
+        return conf
+
+
+@dataclass(frozen=True)
+class WorkerTimings:
+    """A worker's waits: a query's timeout, how often results are handed in, how long a worker with
+    --exit-when-done idles before exiting, how long its coordinator may stay silent (the run has then ended),
+    and the shortest wall-clock limit of a sandboxed trial."""
+
+    query_timeout_s: float = 5.0
+    submit_interval_s: float = 1.0
+    idle_exit_s: float = 2.0
+    coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S
+    min_trial_limit_s: float = MIN_LIMIT_S
+
+    def __post_init__(self) -> None:
+        for name, what in (("query_timeout_s", "query timeout"), ("submit_interval_s", "submit interval"),
+                           ("coordinator_timeout_s", "coordinator timeout (--coordinator-timeout)"),
+                           ("min_trial_limit_s", "minimum trial limit (--min-trial-limit)")):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"{what} out of range", received=getattr(self, name), expected="seconds > 0")
+        if not self.idle_exit_s >= 0:
+            raise ConfigError("idle_exit_s out of range", received=self.idle_exit_s, expected="seconds >= 0")
 
 
 class WorkerService:
-    def __init__(self, *, connect: Sequence[str], run_id: str | None = None, worker_id: str | None = None,
-                 batch: int | None = None, listen: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
-                 exit_when_done: bool = False, query_timeout_s: float = 5.0,
-                 submit_interval_s: float = 1.0, idle_exit_s: float = 2.0,
-                 coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S,
-                 credentials_file: str | Path | None = None, engines: tuple[str, ...] | None = None,
-                 isolate: bool = True, min_trial_limit_s: float = MIN_LIMIT_S) -> None:
-        """engines: the engines this worker offers (default: every installed one)."""
+    def __init__(self, access: ZenohAccess, *, run_id: str | None = None, worker_id: str | None = None,
+                 batch: int | None = None, engines: tuple[str, ...] | None = None, exit_when_done: bool = False,
+                 isolate: bool = True, timings: WorkerTimings | None = None) -> None:
+        """access: where and how the worker reaches its coordinator; engines: the engines this worker offers
+        (default: every installed one)."""
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
         self.engines = available_engines(engines)
         self.environment = environment()
@@ -83,24 +111,15 @@ class WorkerService:
         self.batch = BatchSizer(batch)
         self.exit_when_done = exit_when_done
         self.isolate = isolate   # trials in a child process under a wall-clock limit (worker.sandbox)
-        if not min_trial_limit_s > 0:
-            raise ConfigError("minimum trial limit out of range", received=min_trial_limit_s, expected="seconds > 0")
-        self.min_trial_limit_s = min_trial_limit_s
+        self.timings = timings or WorkerTimings()
         self._sandboxes: list[TrialSandbox] = []
         # SPINEFARM_ACK_LOG: one line per verdict received (run, trial, verdict, status, distance), for the
         # fault benches to count lost and duplicated results against what the coordinator acknowledged
         ack_log = os.environ.get("SPINEFARM_ACK_LOG")
         self._ack_log = open(ack_log, "a", buffering=1) if ack_log else None  # noqa: SIM115 (lives with the worker)
-        self.query_timeout_s = query_timeout_s
-        self.submit_interval_s = submit_interval_s
-        self.idle_exit_s = idle_exit_s
-        if not coordinator_timeout_s > 0:
-            raise ConfigError("coordinator timeout out of range", received=coordinator_timeout_s,
-                              expected="seconds > 0")
-        self.coordinator_timeout_s = coordinator_timeout_s
         self._last_heard = time.monotonic()   # the last reply from the current run's coordinator
-        self._conf_args = (tuple(connect), tuple(listen), zenoh_config_file, credentials_file)
-        zenoh_config(*self._conf_args)  # fail fast on a bad config file
+        self.access = access
+        access.config()  # fail fast on a bad config file
         self._evaluators: dict[str, Evaluator] = {}
         self._pending: dict[str, dict[int, SubmittedResult]] = {}   # run id -> trial id -> result
         self._done_runs: set[str] = set()
@@ -118,7 +137,7 @@ class WorkerService:
     def _query(self, session: zenoh.Session, key: str, payload: bytes | None, cls: type) -> tuple[list, int]:
         """(replies decoded as `cls`, number of replies that refused the request or were malformed)."""
         out, refused = [], 0
-        for reply in session.get(key, payload=payload, timeout=self.query_timeout_s):
+        for reply in session.get(key, payload=payload, timeout=self.timings.query_timeout_s):
             if reply.ok is None:
                 log.warning("error reply on %s", key)
                 refused += 1
@@ -163,7 +182,7 @@ class WorkerService:
         objective without fault bands cannot hang: its microsecond trials skip the ~0.2 ms round trip)."""
         if not self.isolate or (config.is_test_objective and "poison" not in config.trial_config):
             return build_evaluator(config)
-        sandbox = TrialSandbox(config, TrialLimit(self.min_trial_limit_s), self.stop)
+        sandbox = TrialSandbox(config, TrialLimit(self.timings.min_trial_limit_s), self.stop)
         self._sandboxes.append(sandbox)
         sandbox.start()
         return sandbox.run
@@ -171,7 +190,7 @@ class WorkerService:
     def _report_problem(self, session: zenoh.Session, run_id: str, reason: str, lease: TrialAssignment) -> None:
         self.unservable[run_id] = reason
         payload = encode_message(WorkerProblem(self.worker_id, reason, lease.trial_id, lease.lease_id))
-        for _ in session.get(keys.problem(run_id), payload=payload, timeout=self.query_timeout_s):
+        for _ in session.get(keys.problem(run_id), payload=payload, timeout=self.timings.query_timeout_s):
             pass
 
     def _apply(self, run_id: str, verdicts: tuple) -> None:
@@ -212,7 +231,7 @@ class WorkerService:
 
     def _silent(self) -> bool:
         """With --exit-when-done: the current run's coordinator has not answered for the timeout."""
-        return self.exit_when_done and time.monotonic() - self._last_heard >= self.coordinator_timeout_s
+        return self.exit_when_done and time.monotonic() - self._last_heard >= self.timings.coordinator_timeout_s
 
     def _run_one(self, evaluate: Evaluator, a: TrialAssignment) -> TrialResult | None:
         t0 = time.perf_counter()
@@ -230,9 +249,9 @@ class WorkerService:
     # --- main loop --------------------------------------------------------------------------------
     def run(self) -> int:
         # a config is used up by open: a fresh one for every attempt
-        connector = Connector(lambda: zenoh.open(zenoh_config(*self._conf_args)), zenoh.ZError, self._conf_args[0],
+        connector = Connector(lambda: zenoh.open(self.access.config()), zenoh.ZError, self.access.connect,
                               self.stop, exit_when_done=self.exit_when_done,
-                              coordinator_timeout_s=self.coordinator_timeout_s)
+                              coordinator_timeout_s=self.timings.coordinator_timeout_s)
         session = connector.open()
         if session is None:
             self.exit_code = connector.exit_code or self.exit_code
@@ -262,7 +281,8 @@ class WorkerService:
             if run_id is None:
                 # Without a given run, "done" means no open run seen for a while, not one empty answer.
                 idle_since = idle_since if idle_since is not None else time.monotonic()
-                if self.exit_when_done and self._done_runs and time.monotonic() - idle_since >= self.idle_exit_s:
+                idle_s = time.monotonic() - idle_since
+                if self.exit_when_done and self._done_runs and idle_s >= self.timings.idle_exit_s:
                     return
                 self.stop.wait(backoff.next())
                 continue
@@ -323,6 +343,6 @@ class WorkerService:
             pending[a.trial_id] = SubmittedResult(a.lease_id, result)
             self.batch.observe(time.perf_counter() - t0)
             self.trials_run += 1
-            if time.monotonic() - last_submit >= self.submit_interval_s:
+            if time.monotonic() - last_submit >= self.timings.submit_interval_s:
                 self._submit(session)
                 last_submit = time.monotonic()

@@ -14,7 +14,7 @@ from spinefarm.protocol.envelope import decode, decode_message, encode_message
 from spinefarm.protocol.submissions import ResultAck
 from spinefarm.protocol.work import RunInfo, WorkGrant, WorkRequest
 from spinefarm.storage.status import read_status
-from spinefarm.worker.service import WorkerService
+from spinefarm.worker.service import WorkerService, ZenohAccess
 
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
 
@@ -46,7 +46,7 @@ def query(session, key, payload=None):
 
 
 def start_workers(endpoint, run_id, n, batch=8):
-    workers = [WorkerService(connect=[endpoint], run_id=run_id, batch=batch, exit_when_done=True,
+    workers = [WorkerService(ZenohAccess([endpoint]), run_id=run_id, batch=batch, exit_when_done=True,
                              worker_id=f"w{i}") for i in range(n)]
     threads = [threading.Thread(target=w.run, daemon=True) for w in workers]
     for t in threads:
@@ -128,7 +128,7 @@ def test_worker_discovers_the_run_without_being_told(endpoint):
     core, storage, _ = sphere_core(trials=30, clock=time.monotonic, run_id="discover-me")
     service = CoordinatorService(core, storage, listen=[endpoint]).start()
     try:
-        w = WorkerService(connect=[endpoint], batch=4, exit_when_done=True)
+        w = WorkerService(ZenohAccess([endpoint]), batch=4, exit_when_done=True)
         t = threading.Thread(target=w.run, daemon=True)
         t.start()
         assert service.wait_done(20)

@@ -9,10 +9,19 @@ import time
 import numpy as np
 import pytest
 from spinefarm.coordinator.service import CoordinatorService
+from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.protocol.work import TrialAssignment
-from spinefarm.worker.service import Backoff, WorkerService, build_evaluator, default_worker_id, sphere_result
+from spinefarm.worker.service import (
+    Backoff,
+    WorkerService,
+    WorkerTimings,
+    ZenohAccess,
+    build_evaluator,
+    default_worker_id,
+    sphere_result,
+)
 
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
 
@@ -34,7 +43,7 @@ def test_sphere_scores_peak_at_the_optimum():
 
 
 def test_bad_vector_becomes_a_failed_result_naming_the_problem():
-    w = WorkerService(connect=["tcp/127.0.0.1:9"], worker_id="w-bad")
+    w = WorkerService(ZenohAccess(["tcp/127.0.0.1:9"]), worker_id="w-bad")
     evaluate = build_evaluator(sphere_config())
     r = w._run_one(evaluate, TrialAssignment(4, 9, (0.5, 0.5), 11, 1.0))
     assert r.status == TrialStatus.FAILED and r.trial_id == 4 and r.worker_id == "w-bad" and r.seed == 11
@@ -60,7 +69,7 @@ def test_default_worker_ids_are_valid_and_distinct():
 def test_worker_waits_for_an_absent_coordinator_then_serves_it():
     endpoint = free_endpoint()
     core, storage, _ = sphere_core(trials=40, clock=time.monotonic)
-    w = WorkerService(connect=[endpoint], run_id=core.run_id, batch=8, exit_when_done=True)
+    w = WorkerService(ZenohAccess([endpoint]), run_id=core.run_id, batch=8, exit_when_done=True)
     t = threading.Thread(target=w.run, daemon=True)
     t.start()
     t.join(0.3)
@@ -80,8 +89,8 @@ def test_results_are_resent_until_the_coordinator_acknowledges_them():
     core, storage, _ = sphere_core(trials=3, clock=time.monotonic, morphology="sphere:2", duration_s=0.3)
     first = CoordinatorService(core, storage, listen=[endpoint]).start()
     # No result is handed in mid-batch (submit interval 60 s): they ride along with the next work request.
-    w = WorkerService(connect=[endpoint], run_id=core.run_id, batch=3, exit_when_done=True,
-                      query_timeout_s=1.0, submit_interval_s=60.0)
+    w = WorkerService(ZenohAccess([endpoint]), run_id=core.run_id, batch=3, exit_when_done=True,
+                      timings=WorkerTimings(query_timeout_s=1.0, submit_interval_s=60.0))
     t = threading.Thread(target=w.run, daemon=True)
     t.start()
     # Closing once the batch is leased raced the worker's fetch of the run's config (it then had leases it
@@ -113,7 +122,21 @@ def test_auto_batch_follows_the_mean_trial_time():
     assert auto.size() == 64  # microsecond trials: capped large batches
     assert BatchSizer(7).size() == 7
     with pytest.raises(Exception, match="batch out of range"):
-        WorkerService(connect=["tcp/127.0.0.1:9"], batch=0)
+        WorkerService(ZenohAccess(["tcp/127.0.0.1:9"]), batch=0)
+
+
+def test_bad_worker_waits_name_the_flag_and_the_value(capsys):
+    for kwargs, flag in (({"coordinator_timeout_s": 0.0}, "--coordinator-timeout"),
+                         ({"min_trial_limit_s": -1.0}, "--min-trial-limit")):
+        with pytest.raises(ConfigError, match=flag) as err:
+            WorkerTimings(**kwargs)
+        assert str(next(iter(kwargs.values()))) in str(err.value)
+    with pytest.raises(ConfigError, match="query timeout"):
+        WorkerTimings(query_timeout_s=float("nan"))
+    from spinefarm.cli.main import main
+
+    assert main(["worker", "--connect", "tcp/127.0.0.1:9", "--min-trial-limit", "0"]) != 0
+    assert "--min-trial-limit" in capsys.readouterr().err
 
 
 class HandRolledCoordinator:
@@ -164,7 +187,8 @@ class HandRolledCoordinator:
 def run_worker_against(peer_config: RunConfig, refuse_results: bool):
     endpoint = free_endpoint()
     peer = HandRolledCoordinator(endpoint, peer_config, refuse_results)
-    w = WorkerService(connect=[endpoint], run_id=peer_config.run_id, exit_when_done=True, query_timeout_s=1.0)
+    w = WorkerService(ZenohAccess([endpoint]), run_id=peer_config.run_id, exit_when_done=True,
+                      timings=WorkerTimings(query_timeout_s=1.0))
     t = threading.Thread(target=w.run, daemon=True)
     try:
         t.start()
@@ -196,7 +220,7 @@ def test_zenoh_json5_config_file_is_passed_through(tmp_path):
     core, storage, _ = sphere_core(trials=10, clock=time.monotonic)
     service = CoordinatorService(core, storage, listen=[endpoint]).start()
     try:
-        w = WorkerService(connect=(), zenoh_config_file=conf, run_id=core.run_id, exit_when_done=True)
+        w = WorkerService(ZenohAccess(config_file=conf), run_id=core.run_id, exit_when_done=True)
         t = threading.Thread(target=w.run, daemon=True)
         t.start()
         assert service.wait_done(20)
@@ -207,11 +231,10 @@ def test_zenoh_json5_config_file_is_passed_through(tmp_path):
 
 
 def test_unreadable_zenoh_config_is_a_clear_error(tmp_path):
-    from spinefarm.protocol.errors import ConfigError
 
     bad = tmp_path / "bad.json5"
     bad.write_text("{ this is not json5 ")
     with pytest.raises(ConfigError, match="cannot read Zenoh config"):
-        WorkerService(connect=(), zenoh_config_file=bad)
+        WorkerService(ZenohAccess(config_file=bad))
     with pytest.raises(ConfigError, match="cannot read Zenoh config"):
-        WorkerService(connect=(), zenoh_config_file=tmp_path / "missing.json5")
+        WorkerService(ZenohAccess(config_file=tmp_path / "missing.json5"))
