@@ -10,8 +10,10 @@ for the next one. A child that dies mid-trial (a segfault) reports it `crashed: 
 the coordinator, which re-issues the trial until it has done this on 3 workers (coordinator.core).
 
 The limit (TrialLimit): max(min_s, factor x the measured wall seconds per simulated second x the
-trial's simulated seconds); before any trial of the run has completed here, first_factor x min_s (a
-first trial may compile kernels). The child asks the kernel for SIGKILL when the worker dies.
+trial's simulated seconds), measured per kind of task (task, engine, step, perturbed, length); before a
+task of its kind has completed here, first_factor x the larger of min_s and the slowest measured rate scaled
+to its step (a first trial may compile kernels; a first judge runs a finer step in another engine).
+The child asks the kernel for SIGKILL when the worker dies.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import ctypes
 import multiprocessing as mp
 import signal
 import time
+from collections.abc import Hashable
 from dataclasses import replace
 from multiprocessing.connection import Connection
 from threading import Event
@@ -40,7 +43,10 @@ RETRIED_REASONS = ("timeout:", "crashed:")   # coordinator.core re-issues these 
 
 
 class TrialLimit:
-    """Wall-clock limit of a trial from its simulated length and the cost measured on this worker."""
+    """Wall-clock limit of a trial from its simulated length and the cost measured on this worker, kept per kind
+    of task: a rung's screen, a judge at a finer step in another engine and a perturbed re-run cost per simulated
+    second what the others do not (a MuJoCo 2 ms screen and a Bullet 0.25 ms judge differ ~30x), so one
+    measured rate would time out every judge."""
 
     def __init__(self, min_s: float = MIN_LIMIT_S, factor: float = LIMIT_FACTOR,
                  first_factor: float = FIRST_FACTOR) -> None:
@@ -48,26 +54,48 @@ class TrialLimit:
             raise ValueError(f"trial limit settings out of range: min_s={min_s}, factor={factor}, "
                              f"first_factor={first_factor} (expected min_s > 0, factors >= 1)")
         self.min_s, self.factor, self.first_factor = min_s, factor, first_factor
-        self.wall_per_sim: float | None = None   # measured wall s per simulated s (slowest-leaning mean)
+        # measured wall s per simulated s (slowest-leaning mean) and the step it ran at, per kind of task
+        self._rates: dict[Hashable, tuple[float, float | None]] = {}
 
-    def observe(self, wall_time_s: float, sim_time_s: float) -> None:
+    @property
+    def wall_per_sim(self) -> float | None:
+        """The slowest measured rate of any kind (None before any trial completed)."""
+        return max((r for r, _ in self._rates.values()), default=None)
+
+    def observe(self, wall_time_s: float, sim_time_s: float, kind: Hashable = None, dt_s: float | None = None) -> None:
         if not (wall_time_s > 0 and sim_time_s > 0):
             return
         r = wall_time_s / sim_time_s
-        w = self.wall_per_sim
-        self.wall_per_sim = r if w is None else max(0.8 * w + 0.2 * r, 0.5 * w)
+        w = self._rates.get(kind, (None, None))[0]
+        self._rates[kind] = (r if w is None else max(0.8 * w + 0.2 * r, 0.5 * w), dt_s)
 
-    def limit_s(self, sim_s: float) -> float:
-        if self.wall_per_sim is None or not sim_s > 0:
+    def limit_s(self, sim_s: float, kind: Hashable = None, dt_s: float | None = None) -> float:
+        """A kind measured here: factor x its rate x sim_s. A kind not yet measured (a first trial, or the first
+        judge of a run): first_factor x the larger of min_s and the slowest measured rate scaled to this step."""
+        if not sim_s > 0:
             return self.first_factor * self.min_s
-        return max(self.min_s, self.factor * self.wall_per_sim * sim_s)
+        if kind in self._rates:
+            return max(self.min_s, self.factor * self._rates[kind][0] * sim_s)
+        guesses = [r * (max(1.0, dt / dt_s) if dt and dt_s else 1.0) * sim_s for r, dt in self._rates.values()]
+        return self.first_factor * max([self.min_s, *guesses])
 
 
 def simulated_s(config: RunConfig, a: TrialAssignment) -> float:
     """Simulated seconds the trial asks for (settle phase included)."""
     tc = config.trial_config
     duration = a.duration_s if a.duration_s is not None else float(tc.get("duration_s") or 0.0)
-    return duration + float(tc.get("settle_s") or 0.0)
+    settle = a.fidelity.settle_s if a.fidelity is not None and a.fidelity.settle_s is not None else None
+    return duration + float(tc.get("settle_s") or 0.0 if settle is None else settle)
+
+
+def task_kind(config: RunConfig, a: TrialAssignment) -> tuple[Hashable, float | None]:
+    """What a trial's cost per simulated second depends on (its task, engine, step, perturbed re-run and length:
+    robust episodes may grow by rung) and its step, where known."""
+    f = a.fidelity
+    step = f.dt_s if f is not None and f.dt_s is not None else config.trial_config.get("dt_s")
+    dt_s = float(step) if isinstance(step, int | float) and not isinstance(step, bool) else None
+    kind = (None, None, False, None) if f is None else (f.task, f.engine, f.perturb, f.dt_s)
+    return (*kind, a.duration_s), dt_s
 
 
 def _die_with_parent() -> None:
@@ -165,7 +193,8 @@ class TrialSandbox:
             self._kill()
             self.start()
         sim_s = simulated_s(self.config, a)
-        limit_s = self.limit.limit_s(sim_s)
+        kind, dt_s = task_kind(self.config, a)
+        limit_s = self.limit.limit_s(sim_s, kind, dt_s)
         t0 = time.perf_counter()
         assert self._conn is not None
         self._conn.send(a)
@@ -183,7 +212,7 @@ class TrialSandbox:
         elif msg[0] == "ok":
             result = msg[1]
             if result.ok:
-                self.limit.observe(result.wall_time_s, sim_s)
+                self.limit.observe(result.wall_time_s, sim_s, kind, dt_s)
         else:
             result = failed_result(a, str(msg[1]), wall)
         return replace(result, extras={**result.extras, "time_limit_s": limit_s})

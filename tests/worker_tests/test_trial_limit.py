@@ -14,7 +14,7 @@ from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.protocol.work import TrialAssignment
 from spinefarm.storage.hdf5_reader import read_run
-from spinefarm.worker.sandbox import TrialLimit, TrialSandbox, _child
+from spinefarm.worker.sandbox import TrialLimit, TrialSandbox, _child, simulated_s, task_kind
 
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, spinefarm, stop
@@ -71,7 +71,7 @@ def test_a_frozen_physics_trial_times_out_from_its_measured_cost_and_the_next_on
     try:
         warm = box.run(at(0.3, n))
         assert warm.ok, warm.reason
-        limit = box.limit.limit_s(0.2)
+        limit = box.limit.limit_s(simulated_s(cfg, at(0.4, n)), *task_kind(cfg, at(0.4, n)))
         assert 1.0 <= limit <= max(1.0, 8 * 1.25 * warm.wall_time_s / 0.2 * 0.2)
         pid = box._proc.pid
         threading.Timer(0.05, os.kill, (pid, signal.SIGSTOP)).start()  # stands in for a call that never returns
@@ -109,3 +109,38 @@ def test_a_hanging_trial_is_given_up_after_three_timeouts_and_the_run_reaches_it
         else:
             assert status[i] == "complete", reasons[i]
     assert any(u < 0.15 for u in u0) and (cols["time_limit_s"][[s == "complete" for s in status]] > 0).all()
+
+
+def test_each_kind_of_task_has_its_own_measured_cost():
+    """A screen's rate does not set a judge's limit: a kind not yet measured gets first_factor x the slowest
+    measured rate scaled to its finer step (hand computed)."""
+    limit = TrialLimit(min_s=1.0, factor=8.0, first_factor=10.0)
+    screen, judge = ("trial", "mujoco", False, 0.002, 3.0), ("judge", "bullet", False, 0.00025, None)
+    assert limit.limit_s(4.0, screen, 0.002) == 10.0  # nothing measured: first_factor x min_s
+    limit.observe(0.8, 4.0, screen, 0.002)  # 0.2 wall s per simulated s
+    assert limit.limit_s(4.0, screen, 0.002) == 8.0 * 0.2 * 4.0
+    assert limit.limit_s(31.0, judge, 0.00025) == 10.0 * 0.2 * 8.0 * 31.0  # the step 8x finer
+    limit.observe(62.0, 31.0, judge, 0.00025)
+    assert limit.limit_s(31.0, judge, 0.00025) == 8.0 * 2.0 * 31.0
+    assert limit.limit_s(4.0, screen, 0.002) == 8.0 * 0.2 * 4.0  # the screen's own rate is untouched
+
+
+def test_a_judge_at_a_finer_step_in_another_engine_is_not_timed_out_by_the_screens_pace():
+    """A MuJoCo 2 ms screen runs ~30x faster per simulated second than a Bullet 0.25 ms judge; with one
+    measured rate every judge of a screened search timed out (and no best was ever verified)."""
+    from spinefarm.protocol.settings import TaskFidelity
+
+    cfg = build_run_config("judge-pace", "tetraspine", duration_s=4.0,
+                           trial_overrides={"engine": "mujoco", "dt_s": 0.002, "settle_s": 0.0})
+    box = TrialSandbox(cfg, TrialLimit(min_s=0.2, first_factor=100.0))
+    n = len(cfg.space())
+    screen = TaskFidelity("trial", "mujoco", 0.002, 0.0)
+    try:
+        for u in (0.3, 0.35, 0.4):
+            r = box.run(dataclasses.replace(at(u, n), fidelity=screen))
+            assert r.ok, r.reason
+        judge = box.run(dataclasses.replace(at(0.4, n), fidelity=TaskFidelity("judge", "bullet", 0.00025, 0.0)))
+        assert judge.ok, judge.reason
+        assert judge.extras["time_limit_s"] > judge.wall_time_s
+    finally:
+        box.close()
