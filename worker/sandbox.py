@@ -57,11 +57,6 @@ class TrialLimit:
         # measured wall s per simulated s (slowest-leaning mean) and the step it ran at, per kind of task
         self._rates: dict[Hashable, tuple[float, float | None]] = {}
 
-    @property
-    def wall_per_sim(self) -> float | None:
-        """The slowest measured rate of any kind (None before any trial completed)."""
-        return max((r for r, _ in self._rates.values()), default=None)
-
     def observe(self, wall_time_s: float, sim_time_s: float, kind: Hashable = None, dt_s: float | None = None) -> None:
         if not (wall_time_s > 0 and sim_time_s > 0):
             return
