@@ -21,11 +21,13 @@ from spinefarm.cli.report import describe_best, progress, serve_until_stopped
 from spinefarm.cli.run_setup import check_run_args, credentials, free_port, open_run
 from spinefarm.protocol.errors import ConfigError
 
+PORT_ATTEMPTS = 5  # `search`'s own coordinator port
+
 
 def cmd_search(args: argparse.Namespace) -> int:
     if args.workers < 0:
         raise ConfigError("--workers out of range", received=args.workers, expected="0 or more")
-    return run_coordinator(args, args.workers, [f"tcp/127.0.0.1:{free_port()}"])
+    return run_coordinator(args, args.workers, None)
 
 
 def cmd_coordinator(args: argparse.Namespace) -> int:
@@ -57,27 +59,38 @@ def _api_port(args: argparse.Namespace) -> tuple[int, str]:
                               received=args.api_host, expected="a local address (or --api-port -1)") from exc
 
 
-def _start_service(args: argparse.Namespace, default_listen: list[str]) -> tuple[Any, Any, Path, list[str]]:
+def _start_service(args: argparse.Namespace, default_listen: list[str] | None) -> tuple[Any, Any, Path, list[str]]:
     from spinefarm.coordinator.service import CoordinatorService
 
     check_run_args(args)
     creds = credentials(args)  # a bad credentials file fails before any run file is touched
     core, storage, path = open_run(args)
-    listen = args.listen if args.listen is not None else ([] if args.connect else default_listen)
-    service = CoordinatorService(core, storage, listen=listen, connect=args.connect or (),
-                                 zenoh_config_file=args.zenoh_config, status_file_for=path, credentials=creds)
-    try:
-        service.start()
-    except BaseException:
-        storage.close()
-        raise
-    return core, service, path, listen
+    # default_listen None: a free loopback port, picked again if another process takes it before Zenoh binds it
+    own_port = args.listen is None and not args.connect and default_listen is None
+    listen = args.listen if args.listen is not None else ([] if args.connect else default_listen or [])
+    attempts = PORT_ATTEMPTS if own_port else 1
+    for attempt in range(attempts):
+        if own_port:
+            listen = [f"tcp/127.0.0.1:{free_port()}"]
+        service = CoordinatorService(core, storage, listen=listen, connect=args.connect or (),
+                                     zenoh_config_file=args.zenoh_config, status_file_for=path, credentials=creds)
+        try:
+            service.start()
+            return core, service, path, listen
+        except ConfigError as exc:
+            if attempt + 1 == attempts or "already in use" not in str(exc):
+                storage.close()
+                raise
+        except BaseException:
+            storage.close()
+            raise
+    raise AssertionError("unreachable")
 
 
 class SearchSession:
     """One coordinator run on this machine: the service, its local workers and API, the progress line."""
 
-    def __init__(self, args: argparse.Namespace, n_workers: int, default_listen: list[str]) -> None:
+    def __init__(self, args: argparse.Namespace, n_workers: int, default_listen: list[str] | None) -> None:
         logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
         self.args, self.n_workers = args, n_workers
         self.core, self.service, self.path, listen = _start_service(args, default_listen)
@@ -164,7 +177,7 @@ class SearchSession:
             serve_until_stopped(self.api, self.args.api_host, self.stopped)
 
 
-def run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: list[str]) -> int:
+def run_coordinator(args: argparse.Namespace, n_workers: int, default_listen: list[str] | None) -> int:
     session = SearchSession(args, n_workers, default_listen)
     code, failure = 0, None
     try:  # from here on every exit (a startup error too) stops the workers and releases the file

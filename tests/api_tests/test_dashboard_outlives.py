@@ -37,7 +37,8 @@ def test_the_page_keeps_its_data_after_the_search_exits(browser, tmp_path):
                   "--api-port", str(port))
     try:
         url = f"http://127.0.0.1:{port}"
-        wait_for(lambda: _answers(url + "/runs/ends-view"), timeout_s=60, poll_s=0.2, what="the search's dashboard")
+        wait_for(lambda: _running(proc) and _answers(url + "/runs/ends-view"), timeout_s=60, poll_s=0.2,
+                 what="the search's dashboard")
         page = browser.new_page(viewport={"width": 1400, "height": 900})
         page.goto(url + "/#/run/ends-view")
         page.wait_for_selector("#trial-table tr.row", timeout=60_000)
@@ -56,6 +57,13 @@ def test_the_page_keeps_its_data_after_the_search_exits(browser, tmp_path):
             proc.kill()
             proc.wait(30)
     assert proc.returncode == 0, proc.stderr.read()
+
+
+def _running(proc: subprocess.Popen) -> bool:
+    """A search that exited early fails the wait at once, with what it said."""
+    if proc.poll() is not None:
+        raise AssertionError(f"the search exited with {proc.returncode}: {proc.stderr.read()}")
+    return True
 
 
 def _answers(url: str) -> bool:
@@ -104,8 +112,8 @@ def test_the_state_comes_from_the_file_alone(tmp_path):
                   "--api-port", "-1")
     from spinefarm.storage.hdf5_reader import read_run
 
-    wait_for(lambda: killed.exists() and _finished(killed, read_run) >= 5, timeout_s=120, poll_s=0.2,
-             what="a few results")
+    wait_for(lambda: _running(proc) and killed.exists() and _finished(killed, read_run) >= 5, timeout_s=120,
+             poll_s=0.2, what="a few results")
     port = free_port()
     s = Server(["api", str(elsewhere / "done.h5"), str(killed), "--port", str(port)], port)
     try:
