@@ -13,7 +13,7 @@ from typing import Any
 
 from spinefarm.cli import checks
 from spinefarm.cli.robust_args import robust_given, robust_settings
-from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.errors import ConfigError, check_range
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -56,6 +56,8 @@ def check_run_args(args: argparse.Namespace) -> None:
     checks.endpoints("--listen", args.listen)
     checks.endpoints("--connect", args.connect)
     checks.port("--api-port", args.api_port, allow_off=True)
+    check_range("--verify-tolerance", args.verify_tolerance, 0.0, 10.0, low_inclusive=False)
+    check_range("--judge-drift", args.judge_drift, 0.0, 10.0, low_inclusive=False)
     if args.out:
         checks.output_path("--out", args.out, (".h5", ".hdf5"))
 
@@ -149,4 +151,4 @@ def judge_policy(args: argparse.Namespace, config: Any) -> Any:
     engine = args.verify_engine or ("bullet" if screen not in ("bullet", None) else None)
     rung = Rung(engine, args.verify_dt) if engine and engine != screen else Rung()
     return JudgePolicy(enabled=not args.no_verify, rung=rung, tolerance=args.verify_tolerance,
-                       perturb=args.verify_perturb)
+                       perturb=args.verify_perturb, drift=args.judge_drift)

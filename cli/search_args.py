@@ -96,6 +96,11 @@ def _judge_args(p: argparse.ArgumentParser) -> None:
                    help="do not re-simulate new bests at a finer step before they count")
     p.add_argument("--verify-tolerance", type=float, default=0.05,
                    help="relative distance change a re-simulated best may show (default 0.05)")
+    p.add_argument("--judge-drift", type=float, default=0.2, metavar="REL",
+                   help="the judge raises the screen's fidelity for the rest of the run once three judged bests "
+                        "(moving 10 cm or more) have a median screen-to-judge distance ratio outside "
+                        "[1 - REL, 1 + REL] (default 0.2; up to 10, where a screen that only ranks like the judge, "
+                        "at another scale, keeps its speed)")
     p.add_argument("--verify-perturb", action="store_true",
                    help="also re-simulate with a jittered start pose and 10 %% more friction")
     g = p.add_argument_group("audit: results re-simulated by another worker")

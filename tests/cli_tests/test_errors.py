@@ -96,6 +96,14 @@ def test_api_port_out_of_range_is_refused_at_once(port, tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(("flag", "value"), [("--judge-drift", "0"), ("--judge-drift", "nan"),
+                                             ("--judge-drift", "11"), ("--verify-tolerance", "-1")])
+def test_judge_settings_out_of_range_are_refused_before_a_run_file_exists(flag, value, tmp_path):
+    r = run("search", "sphere:3", "--workers", "0", flag, value, "--out", str(tmp_path / "r.h5"), timeout=20)
+    one_line_error(r, flag, value)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_api_port_of_the_api_command_out_of_range(tmp_path):
     one_line_error(run("api", "x.h5", "--port", "65536", timeout=20), "--port", "65536")
 

@@ -137,6 +137,37 @@ def test_bests_that_barely_move_do_not_raise_the_fidelity(tmp_path):
         storage.close()
 
 
+def test_judge_drift_from_the_command_line_is_stored_and_a_wider_band_keeps_the_screen(tmp_path):
+    """`--judge-drift 1.5`: a screen that measures twice the judge's distance (a scale, not a misranking) keeps
+    its fidelity; the band is in the stored run, so a resumed run keeps it too."""
+    from spinefarm.cli.main import build_parser
+    from spinefarm.cli.run_setup import run_config
+
+    args = build_parser().parse_args(["search", "sphere:3", "--engine", "mujoco", "--verify-engine", "bullet",
+                                      "--verify-dt", "0.00025", "--judge-drift", "1.5", "--trials", "20"])
+    config, settings = run_config(args, "wide")
+    assert settings.judge.drift == 1.5 and settings.judge.rung.engine == "bullet"
+    core, storage = new_run(config, settings, tmp_path / "r.h5", FakeClock())
+    judged = 0
+    try:
+        for _ in range(40):
+            grant = _answer(core, "w1", 1, lambda a: 0.5 * (a.trial_id + 1) if a.fidelity.task == "judge"
+                            else float(a.trial_id + 1))  # the judge measures half, as in the drift test above
+            judged += sum(a.fidelity.task == "judge" for a in grant.assignments)
+            if judged >= 6:
+                break
+        ratios = storage.columns()["judge_ratio"]
+        assert judged >= 6 and np.allclose(ratios[np.isfinite(ratios)], 2.0) and core.drift is None
+    finally:
+        storage.close()
+    assert read_meta(tmp_path / "r.h5").settings.judge.drift == 1.5
+    core, storage = resume_run(tmp_path / "r.h5", FakeClock())
+    try:
+        assert core.tasks.settings.judge.drift == 1.5 and core.drift is None
+    finally:
+        storage.close()
+
+
 def _r(distance: float, ok: bool = True) -> TrialResult:
     status = TrialStatus.COMPLETE if ok else TrialStatus.FAILED
     return TrialResult(status, "" if ok else "diverged: x", distance, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 1.0, 0)
