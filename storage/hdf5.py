@@ -16,6 +16,7 @@ from __future__ import annotations
 import errno
 import logging
 import os
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -33,6 +34,7 @@ from spinefarm.storage.runlock import RunLock
 from spinefarm.storage.schema import COLUMNS, RunMeta
 from spinefarm.storage.table import TrialTable
 
+WRITER_LOCK_WAIT_S = 10.0  # how long the writer's open waits for readers in the middle of opening the file
 log = logging.getLogger(__name__)
 # A file handle whose writes failed: closing it makes HDF5 retry the failed writes (and crash at exit),
 # so it is kept here, never closed, and the process leaves with os._exit (see CoordinatorCore.write_failure).
@@ -62,6 +64,21 @@ def _replace_with_copy(real: Path, suffix: str, meta: RunMeta, cols: dict[str, n
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+def _open_for_writing(path: Path) -> h5py.File:
+    """The writer's open. HDF5 locks a file while it opens it, readers too: a reader opening a new or resumed
+    run file (the API, a dashboard, spinefarm.load_run polling for results) in the instant the writer reopens
+    it makes the writer's lock fail with EAGAIN. The RunLock already keeps other writers out, so wait that out;
+    a process that keeps the file open without SWMR still fails after WRITER_LOCK_WAIT_S."""
+    end = time.monotonic() + WRITER_LOCK_WAIT_S
+    while True:
+        try:
+            return h5py.File(path, "r+", libver="latest")
+        except BlockingIOError:
+            if time.monotonic() > end:
+                raise
+            time.sleep(0.02)
+
 
 class Hdf5Storage(InMemoryStorage):
     """The single writer of one run file. Use `create`, `resume` or `open_read`."""
@@ -148,8 +165,12 @@ class Hdf5Storage(InMemoryStorage):
     @classmethod
     def _open_writer(cls, path: Path, meta: RunMeta, table: TrialTable, lock: RunLock) -> Hdf5Storage:
         try:
-            f = h5py.File(path, "r+", libver="latest")
+            f = _open_for_writing(path)
             f.swmr_mode = True  # from here on no new objects or attributes; readers may attach
+        except BlockingIOError as exc:
+            raise StorageError(f"cannot open run file {path} for writing: another process holds it open "
+                               f"without SWMR ({_reason(exc)})", expected="no other process with the file open "
+                               "(readers of a run file open it with swmr=True, as spinefarm.load_run does)") from exc
         except OSError as exc:
             raise StorageError(f"cannot open run file {path} for writing: {_reason(exc)}",
                                expected="a writable file system") from exc

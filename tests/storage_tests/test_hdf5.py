@@ -220,3 +220,35 @@ def test_lazy_reader_agrees_with_the_writer_on_a_live_file(tmp_path):
     s.close()
     with pytest.raises(StorageError, match="does not exist"):
         Hdf5Reader(tmp_path / "nope.h5")
+
+
+def _hold_open(path, seconds: float) -> subprocess.Popen:
+    """Another process with the file open without SWMR (it holds HDF5's file lock), for `seconds`."""
+    code = f"import h5py, time; f = h5py.File({str(path)!r}, 'r'); print('open', flush=True); time.sleep({seconds})"
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "open"
+    return p
+
+
+def test_the_writer_waits_out_a_reader_holding_the_file_lock_and_names_one_that_keeps_it(tmp_path, monkeypatch):
+    """A reader opening a run file (the API, a polling script) in the instant the writer opens it must not stop
+    the search; a process that keeps the file open without SWMR gets a clear error, not a hang."""
+    from spinefarm.storage import hdf5
+
+    path = tmp_path / "r.h5"
+    Hdf5Storage.create(path, make_meta()).close()
+    holder = _hold_open(path, 0.8)
+    t0 = time.monotonic()
+    storage = Hdf5Storage._open_writer(path, make_meta(), hdf5.TrialTable(3), None)  # waits the lock out
+    waited = time.monotonic() - t0
+    storage.close()
+    holder.wait(30)
+    assert waited > 0.1
+    monkeypatch.setattr(hdf5, "WRITER_LOCK_WAIT_S", 0.3)
+    holder = _hold_open(path, 30)
+    try:
+        with pytest.raises(StorageError, match="another process holds it open without SWMR"):
+            Hdf5Storage._open_writer(path, make_meta(), hdf5.TrialTable(3), None)
+    finally:
+        holder.kill()
+        holder.wait(30)
