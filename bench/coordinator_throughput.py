@@ -132,6 +132,7 @@ def resume_cost(tmp: Path, rows: int) -> dict:
         s.add_trial(i, u, u, "monte_carlo", -1, i)
         s.finish_trial(i, TrialResult(TrialStatus.COMPLETE, "", 1.0, 1, 1, 1, 1, 1, 1, 1, i, trial_id=i), 1.0)
     s.flush()  # left open in SWMR mode, as after a kill -9
+    s._lock.release()  # the kernel releases a killed writer's run lock; this writer is in the same process
     t = time.perf_counter()
     r = Hdf5Storage.resume(tmp / "resume.h5")
     dt = time.perf_counter() - t
