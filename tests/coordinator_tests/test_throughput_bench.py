@@ -26,3 +26,16 @@ def test_the_fsync_comparison_repeats_a_measured_setting_in_a_file_of_its_own(tm
     assert (cost["workers"], cost["batch"]) == (1, 0)
     assert cost["without_fsync_trials_per_s"] > 0 and cost["with_fsync_trials_per_s"] > 0
     assert not list(tmp_path.iterdir())  # its run files go with its temporary directory
+
+
+def test_the_resume_step_reopens_a_killed_writers_file(tmp_path):
+    """The bench's "killed" writer lives in its own process: its run lock must go, as a killed process's does,
+    or the resume it times is refused ("being written by another coordinator")."""
+    import importlib.util
+
+    path = ROOT / "bench" / "coordinator_throughput.py"
+    spec = importlib.util.spec_from_file_location("coordinator_throughput", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    out = bench.resume_cost(tmp_path, 300)
+    assert out["resume_rows"] == 300 and 0 < out["resume_s"] < 60
