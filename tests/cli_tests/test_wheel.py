@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import urllib.request
@@ -25,8 +26,16 @@ pytestmark = pytest.mark.integration
 @pytest.fixture(scope="module")
 def wheel_tree(tmp_path_factory):
     d = tmp_path_factory.mktemp("wheel")
+    # built from a copy of the tracked files: setuptools builds in the source tree's build/, which two test
+    # processes building at once would share
+    src = d / "src"
+    files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
+    for name in filter(None, files.decode().split("\0")):
+        if (ROOT / name).is_file():
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, src / name)
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w",
-                        str(d), str(ROOT)], capture_output=True, text=True, timeout=300)
+                        str(d), str(src)], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     wheel = next(d.glob("spinefarm-*.whl"))
     tree = d / "site"
