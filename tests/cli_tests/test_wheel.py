@@ -29,8 +29,10 @@ def wheel_tree(tmp_path_factory):
     # built from a copy of the tracked files: setuptools builds in the source tree's build/, which two test
     # processes building at once would share
     src = d / "src"
-    files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
-    for name in filter(None, files.decode().split("\0")):
+    listed = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True)
+    if listed.returncode != 0:  # not a git checkout: the tree without what builds and runs leave
+        shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(".venv", "build", "runs", "*.egg-info", ".git"))
+    for name in filter(None, listed.stdout.decode().split("\0") if listed.returncode == 0 else []):
         if (ROOT / name).is_file():
             (src / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / name, src / name)
