@@ -58,6 +58,7 @@ def check_run_args(args: argparse.Namespace) -> None:
     checks.port("--api-port", args.api_port, allow_off=True)
     check_range("--verify-tolerance", args.verify_tolerance, 0.0, 10.0, low_inclusive=False)
     check_range("--judge-drift", args.judge_drift, 0.0, 10.0, low_inclusive=False)
+    check_range("--judge-share", args.judge_share, 0.0, 1.0, low_inclusive=False)
     if args.out:
         checks.output_path("--out", args.out, (".h5", ".hdf5"))
 
@@ -151,4 +152,5 @@ def judge_policy(args: argparse.Namespace, config: Any) -> Any:
     engine = args.verify_engine or ("bullet" if screen not in ("bullet", None) else None)
     rung = Rung(engine, args.verify_dt) if engine and engine != screen else Rung()
     return JudgePolicy(enabled=not args.no_verify, rung=rung, tolerance=args.verify_tolerance,
-                       perturb=args.verify_perturb, drift=args.judge_drift)
+                       perturb=args.verify_perturb, drift=args.judge_drift,
+                       share=args.judge_share)

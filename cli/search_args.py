@@ -101,6 +101,9 @@ def _judge_args(p: argparse.ArgumentParser) -> None:
                         "(moving 10 cm or more) have a median screen-to-judge distance ratio outside "
                         "[1 - REL, 1 + REL] (default 0.2; up to 10, where a screen that only ranks like the judge, "
                         "at another scale, keeps its speed)")
+    p.add_argument("--judge-share", type=float, default=0.25, metavar="FRACTION",
+                   help="the most of the workers' time the judge's re-simulations take while the search runs "
+                        "(default 0.25; 1: judge every new best at once); the final best is always judged")
     p.add_argument("--verify-perturb", action="store_true",
                    help="also re-simulate with a jittered start pose and 10 %% more friction")
     g = p.add_argument_group("audit: results re-simulated by another worker")

@@ -50,7 +50,7 @@ class TaskDispatch:
         audit = self.tasks.best_audit_due()
         if audit is not None:
             self.scheduler.push_front(audit)
-        key, stale = self.tasks.judge_due(self.study.trial_scheduler.top)
+        key, stale = self.tasks.judge_due(self.study.trial_scheduler.top, self.study.done)
         if key is None:
             return
         for old in stale:

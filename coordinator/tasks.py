@@ -7,6 +7,9 @@
   stored; it fails only when the judge's run fails.
 - The audit re-simulates a fraction of the results (and every new best) on another worker at the same
   fidelity; a disagreement marks the result (it never counts as best), and its worker (PeerBook).
+- The judge takes at most its share of the workers' time while the search runs (JudgePolicy.share): a new
+  best's judge waits while the judge's runs so far took more than that share of the time spent in the
+  judge's runs and the trials together; once the search is over the best is judged whatever it cost.
 - The judge watches the screen: once three judged ratios in a row (trial-id order; bests that move 10 cm or
   more in either run) have a median outside [1 - drift, 1 + drift], the ladder's fidelity is raised for every
   trial leased from then on (the judge's engine at 4x the judge's step when the judge is another engine, else
@@ -81,6 +84,7 @@ class TaskBook:
         self.seed = seed
         self.judged = judged   # the run has a judge (test objectives only when one is named)
         self.pending: set[int] = set()   # task keys issued and not yet settled
+        self.judge_wall_s = 0.0   # the judge's runs settled since this coordinator started (pacing only)
 
     # --- fidelity -----------------------------------------------------------------------------------
     @property
@@ -138,8 +142,9 @@ class TaskBook:
         self.pending.update(keys)
         return keys
 
-    def judge_due(self, top_rung: int) -> tuple[int | None, list[int]]:
-        """(the best's judge task key if it is due, queued judge keys of overtaken bests to drop)."""
+    def judge_due(self, top_rung: int, search_over: bool = False) -> tuple[int | None, list[int]]:
+        """(the best's judge task key if it is due, queued judge keys of overtaken bests to drop). While the
+        search runs, a judge is due only within the judge's share of the workers' time."""
         if not (self.judged and self.settings.judge.enabled):
             return None, []
         best = self.storage.best_ids(1)
@@ -150,9 +155,17 @@ class TaskBook:
         key = task_key(JUDGE, tid)
         if int(cols["rung"][tid]) < top_rung or cols["verification"][tid] != Verification.NOT_CHECKED.stored:
             return None, []  # a screened best is provisional; a judged or pending one is on its way
+        if not search_over and self.over_share(cols["wall_time_s"]):
+            return None, []
         self.storage.set_verification(tid, Verification.PENDING)
         self.pending.add(key)
         return key, [k for k in self.pending if k != key and split_key(k)[0] == "judge"]
+
+    def over_share(self, trial_wall_s: np.ndarray) -> bool:
+        """Has the judge taken more than its share of the time spent in its runs and the trials'?"""
+        share = self.settings.judge.share
+        trials_s = float(np.sum(trial_wall_s, where=np.isfinite(trial_wall_s)))
+        return self.judge_wall_s * (1.0 - share) > share * trials_s
 
     def drop(self, key: int) -> None:
         """A task no longer wanted (an overtaken best's judge, an audit nobody can run)."""
@@ -194,6 +207,8 @@ class TaskBook:
 
     # --- results --------------------------------------------------------------------------------------
     def settle_judge(self, tid: int, r: TrialResult) -> None:
+        if math.isfinite(r.wall_time_s):
+            self.judge_wall_s += r.wall_time_s
         row = self.storage.trial(tid)
         engine = str(r.extras.get("engine", "")) or (self.judge_engine or "")
         cross = self.judge_engine is not None and self.judge_engine != (row.engine or self.run_engine)

@@ -60,17 +60,21 @@ class JudgePolicy:
     (relative). Another engine (two models, whose distances differ by more than any step error): the
     judge's distance is the one reported, the screen-to-judge ratio is stored, and the result fails
     only if the judge's run fails. perturb: also re-simulate with a jittered start pose and 10 % more
-    friction. drift: a run whose judged ratios leave [1 - drift, 1 + drift] raises its fidelity."""
+    friction. drift: a run whose judged ratios leave [1 - drift, 1 + drift] raises its fidelity. share: the
+    most of the workers' time the judge takes while the search runs (its runs cost tens of trials each, and
+    early bests are overtaken within seconds); the best at the search's end is always judged."""
 
     enabled: bool = True
     rung: Rung = field(default_factory=Rung)
     tolerance: float = 0.05
     perturb: bool = False
     drift: float = 0.2
+    share: float = 0.25
 
     def __post_init__(self) -> None:
         check_range("judge tolerance", self.tolerance, 0.0, 10.0, low_inclusive=False)
         check_range("judge drift", self.drift, 0.0, 10.0, low_inclusive=False)
+        check_range("judge share", self.share, 0.0, 1.0, low_inclusive=False)
         if isinstance(self.rung, dict):
             object.__setattr__(self, "rung", Rung.from_dict(self.rung))
 
@@ -128,7 +132,7 @@ class RunSettings:
         "ladder": "list of rungs {engine, dt_s, duration_s, settle_s, episodes} (null: the run's), "
                   "increasing durations, the last the full trial",
         "eta": "integer >= 2: the halving scheduler keeps 1/eta of each rung",
-        "judge": "{enabled, rung, tolerance, perturb, drift}",
+        "judge": "{enabled, rung, tolerance, perturb, drift, share in (0, 1]}",
         "audit": "{fraction in [0, 1], tolerance >= 0, quarantine}",
         "lease_s": "seconds > 0",
         "engine_choice": "null, or how --engine auto chose the tier: {engine, mode, cached, rungs_added, spearman, "

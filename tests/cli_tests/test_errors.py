@@ -97,7 +97,8 @@ def test_api_port_out_of_range_is_refused_at_once(port, tmp_path):
 
 
 @pytest.mark.parametrize(("flag", "value"), [("--judge-drift", "0"), ("--judge-drift", "nan"),
-                                             ("--judge-drift", "11"), ("--verify-tolerance", "-1")])
+                                             ("--judge-drift", "11"), ("--verify-tolerance", "-1"),
+                                             ("--judge-share", "0"), ("--judge-share", "1.5")])
 def test_judge_settings_out_of_range_are_refused_before_a_run_file_exists(flag, value, tmp_path):
     r = run("search", "sphere:3", "--workers", "0", flag, value, "--out", str(tmp_path / "r.h5"), timeout=20)
     one_line_error(r, flag, value)

@@ -54,11 +54,12 @@ class _StripesSampler(BaseSampler):
         return Proposal(trial_rng(self.seed, trial_id).random(self.n_params), "stripes_phase", -1)
 
 
-def _answer(core, worker: str, n: int, distance=lambda a: 1.0) -> WorkGrant:
-    """Take up to n tasks as `worker` and return each with `distance(assignment)` metres."""
+def _answer(core, worker: str, n: int, distance=lambda a: 1.0, wall_s=lambda a: 0.0) -> WorkGrant:
+    """Take up to n tasks as `worker` and return each with `distance(assignment)` metres, having taken
+    `wall_s(assignment)` seconds."""
     grant = decode_message(core.handle_work(enc(WorkRequest(worker, n))), WorkGrant)
     items = tuple(SubmittedResult(a.lease_id, TrialResult(TrialStatus.COMPLETE, "", distance(a), 0.0, 1.0, 1.0, 1.0,
-                                                          1.0, 0.0, 1.0, a.seed, trial_id=a.trial_id))
+                                                          1.0, wall_s(a), 1.0, a.seed, trial_id=a.trial_id))
                   for a in grant.assignments)
     if items:
         core.handle_results(enc(ResultSubmission(worker, items)))
@@ -166,6 +167,60 @@ def test_judge_drift_from_the_command_line_is_stored_and_a_wider_band_keeps_the_
         assert core.tasks.settings.judge.drift == 1.5 and core.drift is None
     finally:
         storage.close()
+
+
+def _judged_while_searching(tmp_path, share: float) -> tuple[list[tuple[float, float]], str]:
+    """A 60-trial MuJoCo screen where every trial is a new best and takes 1 s, and the judge's Bullet run 10 s:
+    (trial seconds and judge seconds spent when each judge was leased, the final best's verification)."""
+    config = build_run_config(f"share{share}", "sphere:3", trial_overrides={"engine": "mujoco"})
+    judge = JudgePolicy(rung=Rung("bullet", 2.5e-4), drift=10.0, share=share)
+    core, storage = new_run(config, SearchSettings(trials=60, judge=judge), tmp_path / f"{share}.h5", FakeClock())
+    spent = {"trial": 0.0, "judge": 0.0}
+    leased: list[tuple[float, float]] = []
+    try:
+        for _ in range(200):
+            grant = _answer(core, "w1", 1, lambda a: float(a.trial_id + 1),
+                            lambda a: 10.0 if a.fidelity.task == "judge" else 1.0)
+            for a in grant.assignments:
+                if a.fidelity.task == "judge":
+                    leased.append((spent["trial"], spent["judge"]))
+                spent[a.fidelity.task] += 10.0 if a.fidelity.task == "judge" else 1.0
+            if core.done:
+                break
+        assert core.done
+        best = storage.best_ids(1)[0]
+        return leased, storage.columns()["verification"][best].decode()
+    finally:
+        storage.close()
+
+
+def test_the_judge_takes_at_most_its_share_of_the_workers_time_and_always_judges_the_final_best(tmp_path):
+    """Early bests are overtaken within seconds and each judge costs many trials: with --judge-share 0.25 a
+    judge is leased only while the judge's time so far is at most a quarter of all time spent; the best at the
+    end is judged even past the share. Share 1 judges every new best at once."""
+    paced, verdict = _judged_while_searching(tmp_path, 0.25)
+    assert verdict == "judged"
+    during = paced[:-1]  # the last one: the final best, judged after the search whatever it cost
+    assert len(during) >= 2 and all(judge_s <= 0.25 * (trial_s + judge_s) for trial_s, judge_s in during)
+    assert paced[-1][0] == 60.0
+    every, verdict = _judged_while_searching(tmp_path, 1.0)
+    assert verdict == "judged" and len(every) >= 50 and len(paced) <= 4
+
+
+def test_judge_share_from_the_command_line_is_stored(tmp_path):
+    from spinefarm.cli.main import build_parser
+    from spinefarm.cli.run_setup import run_config
+
+    args = build_parser().parse_args(["search", "sphere:3", "--engine", "mujoco", "--verify-engine", "bullet",
+                                      "--judge-share", "0.5", "--trials", "4"])
+    config, settings = run_config(args, "share")
+    assert settings.judge.share == 0.5
+    _, storage = new_run(config, settings, tmp_path / "r.h5", FakeClock())
+    storage.close()
+    assert read_meta(tmp_path / "r.h5").settings.judge.share == 0.5
+    assert JudgePolicy.from_dict({"drift": 0.3}).share == 0.25  # a run stored before the share: the default
+    with pytest.raises(ConfigError, match="judge share"):
+        JudgePolicy(share=0.0)
 
 
 def _r(distance: float, ok: bool = True) -> TrialResult:
