@@ -3,7 +3,7 @@
 A run's fidelities are a ladder of rungs. Each rung says how one evaluation is simulated (engine,
 step, simulated duration, settle phase, episodes); a field left None takes the run's trial config.
 The screening rungs are the search's own (the last one is the full trial); the judge is one more
-rung that re-simulates every new best before it counts. Workers run any rung's task like any trial.
+rung that re-simulates new bests (the final one always). Workers run any rung's task like any trial.
 
 RunSettings is stored in the run file as JSON (`RunSettings.SCHEMA` describes every field) and read
 back with `RunSettings.from_dict`, which refuses unknown fields and wrong types with one line.
