@@ -177,14 +177,17 @@ def _judged_while_searching(tmp_path, share: float) -> tuple[list[tuple[float, f
     core, storage = new_run(config, SearchSettings(trials=60, judge=judge), tmp_path / f"{share}.h5", FakeClock())
     spent = {"trial": 0.0, "judge": 0.0}
     leased: list[tuple[float, float]] = []
+
+    def cost_s(a) -> float:
+        return 10.0 if a.fidelity.task == "judge" else 1.0
+
     try:
         for _ in range(200):
-            grant = _answer(core, "w1", 1, lambda a: float(a.trial_id + 1),
-                            lambda a: 10.0 if a.fidelity.task == "judge" else 1.0)
+            grant = _answer(core, "w1", 1, lambda a: float(a.trial_id + 1), cost_s)
             for a in grant.assignments:
                 if a.fidelity.task == "judge":
                     leased.append((spent["trial"], spent["judge"]))
-                spent[a.fidelity.task] += 10.0 if a.fidelity.task == "judge" else 1.0
+                spent[a.fidelity.task] += cost_s(a)
             if core.done:
                 break
         assert core.done
