@@ -12,20 +12,37 @@ back with `RunSettings.from_dict`, which refuses unknown fields and wrong types 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from itertools import pairwise
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 from spinefarm.protocol.engine_choice import EngineChoice
 from spinefarm.protocol.errors import ConfigError, check_range
 
 SCHEDULERS = ("plain", "halving")
+_R = TypeVar("_R", bound="_JsonRecord")
+
+
+class _JsonRecord:
+    """A frozen dataclass stored as a JSON object: `to_dict` gives its fields, `from_dict` refuses unknown
+    fields with one line naming the record (WHAT)."""
+
+    WHAT: ClassVar[str] = "record"
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)  # type: ignore[call-overload]  # every subclass is a dataclass
+
+    @classmethod
+    def from_dict(cls: type[_R], d: Any) -> _R:
+        return cls(**_known(d, cls, cls.WHAT))
 
 
 @dataclass(frozen=True)
-class Rung:
+class Rung(_JsonRecord):
     """One fidelity: engine (None: the run's), dt_s (None: the run's step), duration_s (None: the
     run's), settle_s (None: the run's), episodes (evaluations of one parameter set averaged)."""
+
+    WHAT: ClassVar[str] = "rung"
 
     engine: str | None = None
     dt_s: float | None = None
@@ -44,16 +61,9 @@ class Rung:
         if isinstance(self.episodes, bool) or not isinstance(self.episodes, int) or self.episodes < 1:
             raise ConfigError("rung episodes out of range", received=self.episodes, expected="an integer >= 1")
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: Any) -> Rung:
-        return cls(**_known(d, cls, "rung"))
-
 
 @dataclass(frozen=True)
-class JudgePolicy:
+class JudgePolicy(_JsonRecord):
     """The judge: re-simulate every new full-length best at `rung` before it counts.
 
     Same engine as the screen: the result holds when the distance changes by at most `tolerance`
@@ -63,6 +73,8 @@ class JudgePolicy:
     friction. drift: a run whose judged ratios leave [1 - drift, 1 + drift] raises its fidelity. share: the
     most of the workers' time the judge takes while the search runs (its runs cost tens of trials each, and
     early bests are overtaken within seconds); the best at the search's end is always judged."""
+
+    WHAT: ClassVar[str] = "judge"
 
     enabled: bool = True
     rung: Rung = field(default_factory=Rung)
@@ -78,19 +90,14 @@ class JudgePolicy:
         if isinstance(self.rung, dict):
             object.__setattr__(self, "rung", Rung.from_dict(self.rung))
 
-    def to_dict(self) -> dict[str, Any]:
-        return {**asdict(self), "rung": self.rung.to_dict()}
-
-    @classmethod
-    def from_dict(cls, d: Any) -> JudgePolicy:
-        return cls(**_known(d, cls, "judge"))
-
 
 @dataclass(frozen=True)
-class AuditPolicy:
+class AuditPolicy(_JsonRecord):
     """Re-simulate `fraction` of the results (and every new best) on another worker at the same
     fidelity; a relative distance difference above `tolerance` marks the result, its worker and that
     worker's environment. quarantine: a worker with a disagreeing audit gets no more leases."""
+
+    WHAT: ClassVar[str] = "audit"
 
     fraction: float = 0.0
     tolerance: float = 1e-6
@@ -103,13 +110,6 @@ class AuditPolicy:
     @property
     def enabled(self) -> bool:
         return self.fraction > 0
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: Any) -> AuditPolicy:
-        return cls(**_known(d, cls, "audit"))
 
 
 @dataclass(frozen=True)
@@ -201,7 +201,7 @@ def _known(d: Any, cls: type, what: str) -> dict[str, Any]:
     """d as keyword arguments of cls: an object with known field names only."""
     if not isinstance(d, dict):
         raise ConfigError(f"{what} is not an object", received=type(d).__name__, expected="a JSON object")
-    names = {f for f in cls.__dataclass_fields__ if f != "SCHEMA"}
+    names = {f.name for f in fields(cls)}  # class-level constants (SCHEMA, WHAT) are no fields
     unknown = sorted(set(d) - names)
     if unknown:
         raise ConfigError(f"{what} has unknown fields", received=unknown, expected=sorted(names))
@@ -216,10 +216,12 @@ TASKS = ("trial", "judge", "audit")
 
 
 @dataclass(frozen=True)
-class TaskFidelity:
+class TaskFidelity(_JsonRecord):
     """How a worker runs one leased task, beyond the run's trial config: task (trial, judge, audit),
     engine / dt_s / settle_s (None: the run's), perturb (a jittered start pose and 10 % more friction,
     run besides the plain one: its distance comes back as the extra `perturbed_distance_m`)."""
+
+    WHAT: ClassVar[str] = "task fidelity"
 
     task: str = "trial"
     engine: str | None = None
@@ -237,10 +239,3 @@ class TaskFidelity:
     @classmethod
     def of(cls, task: str, rung: Rung, perturb: bool = False) -> TaskFidelity:
         return cls(task, rung.engine, rung.dt_s, rung.settle_s, perturb)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: Any) -> TaskFidelity:
-        return cls(**_known(d, cls, "task fidelity"))
