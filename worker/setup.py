@@ -1,5 +1,5 @@
-"""What every trial of one run builds alike, built once: bodies, string geometry, string tables, terrain,
-start pose, step, and (for engines that can reset exactly) the engine world itself.
+"""What every trial of one run builds alike, built once: the controller space, bodies, string geometry,
+string tables, terrain, start pose, step, and (for engines that can reset exactly) the engine world itself.
 
 A worker running many trials of one run keeps a SetupCache keyed by the morphology, the trial config's
 hash and the controller; a trial then only resets what it changes (string state, CPG, engine state).
@@ -32,6 +32,7 @@ class TrialSetup:
 
     def __init__(self, morph: Morphology, cfg: TrialConfig, controller: str | None) -> None:
         self.morph, self.cfg, self.controller = morph, cfg, controller
+        self.space = morph.controller_space(controller)  # built once: 1-5 ms for the NTRT spaces
         self.engine_cls = engine_class(cfg.engine)
         self.settings = self.engine_cls.settings_from_options(cfg.engine_options)
         self.bodies = build_bodies(morph.structure)

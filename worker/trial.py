@@ -86,8 +86,6 @@ def _simulate(morphology, params: list, cfg: TrialConfig, seeds: list[int], cont
     t_wall = time.perf_counter()
     morph = load_morphology(morphology)
     controller = controller or cfg.controller
-    space = morph.controller_space(controller)
-    networks = [space.network(space.param_space.physical(p)) for p in params]
     for seed in seeds:
         if not isinstance(seed, int | np.integer):
             raise ParameterError("seed is not an integer", received=seed, expected="an integer")
@@ -96,6 +94,8 @@ def _simulate(morphology, params: list, cfg: TrialConfig, seeds: list[int], cont
     elif setup is None or setup.morph != morph or setup_key(setup.cfg) != setup_key(cfg) \
             or setup.controller != controller:
         setup = TrialSetup(morph, cfg, controller)
+    space = setup.space
+    networks = [space.network(space.param_space.physical(p)) for p in params]
     geom = setup.geom
     law = ControlLaw(networks, [setup.string_tables(n) for n in networks],
                      (geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm), len(setup.bodies),

@@ -177,3 +177,22 @@ def test_settle_phase_scores_locomotion_from_the_settled_pose(engine):
     assert raw.extras["settle_s"] == 0.0
     with pytest.raises(Exception, match="settle_s"):
         TrialConfig(settle_s=-1.0)
+
+
+def test_a_reused_setup_builds_the_controller_space_once(monkeypatch):
+    """The NTRT spaces take milliseconds to build; trials sharing a set-up share the space too."""
+    from spinefarm.robot.morphology.model import Morphology
+    from spinefarm.worker.setup import SetupCache
+
+    built = []
+    original = Morphology.controller_space
+    monkeypatch.setattr(Morphology, "controller_space",
+                        lambda self, controller=None: built.append(controller) or original(self, controller))
+    morph = load_morphology("tetrahedral-complex")
+    cfg = TrialConfig(duration_s=0.05, engine="mujoco", dt_s=0.002)
+    cache = SetupCache()
+    results = [simulate(morph, random_unit_params(morph, s, "ntrt"), cfg, s, controller="ntrt", setup=cache).result
+               for s in (1, 2, 3)]
+    assert all(r.ok for r in results)
+    # random_unit_params builds one per call (its length); the three trials add one between them
+    assert len(built) == 3 + 1
