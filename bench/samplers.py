@@ -34,7 +34,7 @@ import os
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -74,23 +74,37 @@ def _judge(morphology: str, controller: str | None, trial_config: dict, params_u
     return {"holds": bool(r.ok), "speed_cm_s": float(r.speed_cm_s), "distance_m": float(r.distance_m)}
 
 
+@dataclass(frozen=True)
+class Bench:
+    """What every search of one bench run shares: trials per search, checkpoints (trials finished),
+    simulated seconds per trial (None: the morphology's), engine, trials in flight, trial config
+    overrides (settle_s, dt_s, engine_options) and the Bullet judge's step for a screened search."""
+
+    budget: int
+    checkpoints: tuple[int, ...]
+    duration_s: float | None
+    engine: str
+    workers: int
+    overrides: dict
+    judge_dt_s: float = 0.00025
+
+
 class _Search:
     """One search of the bench: the study asks, the pool runs `workers` trials at once, a judge (or the run's
     verification) checks the best ones. Verdicts are kept by trial id, so a trial is judged once."""
 
-    def __init__(self, pool: ProcessPoolExecutor, morphology: str, controller: str | None, sampler: str, seed: int,
-                 budget: int, duration_s: float | None, engine: str, overrides: dict | None,
-                 judge_dt_s: float) -> None:
+    def __init__(self, pool: ProcessPoolExecutor, bench: Bench, morphology: str, controller: str | None,
+                 sampler: str, seed: int) -> None:
         from spinefarm.coordinator.problem import build_run_config
         from spinefarm.coordinator.setup import SearchSettings, new_run
         from spinefarm.protocol.settings import JudgePolicy
 
-        overrides = {**(overrides or {}), **({"engine": engine} if engine != "bullet" else {})} or None
-        self.pool, self.controller, self.judge_dt_s = pool, controller, judge_dt_s
-        self.screened = engine != "bullet"
+        overrides = {**bench.overrides, **({"engine": bench.engine} if bench.engine != "bullet" else {})} or None
+        self.pool, self.controller, self.judge_dt_s = pool, controller, bench.judge_dt_s
+        self.screened = bench.engine != "bullet"
         self.config = build_run_config(f"bench-{sampler}-{seed}", morphology, objective="speed", seed=seed,
-                                       controller=controller, duration_s=duration_s, trial_overrides=overrides)
-        core, self.storage = new_run(self.config, SearchSettings(trials=budget, sampler=sampler,
+                                       controller=controller, duration_s=bench.duration_s, trial_overrides=overrides)
+        core, self.storage = new_run(self.config, SearchSettings(trials=bench.budget, sampler=sampler,
                                                                  judge=JudgePolicy(enabled=False)), None)
         self.study = core.study
         self.target = 0.8 * PAPER_SPEED_CM_S.get(morphology, float("nan"))
@@ -155,14 +169,13 @@ class _Search:
         return told
 
 
-def search(pool: ProcessPoolExecutor, morphology: str, controller: str | None, sampler: str, seed: int,
-           budget: int, checkpoints: list[int], duration_s: float | None, engine: str, workers: int,
-           overrides: dict | None = None, judge_dt_s: float = 0.00025) -> dict:
-    run = _Search(pool, morphology, controller, sampler, seed, budget, duration_s, engine, overrides, judge_dt_s)
+def search(pool: ProcessPoolExecutor, bench: Bench, morphology: str, controller: str | None, sampler: str,
+           seed: int) -> dict:
+    run = _Search(pool, bench, morphology, controller, sampler, seed)
     out: dict = {"seed": seed, "best_verified_speed_cm_s": {}, "trials_to_80pct": None}
     finished = 0
     t0 = time.perf_counter()
-    for _ in range(workers):
+    for _ in range(bench.workers):
         run.submit()
     while run.running:
         done, _ = wait(list(run.running), return_when=FIRST_COMPLETED)
@@ -172,7 +185,7 @@ def search(pool: ProcessPoolExecutor, morphology: str, controller: str | None, s
             finished += 1
             if out["trials_to_80pct"] is None and run.reaches_target(tid, result):
                 out["trials_to_80pct"] = finished
-            if finished in checkpoints:
+            if finished in bench.checkpoints:
                 # checkpoints count trials in id order: the first n trials are the ones sampled first
                 n = finished
                 finished += run.finish_first(n)
@@ -205,7 +218,8 @@ def main() -> None:
         overrides["dt_s"] = args.dt
     if args.engine_option:
         overrides["engine_options"] = dict(o.split("=", 1) for o in args.engine_option)
-    checkpoints = sorted(int(c) for c in args.checkpoints.split(",") if int(c) <= args.budget)
+    checkpoints = tuple(sorted(int(c) for c in args.checkpoints.split(",") if int(c) <= args.budget))
+    bench = Bench(args.budget, checkpoints, args.duration, args.engine, args.workers, overrides, args.judge_dt)
     t0 = time.perf_counter()
     report: dict = {"budget": args.budget, "seeds": args.seeds, "duration_s": args.duration, "engine": args.engine,
                     "trial_overrides": overrides, "judge_dt_s": args.judge_dt if args.engine != "bullet" else None,
@@ -215,9 +229,8 @@ def main() -> None:
             morphology, _, controller = problem.partition(":")
             rows = report["problems"].setdefault(problem, {})
             for sampler in args.samplers.split(","):
-                runs = [search(pool, morphology, controller or None, sampler, seed, args.budget, checkpoints,
-                               args.duration, args.engine, args.workers, overrides,
-                               args.judge_dt) for seed in range(args.seeds)]
+                runs = [search(pool, bench, morphology, controller or None, sampler, seed)
+                        for seed in range(args.seeds)]
                 summary: dict = {"best_verified_speed_cm_s": {},
                                  "trials_to_80pct": [r["trials_to_80pct"] for r in runs],
                                  "wall_time_s": sum(r["wall_time_s"] for r in runs)}
