@@ -6,7 +6,7 @@ from collections.abc import AsyncIterator, Sequence
 from contextlib import asynccontextmanager
 from pathlib import Path
 
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
 from spinefarm.api import errors
 from spinefarm.api.pictures import PictureCache
 from spinefarm.api.registry import RunRegistry
@@ -33,11 +33,9 @@ def create_app(run_files: Sequence[str | Path] = (), runs_dir: str | Path | None
     app = FastAPI(title="spinefarm", summary="Status and results of gait searches (read-only)",
                   lifespan=lifespan, responses=responses, docs_url=None, redoc_url=None)
     errors.install(app)
-    app.include_router(runs.router)
-    app.include_router(runs.files_router)
-    app.include_router(trials.router)
-    app.include_router(episodes.router)
-    app.include_router(files.router)
+    json_api = [Depends(errors.known_query)]  # the JSON API refuses unknown query parameters; pages do not
+    for router in (runs.router, runs.files_router, trials.router, episodes.router, files.router):
+        app.include_router(router, dependencies=json_api)
     dashboard.install(app)
 
     @app.get("/health", tags=["health"])

@@ -31,6 +31,25 @@ class InvalidQuery(SpinefarmError):
     code = "invalid_query"
 
 
+def known_query(request: Request) -> None:
+    """Refuse a query parameter the route does not take: a misspelt `?n=5` would otherwise give the default
+    answer without a word."""
+    route = request.scope.get("route")
+    dependant = getattr(route, "dependant", None)
+    if dependant is None:
+        return
+    names: set[str] = set()
+    todo = [dependant]
+    while todo:  # the route's own query parameters and its dependencies'
+        d = todo.pop()
+        names.update(p.alias for p in d.query_params)
+        todo.extend(d.dependencies)
+    unknown = sorted(set(request.query_params) - names)
+    if unknown:
+        raise InvalidQuery(f"unknown query parameter for {request.url.path}", received=unknown,
+                           expected=sorted(names) if names else "no query parameters")
+
+
 def detail(code: str, message: str, **extra: object) -> dict[str, object]:
     return {"detail": {"code": code, "message": message, **extra}}
 

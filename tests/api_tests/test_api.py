@@ -104,6 +104,19 @@ def test_error_detail_names_what_was_received(client):
     assert detail["message"] == "no such trial; received 6; expected 0 <= trial_id < 6"
 
 
+def test_an_unknown_query_parameter_is_refused_by_name_and_pages_ignore_them(client):
+    """A misspelt ?n=3 would otherwise answer with the default ten trials without a word."""
+    r = client.get("/runs/run-a/best?n=3")
+    assert r.status_code == 422
+    assert r.json()["detail"] == {"code": "invalid_query", "message": "unknown query parameter for "
+                                  "/runs/run-a/best; received ['n']; expected ['k']"}
+    detail = client.get("/runs?limit=3&k=1").json()["detail"]
+    assert detail["message"] == "unknown query parameter for /runs; received ['k', 'limit']; expected no query " \
+                                "parameters"
+    assert len(client.get("/runs/run-a/best?k=3").json()) == 3
+    assert client.get("/?run=run-a").status_code == 200  # the dashboard page, as a shared link may carry it
+
+
 def test_download_is_a_readable_snapshot(client):
     r = client.get("/runs/run-a/file")
     assert r.status_code == 200 and r.headers["content-type"] == "application/x-hdf5"
