@@ -3,7 +3,9 @@
     python bench/run_summary.py RUN.h5
 
 Prints one JSON object: per rung the evaluations, simulated seconds (settle included) and worker wall seconds
-per simulated second; the judged bests in trial order (screen and judge distances, ratio); the share of the
+per simulated second; the fidelities the trials ran at (engine and step, with the first trial of each: a raised
+fidelity shows as a second one); the judged bests in trial order (screen and judge distances, ratio, verdict);
+the share of the
 workers' time the trials took (their wall time against workers x the time from the run's start to its last
 result); the first full-length trial screened, and the first judged, past the paper's speed; the best judged.
 """
@@ -33,13 +35,17 @@ def summary(path: Path, paper_speed_cm_s: float, workers: int) -> dict:
         sim_s = float(simulated[rows.index].sum())
         out["rungs"][int(rung)] = {"evaluations": len(rows), "simulated_s": sim_s,
                                    "worker_wall_s_per_sim_s": float(rows.wall_time_s.sum()) / sim_s}
+    ran = df[df.status == "complete"]
+    out["fidelities"] = [{"engine": str(e), "dt_s": float(dt), "trials": len(rows), "first_trial": int(rows.index[0])}
+                         for (e, dt), rows in sorted(ran.groupby(["engine", "dt_s"]), key=lambda g: g[1].index[0])]
     elapsed_s = float(df.finished_at_unix_s.max() - started)
     out["last_result_after_s"] = elapsed_s
     out["trials_share_of_worker_time"] = float(df.wall_time_s.sum()) / (workers * elapsed_s)
     judged = df[df.verification.isin(["judged", "holds", "not_reproduced"])]
     out["judged"] = [{"trial": int(t), "after_min": round((r.finished_at_unix_s - started) / 60, 2),
                       "screen_m": round(float(r.distance_m), 4), "judge_m": round(float(r.verify_distance_m), 4),
-                      "ratio": round(float(r.judge_ratio), 3)} for t, r in judged.iterrows()]
+                      "ratio": round(float(r.judge_ratio), 3), "verdict": str(r.verification)}
+                     for t, r in judged.iterrows()]
     full = df[(df.rung == df.rung.max()) & (df.status == "complete")]
     fast = full[full.speed_cm_s > paper_speed_cm_s]
     if len(fast):
@@ -49,8 +55,9 @@ def summary(path: Path, paper_speed_cm_s: float, workers: int) -> dict:
     past = judged[judged_speed > paper_speed_cm_s]
     if len(past):
         out["first_judged_past_paper"] = {"trial": int(past.index[0]), "judge_m": float(past.verify_distance_m.iloc[0])}
-    if len(judged):
-        t = int(judged.verify_distance_m.idxmax())
+    counted = judged[judged.verification != "not_reproduced"]  # a best not reproduced never counts
+    if len(counted):
+        t = int(counted.verify_distance_m.idxmax())
         out["best_judged"] = {"trial": t, "screen_m": float(df.distance_m[t]),
                               "judge_m": float(df.verify_distance_m[t]),
                               "speed_cm_s": float(judged_speed[t])}

@@ -8,12 +8,14 @@ Bullet judge), with the same budget and seed, run side by side on this machine.
 Both runs are real `spinefarm search` processes (embedded Zenoh, local workers). Each re-simulates its
 new bests in Bullet at a converged step (0.25 ms): the Bullet-only run at 4x its own step, the
 multi-fidelity run with --verify-engine bullet. Prints one JSON object: wall seconds of each, their
-ratio, and the Bullet-verified distance and speed of each run's best.
+ratio, the Bullet-verified distance and speed of each run's best, and each run file's summary
+(bench/run_summary.py: the fidelities its trials ran at, its judged bests). `--keep DIR` keeps the run files.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import subprocess
 import sys
@@ -22,6 +24,10 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+
+from run_summary import summary  # noqa: E402
+from samplers import PAPER_SPEED_CM_S  # noqa: E402
 
 
 def search(label: str, out: Path, args: argparse.Namespace, extra: list[str]) -> dict:
@@ -44,6 +50,7 @@ def search(label: str, out: Path, args: argparse.Namespace, extra: list[str]) ->
         best = verified[0] if verified else None
         cpu_sim_s = float(cols["sim_time_s"][cols["status"] == b"complete"].sum())
     return {
+        "file": str(out), "summary": summary(out, PAPER_SPEED_CM_S.get(args.morphology, 0.0), args.workers),
         "wall_s": wall, "evaluations": counts["complete"] + counts["failed"], "failed": counts["failed"],
         "simulated_s": cpu_sim_s,
         "best_trial": None if best is None else best.trial_id,
@@ -70,9 +77,12 @@ def main() -> None:
                          "formed in any gait measured, and they cost 40 %% of a step)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--keep", type=Path, default=None, metavar="DIR", help="keep the two run files in DIR")
     args = ap.parse_args()
     rungs = args.rungs or f"{args.duration / 3:g},{args.duration:g}"
-    with tempfile.TemporaryDirectory() as tmp:
+    if args.keep:
+        args.keep.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() if args.keep is None else contextlib.nullcontext(args.keep) as tmp:
         # Bullet named, not left to `auto`: a calibration would add its minutes to this run's wall time.
         bullet = search("bullet", Path(tmp) / "bullet.h5", args,
                         ["--engine", "bullet", "--duration", str(args.duration)])
