@@ -5,9 +5,9 @@
 Prints one JSON object: per rung the evaluations, simulated seconds (settle included) and worker wall seconds
 per simulated second; the fidelities the trials ran at (engine and step, with the first trial of each: a raised
 fidelity shows as a second one); the judged bests in trial order (screen and judge distances, ratio, verdict);
-the share of the
-workers' time the trials took (their wall time against workers x the time from the run's start to its last
-result); the first full-length trial screened, and the first judged, past the paper's speed; the best judged.
+the share of the workers' time the trials took (their wall time against workers x the time from the run's
+start to its last result); the first full-length trial screened, and the first judged, past the paper's
+speed; the best judged.
 """
 
 from __future__ import annotations
