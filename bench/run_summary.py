@@ -36,8 +36,9 @@ def summary(path: Path, paper_speed_cm_s: float, workers: int) -> dict:
         out["rungs"][int(rung)] = {"evaluations": len(rows), "simulated_s": sim_s,
                                    "worker_wall_s_per_sim_s": float(rows.wall_time_s.sum()) / sim_s}
     ran = df[df.status == "complete"]
+    groups = sorted(ran.groupby(["engine", "dt_s"], dropna=False), key=lambda g: g[1].index[0])  # a NaN step too
     out["fidelities"] = [{"engine": str(e), "dt_s": float(dt), "trials": len(rows), "first_trial": int(rows.index[0])}
-                         for (e, dt), rows in sorted(ran.groupby(["engine", "dt_s"]), key=lambda g: g[1].index[0])]
+                         for (e, dt), rows in groups]
     elapsed_s = float(df.finished_at_unix_s.max() - started)
     out["last_result_after_s"] = elapsed_s
     out["trials_share_of_worker_time"] = float(df.wall_time_s.sum()) / (workers * elapsed_s)
