@@ -11,15 +11,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
 import sys
 import threading
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from spinefarm.cli import checks
+from spinefarm.cli.stop_signals import stop_on_signals
 from spinefarm.protocol.errors import ConfigError
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
@@ -76,9 +75,8 @@ def run(args: argparse.Namespace) -> int:
     if not guarded(conf):
         print("warning: no user/password dictionary (--credentials or --config): every session is let in",
               file=sys.stderr)
-    stopping: list[int] = []  # the handler takes no lock: it may run while the main thread holds one
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda signum, _frame: stopping.append(signum))
+    stop = threading.Event()
+    stop_on_signals(stop)
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as exc:
@@ -86,8 +84,7 @@ def run(args: argparse.Namespace) -> int:
                           expected="endpoints free to listen on and readable certificates") from exc
     print(f"router {session.zid()} listening on {', '.join(listen)}", flush=True)
     try:
-        while not stopping:
-            time.sleep(0.2)
+        stop.wait()
     finally:
         closer = threading.Thread(target=session.close, daemon=True)
         closer.start()

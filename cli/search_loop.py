@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import signal
 import socket
 import sys
 import threading
@@ -19,6 +18,7 @@ from spinefarm.cli.local_workers import LocalWorkers, worker_command
 from spinefarm.cli.progress import ProgressLine
 from spinefarm.cli.report import describe_best, progress, serve_until_stopped
 from spinefarm.cli.run_setup import check_run_args, credentials, free_port, open_run
+from spinefarm.cli.stop_signals import stop_on_signals
 from spinefarm.protocol.errors import ConfigError
 
 PORT_ATTEMPTS = 5  # `search`'s own coordinator port
@@ -101,8 +101,7 @@ class SearchSession:
         self.api: tuple[Any, threading.Thread, int] | None = None
         self.workers: LocalWorkers | None = None
         self.stopped = threading.Event()
-        for sig in (signal.SIGINT, signal.SIGTERM):  # Ctrl-C or a service manager: stop cleanly, store all
-            signal.signal(sig, lambda *_: self.stopped.set())
+        stop_on_signals(self.stopped)  # Ctrl-C or a service manager: stop cleanly, store all
         if n_workers == 0:
             print(f"no local workers: attach some with `spinefarm worker --connect {self.endpoint} "
                   f"--run {self.core.run_id}`", file=sys.stderr)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 from pathlib import Path
 
@@ -14,6 +13,7 @@ from spinefarm.cli.export_command import cmd_export
 from spinefarm.cli.run_setup import default_run_id, free_port, robot_name
 from spinefarm.cli.search_args import search_args, zenoh_args
 from spinefarm.cli.search_loop import cmd_coordinator, cmd_search
+from spinefarm.cli.stop_signals import stop_on_signals
 from spinefarm.protocol.errors import ConfigError
 
 __all__ = ["default_run_id", "free_port", "register", "robot_name"]
@@ -85,8 +85,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
     timings = WorkerTimings(coordinator_timeout_s=args.coordinator_timeout, min_trial_limit_s=args.min_trial_limit)
     service = WorkerService(access, run_id=args.run_id, worker_id=args.worker_id, batch=args.batch,
                             engines=parse_engines(args.engines), exit_when_done=args.exit_when_done, timings=timings)
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: service.stop.set())
+    stop_on_signals(service.stop)
     return service.run()
 
 
