@@ -6,6 +6,8 @@ import argparse
 import json
 import shutil
 
+from spinefarm.cli.robot_argument import add_robot_argument
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate", help="compare the fast tier (MuJoCo) with Bullet on a robot's gaits",
@@ -13,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "say whether a search may screen on MuJoCo (Spearman rho >= 0.9, top-10 "
                                    "overlap >= 8, median distance ratio in [0.9, 1.1]). Cached by the spec's "
                                    "hash (see --cache-dir; --refresh recomputes, --clear-cache empties it).")
-    p.add_argument("morphology", nargs="?", help="built-in name or a .yaml spec file")
+    add_robot_argument(p, omit_with="--clear-cache")
     add_calibration_arguments(p)
     p.add_argument("--refresh", action="store_true", help="recompute even if a cached result exists")
     p.add_argument("--clear-cache", action="store_true", help="delete every cached calibration and exit")

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 from spinefarm.cli import checks, render_motion
+from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.sim_commands import add_engine_argument
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.engines import DEFAULT_ENGINE
@@ -42,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "simulation or a stored trial of a run (--run), as a strip of keyframes "
                                    "(--out) and/or a video (--video). Strings are coloured by tension: blue "
                                    "low, red high.")
-    r.add_argument("morphology", nargs="?", help="built-in name or a .yaml spec file (omit with --run)")
+    add_robot_argument(r, omit_with="--run")
     r.add_argument("--out", type=Path, default=None, help="PNG file to write")
     r.add_argument("--record", type=Path, default=None,
                    help="trajectory .npz to draw (as written by `spinefarm trial --record`); with --duration, "

@@ -8,6 +8,7 @@ import json
 import re
 import sys
 
+from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.protocol.errors import ConfigError
 
 
@@ -29,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Checks that a robot builds; that its masses, inertias and start lengths "
                                    "are sane; that a passive settle (no CPG output) holds its shape; and that "
                                    "two runs agree. Exit 0 when every check passes, 1 otherwise.")
-    p.add_argument("morphology", help="a .yaml spec file (or a built-in name)")
+    add_robot_argument(p)
     p.add_argument("--engine", default="bullet", help="physics engine (default bullet)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_check)

@@ -6,6 +6,7 @@ import argparse
 import os
 
 from spinefarm.cli import engine_auto
+from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.robust_args import add_robust_args
 
 
@@ -34,8 +35,7 @@ def search_args(p: argparse.ArgumentParser, *, local: bool) -> None:
 
 
 def _run_args(p: argparse.ArgumentParser, local: bool) -> None:
-    p.add_argument("morphology", nargs="?", help="built-in morphology (e.g. tetraspine), a spec file "
-                   "(my_spine.yaml) or the test objective sphere[:N]; omit with --resume")
+    add_robot_argument(p, omit_with="--resume", more="or the test objective sphere[:N]")
     p.add_argument("--trials", type=int, default=None,
                    help="trial budget (default 2000; with --resume: a new, larger budget)")
     if local:

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 from spinefarm.cli import checks
+from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.protocol.errors import ParameterError
 from spinefarm.robot.engines import DEFAULT_ENGINE
 
@@ -18,8 +19,7 @@ from spinefarm.robot.engines import DEFAULT_ENGINE
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("trial", help="run one trial and print its metrics",
                        description="Run one trial of a morphology under CPG + impedance control.")
-    p.add_argument("morphology", nargs="?", default=None,
-                   help="built-in name (e.g. tetraspine) or a .yaml spec file; omit with --run")
+    add_robot_argument(p, omit_with="--run")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--random-seed", type=int, default=None,
                      help="draw the parameters uniformly from the unit cube with this seed")
@@ -53,7 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     a = sub.add_parser("accuracy", help="speed against error over steps, solver, CPG, contacts and scenes",
                        description="Run the same seeded trials over a sweep of settings against a converged "
                                    "reference; print a table, write JSON and a PNG plot.")
-    a.add_argument("morphology", help="built-in name or a .yaml spec file")
+    add_robot_argument(a)
     a.add_argument("--quick", action="store_true", help="reduced sweep (5 s trials, 3 steps) in a few minutes")
     a.add_argument("--seeds", type=int, default=None, help="random parameter sets (default 3 quick, 5 full)")
     a.add_argument("--duration", type=float, default=None, help="simulated seconds per trial")
