@@ -24,10 +24,10 @@ from spinefarm.storage.table import EMPTY_STATUS
 _DAMAGED = (KeyError, ValueError, TypeError, OSError, RuntimeError)
 
 
-def _open(path: Path) -> h5py.File:
+def _open(path: Path, swmr: bool = True) -> h5py.File:
     check_eof(path)  # a truncated file would hang an SWMR reader
     try:
-        return h5py.File(path, "r", libver="latest", swmr=True)
+        return h5py.File(path, "r", libver="latest", swmr=swmr)
     except OSError as exc:
         raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
 
@@ -42,11 +42,12 @@ def _must_exist(path: Path) -> None:
         raise StorageError("run file does not exist", received=str(path), expected="an existing .h5 file")
 
 
-def read_run(path: str | Path) -> tuple[RunMeta, dict[str, np.ndarray]]:
-    """Metadata and every complete row of a run file, also while (or after) a writer had it open."""
+def read_run(path: str | Path, swmr: bool = True) -> tuple[RunMeta, dict[str, np.ndarray]]:
+    """Metadata and every complete row of a run file, also while (or after) a writer had it open.
+    swmr=False: a file no writer has open (storage.probe), read once, so damage fails at once."""
     path = Path(path)
     _must_exist(path)
-    with _open(path) as f:
+    with _open(path, swmr) as f:
         try:
             meta = meta_of(f, path)
             if "trials" not in f:

@@ -10,7 +10,10 @@ handling SIGTERM. Two guards:
 - `probe`: read the whole file in a child process with a deadline; a child that hangs is killed and
   the file reported as damaged. Done once per file (resume, export, load_run, the API's first sight of
   a file). It also clears the "open for writing" flags a killed writer left (`clear_stale_write_flags`,
-  only when no coordinator holds the file), so h5py, h5dump or pandas open it without --resume.
+  only when no coordinator holds the file), so h5py, h5dump or pandas open it without --resume. A file
+  whose flags are then clear has no writer: the child reads it as a plain (not SWMR) reader, which tries
+  damaged metadata once, so a corrupted file fails in a fraction of a second with HDF5's own words;
+  only a file a writer has open is read as SWMR, where the deadline is the guard.
 """
 
 from __future__ import annotations
@@ -26,10 +29,16 @@ from spinefarm.protocol.errors import StorageError
 
 PROBE_TIMEOUT_S = 10.0
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
+_SAID = 3  # the child's exit code when it read the file and said what is wrong (its last stderr line)
 _PROBE_CODE = (
     "import sys\n"
+    "from spinefarm.protocol.errors import StorageError\n"
     "from spinefarm.storage.hdf5_reader import read_run\n"
-    "meta, cols = read_run(sys.argv[1])\n"
+    "try:\n"
+    "    meta, cols = read_run(sys.argv[1], swmr=sys.argv[2] == 'swmr')\n"
+    "except StorageError as exc:\n"
+    "    print(str(exc).replace(chr(10), ' '), file=sys.stderr)\n"
+    f"    sys.exit({_SAID})\n"
     "print(meta.run_id)\n"
 )
 
@@ -80,10 +89,11 @@ def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S) -> str:
     path = Path(path)
     check_eof(path)
     clear_stale_write_flags(path)  # a killed writer's file: plain HDF5 readers can open it from now on
+    mode = "swmr" if open_for_writing(path) else "plain"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     try:
-        r = subprocess.run([sys.executable, "-P", "-c", _PROBE_CODE, str(path)], capture_output=True, text=True,
-                           timeout=timeout_s, env=env, stdin=subprocess.DEVNULL)
+        r = subprocess.run([sys.executable, "-P", "-c", _PROBE_CODE, str(path), mode], capture_output=True,
+                           text=True, timeout=timeout_s, env=env, stdin=subprocess.DEVNULL)
     except subprocess.TimeoutExpired:
         raise StorageError(f"reading run file {path} did not finish within {timeout_s:g} s",
                            expected="an undamaged run file (this one is truncated or corrupted, or the machine "
@@ -91,8 +101,21 @@ def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S) -> str:
     if r.returncode != 0:
         lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()]
         last = lines[-1] if lines else f"exit code {r.returncode}"
+        if r.returncode == _SAID:
+            raise StorageError(last[:400])
         raise StorageError(f"cannot read run file {path}: {last[:300]}", expected="an undamaged run file")
     return r.stdout.strip()
+
+
+def open_for_writing(path: str | Path) -> bool:
+    """Whether the superblock says a writer has the file open (True also when it cannot tell: a layout
+    this code does not read, or an unreadable file)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(12)
+    except OSError:
+        return True
+    return head[:8] != _SIGNATURE or len(head) < 12 or head[8] not in (2, 3) or head[11] != 0
 
 
 # --- a writer killed mid-run leaves HDF5's "open for writing" flags set ----------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 import time
@@ -30,10 +31,12 @@ def runs_dir(tmp_path):
     d.mkdir()
     run_file(d / "good.h5", "good")
     run_file(tmp_path / "src.h5", "damaged")
-    shutil.copy(tmp_path / "src.h5", d / "header.h5")
-    with open(d / "header.h5", "r+b") as fh:  # garbage in the metadata: an SWMR reader retries for ever
-        fh.seek(200)
-        fh.write(b"\xff" * 512)
+    for name in ("header.h5", "checksum.h5"):  # garbage in the metadata: an SWMR reader retries for ever
+        shutil.copy(tmp_path / "src.h5", d / name)
+        with open(d / name, "r+b") as fh:
+            fh.seek(200)
+            fh.write(b"\xff" * 512)
+    mark_open_for_writing(d / "header.h5")  # with its writer's lock held (below): read as SWMR, to the deadline
     shutil.copy(tmp_path / "src.h5", d / "truncated.h5")
     with open(d / "truncated.h5", "r+b") as fh:
         fh.truncate((d / "truncated.h5").stat().st_size // 2)
@@ -41,9 +44,23 @@ def runs_dir(tmp_path):
     return d
 
 
+def mark_open_for_writing(path):
+    """Set the superblock's "open for writing" flags (write, SWMR write), as a live writer has them."""
+    from spinefarm.storage.probe import lookup3
+
+    with open(path, "r+b") as fh:
+        head = bytearray(fh.read(48))
+        head[11] = 0x05
+        head[44:48] = struct.pack("<I", lookup3(bytes(head[:44])))
+        fh.seek(0)
+        fh.write(head)
+
+
 def test_damaged_files_are_left_out_and_sigterm_stops_the_server(runs_dir):
     from spinefarm.cli.service_commands import free_port
+    from spinefarm.storage.runlock import RunLock
 
+    writer = RunLock(runs_dir / "header.h5").acquire()  # a coordinator has header.h5 open
     port = free_port()
     proc = subprocess.Popen([sys.executable, "-m", "spinefarm", "api", "--runs-dir", str(runs_dir), "--port",
                              str(port)], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -53,7 +70,7 @@ def test_damaged_files_are_left_out_and_sigterm_stops_the_server(runs_dir):
         t0 = time.monotonic()
         runs = httpx.get(url + "/runs", timeout=30).json()
         assert [r["run_id"] for r in runs] == ["good"]
-        assert time.monotonic() - t0 < 15  # the hanging file costs one probe deadline (5 s), once
+        assert time.monotonic() - t0 < 15  # the hanging live file costs one probe deadline (5 s), once
         t0 = time.monotonic()
         for _ in range(3):  # known-bad files are not probed again
             assert httpx.get(url + "/runs/good", timeout=5).status_code == 200
@@ -64,7 +81,11 @@ def test_damaged_files_are_left_out_and_sigterm_stops_the_server(runs_dir):
         assert proc.wait(15) in (0, -signal.SIGTERM)  # uvicorn re-raises the signal once it has stopped
         err = proc.stderr.read()
         assert "truncated" in err and "did not finish within 5 s" in err
+        # a damaged file no writer has open is read once, not to the deadline, and HDF5 says what it found
+        assert "checksum.h5: 'Unable to" in err and "metadata checksum" in err
+        assert "checksum.h5 did not finish" not in err
     finally:
+        writer.release()
         if proc.poll() is None:
             proc.kill()
             proc.wait()
