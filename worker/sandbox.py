@@ -39,6 +39,10 @@ LIMIT_FACTOR = 8.0
 FIRST_FACTOR = 10.0
 START_TIMEOUT_S = 300.0    # building the evaluator in a fresh child (imports, compiled kernels from cache)
 _POLL_S = 0.25             # how often a wait looks at the worker's stop flag
+# A trial process dead of these was most likely signalled with its worker's whole process group (a batch
+# system ending the job, a hang-up): if the worker stops within STOP_GRACE_S too, that is no crash.
+_STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+STOP_GRACE_S = 2.0
 RETRIED_REASONS = ("timeout:", "crashed:")   # coordinator.core re-issues these (kept in step)
 
 
@@ -198,6 +202,8 @@ class TrialSandbox:
         if msg is None and self.stop.is_set():
             self._kill()
             return None
+        if msg is not None and msg[0] == "eof" and self._stopped_with_worker():
+            return None
         if msg is None or msg[0] == "eof":
             code = self._kill()
             self.restarts += 1
@@ -211,6 +217,18 @@ class TrialSandbox:
         else:
             result = failed_result(a, str(msg[1]), wall)
         return replace(result, extras={**result.extras, "time_limit_s": limit_s})
+
+    def _stopped_with_worker(self) -> bool:
+        """Whether the child died of a stop signal and this worker is stopping too (then the trial is
+        abandoned: its lease expires and it is re-issued, with no strike against it)."""
+        proc = self._proc
+        if proc is None:
+            return False
+        proc.join(1.0)
+        if proc.exitcode not in [-int(sig) for sig in _STOP_SIGNALS] or not self.stop.wait(STOP_GRACE_S):
+            return False
+        self._kill()
+        return True
 
     def close(self) -> None:
         self._kill()

@@ -51,6 +51,32 @@ def test_hung_and_crashing_trials_end_in_bounded_time_and_the_sandbox_goes_on():
         box.close()
 
 
+def test_a_trial_process_stopped_with_its_worker_is_no_crash():
+    """A batch system ending the job (scancel), or a terminal's hang-up, signals the worker's whole process
+    group: the trial process dies of the same SIGTERM the worker stops on. That trial is abandoned (re-issued
+    once its lease expires), not reported as a crash that counts towards its three strikes; a trial process
+    killed while its worker goes on is still a crash."""
+    box = TrialSandbox(poisoned("job", 3.0), TrialLimit(min_s=30.0))
+    try:
+        for stops, expected in ((True, None), (False, "crashed:")):
+            box.stop.clear()
+            box.start()  # ready: the signal lands inside the trial (3 s), not in the start-up
+
+            def stop_the_job(stops: bool = stops) -> None:
+                os.kill(box._proc.pid, signal.SIGTERM)  # the group's signal reaches the child ...
+                if stops:
+                    time.sleep(0.05)  # ... and the worker's own handler sets its stop event a moment later
+                    box.stop.set()
+            threading.Timer(1.0, stop_the_job).start()
+            result = box.run(at(0.9))
+            if expected is None:
+                assert result is None
+            else:
+                assert result.reason.startswith(expected) and "SIGTERM" in result.reason, result.reason
+    finally:
+        box.close()
+
+
 def test_a_trial_process_whose_worker_is_gone_before_it_is_ready_exits_quietly(capfd):
     # A worker killed while its trial process starts: the process finds no one to say "ready" to.
     ctx = mp.get_context("spawn")
