@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any
+from dataclasses import asdict, fields
+from typing import Any, ClassVar
 
 from spinefarm.protocol import limits
 from spinefarm.protocol.errors import MessageError
@@ -106,3 +107,25 @@ def decode_message(payload: bytes | str, cls: Any) -> Any:
     except (TypeError, ValueError, KeyError, AttributeError, ArithmeticError, RecursionError) as exc:
         raise MessageError(f"{cls.KIND} message is malformed: {exc}", received=str(body)[:120],
                            expected=f"a valid {cls.KIND} body") from exc
+
+
+_FLAT_KINDS: dict[str, type | tuple[type, ...]] = {"str": str, "int": int, "bool": bool, "float": (int, float)}
+
+
+class FlatMessage:
+    """A message dataclass whose fields are str, int, bool or float (annotated so): `to_dict` gives them,
+    `from_dict` checks each against its annotation (a float must be finite), naming the message (WHAT)."""
+
+    KIND: ClassVar[str]
+    WHAT: ClassVar[str]
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)  # type: ignore[call-overload]  # every subclass is a dataclass
+
+    @classmethod
+    def from_dict(cls, data: Any) -> Any:
+        values = {}
+        for f in fields(cls):  # type: ignore[arg-type]
+            value = get_field(data, f.name, _FLAT_KINDS[str(f.type)], cls.WHAT)
+            values[f.name] = finite(value, f.name, cls.WHAT) if f.type == "float" else value
+        return cls(**values)

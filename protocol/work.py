@@ -3,11 +3,11 @@ trials, and the announcement by which workers find a run."""
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 from spinefarm.protocol import limits
-from spinefarm.protocol.envelope import finite, get_field
+from spinefarm.protocol.envelope import FlatMessage, finite, get_field
 from spinefarm.protocol.errors import ConfigError, MessageError
 from spinefarm.protocol.settings import TaskFidelity
 from spinefarm.protocol.submissions import ResultAck, SubmittedResult, Verdict
@@ -156,21 +156,13 @@ class WorkGrant:
 
 
 @dataclass(frozen=True)
-class RunInfo:
+class RunInfo(FlatMessage):
     """A coordinator announces its run so stateless workers can find it."""
 
     KIND = "run_info"
+    WHAT = "run info"
     run_id: str
     config_hash: str
     trials_budget: int
     run_done: bool
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: Any) -> RunInfo:
-        what = "run info"
-        return cls(get_field(data, "run_id", str, what), get_field(data, "config_hash", str, what),
-                   get_field(data, "trials_budget", int, what), get_field(data, "run_done", bool, what))
 
