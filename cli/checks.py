@@ -6,6 +6,7 @@ ends with a clear message (and no run file or half a simulation left behind).
 
 from __future__ import annotations
 
+import argparse
 import os
 import re
 from collections.abc import Iterable
@@ -69,4 +70,15 @@ def port(flag: str, value: int | None, *, allow_off: bool = False) -> int | None
 def at_least(flag: str, value: int | None, low: int, what: str) -> int | None:
     if value is not None and value < low:
         raise ConfigError(f"{flag} out of range", received=value, expected=f"{what} (at least {low})")
+    return value
+
+
+def seed(text: str) -> int:
+    """argparse type of every seed flag: an integer >= 0 (numpy's generators take no negative seed)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0; received {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0; received {value}")
     return value

@@ -54,7 +54,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="JSON parameter file (as for `spinefarm trial`), an NTRT .nnw folder or a robot with "
                         "published parameters (e.g. tetrahedral-complex); implies a simulation")
     r.add_argument("--duration", type=float, default=None, help="simulate this many seconds and draw them")
-    r.add_argument("--random-seed", type=int, default=0, help="seed of random parameters when --params is absent")
+    r.add_argument("--random-seed", type=checks.seed, default=0,
+                   help="seed of random parameters when --params is absent")
     r.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
     add_engine_argument(r)
     render_motion.add_arguments(r)

@@ -59,6 +59,8 @@ def check_run_args(args: argparse.Namespace) -> None:
     check_range("--verify-tolerance", args.verify_tolerance, 0.0, 10.0, low_inclusive=False)
     check_range("--judge-drift", args.judge_drift, 0.0, 10.0, low_inclusive=False)
     check_range("--judge-share", args.judge_share, 0.0, 1.0, low_inclusive=False)
+    if args.duration is not None:
+        check_range("--duration", args.duration, 0.0, 3600.0, low_inclusive=False)
     if args.out:
         checks.output_path("--out", args.out, (".h5", ".hdf5"))
 
@@ -114,12 +116,12 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     from spinefarm.cli.sim_commands import trial_overrides
     from spinefarm.coordinator.fidelity import parse_rungs
     from spinefarm.coordinator.problem import build_run_config
-    from spinefarm.coordinator.samplers import DEFAULT_SAMPLER
-    from spinefarm.coordinator.setup import SearchSettings
-    from spinefarm.protocol.settings import AuditPolicy
+    from spinefarm.protocol.settings import JudgePolicy
 
     given = None if args.rungs is None else parse_rungs(args.rungs)
-    robust_settings(args, tuple(given) if given else None)  # typed mistakes fail before a calibration runs
+    # typed mistakes fail before a calibration runs
+    robust_settings(args, tuple(given) if given else None)
+    search_settings(args, given, args.lease or 60.0, JudgePolicy(), None)
     choice = choose_engine(args)
     rungs = None if args.rungs is None else parse_rungs(args.rungs)
     if rungs:
@@ -135,12 +137,20 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     lease = args.lease
     if lease is None:
         lease = max(60.0, 20.0 * float(config.trial_config.get("duration_s") or 0.0))
-    settings = SearchSettings(trials=2000 if args.trials is None else args.trials,
-                              sampler=args.sampler or DEFAULT_SAMPLER, sigma=args.sigma, top_k=args.top_k,
-                              startup_trials=args.startup_trials, lease_s=lease, judge=judge_policy(args, config),
-                              audit=AuditPolicy(args.audit, args.audit_tolerance), rungs=rungs or None,
-                              eta=args.eta, engine_choice=choice)
-    return config, settings
+    return config, search_settings(args, rungs, lease, judge_policy(args, config), choice)
+
+
+def search_settings(args: argparse.Namespace, rungs: Any, lease_s: float, judge: Any, choice: Any) -> Any:
+    """The SearchSettings the flags ask for (each value checked as it is built)."""
+    from spinefarm.coordinator.samplers import DEFAULT_SAMPLER
+    from spinefarm.coordinator.setup import SearchSettings
+    from spinefarm.protocol.settings import AuditPolicy
+
+    return SearchSettings(trials=2000 if args.trials is None else args.trials,
+                          sampler=args.sampler or DEFAULT_SAMPLER, sigma=args.sigma, top_k=args.top_k,
+                          startup_trials=args.startup_trials, lease_s=lease_s, judge=judge,
+                          audit=AuditPolicy(args.audit, args.audit_tolerance), rungs=rungs or None,
+                          eta=args.eta, engine_choice=choice)
 
 
 def judge_policy(args: argparse.Namespace, config: Any) -> Any:

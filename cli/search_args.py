@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from spinefarm.cli import engine_auto
+from spinefarm.cli import checks, engine_auto
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.robust_args import add_robust_args
 
@@ -46,7 +46,7 @@ def _run_args(p: argparse.ArgumentParser, local: bool) -> None:
     p.add_argument("--resume", metavar="RUN.h5", help="continue the run stored in this file")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
     p.add_argument("--run-id", help="run id (default <morphology>-<time>-<random>)")
-    p.add_argument("--seed", type=int, default=0, help="run seed: fixes every sampled vector by trial number")
+    p.add_argument("--seed", type=checks.seed, default=0, help="run seed: fixes every sampled vector by trial number")
     p.add_argument("--objective", default="distance",
                    help="distance (default), speed, cot_distance or pareto (front of speed and COT)")
     p.add_argument("--sampler", default=None,

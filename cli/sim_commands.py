@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Run one trial of a morphology under CPG + impedance control.")
     add_robot_argument(p, omit_with="--run")
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--random-seed", type=int, default=None,
+    src.add_argument("--random-seed", type=checks.seed, default=None,
                      help="draw the parameters uniformly from the unit cube with this seed")
     src.add_argument("--params", type=Path, default=None,
                      help="JSON file of named physical parameter values ({name: value} or "
@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "or 'auto' for half the string network's stable-step estimate")
     p.add_argument("--controller", default=None, help="controller space (e.g. ntrt, sidewinding)")
     p.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
-    p.add_argument("--seed", type=int, default=None, help="trial seed (default: the random seed or 0)")
+    p.add_argument("--seed", type=checks.seed, default=None, help="trial seed (default: the random seed or 0)")
     p.add_argument("--settle", type=float, default=None, metavar="S",
                    help="settle this long with the CPG at rest and score locomotion from there (default 0)")
     p.add_argument("--scene", default=None,
@@ -141,6 +141,10 @@ def load_params_file(path: Path) -> tuple[dict[str, float], str | None]:
         data = json.loads(path.read_text())
     except FileNotFoundError as exc:
         raise ParameterError("parameter file not found", received=str(path), expected="an existing JSON file") from exc
+    except (OSError, UnicodeDecodeError) as exc:  # a folder, no permission, a binary file
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else type(exc).__name__
+        raise ParameterError(f"parameter file cannot be read as text ({why})", received=str(path),
+                             expected="a UTF-8 JSON file of name: value") from exc
     except json.JSONDecodeError as exc:
         raise ParameterError(f"parameter file is not JSON (line {exc.lineno})", received=str(path),
                              expected="a JSON object of name: value") from exc

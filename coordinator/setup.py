@@ -57,6 +57,7 @@ class SearchSettings:
     def __post_init__(self) -> None:
         check_range("trials", self.trials, 1)
         check_range("lease_s", self.lease_s, 0.0, low_inclusive=False)
+        check_range("eta", self.eta, 2)  # RunSettings checks it too; here it is before any calibration
         sampler_class(self.sampler)
 
     def run_settings(self, config: RunConfig) -> RunSettings:

@@ -87,8 +87,8 @@ def _simulate(morphology, params: list, cfg: TrialConfig, seeds: list[int], cont
     morph = load_morphology(morphology)
     controller = controller or cfg.controller
     for seed in seeds:
-        if not isinstance(seed, int | np.integer):
-            raise ParameterError("seed is not an integer", received=seed, expected="an integer")
+        if not isinstance(seed, int | np.integer) or seed < 0:
+            raise ParameterError("seed is not a whole number >= 0", received=seed, expected="an integer >= 0")
     if isinstance(setup, SetupCache):
         setup = setup.get(morph, cfg, controller)
     elif setup is None or setup.morph != morph or setup_key(setup.cfg) != setup_key(cfg) \
