@@ -11,6 +11,8 @@ import subprocess
 import sys
 from typing import Any
 
+from spinefarm.cli.stop_signals import die_with_parent
+
 AUTO = "auto"
 
 
@@ -77,7 +79,7 @@ def calibrate_in_child(morphology: str, settings: Any) -> tuple[dict[str, Any], 
            "--settle", repr(settings.settle_s), "--jobs", str(settings.jobs)]
     if settings.controller:
         cmd += ["--controller", settings.controller]
-    r = subprocess.run(cmd, capture_output=True, text=True, stdin=subprocess.DEVNULL)
+    r = subprocess.run(cmd, capture_output=True, text=True, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent)
     if r.returncode != 0:
         lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()] or [f"exit code {r.returncode}"]
         raise ConfigError(f"spinefarm calibrate {morphology} failed: {lines[-1][:300]}")

@@ -16,7 +16,6 @@ start failures in a row (exits before the ready file) with no start in between.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import os
 import signal
 import subprocess
@@ -27,17 +26,13 @@ from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
 
-PR_SET_PDEATHSIG = 1
+from spinefarm.cli.stop_signals import die_with_parent
+
 MAX_FAILURES = 3            # start failures in a row before the search stops
 DEATH_WINDOW_S = 60.0
 DEATH_BUDGET = 10           # restarts after deaths per window and worker slot; more wait for room
 EXIT_UNSERVABLE = 3  # worker.service: the run cannot be built on this worker
 READY_ENV = "SPINEFARM_READY_FILE"   # worker.service writes this file once it has started
-
-
-def _die_with_parent() -> None:  # runs in the child between fork and exec
-    with contextlib.suppress(OSError, AttributeError):  # elsewhere the search's own cleanup stops them
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 def worker_command(endpoint: str, run_id: str, batch: int | None, zenoh_config: str | None,
@@ -88,7 +83,7 @@ class LocalWorkers:
         with open(log_path, "wb") as err:
             proc = subprocess.Popen(self.command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err,
                                     env=env,
-                                    preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None)
+                                    preexec_fn=die_with_parent)
         return _Slot(proc, log_path, ready_path)
 
     @staticmethod

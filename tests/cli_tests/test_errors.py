@@ -7,9 +7,11 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
+from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
 
 
@@ -224,3 +226,57 @@ def test_a_trial_without_a_robot_or_with_a_stray_trial_id(args, needles):
 
 def test_a_trial_of_a_run_names_no_robot_of_its_own(sphere_run):
     one_line_error(run("trial", "tetraspine", "--run", str(sphere_run), timeout=30), "--run names its own robot")
+
+
+@pytest.mark.parametrize("args", [("trial", "tetraspine", "--seed", "-1", "--duration", "0.1"),
+                                  ("trial", "tetraspine", "--random-seed", "-2", "--duration", "0.1"),
+                                  ("render", "tetraspine", "--random-seed", "-3"),
+                                  ("search", "sphere:2", "--seed", "-1", "--workers", "0", "--api-port", "-1")])
+def test_a_negative_seed_is_refused_by_name(args, tmp_path):
+    out = ("--out", str(tmp_path / "r.h5")) if args[0] == "search" else ()
+    one_line_error(run(*args, *out, timeout=60), "seed is a whole number >= 0", "received -")
+    assert not (tmp_path / "r.h5").exists()
+
+
+def test_a_parameter_file_that_is_no_text_is_refused_by_name(tmp_path):
+    binary = tmp_path / "gait.json"
+    binary.write_bytes(b"\x89HDF\r\n\x1a\n\xff\xfe")
+    one_line_error(run("trial", "tetraspine", "--params", str(binary), timeout=60), "cannot be read as text",
+                   "gait.json")
+    one_line_error(run("trial", "tetraspine", "--params", str(tmp_path), timeout=60), "cannot be read as text")
+
+
+@pytest.mark.parametrize("flag", [("--trials", "0"), ("--duration", "-1"), ("--eta", "1"), ("--lease", "-3")])
+def test_search_flags_are_checked_before_the_engine_calibration(flag, tmp_path):
+    """`--engine auto` calibrates an uncached robot for minutes: a mistyped flag must not wait for that."""
+    spec = tmp_path / "fresh.yaml"
+    spec.write_text(run("spec", "tetraspine-ntrt", "--name", f"fresh-{os.getpid()}-{flag[0][2:]}").stdout)
+    r = run("search", str(spec), *flag, "--workers", "0", "--api-port", "-1", "--out", str(tmp_path / "r.h5"),
+            timeout=60)
+    one_line_error(r, flag[0].lstrip("-") if flag[0] != "--lease" else "lease_s", "out of range")
+    assert "calibrating" not in r.stderr and not (tmp_path / "r.h5").exists()
+
+
+def _children(pid: int) -> list[int]:
+    out: list[int] = []
+    for task in (Path("/proc") / str(pid) / "task").iterdir():
+        out += [int(c) for c in (task / "children").read_text().split()]
+    return out
+
+
+def test_a_search_killed_while_it_calibrates_leaves_no_calibration_running(tmp_path):
+    """The calibration of `--engine auto` runs in its own process: it must stop with the search, even a
+    SIGKILLed one, instead of computing on alone for minutes."""
+    spec = tmp_path / "fresh.yaml"
+    spec.write_text(run("spec", "tetraspine-ntrt", "--name", f"orphan-{os.getpid()}").stdout)
+    search = subprocess.Popen([sys.executable, "-m", "spinefarm", "search", str(spec), "--workers", "0",
+                               "--api-port", "-1", "--out", str(tmp_path / "r.h5")], cwd=ROOT,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        calibration = wait_for(lambda: _children(search.pid), timeout_s=60, poll_s=0.1, what="the calibration")[0]
+    finally:
+        search.kill()
+        search.wait(10)
+    wait_for(lambda: not Path(f"/proc/{calibration}").exists() or "Z" in
+             Path(f"/proc/{calibration}/stat").read_text().split(")")[-1].split()[:1],
+             timeout_s=30, poll_s=0.1, what="the calibration process to stop")
