@@ -121,7 +121,7 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     given = None if args.rungs is None else parse_rungs(args.rungs)
     # typed mistakes fail before a calibration runs
     robust_settings(args, tuple(given) if given else None)
-    search_settings(args, given, args.lease or 60.0, JudgePolicy(), None)
+    search_settings(args, given, 60.0 if args.lease is None else args.lease, JudgePolicy(), None)
     choice = choose_engine(args)
     rungs = None if args.rungs is None else parse_rungs(args.rungs)
     if rungs:

@@ -56,15 +56,16 @@ class SearchSettings:
 
     def __post_init__(self) -> None:
         check_range("trials", self.trials, 1)
-        check_range("lease_s", self.lease_s, 0.0, low_inclusive=False)
-        check_range("eta", self.eta, 2)  # RunSettings checks it too; here it is before any calibration
         sampler_class(self.sampler)
+        self._run_settings(self.judge)  # the ladder, eta and lease checked now, before any calibration
 
     def run_settings(self, config: RunConfig) -> RunSettings:
+        return self._run_settings(judge_rung(config, self.judge))
+
+    def _run_settings(self, judge: JudgePolicy) -> RunSettings:
         ladder = (Rung(),) if self.rungs is None else tuple(Rung(duration_s=d) for d in self.rungs)
         return RunSettings(scheduler="plain" if self.rungs is None else "halving", ladder=ladder, eta=self.eta,
-                           judge=judge_rung(config, self.judge), audit=self.audit, lease_s=self.lease_s,
-                           engine_choice=self.engine_choice)
+                           judge=judge, audit=self.audit, lease_s=self.lease_s, engine_choice=self.engine_choice)
 
 
 def judge_rung(config: RunConfig, judge: JudgePolicy) -> JudgePolicy:

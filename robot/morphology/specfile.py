@@ -125,7 +125,12 @@ def _with_base(spec: SpecSource, doc: LineDict, seen: set[str]) -> LineDict:
         raise spec.fail(line, "base", "specs inherit from each other in a cycle", received=base,
                         expected="a chain of bases that ends")
     base_spec = SpecSource(str(path))
-    base_doc = _with_base(base_spec, mapping(base_spec, compose(path.read_text(), base_spec), "(document)", 1,
+    try:
+        base_text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise spec.fail(line, "base", "cannot read the spec to start from", received=str(path),
+                        expected="a readable UTF-8 .yaml file") from exc
+    base_doc = _with_base(base_spec, mapping(base_spec, compose(base_text, base_spec), "(document)", 1,
                                              allowed=TOP_KEYS), seen | {key})
     merged = _merged(base_doc, LineDict({k: v for k, v in doc.items() if k != "base"}))
     merged.key_lines = {**base_doc.key_lines, **doc.key_lines}
@@ -185,10 +190,11 @@ def load_spec_file(path: str | Path, *, segments: int | None = None, name: str |
     """Morphology from a YAML spec file (see docs/morphology-format.md)."""
     p = Path(path)
     try:
-        text = p.read_text()
-    except OSError as exc:
-        raise MorphologySpecError("cannot read the spec file", received=str(p),
-                                  expected="a readable .yaml file") from exc
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:  # a folder, no permission, a binary file
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else "not UTF-8 text"
+        raise MorphologySpecError(f"cannot read the spec file ({why})", received=str(p),
+                                  expected="a readable UTF-8 .yaml file") from exc
     if p.suffix.lower() not in (".yaml", ".yml"):
         raise MorphologySpecError("unsupported spec file type", received=p.suffix, expected=".yaml or .yml")
     return parse_spec(text, str(p), segments=segments, name=name)

@@ -246,14 +246,16 @@ def test_a_parameter_file_that_is_no_text_is_refused_by_name(tmp_path):
     one_line_error(run("trial", "tetraspine", "--params", str(tmp_path), timeout=60), "cannot be read as text")
 
 
-@pytest.mark.parametrize("flag", [("--trials", "0"), ("--duration", "-1"), ("--eta", "1"), ("--lease", "-3")])
+@pytest.mark.parametrize("flag", [("--trials", "0"), ("--duration", "-1"), ("--eta", "1"), ("--lease", "0"),
+                                  ("--rungs", "3,2")])
 def test_search_flags_are_checked_before_the_engine_calibration(flag, tmp_path):
     """`--engine auto` calibrates an uncached robot for minutes: a mistyped flag must not wait for that."""
     spec = tmp_path / "fresh.yaml"
     spec.write_text(run("spec", "tetraspine-ntrt", "--name", f"fresh-{os.getpid()}-{flag[0][2:]}").stdout)
     r = run("search", str(spec), *flag, "--workers", "0", "--api-port", "-1", "--out", str(tmp_path / "r.h5"),
             timeout=60)
-    one_line_error(r, flag[0].lstrip("-") if flag[0] != "--lease" else "lease_s", "out of range")
+    words = {"--lease": ("lease_s", "out of range"), "--rungs": ("rungs must be increasing",)}
+    one_line_error(r, *words.get(flag[0], (flag[0].lstrip("-"), "out of range")))
     assert "calibrating" not in r.stderr and not (tmp_path / "r.h5").exists()
 
 
@@ -280,3 +282,13 @@ def test_a_search_killed_while_it_calibrates_leaves_no_calibration_running(tmp_p
     wait_for(lambda: not Path(f"/proc/{calibration}").exists() or "Z" in
              Path(f"/proc/{calibration}/stat").read_text().split(")")[-1].split()[:1],
              timeout_s=30, poll_s=0.1, what="the calibration process to stop")
+
+
+def test_a_spec_file_that_is_no_text_is_refused_by_name(tmp_path):
+    binary = tmp_path / "robot.yaml"
+    binary.write_bytes(b"\xff\xfe\x00robot")
+    one_line_error(run("trial", str(binary), "--duration", "0.1", timeout=60), "cannot read the spec file",
+                   "robot.yaml")
+    child = tmp_path / "child.yaml"
+    child.write_text(f"base: {binary}\nname: child\n")
+    one_line_error(run("check", str(child), timeout=60), "field base: cannot read the spec to start from")
