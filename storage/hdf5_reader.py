@@ -39,7 +39,8 @@ def _damaged(path: Path, exc: BaseException, what: str = "") -> StorageError:
 
 def _must_exist(path: Path) -> None:
     if not path.is_file():
-        raise StorageError("run file does not exist", received=str(path), expected="an existing .h5 file")
+        message = "a folder is no run file" if path.is_dir() else "run file does not exist"
+        raise StorageError(message, received=str(path), expected="an existing .h5 file")
 
 
 def read_run(path: str | Path, swmr: bool = True) -> tuple[RunMeta, dict[str, np.ndarray]]:

@@ -23,6 +23,7 @@ def test_help_lists_the_service_commands():
 
 @pytest.mark.parametrize(("args", "message"), [
     (("export", "missing.h5", "--best", "3"), "run file does not exist"),
+    (("export", "tests", "--best", "3"), "a folder is no run file"),
     (("search", "no-such-robot", "--trials", "5", "--workers", "0", "--api-port", "-1"), "no-such-robot"),
     (("search", "sphere:3", "--trials", "0", "--workers", "0", "--api-port", "-1"), "trials out of range"),
     (("search", "sphere:3", "--objective", "fame", "--workers", "0", "--api-port", "-1"), "unknown objective"),
