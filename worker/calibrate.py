@@ -20,6 +20,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -276,12 +277,15 @@ def calibration(source: str, settings: CalibrationSettings, refresh: bool = Fals
             return json.loads(path.read_text()), True
         except (OSError, ValueError):
             pass  # a damaged entry is computed again
-    result = calibrate(source, settings)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    result = clean(result)
-    tmp.write_text(json.dumps(result))
-    tmp.replace(path)
+    result = clean(calibrate(source, settings))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(result))
+        tmp.replace(path)
+    except OSError as exc:  # a read-only home in a container: the figures still count, only uncached
+        print(f"warning: the calibration is not cached ({exc.strerror or exc}: {path.parent}); set "
+              "SPINEFARM_CACHE_DIR to a writable folder to keep it", file=sys.stderr)
     return result, False
 
 

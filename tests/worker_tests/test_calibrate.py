@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -134,3 +135,17 @@ def test_a_change_of_the_simulating_code_calibrates_again(tmp_path):
     assert code_digest([engines], ("numpy",)) != before
     assert code_digest([engines], ("numpy", "no-such-package")) != code_digest([engines], ("numpy",))
     assert cache_path("tetraspine-ntrt", CalibrationSettings()).stem.endswith(simulating_code_digest())
+
+
+def test_a_cache_that_cannot_be_written_keeps_the_figures(tmp_path):
+    """A read-only home (a container's): the calibration's figures still come out, with a warning, instead of
+    being computed and thrown away (and `search --engine auto` falling back to Bullet)."""
+    blocked = tmp_path / "a-file"
+    blocked.write_text("x")  # no folder can be made below a file
+    env = {**os.environ, "SPINEFARM_CACHE_DIR": str(blocked / "cache")}
+    r = subprocess.run([sys.executable, "-m", "spinefarm", "calibrate", "tetraspine-ntrt", *TINY, "--jobs", "1",
+                        "--json"], cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out["cached"] is False and out["decision"] == decide(out)[0]
+    assert "the calibration is not cached" in r.stderr and "SPINEFARM_CACHE_DIR" in r.stderr
