@@ -12,6 +12,7 @@ import functools
 import hashlib
 import importlib.util
 import json
+import logging
 import math
 import os
 import subprocess
@@ -24,6 +25,7 @@ from typing import Any
 from spinefarm.api.errors import NotFound, RenderFailed, SimulatorUnavailable
 from spinefarm.storage.schema import RunMeta, TrialRecord
 
+log = logging.getLogger("spinefarm.api")
 FRAMES = 6
 RENDER_TIMEOUT_S = 900.0
 # The Python module each engine needs; a server without it says so instead of failing later.
@@ -108,16 +110,28 @@ class PictureCache:
         key = hashlib.sha256(json.dumps({"kind": kind, "code": code_stamp(),
                                          **{k: v for k, v in job.items() if k != "title"}},
                                         sort_keys=True).encode()).hexdigest()[:32]
-        out = self.dir / f"{key}{KINDS[kind][1]}"
+        out = self._writable_dir() / f"{key}{KINDS[kind][1]}"
         with self._lock(key):
             if out.is_file():
                 return out
             self._render({**job, **(inputs or {})}, out, KINDS[kind][0])
         return out
 
+    def _writable_dir(self) -> Path:
+        """The cache folder; where it cannot be made (a read-only home, a path below a file) a private
+        temporary one instead, said once in the log."""
+        with self._guard:
+            try:
+                self.dir.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                fallback = Path(tempfile.mkdtemp(prefix="spinefarm-pictures-"))
+                log.warning("cannot keep gait pictures in %s (%s); drawing them in %s", self.dir,
+                            exc.strerror or exc, fallback)
+                self.dir = fallback
+            return self.dir
+
     def _render(self, job: dict, out: Path, module: str) -> None:
-        self.dir.mkdir(parents=True, exist_ok=True)
-        fd, job_path = tempfile.mkstemp(suffix=".json", dir=self.dir)
+        fd, job_path = tempfile.mkstemp(suffix=".json", dir=out.parent)
         with os.fdopen(fd, "w") as fh:
             json.dump(job, fh)
         tmp = out.with_name(out.stem + f".{os.getpid()}.tmp{out.suffix}")

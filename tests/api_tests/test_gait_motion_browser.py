@@ -151,3 +151,17 @@ def test_without_the_simulator_the_3d_view_says_so(browser, run_file):
         page.close()
     finally:
         s.stop()
+
+
+def test_a_picture_cache_folder_that_cannot_be_made_draws_in_a_temporary_one(run_file, tmp_path, caplog):
+    """A read-only home or a mistyped SPINEFARM_CACHE_DIR: the gait is still drawn (it was a 500)."""
+    from fastapi.testclient import TestClient
+    from spinefarm.api.app import create_app
+
+    blocked = tmp_path / "a-file"
+    blocked.write_text("x")  # no folder can be made below a file
+    with TestClient(create_app([run_file], picture_cache_dir=blocked / "pictures")) as client:
+        r = client.get("/runs/tetra-motion/trials/0/motion.json")
+        assert r.status_code == 200, r.text
+        assert r.json()["format"] == "spinefarm-motion/1" and len(r.json()["time_s"]) > 1
+    assert any("cannot keep gait pictures in" in m and "drawing them in" in m for m in caplog.messages)
