@@ -135,6 +135,10 @@ class SandboxProblem(SpinefarmError):
     """The run's evaluator cannot be built here (the worker reports it as a WorkerProblem)."""
 
 
+class SandboxStopped(Exception):
+    """The worker stopped while its trial process was starting: no problem of the run's (nothing to report)."""
+
+
 class TrialSandbox:
     """One child process running one run's trials; `run(a)` never takes longer than the trial's limit."""
 
@@ -154,7 +158,11 @@ class TrialSandbox:
         self._proc.start()
         child.close()
         self._conn = parent
-        kind, value = self._wait(START_TIMEOUT_S) or ("problem", "")
+        msg = self._wait(START_TIMEOUT_S)
+        if (msg is None and self.stop.is_set()) or (msg == ("eof", None) and self._stopped_with_worker()):
+            self._kill()
+            raise SandboxStopped()
+        kind, value = msg or ("problem", "")
         if kind != "ready":
             value = None if kind == "eof" else value
             code = self._kill()

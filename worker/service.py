@@ -29,7 +29,7 @@ from spinefarm.protocol.work import RunInfo, TrialAssignment, WorkGrant, WorkReq
 from spinefarm.worker.connect import Connector
 from spinefarm.worker.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
 from spinefarm.worker.pacing import Backoff, BatchSizer, default_worker_id, mark_ready
-from spinefarm.worker.sandbox import MIN_LIMIT_S, TrialLimit, TrialSandbox
+from spinefarm.worker.sandbox import MIN_LIMIT_S, SandboxStopped, TrialLimit, TrialSandbox
 from spinefarm.worker.tasks import available_engines, environment
 
 __all__ = ["Backoff", "BatchSizer", "WorkerService", "WorkerTimings", "ZenohAccess", "build_evaluator",
@@ -170,6 +170,8 @@ class WorkerService:
                 return None
             try:
                 self._evaluators[config_hash] = self._build(configs[0])
+            except SandboxStopped:  # stopped while its trial process started: nothing wrong with the run
+                return None
             except Exception as exc:  # a spec this worker cannot build: say so, serve nothing of it
                 reason = str(exc) if isinstance(exc, SpinefarmError) else f"{type(exc).__name__}: {exc}"
                 log.error("cannot run trials of run %s: %s", run_id, reason)

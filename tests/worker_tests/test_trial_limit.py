@@ -10,11 +10,12 @@ import signal
 import threading
 import time
 
+import pytest
 from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.protocol.work import TrialAssignment
 from spinefarm.storage.hdf5_reader import read_run
-from spinefarm.worker.sandbox import TrialLimit, TrialSandbox, _child, simulated_s, task_kind
+from spinefarm.worker.sandbox import SandboxStopped, TrialLimit, TrialSandbox, _child, simulated_s, task_kind
 
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, spinefarm, stop
@@ -73,6 +74,30 @@ def test_a_trial_process_stopped_with_its_worker_is_no_crash():
                 assert result is None
             else:
                 assert result.reason.startswith(expected) and "SIGTERM" in result.reason, result.reason
+    finally:
+        box.close()
+
+
+def test_a_worker_stopped_while_its_trial_process_starts_reports_no_problem():
+    """Stopping a worker (or its whole job) while its trial process starts (imports, compiled kernels: up to a
+    minute on a fresh install) is no problem of the run's: reported as one, it would stop the whole search."""
+    box = TrialSandbox(poisoned("starting", 0.05), TrialLimit(min_s=30.0))
+    try:
+        box.stop.set()  # the worker's stop came first
+        with pytest.raises(SandboxStopped):
+            box.start()
+        box.stop.clear()
+
+        def stop_the_job() -> None:  # the job's SIGTERM reaches the starting child, then the worker
+            while box._proc is None or box._proc.pid is None:
+                time.sleep(0.001)
+            os.kill(box._proc.pid, signal.SIGTERM)
+            time.sleep(0.05)
+            box.stop.set()
+        threading.Thread(target=stop_the_job).start()
+        with pytest.raises(SandboxStopped):
+            box.start()
+        assert box._proc is None
     finally:
         box.close()
 
