@@ -68,6 +68,7 @@ class CoordinatorCore(TaskDispatch):
         # (judge, audit) a restart cut short.
         scheduler.enqueue(self.tasks.restart() + study.storage.waiting_ids())
         self.failure: str | None = None  # why the run cannot go on (a worker cannot build it)
+        self.unservable_workers: dict[str, str] = {}  # worker -> why it cannot serve this run (others do)
         self.drift = self.tasks.drift()  # why the screen's fidelity was raised (None: it was not)
         self._judge_best()
 
@@ -128,7 +129,7 @@ class CoordinatorCore(TaskDispatch):
                 self.told_done.add(req.worker_id)
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True,
                                                 verdicts))
-            if self.peers.is_quarantined(req.worker_id):
+            if self.peers.is_quarantined(req.worker_id) or req.worker_id in self.unservable_workers:
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, False,
                                                 verdicts))
             leases = self.scheduler.grant(req.worker_id, req.capacity, self._ask, self._eligible)
@@ -271,10 +272,28 @@ class CoordinatorCore(TaskDispatch):
                     "worker problem quotes no lease this worker holds", received=(problem.trial_id,
                                                                                   problem.lease_id),
                     expected="the trial id and lease id of a trial leased to that worker"))
-            if self.failure is None:
+            if self._served_by_others(problem.worker_id):
+                self._leave_out(problem.worker_id, problem.reason)
+            elif self.failure is None:
                 self.failure = f"worker {problem.worker_id} cannot serve run {self.run_id}: {problem.reason}"
                 log.error("%s", self.failure)
         return encode("ack", {})
+
+    def _served_by_others(self, worker_id: str) -> bool:
+        """Other workers have stored complete results of this run: one machine's problem (an old install, a
+        missing engine) need not stop it (lock held)."""
+        cols = self.study.storage.columns()
+        return bool(((cols["status"] == b"complete") & (cols["worker_id"] != worker_id.encode())).any())
+
+    def _leave_out(self, worker_id: str, reason: str) -> None:
+        """The worker gets no more work of this run; what it holds goes to the others (lock held)."""
+        self.unservable_workers[worker_id] = reason[:300]
+        w = self.scheduler.workers.get(worker_id)
+        for key in sorted(w.leases, reverse=True) if w is not None else []:  # kept in order at the head
+            self.scheduler.withdraw(key)
+            self.scheduler.push_front(key)
+        log.warning("worker %s cannot serve run %s (%s); other workers serve it, so the run goes on without it",
+                    worker_id, self.run_id, reason)
 
     def run_info(self) -> bytes:
         return encode_message(RunInfo(self.run_id, self.config_hash, self.study.budget, self.study.done))

@@ -247,3 +247,22 @@ def test_only_a_worker_holding_this_runs_work_can_stop_it_with_a_problem():
     genuine = WorkerProblem("w1", "engine 'mujoco' is not installed", a.trial_id, a.lease_id)
     assert decode(core.handle_problem(encode_message(genuine)))[0] == "ack"
     assert "w1 cannot serve" in core.failure and core.status()["state"] == "failed"
+
+
+def test_a_worker_that_cannot_serve_a_run_others_serve_is_left_out_and_the_run_goes_on():
+    """One machine with an old install or without an engine must not stop a search its peers serve."""
+    from spinefarm.protocol.run import WorkerProblem
+
+    core, _, _ = sphere_core(20)
+    a = ask(core, "w2", 1).assignments[0]
+    assert submit(core, [(a.lease_id, res(a, worker="w2"))], worker="w2")[a.trial_id] == Verdict.STORED
+    held = ask(core, "w1", 2).assignments
+    problem = WorkerProblem("w1", "engine 'mujoco' is not installed", held[0].trial_id, held[0].lease_id)
+    assert decode(core.handle_problem(encode_message(problem)))[0] == "ack"
+    st = core.status()
+    assert core.failure is None and st["state"] == "running"
+    assert st["unservable_workers"] == {"w1": "engine 'mujoco' is not installed"}
+    assert ask(core, "w1", 4).assignments == ()  # no more work for it
+    again = ask(core, "w2", 2).assignments  # what it held goes to the others first
+    assert [x.trial_id for x in again] == [x.trial_id for x in held]
+    assert [x.params_unit for x in again] == [x.params_unit for x in held]
