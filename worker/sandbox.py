@@ -43,6 +43,7 @@ _POLL_S = 0.25             # how often a wait looks at the worker's stop flag
 # system ending the job, a hang-up): if the worker stops within STOP_GRACE_S too, that is no crash.
 _STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 STOP_GRACE_S = 2.0
+START_ATTEMPTS = 3  # starts of a trial process killed by a signal before it was ready, before that is a problem
 RETRIED_REASONS = ("timeout:", "crashed:")   # coordinator.core re-issues these (kept in step)
 
 
@@ -139,6 +140,10 @@ class SandboxStopped(Exception):
     """The worker stopped while its trial process was starting: no problem of the run's (nothing to report)."""
 
 
+class _KilledAtStart(Exception):
+    """The trial process died of a signal before it was ready (its words: the signal)."""
+
+
 class TrialSandbox:
     """One child process running one run's trials; `run(a)` never takes longer than the trial's limit."""
 
@@ -151,7 +156,18 @@ class TrialSandbox:
         self.restarts = 0
 
     def start(self) -> None:
-        """Start the child and wait until its evaluator is built; SandboxProblem if it cannot be."""
+        """Start the child and wait until its evaluator is built; SandboxProblem if it cannot be. A child
+        killed by a signal while it starts (the OOM killer, a stray kill) is started again, up to
+        START_ATTEMPTS times in all: only a problem that repeats is the run's."""
+        for attempt in range(1, START_ATTEMPTS + 1):
+            try:
+                self._start_once()
+                return
+            except _KilledAtStart as killed:
+                if attempt == START_ATTEMPTS:
+                    raise SandboxProblem(f"the trial process did not start ({killed}, {attempt} times)") from None
+
+    def _start_once(self) -> None:
         ctx = mp.get_context("spawn")
         parent, child = ctx.Pipe()
         self._proc = ctx.Process(target=_child, args=(child, self.config), daemon=True, name="spinefarm-trials")
@@ -166,6 +182,8 @@ class TrialSandbox:
         if kind != "ready":
             value = None if kind == "eof" else value
             code = self._kill()
+            if kind == "eof" and code is not None and code < 0:
+                raise _KilledAtStart(_exit_text(code))
             raise SandboxProblem(value or f"the trial process did not start ({_exit_text(code)})")
 
     def _wait(self, timeout_s: float) -> tuple[str, object] | None:

@@ -15,7 +15,15 @@ from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.protocol.work import TrialAssignment
 from spinefarm.storage.hdf5_reader import read_run
-from spinefarm.worker.sandbox import SandboxStopped, TrialLimit, TrialSandbox, _child, simulated_s, task_kind
+from spinefarm.worker.sandbox import (
+    SandboxProblem,
+    SandboxStopped,
+    TrialLimit,
+    TrialSandbox,
+    _child,
+    simulated_s,
+    task_kind,
+)
 
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, spinefarm, stop
@@ -98,6 +106,41 @@ def test_a_worker_stopped_while_its_trial_process_starts_reports_no_problem():
         with pytest.raises(SandboxStopped):
             box.start()
         assert box._proc is None
+    finally:
+        box.close()
+
+
+def kill_starting_children(box: TrialSandbox, times: int) -> threading.Thread:
+    """SIGKILL the box's trial process `times` times, each as soon as it exists (before it is ready)."""
+    def run() -> None:
+        seen: set[int] = set()
+        while len(seen) < times:
+            proc = box._proc
+            if proc is not None and proc.pid is not None and proc.pid not in seen:
+                seen.add(proc.pid)
+                os.kill(proc.pid, signal.SIGKILL)
+            time.sleep(0.001)
+    t = threading.Thread(target=run, daemon=True)
+    t.start()
+    return t
+
+
+def test_a_trial_process_killed_while_it_starts_is_started_again():
+    """The OOM killer or a stray kill while the trial process starts is no problem of the run's (reported, it
+    stops a search no other worker has served); the same death at every start is."""
+    box = TrialSandbox(poisoned("oom", 0.05), TrialLimit(min_s=30.0))
+    try:
+        killer = kill_starting_children(box, 1)
+        box.start()
+        killer.join(5)
+        assert box.run(at(0.9)).ok
+    finally:
+        box.close()
+    box = TrialSandbox(poisoned("oom", 0.05), TrialLimit(min_s=30.0))
+    try:
+        kill_starting_children(box, 3)
+        with pytest.raises(SandboxProblem, match=r"did not start \(signal SIGKILL, 3 times\)"):
+            box.start()
     finally:
         box.close()
 
