@@ -79,12 +79,23 @@ def _start_service(args: argparse.Namespace, default_listen: list[str] | None) -
             return core, service, path, listen
         except ConfigError as exc:
             if attempt + 1 == attempts or "already in use" not in str(exc):
-                storage.close()
+                _abandon(storage, path, new=not args.resume)
                 raise
         except BaseException:
-            storage.close()
+            _abandon(storage, path, new=not args.resume)
             raise
     raise AssertionError("unreachable")
+
+
+def _abandon(storage: Any, path: Path, new: bool) -> None:
+    """The run could not be served: a run file made just now (no trial in it) goes, so the same command
+    works once the cause is fixed; a resumed one stays as it was."""
+    from spinefarm.storage.status import status_path
+
+    storage.close()
+    if new:
+        path.unlink(missing_ok=True)
+        status_path(path).unlink(missing_ok=True)
 
 
 class SearchSession:

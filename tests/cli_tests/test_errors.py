@@ -292,3 +292,19 @@ def test_a_spec_file_that_is_no_text_is_refused_by_name(tmp_path):
     child = tmp_path / "child.yaml"
     child.write_text(f"base: {binary}\nname: child\n")
     one_line_error(run("check", str(child), timeout=60), "field base: cannot read the spec to start from")
+
+
+def test_a_coordinator_that_cannot_listen_leaves_no_run_file(tmp_path):
+    """The port is taken: one line, and the run file it had just made is gone, so the same command works once
+    the port is free (it said "run file already exists")."""
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        out = tmp_path / "r.h5"
+        r = run("coordinator", "sphere:2", "--listen", f"tcp/127.0.0.1:{port}", "--out", str(out), "--api-port",
+                "-1", timeout=60)
+    one_line_error(r, "cannot open the Zenoh session", "Address already in use")
+    assert not out.exists() and not Path(str(out) + ".status.json").exists()
