@@ -131,9 +131,13 @@ class PictureCache:
             return self.dir
 
     def _render(self, job: dict, out: Path, module: str) -> None:
-        fd, job_path = tempfile.mkstemp(suffix=".json", dir=out.parent)
-        with os.fdopen(fd, "w") as fh:
-            json.dump(job, fh)
+        try:
+            fd, job_path = tempfile.mkstemp(suffix=".json", dir=out.parent)
+            with os.fdopen(fd, "w") as fh:
+                json.dump(job, fh)
+        except OSError as exc:  # a full disk: the drawing fails in words, not with a traceback
+            raise RenderFailed("cannot write in the picture cache", received=exc.strerror or str(exc),
+                               expected=f"free space in {out.parent}") from exc
         tmp = out.with_name(out.stem + f".{os.getpid()}.tmp{out.suffix}")
         try:
             # -P: the user's current folder never shadows the installed package in the drawing process

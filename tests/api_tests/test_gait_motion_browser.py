@@ -165,3 +165,33 @@ def test_a_picture_cache_folder_that_cannot_be_made_draws_in_a_temporary_one(run
         assert r.status_code == 200, r.text
         assert r.json()["format"] == "spinefarm-motion/1" and len(r.json()["time_s"]) > 1
     assert any("cannot keep gait pictures in" in m and "drawing them in" in m for m in caplog.messages)
+
+
+def test_a_full_picture_cache_is_an_error_in_words(run_file, tmp_path):
+    """A full disk under the picture cache (a real tmpfs, filled): a JSON error naming it, not a traceback."""
+    import subprocess
+
+    from fastapi.testclient import TestClient
+    from spinefarm.api.app import create_app
+
+    mnt = tmp_path / "fs"
+    mnt.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mnt)], capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs to fill up (needs root): {r.stderr.strip()}")
+    try:
+        (mnt / "pictures").mkdir()
+        with open(mnt / "filler", "wb", buffering=0) as fh:  # every block taken
+            try:
+                while True:
+                    fh.write(b"\0" * 4096)
+            except OSError:
+                pass
+        with TestClient(create_app([run_file], picture_cache_dir=mnt / "pictures"),
+                        raise_server_exceptions=False) as client:
+            r = client.get("/runs/tetra-motion/trials/0/motion.json")
+        assert r.status_code == 500, r.text
+        detail = r.json()["detail"]
+        assert detail["code"] == "render_failed" and "No space left on device" in detail["message"], detail
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], check=False)
