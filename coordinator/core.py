@@ -288,10 +288,7 @@ class CoordinatorCore(TaskDispatch):
     def _leave_out(self, worker_id: str, reason: str) -> None:
         """The worker gets no more work of this run; what it holds goes to the others (lock held)."""
         self.unservable_workers[worker_id] = reason[:300]
-        w = self.scheduler.workers.get(worker_id)
-        for key in sorted(w.leases, reverse=True) if w is not None else []:  # kept in order at the head
-            self.scheduler.withdraw(key)
-            self.scheduler.push_front(key)
+        self.scheduler.take_back(worker_id)
         log.warning("worker %s cannot serve run %s (%s); other workers serve it, so the run goes on without it",
                     worker_id, self.run_id, reason)
 

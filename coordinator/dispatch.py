@@ -85,10 +85,7 @@ class TaskDispatch:
 
     def _quarantine(self, worker_id: str) -> None:
         """Take back everything a worker just quarantined holds (lock held)."""
-        w = self.scheduler.workers.get(worker_id)
-        for key in sorted(w.leases) if w is not None else []:
-            self.scheduler.withdraw(key)
-            self.scheduler.push_front(key)
+        self.scheduler.take_back(worker_id)
         log.warning("worker %s quarantined: its audited results disagree with other workers'", worker_id)
 
     def _settle_task(self, key: int, worker_id: str, result: TrialResult) -> Verdict:

@@ -188,6 +188,16 @@ class Scheduler:
         self._attempts.pop(key, None)
         self._failed_on.pop(key, None)
 
+    def take_back(self, worker_id: str) -> list[int]:
+        """Withdraw every key `worker_id` holds (withdraw: no attempt counted) and issue them before anything
+        queued, in the order of their keys."""
+        w = self.workers.get(worker_id)
+        keys = sorted(w.leases) if w is not None else []
+        for key in reversed(keys):
+            self.withdraw(key)
+            self.push_front(key)
+        return keys
+
     def queued_keys(self) -> list[int]:
         return list(self._queue)
 

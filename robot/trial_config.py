@@ -14,6 +14,7 @@ from spinefarm.robot.engines import DEFAULT_ENGINE, check_engine_options, engine
 from spinefarm.robot.scene import SceneConfig
 
 MOTOR_MODEL_NAMES = ("physical", "ntrt2014")
+MAX_DURATION_S = 3600.0  # the longest trial a config takes
 
 
 @dataclass(frozen=True)
@@ -65,7 +66,7 @@ class TrialConfig:
 
     def __post_init__(self) -> None:
         if self.duration_s is not None:
-            check_range("duration_s", self.duration_s, 0.0, 3600.0, low_inclusive=False)
+            check_range("duration_s", self.duration_s, 0.0, MAX_DURATION_S, low_inclusive=False)
         check_range("settle_s", self.settle_s, 0.0, 60.0)
         if self.dt_s is not None:
             check_range("dt_s", self.dt_s, 1e-6, 0.02)

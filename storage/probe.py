@@ -107,15 +107,21 @@ def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S) -> str:
     return r.stdout.strip()
 
 
-def open_for_writing(path: str | Path) -> bool:
-    """Whether the superblock says a writer has the file open (True also when it cannot tell: a layout
-    this code does not read, or an unreadable file)."""
+def _superblock(path: str | Path) -> bytes | None:
+    """The file's first 48 bytes when they are a version 2 or 3 superblock at offset 0 (its byte 11: the
+    "open for writing" flags), else None (another layout, or an unreadable file)."""
     try:
         with open(path, "rb") as fh:
-            head = fh.read(12)
+            head = fh.read(48)
     except OSError:
-        return True
-    return head[:8] != _SIGNATURE or len(head) < 12 or head[8] not in (2, 3) or head[11] != 0
+        return None
+    return head if head[:8] == _SIGNATURE and len(head) == 48 and head[8] in (2, 3) else None
+
+
+def open_for_writing(path: str | Path) -> bool:
+    """Whether the superblock says a writer has the file open (True also when it cannot tell)."""
+    head = _superblock(path)
+    return head is None or head[11] != 0
 
 
 # --- a writer killed mid-run leaves HDF5's "open for writing" flags set ----------------------------------
@@ -165,12 +171,8 @@ def clear_stale_write_flags(path: str | Path) -> bool:
     from spinefarm.storage.runlock import RunLock
 
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(48)
-    except OSError:
-        return False
-    if head[:8] != _SIGNATURE or len(head) < 48 or head[8] not in (2, 3) or head[11] == 0:
+    head = _superblock(path)
+    if head is None or head[11] == 0:
         return False
     if struct.unpack_from("<I", head, 44)[0] != lookup3(head[:44]):
         return False  # not a superblock this code understands: leave it to HDF5
