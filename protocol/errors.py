@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from typing import Any
 
 
@@ -70,8 +72,6 @@ class StorageError(SpinefarmError):
 def check_range(field: str, value: float, low: float | None = None, high: float | None = None,
                 *, low_inclusive: bool = True) -> None:
     """Raise ConfigError naming `field` unless low <= value <= high (and finite)."""
-    import math
-
     ok = isinstance(value, int | float) and math.isfinite(value)
     if ok and low is not None:
         ok = value >= low if low_inclusive else value > low
@@ -82,6 +82,33 @@ def check_range(field: str, value: float, low: float | None = None, high: float 
         hi = "inf" if high is None else f"{high:g}"
         bracket = "[" if low_inclusive else "("
         raise ConfigError(f"{field} out of range", received=value, expected=f"a finite number in {bracket}{lo}, {hi}]")
+
+
+def bounded(default: Any = dataclasses.MISSING, low: float | None = None, high: float | None = None, *,
+            low_inclusive: bool = True) -> Any:
+    """A dataclass field with its range declared beside it; check_fields holds every such field to it
+    (a None value is an unset option and is not checked)."""
+    return dataclasses.field(default=default, metadata={"bounds": (low, high, low_inclusive)})
+
+
+def whole(default: int, low: int, high: int) -> Any:
+    """A dataclass field holding an integer in [low, high] (a bool is no integer here)."""
+    return dataclasses.field(default=default, metadata={"whole": (low, high)})
+
+
+def check_fields(record: Any, prefix: str = "") -> None:
+    """Hold each bounded and whole field of a dataclass to its range, in declaration order; errors
+    name prefix + the field's name."""
+    for f in dataclasses.fields(record):
+        value = getattr(record, f.name)
+        if "bounds" in f.metadata and value is not None:
+            low, high, low_inclusive = f.metadata["bounds"]
+            check_range(prefix + f.name, value, low, high, low_inclusive=low_inclusive)
+        elif "whole" in f.metadata:
+            low, high = f.metadata["whole"]
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+                raise ConfigError(f"{prefix}{f.name} out of range", received=value,
+                                  expected=f"an integer in [{low}, {high}]")
 
 
 class RunMismatchError(ConfigError):

@@ -17,7 +17,7 @@ from itertools import pairwise
 from typing import Any, ClassVar, TypeVar
 
 from spinefarm.protocol.engine_choice import EngineChoice
-from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.protocol.errors import ConfigError, bounded, check_fields, check_range
 
 SCHEDULERS = ("plain", "halving")
 _R = TypeVar("_R", bound="_JsonRecord")
@@ -78,15 +78,13 @@ class JudgePolicy(_JsonRecord):
 
     enabled: bool = True
     rung: Rung = field(default_factory=Rung)
-    tolerance: float = 0.05
+    tolerance: float = bounded(0.05, 0.0, 10.0, low_inclusive=False)
     perturb: bool = False
-    drift: float = 0.2
-    share: float = 0.25
+    drift: float = bounded(0.2, 0.0, 10.0, low_inclusive=False)
+    share: float = bounded(0.25, 0.0, 1.0, low_inclusive=False)
 
     def __post_init__(self) -> None:
-        check_range("judge tolerance", self.tolerance, 0.0, 10.0, low_inclusive=False)
-        check_range("judge drift", self.drift, 0.0, 10.0, low_inclusive=False)
-        check_range("judge share", self.share, 0.0, 1.0, low_inclusive=False)
+        check_fields(self, "judge ")
         if isinstance(self.rung, dict):
             object.__setattr__(self, "rung", Rung.from_dict(self.rung))
 
@@ -99,13 +97,12 @@ class AuditPolicy(_JsonRecord):
 
     WHAT: ClassVar[str] = "audit"
 
-    fraction: float = 0.0
-    tolerance: float = 1e-6
+    fraction: float = bounded(0.0, 0.0, 1.0)
+    tolerance: float = bounded(1e-6, 0.0, 10.0)
     quarantine: bool = True
 
     def __post_init__(self) -> None:
-        check_range("audit fraction", self.fraction, 0.0, 1.0)
-        check_range("audit tolerance", self.tolerance, 0.0, 10.0)
+        check_fields(self, "audit ")
 
     @property
     def enabled(self) -> bool:

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.protocol.errors import ConfigError, bounded, check_fields
 
 GROUND_TOP_CM = 0.5
 GROUND_HALF_EXTENT_CM = 500.0
@@ -33,14 +33,14 @@ class SceneConfig:
     """
 
     kind: str = "flat"
-    friction: float | None = None
-    slope_deg: float = 0.0
-    rough_amplitude_cm: float = 2.0
-    rough_wavelength_cm: float = 40.0
+    friction: float | None = bounded(None, 0.0, 10.0)
+    slope_deg: float = bounded(0.0, -45.0, 45.0)
+    rough_amplitude_cm: float = bounded(2.0, 0.0, 50.0)
+    rough_wavelength_cm: float = bounded(40.0, 2.0, 1000.0)
     rough_seed: int = 0
-    obstacle_height_cm: float = 3.0
-    obstacle_depth_cm: float = 5.0
-    obstacle_spacing_cm: float = 60.0
+    obstacle_height_cm: float = bounded(3.0, 0.0, 100.0, low_inclusive=False)
+    obstacle_depth_cm: float = bounded(5.0, 0.0, 200.0, low_inclusive=False)
+    obstacle_spacing_cm: float = bounded(60.0, 1.0, 1000.0)
     collision_filter: str = "all"
 
     def __post_init__(self) -> None:
@@ -48,14 +48,7 @@ class SceneConfig:
             raise ConfigError("unknown scene kind", received=self.kind, expected=sorted(SCENE_BUILDERS))
         if self.collision_filter not in FILTERS:
             raise ConfigError("unknown collision_filter", received=self.collision_filter, expected=list(FILTERS))
-        if self.friction is not None:
-            check_range("scene.friction", self.friction, 0.0, 10.0)
-        check_range("scene.slope_deg", self.slope_deg, -45.0, 45.0)
-        check_range("scene.rough_amplitude_cm", self.rough_amplitude_cm, 0.0, 50.0)
-        check_range("scene.rough_wavelength_cm", self.rough_wavelength_cm, 2.0, 1000.0)
-        check_range("scene.obstacle_height_cm", self.obstacle_height_cm, 0.0, 100.0, low_inclusive=False)
-        check_range("scene.obstacle_depth_cm", self.obstacle_depth_cm, 0.0, 200.0, low_inclusive=False)
-        check_range("scene.obstacle_spacing_cm", self.obstacle_spacing_cm, 1.0, 1000.0)
+        check_fields(self, "scene.")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -244,10 +237,13 @@ def pairs_off(terrain: Terrain, n_segments: int) -> list[tuple[int, int]]:
 class GroundSpec:
     """Flat static box whose top is at top_y_cm (NTRT [P]: half-height 0.5, top at y = 0.5)."""
 
-    top_y_cm: float = 0.5
-    half_extent_cm: float = 500.0
-    half_height_cm: float = 0.5
-    friction: float = 0.5
+    top_y_cm: float = bounded(GROUND_TOP_CM)
+    half_extent_cm: float = bounded(GROUND_HALF_EXTENT_CM, 0.0, low_inclusive=False)
+    half_height_cm: float = bounded(GROUND_HALF_HEIGHT_CM, 0.0, low_inclusive=False)
+    friction: float = bounded(0.5, 0.0, 10.0)
+
+    def __post_init__(self) -> None:
+        check_fields(self, "ground.")
 
     def to_terrain(self) -> Terrain:
         box = Box((0.0, self.top_y_cm - self.half_height_cm, 0.0),

@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.protocol.errors import ConfigError, bounded, check_fields
 from spinefarm.robot.engines import DEFAULT_ENGINE, check_engine_options, engine_spec
 from spinefarm.robot.scene import SceneConfig
 
@@ -39,38 +39,33 @@ class TrialConfig:
     refuse_unstable_dt: raise ConfigError for a dt_s above that estimate (known to be unstable).
     """
 
-    duration_s: float | None = None
-    settle_s: float = 0.0
-    dt_s: float | None = None
+    duration_s: float | None = bounded(None, 0.0, MAX_DURATION_S, low_inclusive=False)
+    settle_s: float = bounded(0.0, 0.0, 60.0)
+    dt_s: float | None = bounded(None, 1e-6, 0.02)
     auto_dt: bool = False
-    dt_safety_factor: float = 0.5
+    dt_safety_factor: float = bounded(0.5, 0.0, 1.0, low_inclusive=False)
     refuse_unstable_dt: bool = True
     engine: str = DEFAULT_ENGINE
     engine_options: dict[str, Any] = field(default_factory=dict)
     motor_model: str = "physical"
     controller: str | None = None
-    cpg_update_period_s: float | None = None
-    cpg_max_step_s: float | None = None
+    cpg_update_period_s: float | None = bounded(None, 1e-6, 10.0)
+    cpg_max_step_s: float | None = bounded(None, 1e-6, 0.1)
     relocate_anchors: bool = True
-    pose_jitter_cm: float = 0.0
-    ground_friction: float | None = None
-    check_every_s: float = 0.01
-    max_body_speed_m_s: float = 5.0
+    pose_jitter_cm: float = bounded(0.0, 0.0, 10.0)
+    ground_friction: float | None = bounded(None, 0.0, 10.0)
+    check_every_s: float = bounded(0.01, 1e-6, 10.0)
+    max_body_speed_m_s: float = bounded(5.0, 0.0, low_inclusive=False)
     min_height_m: float = -0.5
     max_height_m: float = 5.0
-    max_stretch_ratio: float = 4.0
-    max_kinetic_energy_j: float = 200.0
-    record_every_s: float | None = None
+    max_stretch_ratio: float = bounded(4.0, 1.0, low_inclusive=False)
+    max_kinetic_energy_j: float = bounded(200.0, 0.0, low_inclusive=False)
+    record_every_s: float | None = bounded(None, 1e-6, 10.0)
     scene: SceneConfig = field(default_factory=SceneConfig)
     extras: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.duration_s is not None:
-            check_range("duration_s", self.duration_s, 0.0, MAX_DURATION_S, low_inclusive=False)
-        check_range("settle_s", self.settle_s, 0.0, 60.0)
-        if self.dt_s is not None:
-            check_range("dt_s", self.dt_s, 1e-6, 0.02)
-        check_range("dt_safety_factor", self.dt_safety_factor, 0.0, 1.0, low_inclusive=False)
+        check_fields(self)
         if not isinstance(self.engine_options, Mapping):
             raise ConfigError("engine_options is not a mapping", received=self.engine_options,
                               expected="{option: value} of the engine's settings")
@@ -78,19 +73,6 @@ class TrialConfig:
         check_engine_options(self.engine, self.engine_options)
         if self.motor_model not in MOTOR_MODEL_NAMES:
             raise ConfigError("unknown motor_model", received=self.motor_model, expected=sorted(MOTOR_MODEL_NAMES))
-        if self.cpg_update_period_s is not None:
-            check_range("cpg_update_period_s", self.cpg_update_period_s, 1e-6, 10.0)
-        if self.cpg_max_step_s is not None:
-            check_range("cpg_max_step_s", self.cpg_max_step_s, 1e-6, 0.1)
-        check_range("pose_jitter_cm", self.pose_jitter_cm, 0.0, 10.0)
-        if self.ground_friction is not None:
-            check_range("ground_friction", self.ground_friction, 0.0, 10.0)
-        check_range("check_every_s", self.check_every_s, 1e-6, 10.0)
-        check_range("max_body_speed_m_s", self.max_body_speed_m_s, 0.0, None, low_inclusive=False)
-        check_range("max_stretch_ratio", self.max_stretch_ratio, 1.0, None, low_inclusive=False)
-        check_range("max_kinetic_energy_j", self.max_kinetic_energy_j, 0.0, None, low_inclusive=False)
-        if self.record_every_s is not None:
-            check_range("record_every_s", self.record_every_s, 1e-6, 10.0)
         if isinstance(self.scene, Mapping):
             object.__setattr__(self, "scene", SceneConfig.from_dict(dict(self.scene)))
         if not isinstance(self.scene, SceneConfig):

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.protocol.errors import ConfigError, bounded, check_fields, whole
 from spinefarm.protocol.run import json_hash
 from spinefarm.robot.morphology.registry import load_morphology
 
@@ -48,25 +48,19 @@ class CalibrationSettings:
     hill climb from the best random gait, seeds after those), whose `bests` best join them; trials of
     duration_s after a settle_s settle; jobs: processes."""
 
-    gaits: int = 40
-    search_trials: int = 40
-    bests: int = 10
-    duration_s: float = 5.0
-    settle_s: float = 1.0
+    gaits: int = whole(40, 3, 100_000)
+    search_trials: int = whole(40, 0, 100_000)
+    bests: int = whole(10, 0, 100_000)
+    duration_s: float = bounded(5.0, 0.0, 3600.0, low_inclusive=False)
+    settle_s: float = bounded(1.0, 0.0, 60.0)
     controller: str | None = None
-    jobs: int = 1
+    jobs: int = whole(1, 1, 100_000)
 
     def __post_init__(self) -> None:
-        for name, low in (("gaits", 3), ("search_trials", 0), ("bests", 0), ("jobs", 1)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= 100_000:
-                raise ConfigError(f"calibration {name} out of range", received=v,
-                                  expected=f"an integer in [{low}, 100000]")
+        check_fields(self, "calibration ")
         if self.bests > self.search_trials:
             raise ConfigError("calibration bests exceed the search's trials", received=self.bests,
                               expected=f"at most {self.search_trials}")
-        check_range("duration_s", self.duration_s, 0.0, 3600.0, low_inclusive=False)
-        check_range("settle_s", self.settle_s, 0.0, 60.0)
 
     def key(self) -> str:
         """What the result depends on besides the robot (not the number of processes)."""

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING
 
-from spinefarm.protocol.errors import ConfigError, MorphologySpecError, check_range
+from spinefarm.protocol.errors import ConfigError, MorphologySpecError, bounded, check_fields
 from spinefarm.robot.morphology.structure import StructureSpec
 
 if TYPE_CHECKING:
@@ -20,17 +20,13 @@ if TYPE_CHECKING:
 class ImpedanceGains:
     """T* = max(0, T0 + K (L - Lc) + B (v - V0)) (spec 4.2). Lc None means the start length."""
 
-    tension_offset_n: float = 0.0
-    position_gain_n_per_m: float = 1000.0
-    velocity_gain_n_s_per_m: float = 100.0
-    control_length_cm: float | None = None
+    tension_offset_n: float = bounded(0.0)
+    position_gain_n_per_m: float = bounded(1000.0, 0.0)
+    velocity_gain_n_s_per_m: float = bounded(100.0, 0.0)
+    control_length_cm: float | None = bounded(None, 0.0, low_inclusive=False)
 
     def __post_init__(self) -> None:
-        check_range("tension_offset_n", self.tension_offset_n, None, None)
-        check_range("position_gain_n_per_m", self.position_gain_n_per_m, 0.0, None)
-        check_range("velocity_gain_n_s_per_m", self.velocity_gain_n_s_per_m, 0.0, None)
-        if self.control_length_cm is not None:
-            check_range("control_length_cm", self.control_length_cm, 0.0, None, low_inclusive=False)
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -47,13 +43,13 @@ class ControlSpec:
 
     cpg_tags: tuple[str, ...]
     impedance: tuple[tuple[str, ImpedanceGains], ...]
-    cpg_update_period_s: float = 0.001
+    cpg_update_period_s: float = bounded(0.001, 0.0, 10.0, low_inclusive=False)
     node_range: tuple[float, float] = (0.0, 30.0)
     descending_command: float = 2.0
     amplitude_rate_per_s: float = 20.0
 
     def __post_init__(self) -> None:
-        check_range("cpg_update_period_s", self.cpg_update_period_s, 0.0, 10.0, low_inclusive=False)
+        check_fields(self)
         if self.node_range[1] < self.node_range[0]:
             raise ConfigError("node_range is inverted", received=self.node_range, expected="lo <= hi")
         missing = [t for t in self.cpg_tags if t not in dict(self.impedance)]
@@ -73,8 +69,8 @@ class Morphology:
     structure: StructureSpec
     control: ControlSpec
     scored_segment: int
-    duration_s: float = 30.0
-    ground_friction: float = 0.5
+    duration_s: float = bounded(30.0, 0.0, low_inclusive=False)
+    ground_friction: float = bounded(0.5, 0.0, 10.0)
     controllers: tuple[str, ...] = ("ntrt",)
     description: str = ""
     extra: tuple[tuple[str, float], ...] = field(default=())
@@ -84,8 +80,7 @@ class Morphology:
         if not 0 <= self.scored_segment < n:
             raise MorphologySpecError("scored_segment is not a segment", received=self.scored_segment,
                                       expected=f"an index in [0, {n - 1}]")
-        check_range("duration_s", self.duration_s, 0.0, None, low_inclusive=False)
-        check_range("ground_friction", self.ground_friction, 0.0, 10.0)
+        check_fields(self)
         tags = {s.tag for s in self.structure.strings}
         unknown = [t for t, _ in self.control.impedance if t not in tags]
         if unknown:

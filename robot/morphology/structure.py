@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from spinefarm.protocol.errors import ConfigError, MorphologySpecError, check_range
+from spinefarm.protocol.errors import ConfigError, MorphologySpecError, bounded, check_fields
 from spinefarm.robot import fixedmath as fm
 
 NEWTON = 100.0  # kg*cm/s^2 per N
@@ -25,18 +25,14 @@ NEWTON = 100.0  # kg*cm/s^2 per N
 class RodMaterial:
     """Solid cylinders of one tag. Friction is the Bullet coefficient (combined as a product)."""
 
-    radius_cm: float = 0.5
-    density_kg_per_cm3: float = 0.014
-    friction: float = 0.5
-    rolling_friction: float = 0.0
-    restitution: float = 0.0
+    radius_cm: float = bounded(0.5, 0.0, low_inclusive=False)
+    density_kg_per_cm3: float = bounded(0.014, 0.0, low_inclusive=False)
+    friction: float = bounded(0.5, 0.0, 10.0)
+    rolling_friction: float = bounded(0.0, 0.0, 10.0)
+    restitution: float = bounded(0.0, 0.0, 1.0)
 
     def __post_init__(self) -> None:
-        check_range("radius_cm", self.radius_cm, 0.0, None, low_inclusive=False)
-        check_range("density_kg_per_cm3", self.density_kg_per_cm3, 0.0, None, low_inclusive=False)
-        check_range("friction", self.friction, 0.0, 10.0)
-        check_range("rolling_friction", self.rolling_friction, 0.0, 10.0)
-        check_range("restitution", self.restitution, 0.0, 1.0)
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -48,27 +44,18 @@ class StringMaterial:
     step (NTRT's octahedral ligaments).
     """
 
-    stiffness_n_per_m: float = 1000.0
-    damping_n_s_per_m: float = 10.0
-    pretension_n: float = 0.0
-    max_tension_n: float = 70.0
-    motor_speed_cm_s: float = 24.0
-    motor_accel_cm_s2: float = 10000.0
-    min_rest_length_cm: float = 0.1
-    min_actuated_length_cm: float = 0.1
-    drive_offset_cm: float | None = None
+    stiffness_n_per_m: float = bounded(1000.0, 0.0, low_inclusive=False)
+    damping_n_s_per_m: float = bounded(10.0, 0.0)
+    pretension_n: float = bounded(0.0, 0.0)
+    max_tension_n: float = bounded(70.0, 0.0, low_inclusive=False)
+    motor_speed_cm_s: float = bounded(24.0, 0.0, low_inclusive=False)
+    motor_accel_cm_s2: float = bounded(10000.0, 0.0, low_inclusive=False)
+    min_rest_length_cm: float = bounded(0.1, 0.0)
+    min_actuated_length_cm: float = bounded(0.1, 0.0)
+    drive_offset_cm: float | None = bounded(None)
 
     def __post_init__(self) -> None:
-        check_range("stiffness_n_per_m", self.stiffness_n_per_m, 0.0, None, low_inclusive=False)
-        check_range("damping_n_s_per_m", self.damping_n_s_per_m, 0.0, None)
-        check_range("pretension_n", self.pretension_n, 0.0, None)
-        check_range("max_tension_n", self.max_tension_n, 0.0, None, low_inclusive=False)
-        check_range("motor_speed_cm_s", self.motor_speed_cm_s, 0.0, None, low_inclusive=False)
-        check_range("motor_accel_cm_s2", self.motor_accel_cm_s2, 0.0, None, low_inclusive=False)
-        check_range("min_rest_length_cm", self.min_rest_length_cm, 0.0, None)
-        check_range("min_actuated_length_cm", self.min_actuated_length_cm, 0.0, None)
-        if self.drive_offset_cm is not None:
-            check_range("drive_offset_cm", self.drive_offset_cm, None, None)
+        check_fields(self)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from itertools import chain
 
 import numpy as np
 import pybullet as pb
-from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.protocol.errors import bounded, check_fields, whole
 from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel
 from spinefarm.robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
@@ -28,24 +28,19 @@ from spinefarm.worker.engines.couple import wrench_to_force_pairs
 class BulletSettings:
     """Bullet settings; defaults are Bullet 2.8x's sequential-impulse defaults."""
 
-    solver_iterations: int = 10
-    erp: float = 0.2
+    solver_iterations: int = whole(10, 1, 1000)
+    erp: float = bounded(0.2, 0.0, 1.0)
     split_impulse: bool = True
     split_impulse_threshold: float = -0.04
-    warm_starting_factor: float = 0.85
+    warm_starting_factor: float = bounded(0.85, 0.0, 1.0)
     cone_friction: bool = False
-    gravity_cm_s2: float = GRAVITY_CM_S2
+    gravity_cm_s2: float = bounded(GRAVITY_CM_S2, 0.0)
     # Bullet's friction anchors hold static contacts in place; without them a resting spine
     # creeps ~0.5 cm/s at dt = 1 ms (a drift proportional to dt). NTRT's Bullet 2.81 had none.
     friction_anchor: bool = True
 
     def __post_init__(self) -> None:
-        if not isinstance(self.solver_iterations, int) or not 1 <= self.solver_iterations <= 1000:
-            raise ConfigError("solver_iterations out of range", received=self.solver_iterations,
-                              expected="an integer in [1, 1000]")
-        check_range("erp", self.erp, 0.0, 1.0)
-        check_range("warm_starting_factor", self.warm_starting_factor, 0.0, 1.0)
-        check_range("gravity_cm_s2", self.gravity_cm_s2, 0.0, None)
+        check_fields(self)
 
 
 def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:

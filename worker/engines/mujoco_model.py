@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-from spinefarm.protocol.errors import ConfigError, check_range
+from spinefarm.protocol.errors import ConfigError, bounded, check_fields, whole
 from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel, quaternion_matrix
 from spinefarm.robot.scene import GROUND_TOP_CM, Terrain
@@ -81,18 +81,18 @@ class MujocoSettings:
     integrator: str = "implicitfast"
     cone: str = "elliptic"
     solver: str = "newton"
-    iterations: int = 100
-    ls_iterations: int = 50
-    tolerance: float = 1e-8
-    solref_time_s: float = 0.005
-    solref_damping_ratio: float = 1.0
+    iterations: int = whole(100, 1, 10_000)
+    ls_iterations: int = whole(50, 1, 10_000)
+    tolerance: float = bounded(1e-8, 0.0, 1.0)
+    solref_time_s: float = bounded(0.005, 0.0, 1.0, low_inclusive=False)
+    solref_damping_ratio: float = bounded(1.0, 0.0, 100.0, low_inclusive=False)
     solimp: tuple[float, float, float, float, float] = (0.9, 0.95, 0.001, 0.5, 2.0)
     contact_geometry: str = "auto"
     segment_contacts: str = "auto"
     islands: bool = False
-    noslip_iterations: int = 0
-    margin_cm: float = 0.0
-    gravity_cm_s2: float = GRAVITY_CM_S2
+    noslip_iterations: int = whole(0, 0, 10_000)
+    margin_cm: float = bounded(0.0, 0.0, 10.0)
+    gravity_cm_s2: float = bounded(GRAVITY_CM_S2, 0.0)
 
     def __post_init__(self) -> None:
         for name, table in (("integrator", INTEGRATORS), ("cone", CONES), ("solver", SOLVERS)):
@@ -106,15 +106,7 @@ class MujocoSettings:
                               expected=list(SEGMENT_CONTACTS))
         if not isinstance(self.islands, bool):
             raise ConfigError("islands is not a boolean", received=self.islands, expected="true or false")
-        for name, low in (("iterations", 1), ("ls_iterations", 1), ("noslip_iterations", 0)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not low <= v <= 10_000:
-                raise ConfigError(f"{name} out of range", received=v, expected=f"an integer in [{low}, 10000]")
-        check_range("tolerance", self.tolerance, 0.0, 1.0)
-        check_range("solref_time_s", self.solref_time_s, 0.0, 1.0, low_inclusive=False)
-        check_range("solref_damping_ratio", self.solref_damping_ratio, 0.0, 100.0, low_inclusive=False)
-        check_range("margin_cm", self.margin_cm, 0.0, 10.0)
-        check_range("gravity_cm_s2", self.gravity_cm_s2, 0.0, None)
+        check_fields(self)
         try:
             solimp = tuple(float(v) for v in self.solimp)
         except (TypeError, ValueError) as exc:
