@@ -1,12 +1,15 @@
 """What a trial measured: the parts of a score, declared once, and TrialResult.
 
-Messages, storage columns, API schemas and exports all derive from SCORE_PARTS and RECORDED_EXTRAS.
+Messages, storage columns, API schemas and exports all derive from SCORE_PARTS and RECORDED_EXTRAS, read
+with every other stored column from columns.toml.
 """
 
 from __future__ import annotations
 
 import math
+import tomllib
 from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
 from typing import Any
 
 from spinefarm.protocol import limits
@@ -19,7 +22,7 @@ from spinefarm.protocol.states import TrialStatus
 @dataclass(frozen=True)
 class Column:
     """A named quantity with its numpy dtype and unit: a part of a trial's score, an extra it records,
-    and every column storage keeps (the trials and episodes tables) are declared as one."""
+    and every column storage keeps (the trials and episodes tables) are declared as one, in columns.toml."""
 
     name: str
     dtype: str   # numpy dtype ("f8"; "S16": a short string, fixed-width bytes in files)
@@ -27,27 +30,17 @@ class Column:
     description: str
 
 
-# The measured parts of a trial's score: messages, storage columns, API schemas and exports all derive
-# from SCORE_PARTS, so a part is declared here once.
-SCORE_PARTS: tuple[Column, ...] = (
-    Column("distance_m", "f8", "m", "displacement of the robot's centre of mass in the ground plane"),
-    Column("ntrt_distance_cm", "f8", "cm", "displacement of the segment NTRT scores, from the start pose"),
-    Column("speed_cm_s", "f8", "cm/s", "mean ground speed"),
-    Column("work_j", "f8", "J", "actuator work shortening strings under tension"),
-    Column("cot", "f8", "1", "cost of transport, work / (m g d)"),
-    Column("mass_kg", "f8", "kg", "robot mass"),
-    Column("sim_time_s", "f8", "s", "simulated time"),
-    Column("wall_time_s", "f8", "s", "wall-clock time the worker spent on the trial"),
-)
-SCORE_NAMES = tuple(p.name for p in SCORE_PARTS)
+def column_group(name: str) -> tuple[Column, ...]:
+    """A group of columns.toml, in its order: every stored quantity is declared there, once."""
+    return tuple(Column(column, *about) for column, about in _CATALOGUE[name].items())
 
+
+_CATALOGUE = tomllib.loads(Path(__file__).with_name("columns.toml").read_text(encoding="utf-8"))
+# The measured parts of a trial's score: messages, storage columns, API schemas and exports derive from them.
+SCORE_PARTS = column_group("score")
+SCORE_NAMES = tuple(p.name for p in SCORE_PARTS)
 # TrialResult.extras entries that storage keeps as columns: how the trial was computed.
-RECORDED_EXTRAS: tuple[Column, ...] = (
-    Column("engine", "S16", "", "physics engine that ran the trial (bullet, mujoco)"),
-    Column("dt_s", "f8", "s", "physics step the trial used (the automatic choice under --dt auto)"),
-    Column("settle_s", "f8", "s", "settle phase before locomotion was scored (0: scored from the start)"),
-    Column("time_limit_s", "f8", "s", "wall-clock limit the worker gave the trial (past it: failed, timeout)"),
-)
+RECORDED_EXTRAS = column_group("recorded")
 
 
 @dataclass(frozen=True)

@@ -14,23 +14,16 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.results import SCORE_PARTS, Column
+from spinefarm.protocol.results import SCORE_PARTS, Column, column_group
 
 # an episode's score parts, said of an episode where the trial's words do not fit
 _EPISODE_WORDS = {"ntrt_distance_cm": "displacement of the segment NTRT scores",
                   "wall_time_s": "wall-clock time of the episode"}
 EPISODE_COLUMNS: tuple[Column, ...] = (
-    Column("trial_id", "i8", "", "the trial (row of /trials) this episode belongs to"),
-    Column("episode", "i8", "", "episode number k, 0..K-1"),
-    Column("seed", "i8", "", "the episode's seed, from (trial seed, k) alone"),
-    Column("status", "S16", "", "complete or failed"),
-    Column("reason", "S160", "", "why the episode failed; empty when complete"),
+    *column_group("episode"),
     *(replace(p, description=_EPISODE_WORDS.get(p.name, p.description)) for p in SCORE_PARTS
       if p.name != "mass_kg"),  # an episode records its draw (mass_scale), not the mass
-    Column("friction_scale", "f8", "1", "ground friction factor drawn"),
-    Column("mass_scale", "f8", "1", "rod density factor drawn"),
-    Column("start_jitter_cm", "f8", "cm", "standard deviation of the start-position jitter"),
-    Column("rough_seed", "i8", "", "seed of the episode's rough ground; -1: the run's own scene"),
+    *column_group("draw"),
 )
 EPISODE_NAMES = tuple(c.name for c in EPISODE_COLUMNS)
 GROUP = "episodes"

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.results import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, Column
+from spinefarm.protocol.results import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, Column, column_group
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.protocol.states import STORED_STATUSES, AuditState, Verification
 
@@ -21,38 +21,10 @@ PHASE_PATTERN = rb"^[a-z][a-z0-9_]{0,15}$"
 STATUSES = tuple(s.value for s in STORED_STATUSES)
 
 
-# Vector columns (params_unit, params) are (n_trials, n_params); all others are (n_trials,).
-COLUMNS: tuple[Column, ...] = (
-    Column("trial_id", "i8", "", "trial number; equals the row index"),
-    Column("params_unit", "f8", "1", "parameter vector in the unit cube; columns named by param_names"),
-    Column("params", "f8", "see param_units", "physical parameter values, low + u * (high - low)"),
-    Column("phase", "S16", "", "sampler phase (the sampler's own name for it: monte_carlo, gaussian, cmaes, "
-           "tpe, ...), or promoted (a multi-fidelity re-run of its parent at a longer rung)"),
-    Column("parent", "i8", "", "trial id of the centre a gaussian sample was drawn around; -1 for none"),
-    Column("seed", "i8", "", "simulation seed of the trial"),
-    Column("rung", "i8", "", "fidelity rung of a multi-fidelity search (0: the screen); a promoted row re-runs its "
-           "parent's parameters at the next rung"),
-    Column("duration_s", "f8", "s", "simulated duration the trial was asked for (NaN: the run's)"),
-    Column("status", "S16", "", "waiting (sampled, no result yet), complete or failed"),
-    Column("reason", "S160", "", "why a trial failed (diverged: ..., error: ...); empty when complete"),
-    Column("objective", "f8", "see attribute objective", "the score the search maximised"),
-    *SCORE_PARTS,
-    Column("worker_id", "S64", "", "worker that ran the trial"),
-    Column("finished_at_unix_s", "f8", "s since 1970-01-01 UTC", "when the coordinator stored the result"),
-    Column("verification", "S16", "", "the judge's re-simulation of a trial that became best: empty (not "
-           "checked), pending, holds (same engine, within tolerance), judged (in another engine: its distance "
-           "counts) or not_reproduced (then it never counts as best)"),
-    Column("verify_distance_m", "f8", "m", "distance of that re-simulation (the judge's distance)"),
-    Column("verify_reason", "S160", "", "what the re-simulation found when the distance did not hold"),
-    Column("judge_ratio", "f8", "1", "screen-to-judge distance ratio, distance_m / verify_distance_m"),
-    Column("audit", "S16", "", "re-simulation on another worker at the same fidelity: empty (not audited), "
-           "pending, agrees or disagrees (then the result never counts as best)"),
-    Column("audit_distance_m", "f8", "m", "distance the auditing worker measured"),
-    Column("audit_worker_id", "S64", "", "worker that audited the result"),
-    *RECORDED_EXTRAS,
-    Column("pareto_front", "i1", "", "1 if the trial is on the Pareto front of speed (max) and COT (min) among "
-           "complete trials, else 0; kept up to date as results arrive"),
-)
+# Vector columns (params_unit, params) are (n_trials, n_params); all others are (n_trials,). The columns,
+# their units and descriptions are declared in protocol/columns.toml.
+COLUMNS: tuple[Column, ...] = (*column_group("trial"), *SCORE_PARTS, *column_group("outcome"), *RECORDED_EXTRAS,
+                               *column_group("summary"))
 VERIFICATIONS = tuple(v.value for v in Verification)
 AUDITS = tuple(a.value for a in AuditState)
 COLUMN_BY_NAME = {c.name: c for c in COLUMNS}

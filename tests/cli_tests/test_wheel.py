@@ -55,7 +55,8 @@ def spinefarm(tree: Path, *args: str, cwd: Path) -> subprocess.CompletedProcess:
 
 def test_the_wheel_carries_docs_data_and_browser_assets(wheel_tree):
     _, names = wheel_tree
-    for needed in ("spinefarm/__init__.py", "spinefarm/docs/replay.md", "spinefarm/docs/README.md",
+    for needed in ("spinefarm/__init__.py", "spinefarm/protocol/columns.toml", "spinefarm/docs/replay.md",
+                   "spinefarm/docs/README.md",
                    "spinefarm/api/static/index.html", "spinefarm/api/static/vendor/plotly-basic.min.js",
                    "spinefarm/api/static/vendor/LICENSE-plotly.js.txt",
                    "spinefarm/api/static/vendor/redoc.standalone.js",
