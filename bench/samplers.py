@@ -41,6 +41,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from spinefarm.cli import checks
+from spinefarm.cli.sim_commands import add_engine_option_argument, trial_overrides
 from spinefarm.protocol.results import TrialResult
 
 # The paper's table (speed cm/s) for the 80 % mark.
@@ -197,27 +199,24 @@ def search(pool: ProcessPoolExecutor, bench: Bench, morphology: str, controller:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--problems", default="tetraspine:sidewinding,tetrahedral-complex:ntrt")
-    ap.add_argument("--samplers", default="paper,cmaes,tpe")
-    ap.add_argument("--seeds", type=int, default=5)
-    ap.add_argument("--budget", type=int, default=1000)
-    ap.add_argument("--checkpoints", default="100,300,1000")
-    ap.add_argument("--duration", type=float, default=None, help="simulated seconds per trial")
+    ap.add_argument("--problems", default="tetraspine:sidewinding,tetrahedral-complex:ntrt",
+                    help="morphology:controller pairs, comma-separated")
+    ap.add_argument("--samplers", default="paper,cmaes,tpe", help="the samplers compared, comma-separated")
+    ap.add_argument("--seeds", type=checks.seed, default=5, help="searches per sampler and problem (seeds 0..N-1)")
+    ap.add_argument("--budget", type=int, default=1000, help="trials per search")
+    ap.add_argument("--checkpoints", default="100,300,1000", help="trials finished at which the best is judged")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="simulated seconds per trial (default: each morphology's trial length)")
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
     ap.add_argument("--engine", default="bullet")
     ap.add_argument("--settle", type=float, default=None, help="settle phase before scoring (s)")
-    ap.add_argument("--dt", type=float, default=None, help="the engine's step (default: the engine's own)")
-    ap.add_argument("--engine-option", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--dt", default=None, help="the engine's step (default: the engine's own; auto: the stable step)")
+    add_engine_option_argument(ap)
     ap.add_argument("--judge-dt", type=float, default=0.00025, help="Bullet judge's step for a screened search")
     ap.add_argument("--runs", action="store_true", help="also print every seed's run")
     args = ap.parse_args()
-    overrides: dict = {}
-    if args.settle is not None:
-        overrides["settle_s"] = args.settle
-    if args.dt is not None:
-        overrides["dt_s"] = args.dt
-    if args.engine_option:
-        overrides["engine_options"] = dict(o.split("=", 1) for o in args.engine_option)
+    # the flags `spinefarm search` shares, read as it reads them (engine options as JSON values)
+    overrides = {k: v for k, v in trial_overrides(args).items() if k != "engine"}
     checkpoints = tuple(sorted(int(c) for c in args.checkpoints.split(",") if int(c) <= args.budget))
     bench = Bench(args.budget, checkpoints, args.duration, args.engine, args.workers, overrides, args.judge_dt)
     t0 = time.perf_counter()

@@ -8,13 +8,16 @@ import shutil
 
 from spinefarm.cli.robot_argument import add_robot_argument
 
+# what `spinefarm calibrate --help` says first
+DESCRIPTION = ("Run seeded random gaits plus the bests of a short search on both tiers and say whether a search "
+               "may screen on MuJoCo (Spearman rho >= 0.9, top-10 overlap >= 8, median distance ratio in "
+               "[0.9, 1.1]). Cached by the spec's hash (see --cache-dir; --refresh recomputes, --clear-cache "
+               "empties it).")
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate", help="compare the fast tier (MuJoCo) with Bullet on a robot's gaits",
-                       description="Run seeded random gaits plus the bests of a short search on both tiers and "
-                                   "say whether a search may screen on MuJoCo (Spearman rho >= 0.9, top-10 "
-                                   "overlap >= 8, median distance ratio in [0.9, 1.1]). Cached by the spec's "
-                                   "hash (see --cache-dir; --refresh recomputes, --clear-cache empties it).")
+                       description=DESCRIPTION)
     add_robot_argument(p, omit_with="--clear-cache")
     add_calibration_arguments(p)
     p.add_argument("--refresh", action="store_true", help="recompute even if a cached result exists")

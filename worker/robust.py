@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from spinefarm.protocol.results import SCORE_NAMES, TrialResult
@@ -22,9 +22,9 @@ from spinefarm.worker.setup import SetupCache
 from spinefarm.worker.trial import simulate_batch
 
 
-@dataclass(frozen=True)
-class World:
-    """One episode's world: the morphology (masses drawn), trial config (friction, jitter, scene) and seed."""
+class World(NamedTuple):
+    """One episode's world: its draw (and seed), the morphology (masses drawn) and the trial config
+    (friction, jitter, scene)."""
 
     draw: EpisodeDraw
     morph: Morphology
