@@ -64,7 +64,8 @@ def robust_objective(fn: Callable[[TrialResult], float], name: str) -> Callable[
 
 def episode_result(r: TrialResult, e) -> TrialResult:
     """Episode `e` of result `r` as a TrialResult of its own (the robot's mass and extras of `r`)."""
+    from spinefarm.protocol.measured import MEASURED_NUMBERS
     from spinefarm.protocol.states import TrialStatus
 
-    return TrialResult(TrialStatus(e.status), e.reason, e.distance_m, e.ntrt_distance_cm, e.speed_cm_s, e.work_j,
-                       e.cot, e.sim_time_s, e.wall_time_s, r.mass_kg, e.seed, r.trial_id, r.worker_id, r.extras)
+    return TrialResult(status=TrialStatus(e.status), reason=e.reason, **{n: getattr(e, n) for n in MEASURED_NUMBERS},
+                       mass_kg=r.mass_kg, seed=e.seed, trial_id=r.trial_id, worker_id=r.worker_id, extras=r.extras)

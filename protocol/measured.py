@@ -1,27 +1,22 @@
-"""What one run of a world measured, declared once: a trial's result (protocol.results.TrialResult) and each
-robust episode's (protocol.robust.EpisodeResult) carry these fields, in this order, on the wire and in their
-constructors."""
+"""What one run of a world measured: a trial's result (protocol.results.TrialResult) and each robust
+episode's (protocol.robust.EpisodeResult) carry these fields, in this order, on the wire and in their
+constructors.
+
+Measured's fields are status, reason, then the score parts of columns.toml in their order (each a float,
+units in the names), less those of the robot rather than of its world (mass_kg: a trial carries the
+robot's mass, an episode the factor it drew): a new score part is its line in columns.toml alone.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import make_dataclass
 
+from spinefarm.protocol.columns import SCORE_NAMES
 
-@dataclass(frozen=True)
-class Measured:
-    """status: complete or failed, with `reason` (diverged: ..., error: ...); then the parts of the score,
-    units in the names (protocol.results.SCORE_PARTS describes each). A dataclass deriving from it lists its
-    own fields after these, and the fields of a base named after this one before them."""
-
-    status: str
-    reason: str
-    distance_m: float
-    ntrt_distance_cm: float
-    speed_cm_s: float
-    work_j: float
-    cot: float
-    sim_time_s: float
-    wall_time_s: float
-
-
-MEASURED_NUMBERS = tuple(f.name for f in fields(Measured) if f.name not in ("status", "reason"))
+_OF_THE_ROBOT = ("mass_kg",)
+MEASURED_NUMBERS = tuple(name for name in SCORE_NAMES if name not in _OF_THE_ROBOT)
+Measured = make_dataclass("Measured", [("status", str), ("reason", str), *((n, float) for n in MEASURED_NUMBERS)],
+                          frozen=True)
+Measured.__module__ = __name__
+Measured.__doc__ = ("status: complete or failed, with `reason` (diverged: ..., error: ...); then the parts of "
+                    "the score (MEASURED_NUMBERS). A dataclass deriving from it lists its own fields after these.")

@@ -1,46 +1,18 @@
-"""What a trial measured: the parts of a score, declared once, and TrialResult.
-
-Messages, storage columns, API schemas and exports all derive from SCORE_PARTS and RECORDED_EXTRAS, read
-with every other stored column from columns.toml.
-"""
+"""What a trial measured: TrialResult, whose score parts (SCORE_PARTS, protocol.columns) are declared once,
+in columns.toml; messages, storage columns, API schemas and exports derive from them."""
 
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import asdict, dataclass, field, fields, replace
-from pathlib import Path
 from typing import Any
 
 from spinefarm.protocol import limits
+from spinefarm.protocol.columns import SCORE_NAMES
 from spinefarm.protocol.errors import MessageError
-from spinefarm.protocol.measured import Measured
+from spinefarm.protocol.measured import MEASURED_NUMBERS, Measured
 from spinefarm.protocol.robust import MAX_EPISODES, EpisodeResult
 from spinefarm.protocol.states import TrialStatus
-
-
-@dataclass(frozen=True)
-class Column:
-    """A named quantity with its numpy dtype and unit: a part of a trial's score, an extra it records,
-    and every column storage keeps (the trials and episodes tables) are declared as one, in columns.toml."""
-
-    name: str
-    dtype: str   # numpy dtype ("f8"; "S16": a short string, fixed-width bytes in files)
-    unit: str
-    description: str
-
-
-def column_group(name: str) -> tuple[Column, ...]:
-    """A group of columns.toml, in its order: every stored quantity is declared there, once."""
-    return tuple(Column(column, *about) for column, about in _CATALOGUE[name].items())
-
-
-_CATALOGUE = tomllib.loads(Path(__file__).with_name("columns.toml").read_text(encoding="utf-8"))
-# The measured parts of a trial's score: messages, storage columns, API schemas and exports derive from them.
-SCORE_PARTS = column_group("score")
-SCORE_NAMES = tuple(p.name for p in SCORE_PARTS)
-# TrialResult.extras entries that storage keeps as columns: how the trial was computed.
-RECORDED_EXTRAS = column_group("recorded")
 
 
 @dataclass(frozen=True)
@@ -71,9 +43,8 @@ class TrialResult(Measured):
     @classmethod
     def failed(cls, reason: str, seed: int, trial_id: int = -1, wall_time_s: float = math.nan) -> TrialResult:
         """A failure with nothing measured (a trial that raised, was given up, or whose result was unreadable)."""
-        nan = math.nan
-        return cls(TrialStatus.FAILED, reason, nan, nan, nan, nan, nan, 0.0, wall_time_s, nan, seed,
-                   trial_id=trial_id)
+        parts = {**dict.fromkeys(MEASURED_NUMBERS, math.nan), "sim_time_s": 0.0, "wall_time_s": wall_time_s}
+        return cls(status=TrialStatus.FAILED, reason=reason, **parts, mass_kg=math.nan, seed=seed, trial_id=trial_id)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

@@ -7,8 +7,9 @@ import time
 from typing import Any
 
 import numpy as np
+from spinefarm.protocol.columns import RECORDED_EXTRAS, SCORE_NAMES
 from spinefarm.protocol.errors import StorageError
-from spinefarm.protocol.results import RECORDED_EXTRAS, SCORE_NAMES, TrialResult
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import STORED_STATUSES, AuditState, TrialStatus, Verification
 from spinefarm.storage import pareto
 from spinefarm.storage.schema import RunMeta, TrialRecord

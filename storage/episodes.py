@@ -14,7 +14,7 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.results import SCORE_PARTS, Column, column_group
+from spinefarm.protocol.columns import SCORE_PARTS, Column, column_group
 
 # an episode's score parts, said of an episode where the trial's words do not fit
 _EPISODE_WORDS = {"ntrt_distance_cm": "displacement of the segment NTRT scores",

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from spinefarm.protocol.results import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, Column, column_group
+from spinefarm.protocol.columns import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, Column, column_group
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.protocol.states import STORED_STATUSES, AuditState, Verification
 

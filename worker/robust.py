@@ -12,7 +12,9 @@ from collections.abc import Mapping, Sequence
 from typing import NamedTuple
 
 import numpy as np
-from spinefarm.protocol.results import SCORE_NAMES, TrialResult
+from spinefarm.protocol.columns import SCORE_NAMES
+from spinefarm.protocol.measured import MEASURED_NUMBERS
+from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.robust import EpisodeDraw, EpisodeResult, RobustSpec, draw_episode
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.model import Morphology
@@ -86,9 +88,10 @@ def combine(results: Sequence[TrialResult], draws: Sequence[EpisodeDraw], trial_
 
 
 def _episode(r: TrialResult, d: EpisodeDraw) -> EpisodeResult:
-    return EpisodeResult(d.episode, d.seed, "complete" if r.ok else "failed", r.reason[:160], r.distance_m,
-                         r.ntrt_distance_cm, r.speed_cm_s, r.work_j, r.cot, r.sim_time_s, r.wall_time_s,
-                         d.friction_scale, d.mass_scale, d.start_jitter_cm, d.rough_seed)
+    return EpisodeResult(episode=d.episode, seed=d.seed, status="complete" if r.ok else "failed",
+                         reason=r.reason[:160], **{n: getattr(r, n) for n in MEASURED_NUMBERS},
+                         friction_scale=d.friction_scale, mass_scale=d.mass_scale,
+                         start_jitter_cm=d.start_jitter_cm, rough_seed=d.rough_seed)
 
 
 def first_episode(morphology: Morphology | Mapping, cfg: TrialConfig, trial_seed: int, robust: Mapping
