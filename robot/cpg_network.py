@@ -3,6 +3,7 @@ sparse phase couplings. Engine- and compiler-free, so a coordinator can build on
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,4 +42,6 @@ class CpgNetwork:
         return float(max(np.max(np.abs(self.omega_rad_s) + gain, initial=0.0), self.amplitude_rate_per_s))
 
     def complex_weights(self) -> np.ndarray:
-        return (self.weight * np.exp(-1j * self.phase_rad)).astype(np.complex128)
+        """w e^{-i psi} per edge, from glibc's cos and sin (math): the same bits on every CPU."""
+        pairs = zip(self.weight.tolist(), self.phase_rad.tolist(), strict=True)
+        return np.array([complex(w * math.cos(p), -w * math.sin(p)) for w, p in pairs], dtype=np.complex128)

@@ -118,6 +118,14 @@ class Terrain:
     notes: dict[str, float] = field(default_factory=dict)
 
 
+_sin_each = np.frompyfunc(math.sin, 1, 1)
+
+
+def _glibc_sin(x: np.ndarray) -> np.ndarray:
+    """glibc's sine element by element: numpy's own vectorised sine (AVX-512 CPUs) differs in the last bit."""
+    return _sin_each(x).astype(np.float64)
+
+
 def _rough_heights(cfg: SceneConfig) -> Heightfield:
     spacing = cfg.rough_wavelength_cm / 8.0
     n = int(2 * GROUND_HALF_EXTENT_CM / spacing) + 1
@@ -129,7 +137,7 @@ def _rough_heights(cfg: SceneConfig) -> Heightfield:
     for _ in range(waves):  # a sum of plane waves of one wavelength in random directions and phases
         angle = rng.uniform(0, math.pi)
         phase = rng.uniform(0, 2 * math.pi)
-        h += np.sin(2 * math.pi / cfg.rough_wavelength_cm * (x * math.cos(angle) + z * math.sin(angle)) + phase)
+        h += _glibc_sin(2 * math.pi / cfg.rough_wavelength_cm * (x * math.cos(angle) + z * math.sin(angle)) + phase)
     h *= cfg.rough_amplitude_cm / max(np.abs(h).max(), 1e-12)
     return Heightfield(h, spacing)
 

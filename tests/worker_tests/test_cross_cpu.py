@@ -1,5 +1,5 @@
 """One commit, the same bits on every x86-64 CPU: a short trial under emulated CPU models (qemu-user) against
-this machine's, and no BLAS call left in the code a trial runs."""
+this machine's, and no BLAS call, nor numpy's vectorised sine and kin, left in the code a trial runs."""
 
 from __future__ import annotations
 
@@ -50,6 +50,46 @@ def test_the_scan_sees_a_blas_call(tmp_path):
     bad = tmp_path / "probe.py"
     bad.write_text("import numpy as np\n\ndef f(a, b):\n    return a @ b + np.linalg.norm(a) + a.dot(b)\n")
     assert len(_blas_uses(bad, "worker/sim/probe.py")) == 3
+
+
+# numpy's transcendental ufuncs run its own vectorised code on AVX-512 CPUs (X86_V4) and glibc's elsewhere: the
+# last bits differ. Compiled kernels (numba) call glibc's, so only code outside them is held to this.
+TRANSCENDENTAL = {"sin", "cos", "tan", "arcsin", "arccos", "arctan", "arctan2", "sinh", "cosh", "tanh", "arcsinh",
+                  "arccosh", "arctanh", "exp", "exp2", "expm1", "log", "log2", "log10", "log1p", "power",
+                  "float_power", "cbrt", "hypot", "sinc"}
+
+
+def _compiled(fn: ast.AST) -> bool:
+    return any("jit" in ast.unparse(d) for d in getattr(fn, "decorator_list", ()))
+
+
+def _vectorised_libm_uses(path: Path, rel: str | None = None) -> list[str]:
+    rel = rel or path.relative_to(ROOT).as_posix()
+    found: list[str] = []
+
+    def visit(node: ast.AST) -> None:
+        if isinstance(node, ast.FunctionDef) and _compiled(node):
+            return
+        if isinstance(node, ast.Attribute) and node.attr in TRANSCENDENTAL and ast.unparse(node.value) in (
+                "np", "numpy"):
+            found.append(f"{rel}:{node.lineno}: {ast.unparse(node)}")
+        for child in ast.iter_child_nodes(node):
+            visit(child)
+
+    visit(ast.parse(path.read_text()))
+    return found
+
+
+def test_no_vectorised_transcendental_in_the_model_path():
+    found = [use for path in MODEL_PATH for use in _vectorised_libm_uses(path)]
+    assert found == [], "numpy transcendental calls in the model path (use math's, glibc's):\n" + "\n".join(found)
+
+
+def test_the_scan_sees_a_vectorised_sine_but_not_a_compiled_one(tmp_path):
+    probe = tmp_path / "probe.py"
+    probe.write_text("import numpy as np\nfrom numba import njit\n\n@njit(cache=True)\ndef k(x):\n"
+                     "    return np.sin(x)\n\ndef f(x):\n    return np.arctan2(x, 1.0) + np.exp(x)\n")
+    assert [u.split(": ")[1] for u in _vectorised_libm_uses(probe, "robot/probe.py")] == ["np.arctan2", "np.exp"]
 
 
 def test_fixedmath_equals_numpy_to_rounding():

@@ -68,11 +68,13 @@ MAX_SHAPE_ARRAY = 16
 
 
 def _rpy(r: np.ndarray) -> tuple[float, float, float]:
-    """URDF roll, pitch, yaw of a rotation matrix r = Rz(yaw) Ry(pitch) Rx(roll)."""
-    pitch = float(np.arcsin(np.clip(-r[2, 0], -1.0, 1.0)))
-    if abs(r[2, 0]) < 1.0 - 1e-12:
-        return float(np.arctan2(r[2, 1], r[2, 2])), pitch, float(np.arctan2(r[1, 0], r[0, 0]))
-    return float(np.arctan2(-r[1, 2], r[1, 1])), pitch, 0.0  # gimbal lock: put it all in roll
+    """URDF roll, pitch, yaw of a rotation matrix r = Rz(yaw) Ry(pitch) Rx(roll). glibc's asin and atan2
+    (math), not numpy's: numpy runs its own vectorised ones on AVX-512 CPUs, and the bits would differ."""
+    r = [[float(v) for v in row] for row in r]
+    pitch = math.asin(min(1.0, max(-1.0, -r[2][0])))
+    if abs(r[2][0]) < 1.0 - 1e-12:
+        return math.atan2(r[2][1], r[2][2]), pitch, math.atan2(r[1][0], r[0][0])
+    return math.atan2(-r[1][2], r[1][1]), pitch, 0.0  # gimbal lock: put it all in roll
 
 
 def _load_compound_urdf(body: BodyModel, pos: np.ndarray, quat: tuple[float, ...], client: int) -> int:
