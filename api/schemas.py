@@ -96,6 +96,8 @@ class RunStatus(BaseModel):
     audit: dict[str, Any] | None = Field(None, description="audits_pending/agrees/disagrees, fraction, tolerance, "
                                          "and the figures per worker environment")
     fidelity_raised: str | None = Field(None, description="why the judge raised the screen's fidelity")
+    unservable_workers: dict[str, str] = Field(default_factory=dict, description="workers left out of this run "
+                                               "(worker id: why it cannot serve it); the others go on with it")
 
 
 class ErrorDetail(BaseModel):

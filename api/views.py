@@ -100,6 +100,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
                   "tolerance": meta.settings.audit.tolerance,
                   "environments": (live.get("audit") or {}).get("environments", [])},
         "fidelity_raised": live.get("fidelity_raised"),
+        "unservable_workers": (live.get("unservable_workers") or {}) if state in ("running", "stalled", "done") else {},
         "status_age_s": age if live else None,
         "started_at_unix_s": _num(meta.created_at_unix_s),
         "controller": meta.controller or (tc.get("controller") if tc else None),

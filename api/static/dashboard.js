@@ -59,7 +59,27 @@ function card(k, v) { return `<div class="card"><div class="v">${v}</div><div cl
 function stateBadge(s) { return `<span class="state ${esc(s)}">${esc(s)}</span>`; }
 
 // ---------------------------------------------------------------- one run
+// what went on beside the trials: the judge's raised fidelity, workers left out of the run
+function runWarnings(status) {
+  const out = [];
+  if (status.fidelity_raised) {
+    out.push(`<div class="notice warn" id="fidelity-raised">The judge raised the screen's fidelity for the rest of
+      the run: ${esc(status.fidelity_raised)}.</div>`);
+  }
+  const left = Object.entries(status.unservable_workers || {});
+  if (left.length) {
+    out.push(`<div class="notice warn" id="unservable-workers">${left.length} worker${left.length > 1 ? "s" : ""}
+      left out of this run (the others serve it): <ul>${left.map(([w, why]) =>
+      `<li><b>${esc(w)}</b>: ${esc(why)}</li>`).join("")}</ul></div>`);
+  }
+  return out.join("");
+}
+
 function runNotice(status, r) {
+  return runWarnings(status) + runOutcome(status, r);
+}
+
+function runOutcome(status, r) {
   const best = status.best;
   if (status.state === "stopped") {
     return `<div class="notice" id="stopped">This run stopped before its budget (${status.trials_done} of

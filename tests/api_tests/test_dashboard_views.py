@@ -153,3 +153,38 @@ def test_redoc_docs_and_favicon_stay_on_this_machine(page, server):
     with urllib.request.urlopen(server.url + "/favicon.ico", timeout=10) as r:
         assert r.status == 200 and r.headers["content-type"].startswith("image/svg+xml")
     # the page fixture asserts that no request left this server
+
+
+def test_workers_left_out_and_a_raised_fidelity_are_shown(browser, tmp_path):
+    """What the coordinator's status says went on beside the trials (tests/coordinator_tests/test_core.py makes
+    both happen): the run page names each worker left out with why, and why the judge raised the fidelity."""
+    from spinefarm.storage.status import read_status, write_status
+
+    from tests.api_tests.test_dashboard_browser import Server, free_port, spinefarm
+
+    out = tmp_path / "left.h5"
+    spinefarm("search", "sphere:3", "--trials", "6", "--workers", "1", "--out", str(out), "--run-id", "left-out",
+              "--api-port", "-1", "--quiet")
+    status = read_status(out)
+    assert status["unservable_workers"] == {} and status["fidelity_raised"] is None  # a search where neither happened
+    left = {"old-box": "engine 'mujoco' is not installed", "w<7>": "space hash differs: an older install"}
+    write_status(out, {**status, "unservable_workers": left, "fidelity_raised": "median ratio 1.3 of 3 judged bests"})
+    port = free_port()
+    server = Server(["api", str(out), "--port", str(port)], port)
+    try:
+        assert get(server.url + "/runs/left-out")["unservable_workers"] == left
+        pg = browser.new_page()
+        errors: list[str] = []
+        pg.on("pageerror", lambda e: errors.append(str(e)))
+        pg.goto(server.url + "/#/run/left-out")
+        pg.wait_for_selector("#cards .card")
+        assert not errors, errors
+        notice = pg.wait_for_selector("#unservable-workers")
+        assert notice.inner_text().startswith("2 workers left out of this run")
+        assert [li.inner_text() for li in notice.query_selector_all("li")] == [
+            "old-box: engine 'mujoco' is not installed", "w<7>: space hash differs: an older install"]
+        assert "median ratio 1.3 of 3 judged bests" in pg.inner_text("#fidelity-raised")
+        pg.screenshot(path=str(ARTIFACTS / "views-unservable-workers.png"), full_page=True)
+        pg.close()
+    finally:
+        server.stop()
