@@ -12,26 +12,48 @@ stale lock):
   same file in this process does not drop them, and they do not interact with HDF5's own flock.
   `bind(path)` moves it to a new file (resume writes a fresh copy and renames it over the old one).
 
-The sidecar stays in place: deleting a lock file races with its next taker.
+The sidecar stays in place: deleting a lock file races with its next taker. A file system that refuses
+locks (ENOLCK: NFS without its lock service) refuses the run too, saying so, unless HDF5_USE_FILE_LOCKING=FALSE
+says to go without: HDF5 then takes no lock either, and one writer is the user's to keep.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
+import logging
 import os
 import struct
 from pathlib import Path
 
 from spinefarm.protocol.errors import StorageError
 
+log = logging.getLogger("spinefarm.storage")
 _F_OFD_SETLK = getattr(fcntl, "F_OFD_SETLK", 37)
+_NO_LOCKS = (errno.ENOLCK, errno.ENOSYS, errno.EOPNOTSUPP)  # flock refused by the file system itself
 _FLOCK = "@hhqqi4x"   # struct flock: l_type, l_whence, l_start, l_len, l_pid (0 for OFD locks)
 
 
 def lock_path(run_path: str | Path) -> Path:
     p = Path(run_path).resolve()
     return p.with_name(p.name + ".lock")
+
+
+def locks_waived() -> bool:
+    """HDF5_USE_FILE_LOCKING=FALSE: the user's word that this file system has no locks; HDF5 then takes none,
+    and the run lock goes without its name lock where flock is refused."""
+    return os.environ.get("HDF5_USE_FILE_LOCKING", "").strip().upper() == "FALSE"
+
+
+def _cannot_lock(run_path: Path, exc: OSError) -> StorageError:
+    if exc.errno in _NO_LOCKS:
+        return StorageError(f"cannot lock run file {run_path}: {exc.strerror} (its file system offers no locks: "
+                            "NFS without its lock service, a Lustre mount without -o flock, some FUSE mounts)",
+                            expected="the run file on a file system with locks (--out on a local disk), or "
+                                     "HDF5_USE_FILE_LOCKING=FALSE in the environment to write it without "
+                                     "(then only one coordinator may write it)")
+    return StorageError(f"cannot lock run file {run_path}: {exc.strerror}", expected="a lockable run file")
 
 
 def _refused(run_path: Path, holder: str) -> StorageError:
@@ -80,6 +102,12 @@ class RunLock:
             holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
             os.close(fd)
             raise _refused(self.run_path, f"pid {holder}") from None
+        except OSError as exc:
+            if exc.errno not in _NO_LOCKS or not locks_waived():
+                os.close(fd)
+                raise _cannot_lock(self.run_path, exc) from None
+            log.warning("run file %s is written without a lock (HDF5_USE_FILE_LOCKING=FALSE, a file system "
+                        "without locks): make sure no other coordinator writes it", self.run_path)
         self._fd = fd
         try:
             if self.path.with_name(self.path.name[:-5]).exists():
