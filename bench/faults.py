@@ -334,11 +334,13 @@ def damaged_files(tmp: Path) -> dict:
 def main() -> None:
     import logging
 
+    from spinefarm.cli import checks  # an argparse type: seeds are whole numbers >= 0
+
     logging.getLogger("spinefarm").setLevel(logging.ERROR)  # rejected messages are counted, not printed
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=4, help="runs of the kill matrix")
     ap.add_argument("--trials", type=int, default=300, help="trial budget of each kill-matrix run")
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--seed", type=checks.seed, default=1)
     ap.add_argument("--power-cuts", type=int, default=1, help="tries of the dying-disk part")
     ap.add_argument("--skip", default="",
                     help="comma-separated parts to skip: kills,reissue,hostile,disk,power_cut,files")

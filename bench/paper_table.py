@@ -127,12 +127,14 @@ def command(result: dict, tolerance: float | None = None) -> str:
 
 
 def main() -> None:
+    from spinefarm.cli import checks  # an argparse type: seeds are whole numbers >= 0
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--episodes", type=int, default=16, help="episodes per spine and engine (default 16)")
     ap.add_argument("--configs", default=",".join(CONFIGS), help=f"of {', '.join(CONFIGS)}")
     ap.add_argument("--gaits", default=",".join(PAPER), help="shipped gaits (examples/gaits/NAME.json)")
     ap.add_argument("--randomize", default=DEFAULT_RANDOMIZE, help="each episode's draw, as search --randomize")
-    ap.add_argument("--seed", type=int, default=0, help="the episodes' seed (episode k: from (seed, k))")
+    ap.add_argument("--seed", type=checks.seed, default=0, help="the episodes' seed (episode k: from (seed, k))")
     ap.add_argument("--duration", type=float, default=None, help="trial length (default: each morphology's)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--write-docs", action="store_true", help="put the table into docs/results.md")

@@ -93,6 +93,8 @@ def measure(pool: ProcessPoolExecutor, name: str, morphology: str, controller: s
 
 
 def main() -> None:
+    from spinefarm.cli import checks  # an argparse type: seeds are whole numbers >= 0
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--morphology", default="tetraspine")
     ap.add_argument("--controller", default="sidewinding")
@@ -110,7 +112,7 @@ def main() -> None:
     ap.add_argument("--measure-top", type=int, default=1, help="measure each search's K best (default 1)")
     ap.add_argument("--measure-duration", type=float, default=None, help="default: the morphology's (30 s)")
     ap.add_argument("--gait", action="append", default=[], help="also measure this --params gait file")
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--seed", type=checks.seed, default=1)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out-dir", default="runs/bench-robust")
     ap.add_argument("--skip-search", action="store_true", help="only measure the --gait files")

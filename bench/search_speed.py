@@ -62,6 +62,8 @@ def search(label: str, out: Path, args: argparse.Namespace, extra: list[str]) ->
 
 
 def main() -> None:
+    from spinefarm.cli import checks  # an argparse type: seeds are whole numbers >= 0
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--morphology", default="tetraspine")
     ap.add_argument("--controller", default="sidewinding")
@@ -76,7 +78,7 @@ def main() -> None:
                     help="MuJoCo engine options of the screen (default segment_contacts=off: no such contact "
                          "formed in any gait measured, and they cost 40 %% of a step)")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--seed", type=checks.seed, default=1)
     ap.add_argument("--keep", type=Path, default=None, metavar="DIR", help="keep the two run files in DIR")
     args = ap.parse_args()
     rungs = args.rungs or f"{args.duration / 3:g},{args.duration:g}"

@@ -369,9 +369,11 @@ def soak(minutes: float, seed: int, workdir: Path, netns: bool = True, rate: flo
 
 
 def main() -> None:
+    from spinefarm.cli import checks  # an argparse type: seeds are whole numbers >= 0
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=30.0)
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--seed", type=checks.seed, default=1)
     ap.add_argument("--rate", type=float, default=3.5,
                     help="parameter sets a second the budget is sized for (3.5: 2 shared cores under heavy load)")
     ap.add_argument("--dir", type=Path, default=None, help="keep the run file and logs here")

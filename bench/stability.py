@@ -72,10 +72,12 @@ def largest_stable_step(morph, params, duration, seed, iterations, lo=1e-5, hi=2
 
 
 def main() -> None:
+    from spinefarm.cli import checks  # an argparse type: seeds are whole numbers >= 0
+
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--duration", type=float, default=1.0)
     ap.add_argument("--iterations", type=int, default=8)
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--seed", type=checks.seed, default=1)
     ap.add_argument("--case", action="append", choices=sorted(CASES))
     args = ap.parse_args()
     rows = []

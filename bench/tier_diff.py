@@ -155,9 +155,11 @@ def run(spine: str, engine: str, seed: int, duration_s: float, settle_s: float, 
 
 
 def main() -> None:
+    from spinefarm.cli import checks  # an argparse type: seeds are whole numbers >= 0
+
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("spine")
-    ap.add_argument("--seed", type=int, default=1, help="random parameter set (as bench/tier_agreement.py's)")
+    ap.add_argument("--seed", type=checks.seed, default=1, help="random parameter set (as bench/tier_agreement.py's)")
     ap.add_argument("--duration", type=float, default=2.0)
     ap.add_argument("--settle", type=float, default=0.0)
     ap.add_argument("--every", type=float, default=0.1, help="sample period (s)")
