@@ -43,7 +43,7 @@ def lock_path(run_path: str | Path) -> Path:
 def locks_waived() -> bool:
     """HDF5_USE_FILE_LOCKING=FALSE: the user's word that this file system has no locks; HDF5 then takes none,
     and the run lock goes without its name lock where flock is refused."""
-    return os.environ.get("HDF5_USE_FILE_LOCKING", "").strip().upper() == "FALSE"
+    return os.environ.get("HDF5_USE_FILE_LOCKING") in ("FALSE", "0")  # HDF5's own reading of it, to the letter
 
 
 def _cannot_lock(run_path: Path, exc: OSError) -> StorageError:

@@ -66,3 +66,15 @@ def test_a_file_system_without_locks_is_named_and_the_waiver_runs_the_search(shi
     read = run(shim, mount, "export", str(out), "--csv", str(tmp_path / "t.csv"), waive=True)
     assert read.returncode == 0, read.stderr
     assert len((tmp_path / "t.csv").read_text().splitlines()) == 6
+
+
+@pytest.mark.parametrize(("value", "waived"), [("FALSE", True), ("0", True), ("false", False), ("TRUE", False),
+                                               ("BEST_EFFORT", False), (None, False)])
+def test_the_waiver_reads_hdf5s_switch_as_hdf5_does(monkeypatch, value, waived):
+    from spinefarm.storage.runlock import locks_waived
+
+    if value is None:
+        monkeypatch.delenv("HDF5_USE_FILE_LOCKING", raising=False)
+    else:
+        monkeypatch.setenv("HDF5_USE_FILE_LOCKING", value)
+    assert locks_waived() is waived
