@@ -5,7 +5,9 @@ const view = document.getElementById("view");
 const crumbs = document.getElementById("crumbs");
 const liveBadge = document.getElementById("live");
 const REFRESH_MS = 2000;
+const WATCH_MS = 5000;
 let timer = null;
+let liveGen = -1; // the generation whose page last refreshed a running run
 let generation = 0; // a navigation bumps it; a late refresh of an old page then does nothing
 
 const esc = (s) => String(s ?? "").replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;",
@@ -28,7 +30,25 @@ function setCrumbs(parts) {
 function schedule(fn, live) {
   clearTimeout(timer);
   liveBadge.hidden = !live;
-  if (live) timer = setTimeout(fn, REFRESH_MS);
+  if (live) {
+    liveGen = generation;
+    timer = setTimeout(fn, REFRESH_MS);
+  } else if (liveGen === generation) {
+    timer = setTimeout(() => watchServer(fn), WATCH_MS);
+  }
+}
+
+// A page that saw its run live and then done (the search's last status) watches its server, lightly: the
+// search's own server stops moments later, and the page says so (fn's refresh fails into serverGone).
+async function watchServer(fn) {
+  const gen = generation;
+  try {
+    await api("/health");
+  } catch {
+    if (gen === generation) fn();
+    return;
+  }
+  if (gen === generation) timer = setTimeout(() => watchServer(fn), WATCH_MS);
 }
 
 const fmtDuration = (s) => (s === null || s === undefined) ? "–" : s < 90 ? `${Math.round(s)} s`

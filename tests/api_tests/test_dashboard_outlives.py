@@ -59,6 +59,33 @@ def test_the_page_keeps_its_data_after_the_search_exits(browser, tmp_path):
     assert proc.returncode == 0, proc.stderr.read()
 
 
+def test_a_page_that_saw_its_run_end_still_notices_its_server_go(browser, tmp_path):
+    """The page reads the search's last status (done) while its server is still up, then the server stops: the
+    page must still say so (the race of a search that ends, as `--serve` holds it open on purpose here)."""
+    port = free_port()
+    out = tmp_path / "watched.h5"
+    proc = search("--trials", "150", "--duration", "0.1", "--out", str(out), "--run-id", "watched",
+                  "--api-port", str(port), "--serve")
+    try:
+        url = f"http://127.0.0.1:{port}"
+        wait_for(lambda: _running(proc) and _answers(url + "/runs/watched"), timeout_s=60, poll_s=0.2,
+                 what="the search's dashboard")
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.goto(url + "/#/run/watched")
+        page.wait_for_selector("#trial-table tr.row", timeout=60_000)
+        page.wait_for_selector("#run-title .state.done", timeout=120_000)  # the page has seen the run end
+        assert proc.poll() is None and not page.locator("#ended").count()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(30) == 0
+        page.wait_for_selector("#ended", timeout=30_000)
+        assert f"spinefarm api {out}" in page.locator("#ended").inner_text()
+        page.close()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(30)
+
+
 def _running(proc: subprocess.Popen) -> bool:
     """A search that exited early fails the wait at once, with what it said."""
     if proc.poll() is not None:
