@@ -64,8 +64,8 @@ def robust_objective(fn: Callable[[TrialResult], float], name: str) -> Callable[
 
 def episode_result(r: TrialResult, e) -> TrialResult:
     """Episode `e` of result `r` as a TrialResult of its own (the robot's mass and extras of `r`)."""
-    from spinefarm.protocol.measured import MEASURED_NUMBERS
+    from spinefarm.protocol.measured import measured_numbers
     from spinefarm.protocol.states import TrialStatus
 
-    return TrialResult(status=TrialStatus(e.status), reason=e.reason, **{n: getattr(e, n) for n in MEASURED_NUMBERS},
-                       mass_kg=r.mass_kg, seed=e.seed, trial_id=r.trial_id, worker_id=r.worker_id, extras=r.extras)
+    return TrialResult(status=TrialStatus(e.status), reason=e.reason, **measured_numbers(e), mass_kg=r.mass_kg,
+                       seed=e.seed, trial_id=r.trial_id, worker_id=r.worker_id, extras=r.extras)

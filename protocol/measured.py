@@ -20,3 +20,8 @@ Measured = make_dataclass("Measured", [("status", str), ("reason", str), *((n, f
 Measured.__module__ = __name__
 Measured.__doc__ = ("status: complete or failed, with `reason` (diverged: ..., error: ...); then the parts of "
                     "the score (MEASURED_NUMBERS). A dataclass deriving from it lists its own fields after these.")
+
+
+def measured_numbers(record: object) -> dict[str, float]:
+    """The measured parts of a result or an episode, by name: what one hands the other's constructor."""
+    return {name: getattr(record, name) for name in MEASURED_NUMBERS}

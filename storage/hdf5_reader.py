@@ -29,10 +29,10 @@ def _open(path: Path, swmr: bool = True) -> h5py.File:
     try:
         return h5py.File(path, "r", libver="latest", swmr=swmr)
     except OSError as exc:
-        if "unable to lock file" in str(exc) and "No locks available" in str(exc):
-            raise StorageError(f"cannot open run file {path}: {exc}", expected="a file system with locks, or "
-                               "HDF5_USE_FILE_LOCKING=FALSE in the environment where it has none") from exc
-        raise StorageError(f"cannot open run file {path}: {exc}", expected="a readable HDF5 file") from exc
+        no_locks = "unable to lock file" in str(exc) and "No locks available" in str(exc)
+        raise StorageError(f"cannot open run file {path}: {exc}", expected="a file system with locks, or "
+                           "HDF5_USE_FILE_LOCKING=FALSE in the environment where it has none" if no_locks
+                           else "a readable HDF5 file") from exc
 
 
 def _damaged(path: Path, exc: BaseException, what: str = "") -> StorageError:

@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 from spinefarm.protocol.columns import SCORE_NAMES
-from spinefarm.protocol.measured import MEASURED_NUMBERS
+from spinefarm.protocol.measured import measured_numbers
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.robust import EpisodeDraw, EpisodeResult, RobustSpec, draw_episode
 from spinefarm.protocol.states import TrialStatus
@@ -89,7 +89,7 @@ def combine(results: Sequence[TrialResult], draws: Sequence[EpisodeDraw], trial_
 
 def _episode(r: TrialResult, d: EpisodeDraw) -> EpisodeResult:
     return EpisodeResult(episode=d.episode, seed=d.seed, status="complete" if r.ok else "failed",
-                         reason=r.reason[:160], **{n: getattr(r, n) for n in MEASURED_NUMBERS},
+                         reason=r.reason[:160], **measured_numbers(r),
                          friction_scale=d.friction_scale, mass_scale=d.mass_scale,
                          start_jitter_cm=d.start_jitter_cm, rough_seed=d.rough_seed)
 

@@ -36,12 +36,7 @@ def test_the_page_keeps_its_data_after_the_search_exits(browser, tmp_path):
     proc = search("--trials", "300", "--duration", "0.1", "--out", str(out), "--run-id", "ends-view",
                   "--api-port", str(port))
     try:
-        url = f"http://127.0.0.1:{port}"
-        wait_for(lambda: _running(proc) and _answers(url + "/runs/ends-view"), timeout_s=60, poll_s=0.2,
-                 what="the search's dashboard")
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
-        page.goto(url + "/#/run/ends-view")
-        page.wait_for_selector("#trial-table tr.row", timeout=60_000)
+        page = _live_page(browser, proc, f"http://127.0.0.1:{port}", "ends-view")
         assert page.locator("#live").is_visible()
         proc.wait(120)  # the search ends, its server with it
         page.wait_for_selector("#ended", timeout=30_000)
@@ -67,12 +62,7 @@ def test_a_page_that_saw_its_run_end_still_notices_its_server_go(browser, tmp_pa
     proc = search("--trials", "150", "--duration", "0.1", "--out", str(out), "--run-id", "watched",
                   "--api-port", str(port), "--serve")
     try:
-        url = f"http://127.0.0.1:{port}"
-        wait_for(lambda: _running(proc) and _answers(url + "/runs/watched"), timeout_s=60, poll_s=0.2,
-                 what="the search's dashboard")
-        page = browser.new_page(viewport={"width": 1400, "height": 900})
-        page.goto(url + "/#/run/watched")
-        page.wait_for_selector("#trial-table tr.row", timeout=60_000)
+        page = _live_page(browser, proc, f"http://127.0.0.1:{port}", "watched")
         page.wait_for_selector("#run-title .state.done", timeout=120_000)  # the page has seen the run end
         assert proc.poll() is None and not page.locator("#ended").count()
         proc.send_signal(signal.SIGINT)
@@ -84,6 +74,16 @@ def test_a_page_that_saw_its_run_end_still_notices_its_server_go(browser, tmp_pa
         if proc.poll() is None:
             proc.kill()
             proc.wait(30)
+
+
+def _live_page(browser, proc: subprocess.Popen, url: str, run_id: str):
+    """The run's page on a running search's own dashboard, once it shows trials."""
+    wait_for(lambda: _running(proc) and _answers(f"{url}/runs/{run_id}"), timeout_s=60, poll_s=0.2,
+             what="the search's dashboard")
+    page = browser.new_page(viewport={"width": 1400, "height": 900})
+    page.goto(f"{url}/#/run/{run_id}")
+    page.wait_for_selector("#trial-table tr.row", timeout=60_000)
+    return page
 
 
 def _running(proc: subprocess.Popen) -> bool:
