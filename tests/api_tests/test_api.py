@@ -11,7 +11,6 @@ import h5py
 import httpx
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 from spinefarm.api.app import create_app
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.storage.hdf5 import Hdf5Storage
@@ -19,6 +18,7 @@ from spinefarm.storage.runlock import RunLock
 from spinefarm.storage.status import write_status
 
 from tests.coordinator_tests.helpers import wait_for
+from tests.http_server import served
 from tests.storage_tests.conftest import make_meta, result
 
 
@@ -43,7 +43,7 @@ def client(tmp_path):
                                       "rate_trials_s": 3.5, "eta_s": 27.0, "updated_at_unix_s": time.time(),
                                       "workers": [{"worker_id": "w-1", "alive": True, "leases": 2,
                                                    "last_contact_unix_s": time.time()}]})
-    with TestClient(create_app(runs_dir=tmp_path)) as c:
+    with served(create_app(runs_dir=tmp_path)) as c:
         yield c
     lock.release()
 
@@ -135,7 +135,7 @@ def test_stale_status_file_reads_as_stalled(tmp_path):
     write_run(tmp_path / "a.h5")
     write_status(tmp_path / "a.h5", {"state": "running", "updated_at_unix_s": time.time() - 3600})
     lock = RunLock(tmp_path / "a.h5").acquire()
-    with TestClient(create_app([tmp_path / "a.h5"])) as c:
+    with served(create_app([tmp_path / "a.h5"])) as c:
         assert c.get("/runs/run-a").json()["state"] == "stalled"
         lock.release()
         st = c.get("/runs/run-a").json()
@@ -188,7 +188,7 @@ def test_verification_verdicts_show_and_a_not_reproduced_best_is_skipped(tmp_pat
     s.set_verification(1, "holds", 0.98)
     s.flush()
     s.close()
-    with TestClient(create_app(runs_dir=tmp_path)) as c:
+    with served(create_app(runs_dir=tmp_path)) as c:
         best = c.get("/runs/run-v/best", params={"k": 2}).json()
         assert [b["trial_id"] for b in best] == [1, 0]  # trial 2 had the top objective but did not hold
         v = best[0]["verification"]

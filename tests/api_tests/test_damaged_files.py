@@ -100,15 +100,16 @@ def _ok(url):
 
 def test_a_status_file_with_a_lone_surrogate_is_served(tmp_path):
     """An old status file holding a worker id like "\\ud800" must not turn /runs into 500 for good."""
-    from fastapi.testclient import TestClient
     from spinefarm.api.app import create_app
     from spinefarm.storage.status import status_path
+
+    from tests.http_server import served
 
     run_file(tmp_path / "run.h5", "odd")
     status_path(tmp_path / "run.h5").write_text(
         '{"run_id": "odd", "state": "running", "workers": [{"worker_id": "\\ud800", "alive": true, "leases": 0, '
         '"last_contact_unix_s": 1.0}], "updated_at_unix_s": 1.0}')
-    with TestClient(create_app(runs_dir=tmp_path)) as client:
+    with served(create_app(runs_dir=tmp_path)) as client:
         assert client.get("/runs").status_code == 200
         assert client.get("/runs/odd").status_code == 200
 

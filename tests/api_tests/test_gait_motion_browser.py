@@ -155,12 +155,13 @@ def test_without_the_simulator_the_3d_view_says_so(browser, run_file):
 
 def test_a_picture_cache_folder_that_cannot_be_made_draws_in_a_temporary_one(run_file, tmp_path, caplog):
     """A read-only home or a mistyped SPINEFARM_CACHE_DIR: the gait is still drawn (it was a 500)."""
-    from fastapi.testclient import TestClient
     from spinefarm.api.app import create_app
+
+    from tests.http_server import served
 
     blocked = tmp_path / "a-file"
     blocked.write_text("x")  # no folder can be made below a file
-    with TestClient(create_app([run_file], picture_cache_dir=blocked / "pictures")) as client:
+    with served(create_app([run_file], picture_cache_dir=blocked / "pictures")) as client:
         r = client.get("/runs/tetra-motion/trials/0/motion.json")
         assert r.status_code == 200, r.text
         assert r.json()["format"] == "spinefarm-motion/1" and len(r.json()["time_s"]) > 1
@@ -171,8 +172,9 @@ def test_a_full_picture_cache_is_an_error_in_words(run_file, tmp_path):
     """A full disk under the picture cache (a real tmpfs, filled): a JSON error naming it, not a traceback."""
     import subprocess
 
-    from fastapi.testclient import TestClient
     from spinefarm.api.app import create_app
+
+    from tests.http_server import served
 
     mnt = tmp_path / "fs"
     mnt.mkdir()
@@ -187,8 +189,7 @@ def test_a_full_picture_cache_is_an_error_in_words(run_file, tmp_path):
                     fh.write(b"\0" * 4096)
             except OSError:
                 pass
-        with TestClient(create_app([run_file], picture_cache_dir=mnt / "pictures"),
-                        raise_server_exceptions=False) as client:
+        with served(create_app([run_file], picture_cache_dir=mnt / "pictures")) as client:
             r = client.get("/runs/tetra-motion/trials/0/motion.json")
         assert r.status_code == 500, r.text
         detail = r.json()["detail"]

@@ -85,10 +85,11 @@ def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(
     finally:
         stop(coord, *workers)
     # the API counts evaluations against the evaluations planned, parameter sets against the budget
-    from fastapi.testclient import TestClient
     from spinefarm.api.app import create_app
 
-    with TestClient(create_app(runs_dir=tmp_path)) as client:
+    from tests.http_server import served
+
+    with served(create_app(runs_dir=tmp_path)) as client:
         st = client.get("/runs/mf").json()
     rows = len(read_run(out)[1]["trial_id"])
     assert (st["trials_budget"], st["parameter_sets_sampled"], st["trials_planned"]) == (27, 27, 27 + 9 + 3)

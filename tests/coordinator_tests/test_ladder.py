@@ -94,10 +94,11 @@ def test_an_audit_finds_the_worker_that_disagrees_and_quarantines_it(tmp_path):
         assert quarantined == {"honest0": False, "honest1": False, "honest2": False, "bad": True}
     finally:
         stop(coord, *workers)
-    from fastapi.testclient import TestClient
     from spinefarm.api.app import create_app
 
-    with TestClient(create_app(runs_dir=tmp_path)) as client:
+    from tests.http_server import served
+
+    with served(create_app(runs_dir=tmp_path)) as client:
         run = client.get("/runs/aud").json()
     assert run["audit"]["audits_disagrees"] == int((audit == b"disagrees").sum()) and run["audit"]["fraction"] == 0.25
     assert run["audit"]["audits_overruled"] == int((audit == b"overruled").sum())

@@ -7,7 +7,6 @@ import subprocess
 import sys
 
 import numpy as np
-from fastapi.testclient import TestClient
 from spinefarm.api.app import create_app
 from spinefarm.protocol.robust import RobustSpec
 from spinefarm.robot.morphology.model import Morphology
@@ -17,6 +16,7 @@ from spinefarm.worker.trial import TrialConfig
 
 import spinefarm
 from tests.coordinator_tests.procs import ROOT
+from tests.http_server import served
 
 RANDOMIZE = "friction=0.1,mass=0.05,start_jitter_cm=0.5"
 
@@ -72,7 +72,7 @@ def test_episodes_are_stored_and_resumed_exactly(tmp_path):
         assert reader.episodes(2)["episode"].tolist() == [0, 1]
     assert len(spinefarm.load_run(out)) == 5
 
-    with TestClient(create_app([out])) as client:  # the API gives each trial's episodes and spread
+    with served(create_app([out])) as client:  # the API gives each trial's episodes and spread
         body = client.get(f"/runs/{meta.run_id}/trials/4/episodes").json()
         assert body["robust"]["statistic"] == "q25" and [e["episode"] for e in body["episodes"]] == [0, 1]
         assert [e["distance_m"] for e in body["episodes"]] == after["distance_m"][mine].tolist()

@@ -83,12 +83,13 @@ def _garble(path):
 
 
 def test_invalid_utf8_in_stored_cells_gives_no_500_and_no_traceback(files, tmp_path):
-    from fastapi.testclient import TestClient
     from spinefarm.api.app import create_app
+
+    from tests.http_server import served
 
     good, _ = files
     best = _garble(good)
-    with TestClient(create_app([good])) as c:
+    with served(create_app([good])) as c:
         for url in ("/runs/good/best?k=5", f"/runs/good/trials/{best}", "/runs/good/trials/3",
                     "/runs/good/trials.csv", "/runs", "/runs/good"):
             r = c.get(url)
@@ -112,11 +113,12 @@ def test_export_of_a_damaged_file_gives_one_line(files, tmp_path):
 
 
 def test_a_405_names_what_is_allowed_and_trials_csv_is_documented_as_csv(files):
-    from fastapi.testclient import TestClient
     from spinefarm.api.app import create_app
 
+    from tests.http_server import served
+
     good, _ = files
-    with TestClient(create_app([good])) as c:
+    with served(create_app([good])) as c:
         r = c.post("/runs")
         assert r.status_code == 405 and r.headers.get("allow") == "GET", dict(r.headers)
         spec = c.get("/openapi.json").json()

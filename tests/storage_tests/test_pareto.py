@@ -9,7 +9,6 @@ import sys
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 from spinefarm.api.app import create_app
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import TrialStatus
@@ -18,6 +17,7 @@ from spinefarm.storage.export import write_csv
 from spinefarm.storage.hdf5 import Hdf5Storage
 
 from tests.coordinator_tests.procs import ROOT
+from tests.http_server import served
 
 # (speed cm/s, COT, status); the front is known by construction
 SYNTHETIC = [
@@ -94,7 +94,7 @@ def test_the_file_marks_the_front_and_the_api_and_export_serve_it(tmp_path):
     s.close()
     again = Hdf5Storage.open_read(path)
     assert set(np.flatnonzero(again.columns()["pareto_front"] == 1)) == FRONT
-    with TestClient(create_app([path])) as c:
+    with served(create_app([path])) as c:
         body = c.get("/runs/run-p/pareto").json()
     assert [t["trial_id"] for t in body] == [3, 11, 2, 1, 8, 0]
     assert body[0]["scores"]["speed_cm_s"] == 4.0 and body[0]["scores"]["cot"] == 8.0

@@ -9,7 +9,6 @@ import sys
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 from spinefarm.api.app import create_app
 from spinefarm.protocol.engine_choice import EngineChoice
 from spinefarm.protocol.errors import ConfigError
@@ -19,6 +18,7 @@ from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.worker.calibrate import agreement, decide
 
 from tests.coordinator_tests.procs import ROOT
+from tests.http_server import served
 
 TINY = ("--gaits", "4", "--search-trials", "2", "--bests", "1", "--duration", "0.5", "--settle", "0.2")
 
@@ -77,7 +77,7 @@ def test_search_engine_auto_stores_its_choice_and_resumes_with_it(tmp_path):
     assert (choice["rungs_added"] is not None) == (choice["engine"] == "mujoco")
     assert {e.decode() if isinstance(e, bytes) else e for e in cols["engine"]} == {choice["engine"]}
     assert f"engine auto chose {choice['engine']}" in r.stdout + r.stderr
-    with TestClient(create_app([out])) as client:  # the dashboard's meta carries the choice
+    with served(create_app([out])) as client:  # the dashboard's meta carries the choice
         run_id = client.get("/runs").json()[0]["run_id"]
         assert client.get(f"/runs/{run_id}/meta").json()["engine_choice"] == choice
     resumed = spinefarm("search", "--resume", str(out), "--trials", "5", "--workers", "1", "--api-port", "-1",
