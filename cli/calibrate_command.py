@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+from typing import TYPE_CHECKING
 
 from spinefarm.cli.robot_argument import add_robot_argument
+
+if TYPE_CHECKING:
+    from spinefarm.worker.calibrate import CalibrationSettings
 
 # what `spinefarm calibrate --help` says first
 DESCRIPTION = ("Run seeded random gaits plus the bests of a short search on both tiers and say whether a search "
@@ -41,7 +45,8 @@ def add_calibration_arguments(p: argparse.ArgumentParser, prefix: str = "") -> N
         p.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
 
 
-def settings_from(args: argparse.Namespace, prefix: str = "", controller: str | None = None, jobs: int = 1):
+def settings_from(args: argparse.Namespace, prefix: str = "", controller: str | None = None, jobs: int = 1
+                  ) -> CalibrationSettings:
     from spinefarm.worker.calibrate import CalibrationSettings
 
     get = vars(args)

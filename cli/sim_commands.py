@@ -7,13 +7,18 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from spinefarm.cli import checks
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.protocol.errors import ParameterError
 from spinefarm.robot.engines import DEFAULT_ENGINE
+
+if TYPE_CHECKING:
+    from spinefarm.robot.morphology.model import Morphology
+    from spinefarm.storage.schema import RunMeta
+    from spinefarm.worker.accuracy import ParamSet
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -296,11 +301,11 @@ def _stored_trial(path: Path, trial_id: int | None
             config, rec.trial_id)
 
 
-def _physical(morph, params, controller) -> np.ndarray:
+def _physical(morph: Morphology, params: np.ndarray | dict, controller: str | None) -> np.ndarray:
     return morph.param_space(controller).physical(params)
 
 
-def _best_of_run(path: Path, n: int = 1):
+def _best_of_run(path: Path, n: int = 1) -> tuple[list[ParamSet], RunMeta]:
     from spinefarm.storage.hdf5 import Hdf5Storage
     from spinefarm.worker.accuracy import ParamSet
 
@@ -349,7 +354,7 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     return 0
 
 
-def _finite(x):
+def _finite(x: Any) -> Any:
     if isinstance(x, float) and not math.isfinite(x):
         return None
     if isinstance(x, dict):

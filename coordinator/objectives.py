@@ -7,6 +7,7 @@ from collections.abc import Callable
 
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.results import TrialResult
+from spinefarm.protocol.robust import EpisodeResult
 
 
 def _distance(r: TrialResult) -> float:
@@ -62,7 +63,7 @@ def robust_objective(fn: Callable[[TrialResult], float], name: str) -> Callable[
     return robust
 
 
-def episode_result(r: TrialResult, e) -> TrialResult:
+def episode_result(r: TrialResult, e: EpisodeResult) -> TrialResult:
     """Episode `e` of result `r` as a TrialResult of its own (the robot's mass and extras of `r`)."""
     from spinefarm.protocol.measured import measured_numbers
     from spinefarm.protocol.states import TrialStatus

@@ -11,7 +11,7 @@ import json
 import logging
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import zenoh
@@ -94,7 +94,7 @@ class CoordinatorService:
         return self
 
     # --- callbacks (zenoh threads) ----------------------------------------------------------------
-    def _guard(self, handler):
+    def _guard(self, handler: Callable[[bytes], bytes | None]) -> Callable[[zenoh.Query], None]:
         def on_query(query: zenoh.Query) -> None:
             # `with` finalises the query at once; a reference kept elsewhere (a logged traceback)
             # would otherwise hold the requester until its timeout.

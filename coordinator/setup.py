@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -22,6 +23,8 @@ from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung, RunSetti
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.schema import RunMeta
+
+Clock = Callable[[], float]  # seconds, monotonic
 
 # The judge in the search's own engine re-simulates at this many times finer a step.
 JUDGE_REFINE = 4
@@ -99,7 +102,7 @@ def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
                    run=config.to_dict(), settings=settings.run_settings(config), environment=environment_record())
 
 
-def build_core(storage: BaseStorage, clock=time.monotonic, trusted_peers: bool = False) -> CoordinatorCore:
+def build_core(storage: BaseStorage, clock: Clock = time.monotonic, trusted_peers: bool = False) -> CoordinatorCore:
     """A core over a storage that already holds its run (new or resumed). trusted_peers: access is
     controlled (--credentials), so a worker whose audits disagree is marked, not quarantined."""
     meta = storage.run_meta()
@@ -120,7 +123,7 @@ def build_core(storage: BaseStorage, clock=time.monotonic, trusted_peers: bool =
 
 
 def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,
-            clock=time.monotonic, overwrite: bool = False,
+            clock: Clock = time.monotonic, overwrite: bool = False,
             trusted_peers: bool = False) -> tuple[CoordinatorCore, BaseStorage]:
     """Create the run's storage (an HDF5 file, or memory when `out` is None) and its core.
 
@@ -137,7 +140,7 @@ def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,
     return _core_or_close(storage, clock, trusted_peers), storage
 
 
-def _core_or_close(storage: BaseStorage, clock, trusted_peers: bool = False) -> CoordinatorCore:
+def _core_or_close(storage: BaseStorage, clock: Clock, trusted_peers: bool = False) -> CoordinatorCore:
     try:
         return build_core(storage, clock, trusted_peers)
     except BaseException:
@@ -145,7 +148,7 @@ def _core_or_close(storage: BaseStorage, clock, trusted_peers: bool = False) -> 
         raise
 
 
-def resume_run(path: str | Path, clock=time.monotonic, trials_budget: int | None = None,
+def resume_run(path: str | Path, clock: Clock = time.monotonic, trials_budget: int | None = None,
                trusted_peers: bool = False) -> tuple[CoordinatorCore, BaseStorage]:
     """Continue a stored run (optionally to a new budget): same numbering, same sampler state."""
     from spinefarm.storage.hdf5 import Hdf5Storage

@@ -14,7 +14,7 @@ from spinefarm.protocol.settings import PROMOTED, RunSettings
 from spinefarm.storage.base import BaseStorage
 
 
-def trial_seed(run_seed: int, trial_id):
+def trial_seed(run_seed: int, trial_id: int | np.ndarray) -> int | np.ndarray:
     """Seed of trial `trial_id` (an int or an integer array) in a run seeded with `run_seed`."""
     return (run_seed * 1_000_003 + trial_id) % (2**31 - 1)
 

@@ -8,14 +8,17 @@ every rod's oriented box (spec section 2). Body frames have world-aligned axes a
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.morphology.structure import StructureSpec, rotation_from_y
 
+Quaternion = tuple[float, float, float, float]  # x, y, z, w (pybullet's order)
 
-def quaternion_matrix(q_xyzw) -> np.ndarray:
+
+def quaternion_matrix(q_xyzw: Sequence[float] | np.ndarray) -> np.ndarray:
     """(3, 3) rotation matrix of a unit quaternion (x, y, z, w)."""
     x, y, z, w = q_xyzw
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],

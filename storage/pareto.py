@@ -10,13 +10,15 @@ from __future__ import annotations
 import numpy as np
 from spinefarm.protocol.states import TrialStatus
 
+Number = float | np.ndarray  # a speed or a COT, or arrays of them
+
 
 def candidates(status: np.ndarray, speed_cm_s: np.ndarray, cot: np.ndarray) -> np.ndarray:
     """Rows that take part: complete, with a finite speed and a COT that is a number (inf: no motion)."""
     return (status == TrialStatus.COMPLETE.stored) & np.isfinite(speed_cm_s) & ~np.isnan(cot)
 
 
-def dominates(s_a, c_a, s_b, c_b):
+def dominates(s_a: Number, c_a: Number, s_b: Number, c_b: Number) -> np.ndarray | bool:
     """a dominates b: at least as fast, at most as costly, better in one (element-wise on arrays)."""
     return (s_a >= s_b) & (c_a <= c_b) & ((s_a > s_b) | (c_a < c_b))
 

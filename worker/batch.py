@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from spinefarm.robot.morphology.structure import NEWTON
+from spinefarm.robot.scene import Terrain
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker import scoring
 from spinefarm.worker.control.law import ControlLaw
@@ -84,7 +85,7 @@ class Batch:
     guards (masses (nb,) kg, start_length_cm (n_strings,), terrain for heights)."""
 
     def __init__(self, engine: BasePhysics, law: ControlLaw, timing: Timing, cfg: TrialConfig, masses: np.ndarray,
-                 start_length_cm: np.ndarray, terrain) -> None:
+                 start_length_cm: np.ndarray, terrain: Terrain) -> None:
         self.engine, self.law, self.timing, self.cfg = engine, law, timing, cfg
         self.masses, self.start_length_cm, self.terrain = masses, start_length_cm, terrain
         poses = engine.read_poses()

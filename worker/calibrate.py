@@ -150,7 +150,8 @@ def _run(jobs: list[tuple], processes: int) -> list[tuple[float, float]]:
         return list(pool.map(_trial, jobs))
 
 
-def _step_error(source, gaits: list, distances: np.ndarray, engine: str, settings: CalibrationSettings) -> float | None:
+def _step_error(source: str, gaits: list, distances: np.ndarray, engine: str, settings: CalibrationSettings
+                ) -> float | None:
     """Median |d(dt) - d(dt/2)| / |d(dt/2)| over the first STEP_ERROR_GAITS gaits that move."""
     moving = [i for i in np.argsort(-np.abs(np.nan_to_num(distances)))
               if np.isfinite(distances[i]) and abs(distances[i]) >= MOVING_M][:STEP_ERROR_GAITS]

@@ -4,26 +4,31 @@ score. Engine-neutral: works on poses and string state, whatever engine produced
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot import fixedmath as fm
-from spinefarm.robot.bodies import quaternion_matrix
+from spinefarm.robot.bodies import BodyModel, Quaternion, quaternion_matrix
 from spinefarm.robot.morphology.model import Morphology
-from spinefarm.robot.scene import GROUND_TOP_CM, SceneConfig, surface_height_cm
+from spinefarm.robot.scene import GROUND_TOP_CM, SceneConfig, Terrain, surface_height_cm
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker import scoring
 from spinefarm.worker.sim import strings as sk
+
+if TYPE_CHECKING:
+    from spinefarm.worker.sim.stability import StabilityEstimate
 
 STRETCH_BASE_MIN_CM = 2.0
 
 
 @lru_cache(maxsize=64)
-def _stable_step(morph: Morphology, relocate: bool):
+def _stable_step(morph: Morphology, relocate: bool) -> StabilityEstimate:
     from spinefarm.worker.sim.stability import estimate_stable_step
 
     return estimate_stable_step(morph, relocate)
@@ -44,11 +49,11 @@ def choose_step(morph: Morphology, cfg: TrialConfig) -> float:
     return dt
 
 
-def _rotation_matrix(rotation: tuple[float, float, float, float] | None) -> np.ndarray:
+def _rotation_matrix(rotation: Quaternion | None) -> np.ndarray:
     return np.eye(3) if rotation is None else quaternion_matrix(rotation)
 
 
-def start_rotation(scene: SceneConfig) -> tuple[float, float, float, float] | None:
+def start_rotation(scene: SceneConfig) -> Quaternion | None:
     """On a slope the robot starts lying on it: its build pose tilted like the plane."""
     if scene.kind != "slope" or scene.slope_deg == 0.0:
         return None
@@ -56,14 +61,14 @@ def start_rotation(scene: SceneConfig) -> tuple[float, float, float, float] | No
     return (math.sin(a / 2), 0.0, 0.0, math.cos(a / 2))
 
 
-def build_poses(bodies, lift_cm: float = 0.0, rotation=None) -> np.ndarray:
+def build_poses(bodies: Sequence[BodyModel], lift_cm: float = 0.0, rotation: Quaternion | None = None) -> np.ndarray:
     """Start poses without jitter (tilted on a slope, lifted clear of the terrain)."""
     rot = _rotation_matrix(rotation)
     q = (0.0, 0.0, 0.0, 1.0) if rotation is None else rotation
     return np.array([[*(fm.matvec(rot, b.com_cm) + np.array([0.0, lift_cm, 0.0])), *q] for b in bodies])
 
 
-def start_lift_cm(terrain, morph: Morphology, rotation=None) -> float:
+def start_lift_cm(terrain: Terrain, morph: Morphology, rotation: Quaternion | None = None) -> float:
     """How far to raise the robot so that no point along its rods starts lower above the terrain
     than it would above flat ground (0 on flat ground)."""
     nodes = fm.rotate_rows(morph.structure.node_array(), _rotation_matrix(rotation))
@@ -75,7 +80,7 @@ def start_lift_cm(terrain, morph: Morphology, rotation=None) -> float:
 
 
 def check_state(poses: np.ndarray, last: np.ndarray, masses: np.ndarray, sstate: np.ndarray,
-           start_length: np.ndarray, interval_s: float, cfg: TrialConfig, terrain) -> str:
+           start_length: np.ndarray, interval_s: float, cfg: TrialConfig, terrain: Terrain) -> str:
     """A divergence reason, or "" while the state is physically sane."""
     if not np.all(np.isfinite(poses)):
         return "diverged: non-finite pose"

@@ -25,10 +25,9 @@ from numba import njit, types
 from numba.extending import intrinsic
 from spinefarm.robot.engines import engine_spec
 from spinefarm.worker.control.law import STATUS_OK, ControlLaw, law_step_world
-from spinefarm.worker.engines.base import BasePhysics
+from spinefarm.worker.engines.base import BasePhysics, Run
 
 OnStep = Callable[[np.ndarray, np.ndarray], None]
-Run = Callable[[int, np.ndarray], None]
 
 
 @intrinsic

@@ -80,8 +80,8 @@ def simulate_batch(morphology: Morphology | str | Mapping, params: Sequence, con
     return outcomes
 
 
-def _simulate(morphology, params: list, cfg: TrialConfig, seeds: list[int], controller: str | None,
-              scene_factory: EngineFactory | None, setup: TrialSetup | SetupCache | None
+def _simulate(morphology: Morphology | str | Mapping, params: list, cfg: TrialConfig, seeds: list[int],
+              controller: str | None, scene_factory: EngineFactory | None, setup: TrialSetup | SetupCache | None
               ) -> tuple[list[TrialOutcome | None], dict]:
     t_wall = time.perf_counter()
     morph = load_morphology(morphology)

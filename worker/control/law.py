@@ -99,7 +99,7 @@ def string_tables(morph: Morphology, start_length_cm: np.ndarray, node_of_string
     return params, state
 
 
-def _stack(arrays: list[np.ndarray], dtype) -> np.ndarray:
+def _stack(arrays: list[np.ndarray], dtype: type) -> np.ndarray:
     """(B, max length) of 1-D arrays, zero-padded (a world reads only its own length)."""
     out = np.zeros((len(arrays), max((a.shape[0] for a in arrays), default=0)), dtype=dtype)
     for b, a in enumerate(arrays):
@@ -112,7 +112,8 @@ class ControlLaw:
     pair of string_tables per world; geom: the robot's string geometry (body_a, body_b, anchor_a_cm,
     anchor_b_cm); cpg_max_step_s: the CPG's RK4 sub-step cap (None: CpgIntegrator's default)."""
 
-    def __init__(self, networks: list[CpgNetwork], tables: list[tuple[np.ndarray, np.ndarray]], geom,
+    def __init__(self, networks: list[CpgNetwork], tables: list[tuple[np.ndarray, np.ndarray]],
+                 geom: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
                  n_bodies: int, cpg_max_step_s: float | None, motor_model: str) -> None:
         n_worlds = len(networks)
         if len({n.n_nodes for n in networks}) != 1 or len(tables) != n_worlds:

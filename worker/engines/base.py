@@ -38,7 +38,7 @@ dataclass, built from TrialConfig.engine_options by `settings_from_options`, nev
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -48,6 +48,9 @@ from spinefarm.robot.engines import check_engine_options, engine_spec
 from spinefarm.robot.scene import Terrain
 
 GRAVITY_CM_S2 = 981.0
+
+Run = Callable[[int, np.ndarray], None]  # run(k, active): k steps of the active worlds (the loop's)
+Vector3 = Sequence[float] | np.ndarray
 
 
 class BasePhysics:
@@ -80,8 +83,7 @@ class BasePhysics:
         """Whether the constructor wants rod_pairs (robot.reach) with these settings."""
         return False
 
-    def advance(self, run: Callable[[int, np.ndarray], None], n_steps: int, active: np.ndarray,
-                horizon_steps: int) -> None:
+    def advance(self, run: Run, n_steps: int, active: np.ndarray, horizon_steps: int) -> None:
         """n_steps of the active worlds through run(k, active) (the loop's steps); see the module docstring."""
         run(n_steps, active)
 
@@ -97,7 +99,8 @@ class BasePhysics:
         """ability "velocities": (B, nb, 6) world-frame body velocities, linear cm/s and angular rad/s."""
         raise NotImplementedError(f"engine {self.name} has no velocities")
 
-    def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0), world: int = 0) -> None:
+    def set_velocity(self, index: int, linear_cm_s: Vector3, angular_rad_s: Vector3 = (0.0, 0.0, 0.0),
+                     world: int = 0) -> None:
         """ability "velocities": set one body's world-frame velocity."""
         raise NotImplementedError(f"engine {self.name} has no set_velocity")
 

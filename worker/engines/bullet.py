@@ -20,7 +20,7 @@ from spinefarm.protocol.errors import bounded, check_fields, whole
 from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel
 from spinefarm.robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
-from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics, world_offsets
+from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics, Vector3, world_offsets
 from spinefarm.worker.engines.couple import wrench_to_force_pairs
 
 
@@ -139,7 +139,8 @@ class BulletPhysics(BasePhysics):
         """(B, n_bodies, 6): linear (cm/s) and angular (rad/s) velocity; for checks, not the hot loop."""
         return np.array([w.velocities() for w in self.worlds])
 
-    def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0), world: int = 0) -> None:
+    def set_velocity(self, index: int, linear_cm_s: Vector3, angular_rad_s: Vector3 = (0.0, 0.0, 0.0),
+                     world: int = 0) -> None:
         """Set one body's world-frame velocity; for checks and tests."""
         self.worlds[world].set_velocity(index, linear_cm_s, angular_rad_s)
 
@@ -276,7 +277,7 @@ class BulletWorld:
         return np.array([tuple(chain.from_iterable(pb.getBaseVelocity(b, physicsClientId=self.client)))
                          for b in self.body_ids])
 
-    def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0)) -> None:
+    def set_velocity(self, index: int, linear_cm_s: Vector3, angular_rad_s: Vector3 = (0.0, 0.0, 0.0)) -> None:
         """Set one body's world-frame velocity; for checks and tests."""
         pb.resetBaseVelocity(self.body_ids[index], list(map(float, linear_cm_s)), list(map(float, angular_rad_s)),
                              physicsClientId=self.client)

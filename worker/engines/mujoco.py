@@ -13,7 +13,7 @@ from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel, quaternion_matrix
 from spinefarm.robot.scene import GroundSpec, Terrain, pairs_off
-from spinefarm.worker.engines.base import BasePhysics, world_offsets
+from spinefarm.worker.engines.base import BasePhysics, Run, Vector3, world_offsets
 from spinefarm.worker.engines.mujoco_model import (
     POSE_COLUMNS,
     MujocoSettings,
@@ -35,7 +35,7 @@ def _libmujoco() -> ctypes.CDLL:
 _MJ_STEP = None
 
 
-def mj_step_cfunc():
+def mj_step_cfunc() -> ctypes._CFuncPtr:
     """mj_step as a ctypes function of two addresses (model, data), callable from compiled code."""
     global _MJ_STEP
     if _MJ_STEP is None:
@@ -145,7 +145,7 @@ class MujocoPhysics(BasePhysics):
         return [(step, self.model._address, d._address, q, self._order, x) for d, q, x in
                 zip(self.data, self.qpos, self.xfrc, strict=True)]
 
-    def advance(self, run, n_steps: int, active: np.ndarray, horizon_steps: int) -> None:
+    def advance(self, run: Run, n_steps: int, active: np.ndarray, horizon_steps: int) -> None:
         """With segment_contacts "auto", the steps are run in pieces no longer than the contact guard finds
         safe (it looks again when a world reaches the end of its safe steps, at most horizon_steps ahead); a
         world for which not even one step is safe leaves `active` for `retries`: run it again from its start
@@ -200,7 +200,8 @@ class MujocoPhysics(BasePhysics):
                 out[w, b, 3:] = fm.matvec(quaternion_matrix(poses[w, b, 3:]), self.qvel[w][b, 3:])
         return out
 
-    def set_velocity(self, index: int, linear_cm_s, angular_rad_s=(0.0, 0.0, 0.0), world: int = 0) -> None:
+    def set_velocity(self, index: int, linear_cm_s: Vector3, angular_rad_s: Vector3 = (0.0, 0.0, 0.0),
+                     world: int = 0) -> None:
         """Set one body's world-frame velocity; for checks and tests."""
         rot = quaternion_matrix(self.read_poses()[world, index, 3:])
         self.qvel[world][index, :3] = linear_cm_s

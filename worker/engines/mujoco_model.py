@@ -27,14 +27,15 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, bounded, check_fields, whole
 from spinefarm.robot import fixedmath as fm
-from spinefarm.robot.bodies import BodyModel, quaternion_matrix
-from spinefarm.robot.scene import GROUND_TOP_CM, Terrain
+from spinefarm.robot.bodies import BodyModel, Quaternion, quaternion_matrix
+from spinefarm.robot.scene import GROUND_TOP_CM, Box, Terrain
 from spinefarm.worker.engines.base import GRAVITY_CM_S2
 
 log = logging.getLogger("spinefarm.mujoco")
@@ -122,11 +123,11 @@ def _f(v: float) -> str:
     return f"{float(v):.17g}"
 
 
-def _vec(v) -> str:
+def _vec(v: Sequence[float] | np.ndarray) -> str:
     return " ".join(_f(x) for x in v)
 
 
-def _wxyz(q_xyzw) -> tuple[float, float, float, float]:
+def _wxyz(q_xyzw: Sequence[float] | np.ndarray) -> tuple[float, float, float, float]:
     x, y, z, w = (float(v) for v in q_xyzw)
     return (w, x, y, z)
 
@@ -182,7 +183,8 @@ def _terrain_xml(terrain: Terrain, attributes: str) -> tuple[list[str], list[str
 
 
 def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: MujocoSettings,
-              start_offsets_cm: np.ndarray | None, start_rotation, excluded: list[tuple[int, int]],
+              start_offsets_cm: np.ndarray | None, start_rotation: Quaternion | None,
+              excluded: list[tuple[int, int]],
               rod_pairs: np.ndarray | None = None) -> str:
     """The MJCF of the world; heightfield elevations are filled in after compiling. rod_pairs (p, 4) rows (body
     a, rod of a, body b, rod of b): the segment-segment pairs of segment_contacts "reach"."""
@@ -278,7 +280,7 @@ def _pairs_xml(rod_pairs: np.ndarray | None, mu: float, solver: str) -> str:
                    for a, i, b, j in (() if rod_pairs is None else rod_pairs.tolist()))
 
 
-def _is_plane(box) -> bool:
+def _is_plane(box: Box) -> bool:
     hx, hy, hz = box.half_extents_cm
     return min(hx, hz) >= PLANE_ASPECT * hy
 

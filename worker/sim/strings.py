@@ -223,7 +223,8 @@ class StringBank:
     net wrench about its COM, wa/wb (n, 3) world anchors, string_force (n, 3) force on end a.
     """
 
-    def __init__(self, n_bodies: int, body_a, body_b, anchor_a_cm, anchor_b_cm, params, state) -> None:
+    def __init__(self, n_bodies: int, body_a: np.ndarray, body_b: np.ndarray, anchor_a_cm: np.ndarray,
+                 anchor_b_cm: np.ndarray, params: np.ndarray, state: np.ndarray) -> None:
         n = params.shape[0]
         self.body_a = np.ascontiguousarray(body_a, dtype=np.int64)
         self.body_b = np.ascontiguousarray(body_b, dtype=np.int64)
