@@ -184,8 +184,7 @@ def _terrain_xml(terrain: Terrain, attributes: str) -> tuple[list[str], list[str
 
 def model_xml(bodies: list[BodyModel], terrain: Terrain, dt_s: float, settings: MujocoSettings,
               start_offsets_cm: np.ndarray | None, start_rotation: Quaternion | None,
-              excluded: list[tuple[int, int]],
-              rod_pairs: np.ndarray | None = None) -> str:
+              excluded: list[tuple[int, int]], rod_pairs: np.ndarray | None = None) -> str:
     """The MJCF of the world; heightfield elevations are filled in after compiling. rod_pairs (p, 4) rows (body
     a, rod of a, body b, rod of b): the segment-segment pairs of segment_contacts "reach"."""
     s = settings
