@@ -34,6 +34,11 @@ PUBLISHED = {name: PUBLISHED_DIR / folder / "paper-2014-06-07" for folder, name 
 def parameter_folder(where: str | Path) -> Path:
     """A folder of .nnw files: an existing path, or the shipped set of a robot named in PUBLISHED."""
     path = Path(where)
+    if path.is_file():  # a spec file, say: its robot has no published parameters to replay
+        raise ConfigError("replay needs NTRT's parameters, not a file", received=str(where),
+                          expected=f"one of {', '.join(PUBLISHED)}, or a folder holding logs/bestParameters-*.nnw "
+                                   "(with --morphology FILE.yaml to run them on a robot from a spec file); a "
+                                   "searched gait replays with `spinefarm trial --run RUN.h5`")
     if path.exists():
         return path
     if str(where) in PUBLISHED:

@@ -92,6 +92,20 @@ def test_robot_is_detected_from_the_path(tmp_path: Path):
 
 
 @needs_data
+def test_a_spec_file_given_to_replay_says_how_to_run_ntrt_parameters_on_it(tmp_path: Path, capsys):
+    """A spec file has no published parameters: the error says so and names the way that works, which does."""
+    spec = tmp_path / "my-octa.yaml"
+    assert main(["spec", "octahedral-complex", "--name", "my-octa"]) == 0
+    spec.write_text(capsys.readouterr().out)
+    assert main(["replay", str(spec)]) == 2
+    err = capsys.readouterr().err
+    assert "not a file" in err and str(spec) in err and "--morphology FILE.yaml" in err and "trial --run" in err
+    assert main(["replay", str(_folder("octahedral-complex")), "--morphology", str(spec), "--duration", "0.05",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["morphology"] == "my-octa"
+
+
+@needs_data
 @pytest.mark.parametrize(("name", "n_edges", "f", "amp"), [
     ("tetraspine-ntrt", 57, 5.5764, 29.779), ("tetrahedral-complex", 100, 3.78642, 16.3102),
     ("octahedral-complex", 26, 20.8169, 9.458), ("ribbed", 77, 1.98021, 23.9918)])
