@@ -78,8 +78,17 @@ def install(app: FastAPI) -> None:
         app.add_exception_handler(kind, _own_error(status))
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         code = "not_found" if exc.status_code == 404 else f"http_{exc.status_code}"
+        message = str(exc.detail)
+        if exc.status_code == 404 and request.scope.get("route") is None:  # no route matched the path
+            message = (f"no such endpoint; received {request.method} {request.url.path!r}; expected one of "
+                       f"{', '.join(_paths(request.app))} (described at /docs)")
         # headers carry e.g. a 405's Allow
-        return JSONResponse(status_code=exc.status_code, content=detail(code, str(exc.detail)),
+        return JSONResponse(status_code=exc.status_code, content=detail(code, message),
                             headers=getattr(exc, "headers", None))
+
+
+def _paths(app: FastAPI) -> list[str]:
+    """The JSON API's paths, as /docs lists them (FastAPI builds the schema once and keeps it)."""
+    return list(app.openapi()["paths"])

@@ -52,6 +52,17 @@ class Trial(BaseModel):
     duration_s: float | None = None  # simulated duration asked for (null: the run's)
 
 
+
+class TrialPage(BaseModel):
+    """GET /runs/{run_id}/trials: trials in id order, `offset` and `limit` into those of `status` (all if null)."""
+
+    run_id: str
+    status: str | None
+    total: int = Field(description="trials of that status in the run (the page is a slice of them)")
+    offset: int
+    limit: int
+    trials: list[Trial]
+
 class Worker(BaseModel):
     worker_id: str
     alive: bool

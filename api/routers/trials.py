@@ -1,15 +1,18 @@
-"""GET /runs/{run_id}/best, /runs/{run_id}/pareto and /runs/{run_id}/trials/{trial_id}."""
+"""GET /runs/{run_id}/best, /runs/{run_id}/pareto, /runs/{run_id}/trials (a page of them) and
+/runs/{run_id}/trials/{trial_id}."""
 
 from __future__ import annotations
 
 from typing import Annotated, Any
 
+import numpy as np
 from fastapi import APIRouter, Depends, Path, Query, Request
 from fastapi.responses import FileResponse, JSONResponse
 from spinefarm.api.deps import run_storage
 from spinefarm.api.errors import NotFound
-from spinefarm.api.schemas import Trial
+from spinefarm.api.schemas import Trial, TrialPage
 from spinefarm.api.views import trial_view
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.hdf5_reader import Hdf5Reader
 from spinefarm.storage.schema import TrialRecord
 
@@ -26,6 +29,20 @@ def best(storage: Annotated[Hdf5Reader, Depends(run_storage)],
             summary="The Pareto front of speed (max) and COT (min) among complete trials, fastest first")
 def pareto(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> list[dict[str, Any]]:
     return [trial_view(storage, storage.trial(i)) for i in storage.pareto_ids()]
+
+
+@router.get("/trials", response_model=TrialPage, summary="A page of trials in id order, of one status or all")
+def trials_page(storage: Annotated[Hdf5Reader, Depends(run_storage)],
+                offset: Annotated[int, Query(ge=0, le=2**62, description="trials to skip")] = 0,
+                limit: Annotated[int, Query(ge=1, le=1000, description="trials in the page")] = 100,
+                status: Annotated[TrialStatus | None, Query(description="only trials of this status")] = None
+                ) -> dict[str, Any]:
+    ids = np.arange(storage.n_trials())
+    if status is not None:
+        ids = ids[storage.columns()["status"][: ids.size] == status.stored]
+    page = [trial_view(storage, storage.trial(int(i))) for i in ids[offset:offset + limit]]
+    return {"run_id": storage.run_meta().run_id, "status": None if status is None else status.value,
+            "total": int(ids.size), "offset": offset, "limit": limit, "trials": page}
 
 
 @router.get("/trials/{trial_id}", response_model=Trial, summary="One trial")

@@ -75,6 +75,30 @@ def test_one_trial_including_a_waiting_one(client):
     assert t["scores"]["distance_m"] is None  # no result yet: null, not NaN
 
 
+def test_trials_come_in_pages_of_one_status_or_all(client):
+    page = client.get("/runs/run-a/trials", params={"offset": 1, "limit": 2}).json()
+    assert (page["run_id"], page["status"], page["total"], page["offset"], page["limit"]) == ("run-a", None, 6, 1, 2)
+    assert [t["trial_id"] for t in page["trials"]] == [1, 2]
+    assert page["trials"][0] == client.get("/runs/run-a/trials/1").json()  # the same view as one trial's
+    waiting = client.get("/runs/run-a/trials", params={"status": "waiting"}).json()
+    assert (waiting["total"], [t["trial_id"] for t in waiting["trials"]]) == (2, [4, 5])
+    assert client.get("/runs/run-a/trials", params={"status": "complete", "offset": 4}).json()["trials"] == []
+    assert len(client.get("/runs/run-a/trials").json()["trials"]) == 6
+    detail = client.get("/runs/run-a/trials", params={"status": "done"}).json()["detail"]
+    assert detail["message"].startswith("query.status: Input should be 'waiting', 'running', 'complete' or "
+                                        "'failed'; received 'done'")
+
+
+def test_an_unknown_path_names_the_paths_there_are(client):
+    r = client.get("/runs/run-a/trialz")
+    assert r.status_code == 404
+    message = r.json()["detail"]["message"]
+    assert message.startswith("no such endpoint; received GET '/runs/run-a/trialz'; expected one of /runs, ")
+    assert "/runs/{run_id}/trials/{trial_id}" in message and message.endswith("(described at /docs)")
+    # a path that exists but names no run or trial says that instead
+    assert client.get("/runs/run-a/trials/6").json()["detail"]["message"].startswith("no such trial")
+
+
 @pytest.mark.parametrize(("url", "status", "code"), [
     ("/runs/nope", 404, "not_found"),
     ("/runs/run-a/trials/6", 404, "not_found"),
@@ -126,8 +150,8 @@ def test_download_is_a_readable_snapshot(client):
 
 def test_openapi_documents_every_endpoint(client):
     paths = client.get("/openapi.json").json()["paths"]
-    assert {"/runs", "/runs/{run_id}", "/runs/{run_id}/best", "/runs/{run_id}/trials/{trial_id}",
-            "/runs/{run_id}/file"} <= set(paths)
+    assert {"/runs", "/runs/{run_id}", "/runs/{run_id}/best", "/runs/{run_id}/trials",
+            "/runs/{run_id}/trials/{trial_id}", "/runs/{run_id}/file"} <= set(paths)
 
 
 def test_stale_status_file_reads_as_stalled(tmp_path):
