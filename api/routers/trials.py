@@ -40,7 +40,7 @@ def trials_page(storage: Annotated[Hdf5Reader, Depends(run_storage)],
     ids = np.arange(storage.n_trials())
     if status is not None:
         ids = ids[storage.columns()["status"][: ids.size] == status.stored]
-    page = [trial_view(storage, storage.trial(int(i))) for i in ids[offset:offset + limit]]
+    page = [trial_view(storage, rec) for rec in storage.records(ids[offset:offset + limit].tolist())]
     return {"run_id": storage.run_meta().run_id, "status": None if status is None else status.value,
             "total": int(ids.size), "offset": offset, "limit": limit, "trials": page}
 

@@ -212,6 +212,10 @@ def test_lazy_reader_agrees_with_the_writer_on_a_live_file(tmp_path):
         assert r.n_trials() == 12 and r.counts() == s.counts()
         assert r.best_ids(4) == s.best_ids(4)
         assert r.trial(10) == s.trial(10) and r.best(2) == s.best(2)
+        for ids in ([3, 4, 5], [11, 0, 7, 0], []):  # a run of rows, rows apart and repeated, none
+            assert r.records(ids) == [s.trial(i) for i in ids]
+        with pytest.raises(StorageError, match="no such trial"):
+            r.records([2, 12])
         assert r.run_meta() == s.run_meta()
         with pytest.raises(StorageError, match="no such trial"):
             r.trial(12)
