@@ -28,7 +28,7 @@ def best(storage: Annotated[Hdf5Reader, Depends(run_storage)],
 @router.get("/pareto", response_model=list[Trial],
             summary="The Pareto front of speed (max) and COT (min) among complete trials, fastest first")
 def pareto(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> list[dict[str, Any]]:
-    return [trial_view(storage, storage.trial(i)) for i in storage.pareto_ids()]
+    return [trial_view(storage, rec) for rec in storage.records(storage.pareto_ids())]
 
 
 @router.get("/trials", response_model=TrialPage, summary="A page of trials in id order, of one status or all")
