@@ -68,7 +68,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--jobs", type=int, default=2, help="worker processes")
     add_engine_argument(a)
     a.add_argument("--out", type=Path, default=Path("accuracy"), help="output prefix for .json and .png")
-    a.add_argument("--json", action="store_true", help="end with one JSON object")
+    a.add_argument("--json", action="store_true",
+                   help="print one JSON object (the table goes to standard error)")
     a.set_defaults(func=cmd_accuracy)
 
 
@@ -347,8 +348,9 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     slim = {**report, "table": [{k: v for k, v in r.items()} for r in report["table"]]}
     json_path.write_text(json.dumps(_finite(slim), indent=1))
     plot(report, str(png_path))
-    print(format_table(report))
-    print(f"wrote {json_path} and {png_path}")
+    words = sys.stderr if args.json else sys.stdout  # with --json, standard output is the one JSON object
+    print(format_table(report), file=words)
+    print(f"wrote {json_path} and {png_path}", file=words)
     if args.json:
         print(json.dumps(_finite(report)))
     return 0

@@ -19,14 +19,14 @@ def test_accuracy_command_writes_table_json_and_plot(tmp_path):
         [sys.executable, "-m", "spinefarm", "accuracy", "tetraspine-ntrt", "--quick", "--seeds", "1",
          "--duration", "0.2", "--jobs", "2", "--out", str(out), "--json"],
         capture_output=True, text=True, check=True)
-    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    report = json.loads(proc.stdout)  # the one JSON object, nothing else
     assert 0.0 <= report["default_distance_error"] < math.inf
     labels = [r["label"] for r in report["table"]]
     assert "dt 1 ms (default)" in labels and any(lbl.startswith("scene: rough") for lbl in labels)
     assert report["recommended"] in labels and set(report["pareto_front"]) <= set(labels)
     assert json.loads(out.with_suffix(".json").read_text())["morphology"] == "tetraspine-ntrt"
     assert out.with_suffix(".png").stat().st_size > 10_000
-    assert "Pareto front" in proc.stdout
+    assert "Pareto front" in proc.stderr  # the table
     _errors_match_their_own_reference(report)
 
 
@@ -58,7 +58,7 @@ def test_accuracy_command_on_mujoco(tmp_path):
         [sys.executable, "-m", "spinefarm", "accuracy", "tetraspine-ntrt", "--quick", "--seeds", "1",
          "--duration", "0.2", "--jobs", "2", "--out", str(out), "--engine", "mujoco", "--json"],
         capture_output=True, text=True, check=True)
-    report = json.loads(proc.stdout.strip().splitlines()[-1])
+    report = json.loads(proc.stdout)  # the one JSON object, nothing else
     assert report["engine"] == "mujoco"
     labels = [r["label"] for r in report["table"]]
     assert any(lbl.endswith("(default)") for lbl in labels)
