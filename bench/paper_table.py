@@ -132,7 +132,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--episodes", type=int, default=16, help="episodes per spine and engine (default 16)")
     ap.add_argument("--configs", default=",".join(CONFIGS), help=f"of {', '.join(CONFIGS)}")
-    ap.add_argument("--gaits", default=",".join(PAPER), help="shipped gaits (examples/gaits/NAME.json)")
+    ap.add_argument("--gaits", default=",".join(PAPER),
+                    help="shipped gaits (examples/gaits/NAME.json; a subfolder's as efficient/NAME)")
     ap.add_argument("--randomize", default=DEFAULT_RANDOMIZE, help="each episode's draw, as search --randomize")
     ap.add_argument("--seed", type=checks.seed, default=0, help="the episodes' seed (episode k: from (seed, k))")
     ap.add_argument("--duration", type=float, default=None, help="trial length (default: each morphology's)")
@@ -148,7 +149,8 @@ def main() -> None:
         write_docs(result, command(result, args.tolerance), configs, args.tolerance)
         return
     configs, gaits = args.configs.split(","), args.gaits.split(",")
-    bad = [c for c in configs if c not in CONFIGS] + [g for g in gaits if not (GAITS / f"{g}.json").is_file()]
+    bad = [c for c in configs if c not in CONFIGS] + [g for g in gaits if not (GAITS / f"{g}.json").is_file()
+                                                      or Path(g).name not in PAPER]
     if bad or args.episodes < 1:
         sys.exit(f"paper_table: unknown config or gait {bad} or episodes {args.episodes}; expected configs of "
                  f"{list(CONFIGS)}, gaits of examples/gaits/, episodes >= 1")
@@ -165,7 +167,8 @@ def main() -> None:
     for g in gaits:
         per = {c: summarise([r for r in rows if r["gait"] == g and r["config"] == c]) for c in configs}
         head = per[configs[0]]
-        spines[g] = {"paper_speed_cm_s": PAPER[g][0], "paper_cot": PAPER[g][1], "headline_config": configs[0],
+        paper = PAPER[Path(g).name]  # a gait in a subfolder (robust/, efficient/) is still its spine's
+        spines[g] = {"paper_speed_cm_s": paper[0], "paper_cot": paper[1], "headline_config": configs[0],
                      **{k: head.get(k) for k in ("median_speed_cm_s", "iqr_speed_cm_s", "median_cot")},
                      "configs": per}
     result = {"episodes": args.episodes, "randomize": args.randomize, "seed": args.seed, "duration": args.duration,

@@ -39,3 +39,16 @@ def test_every_shipped_gait_lands_in_the_range_docs_state():
         assert s0 <= got["median_speed_cm_s"] <= s1, (gait, got["median_speed_cm_s"], (s0, s1))
         assert c0 <= got["median_cot"] <= c1, (gait, got["median_cot"], (c0, c1))
         assert got["configs"]["bullet"]["failed"] == 0
+
+
+def test_a_gait_of_a_subfolder_is_set_beside_its_spines_paper_figures():
+    """examples/gaits/robust/tetraspine.json is the Tetraspine's: its row carries the Tetraspine's paper figures."""
+    r = subprocess.run([sys.executable, "bench/paper_table.py", "--episodes", "1", "--duration", "0.5", "--configs",
+                        "bullet", "--gaits", "robust/tetraspine", "--workers", "1"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    row = json.loads(r.stdout.strip().splitlines()[-1])["spines"]["robust/tetraspine"]
+    assert (row["paper_speed_cm_s"], row["paper_cot"]) == (9.46, 3.2) and row["configs"]["bullet"]["failed"] == 0
+    bad = subprocess.run([sys.executable, "bench/paper_table.py", "--gaits", "robust/nothing"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode != 0 and "robust/nothing" in bad.stderr
