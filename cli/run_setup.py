@@ -96,9 +96,9 @@ def open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
 
     trusted = bool(args.credentials)
     if args.resume:
-        if args.morphology or args.out or robust_given(args):
+        if args.morphology or args.out or robust_given(args) or args.enqueue:
             raise ConfigError("--resume continues a stored run (robust settings included)",
-                              received="a morphology, --out or --episodes/--randomize/--robust too",
+                              received="a morphology, --out, --enqueue or --episodes/--randomize/--robust too",
                               expected="only --resume RUN.h5")
         core, storage = resume_run(args.resume, trials_budget=args.trials, trusted_peers=trusted)
         note_environment(args.resume, storage.run_meta().environment or None)
@@ -123,7 +123,8 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     given = None if args.rungs is None else parse_rungs(args.rungs)
     # typed mistakes fail before a calibration runs
     robust_settings(args, tuple(given) if given else None)
-    search_settings(args, given, 60.0 if args.lease is None else args.lease, JudgePolicy(), None)
+    units = enqueued(args)
+    search_settings(args, given, 60.0 if args.lease is None else args.lease, JudgePolicy(), None, units)
     choice = choose_engine(args)
     rungs = None if args.rungs is None else parse_rungs(args.rungs)
     if rungs:
@@ -139,10 +140,36 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     lease = args.lease
     if lease is None:
         lease = max(60.0, 20.0 * float(config.trial_config.get("duration_s") or 0.0))
-    return config, search_settings(args, rungs, lease, judge_policy(args, config), choice)
+    return config, search_settings(args, rungs, lease, judge_policy(args, config), choice, units)
 
 
-def search_settings(args: argparse.Namespace, rungs: Any, lease_s: float, judge: Any, choice: Any) -> Any:
+def enqueued(args: argparse.Namespace) -> tuple[tuple[float, ...], ...]:
+    """--enqueue's parameter files as unit-cube vectors of the run's space (names, bounds and controller
+    checked before anything runs)."""
+    if not args.enqueue:
+        return ()
+    from spinefarm.cli.sim_commands import load_params_file
+    from spinefarm.coordinator.problem import is_test_objective, sphere_space
+    from spinefarm.robot.morphology.registry import load_morphology
+
+    if is_test_objective(args.morphology):
+        space, controller = sphere_space(args.morphology), None
+    else:
+        morph = load_morphology(args.morphology)
+        controller = args.controller or morph.controllers[0]
+        space = morph.param_space(controller)
+    units = []
+    for path in args.enqueue:
+        params, given = load_params_file(Path(path))
+        if given is not None and given != controller:
+            raise ConfigError(f"--enqueue {path} is a gait of another controller space", received=given,
+                              expected=f"{controller} (the run's; --controller {given} searches that space)")
+        units.append(tuple(space.to_unit(space.physical(params)).tolist()))
+    return tuple(units)
+
+
+def search_settings(args: argparse.Namespace, rungs: Any, lease_s: float, judge: Any, choice: Any,
+                    enqueued: tuple[tuple[float, ...], ...] = ()) -> Any:
     """The SearchSettings the flags ask for (each value checked as it is built)."""
     from spinefarm.coordinator.samplers import DEFAULT_SAMPLER
     from spinefarm.coordinator.setup import SearchSettings
@@ -152,7 +179,7 @@ def search_settings(args: argparse.Namespace, rungs: Any, lease_s: float, judge:
                           sampler=args.sampler or DEFAULT_SAMPLER, sigma=args.sigma, top_k=args.top_k,
                           startup_trials=args.startup_trials, lease_s=lease_s, judge=judge,
                           audit=AuditPolicy(args.audit, args.audit_tolerance), rungs=rungs or None,
-                          eta=args.eta, engine_choice=choice)
+                          eta=args.eta, engine_choice=choice, enqueued=enqueued)
 
 
 def judge_policy(args: argparse.Namespace, config: Any) -> Any:

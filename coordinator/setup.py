@@ -56,19 +56,29 @@ class SearchSettings:
     rungs: tuple[float, ...] | None = None   # multi-fidelity screening (successive halving over durations)
     eta: int = 3
     engine_choice: EngineChoice | None = None   # how --engine auto chose the tier (None: the engine was given)
+    enqueued: tuple[tuple[float, ...], ...] = ()   # unit-cube parameter sets evaluated first (--enqueue)
 
     def __post_init__(self) -> None:
         check_range("trials", self.trials, 1)
+        if len(self.enqueued) > self.trials:
+            raise ConfigError("more enqueued parameter sets than trials", received=len(self.enqueued),
+                              expected=f"at most --trials ({self.trials})")
         sampler_class(self.sampler)
         self._run_settings(self.judge)  # the ladder, eta and lease checked now, before any calibration
 
     def run_settings(self, config: RunConfig) -> RunSettings:
+        n_params = len(config.space())
+        lengths = sorted({len(u) for u in self.enqueued} - {n_params})
+        if lengths:
+            raise ConfigError("an enqueued parameter set does not fit the run's space", received=f"{lengths[0]} values",
+                              expected=f"{n_params} (the {config.controller} space of {config.morphology})")
         return self._run_settings(judge_rung(config, self.judge))
 
     def _run_settings(self, judge: JudgePolicy) -> RunSettings:
         ladder = (Rung(),) if self.rungs is None else tuple(Rung(duration_s=d) for d in self.rungs)
         return RunSettings(scheduler="plain" if self.rungs is None else "halving", ladder=ladder, eta=self.eta,
-                           judge=judge, audit=self.audit, lease_s=self.lease_s, engine_choice=self.engine_choice)
+                           judge=judge, audit=self.audit, lease_s=self.lease_s, engine_choice=self.engine_choice,
+                           enqueued=self.enqueued)
 
 
 def judge_rung(config: RunConfig, judge: JudgePolicy) -> JudgePolicy:
@@ -114,7 +124,7 @@ def build_core(storage: BaseStorage, clock: Clock = time.monotonic, trusted_peer
     if config.robust:  # K episodes per parameter set, scored by a statistic over them
         objective = robust_objective(objective, config.robust["statistic"])
     study = Study(storage, sampler, space, meta.trials_budget, objective, meta.seed,
-                  trial_scheduler(settings))
+                  trial_scheduler(settings), enqueued=settings.enqueued)
     scheduler = Scheduler(clock, settings.lease_s)
     judged = settings.judge.enabled and (not config.is_test_objective or settings.judge.rung.engine is not None)
     tasks = TaskBook(storage, settings, config.trial_config.get("engine"), meta.seed, judged)

@@ -7,10 +7,10 @@ from collections.abc import Callable
 
 import numpy as np
 from spinefarm.coordinator.fidelity import BaseTrialScheduler, PlainTrialScheduler
-from spinefarm.coordinator.samplers.base import BaseSampler
+from spinefarm.coordinator.samplers.base import BaseSampler, Proposal
 from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.results import TrialResult
-from spinefarm.protocol.settings import PROMOTED, RunSettings
+from spinefarm.protocol.settings import ENQUEUED, PROMOTED, RunSettings
 from spinefarm.storage.base import BaseStorage
 
 
@@ -28,8 +28,10 @@ class Study:
 
     def __init__(self, storage: BaseStorage, sampler: BaseSampler, space: ParamSpace, budget: int,
                  objective: Callable[[TrialResult], float], seed: int,
-                 trial_scheduler: BaseTrialScheduler | None = None) -> None:
-        """budget counts new parameter sets; a scheduler's promotions to longer rungs come on top."""
+                 trial_scheduler: BaseTrialScheduler | None = None,
+                 enqueued: tuple[tuple[float, ...], ...] = ()) -> None:
+        """budget counts new parameter sets (the enqueued ones among them); a scheduler's promotions to longer
+        rungs come on top. enqueued: unit-cube parameter sets evaluated first, in order, before the sampler's."""
         self.trial_scheduler = trial_scheduler or PlainTrialScheduler(RunSettings())
         self.storage = storage
         self.sampler = sampler
@@ -37,6 +39,7 @@ class Study:
         self.budget = budget
         self.objective = objective
         self.seed = seed
+        self.enqueued = enqueued
         self._n_finished = sum(v for k, v in storage.counts().items() if k != "waiting")
 
     @property
@@ -80,7 +83,9 @@ class Study:
         if sampling_done:
             return None
         view = ts.sampler_view(self.storage)  # with rungs: proposal k is the k-th parameter set
-        p = self.sampler.propose(view.n_trials(), view)
+        k = view.n_trials()
+        p = Proposal(np.asarray(self.enqueued[k]), ENQUEUED, -1) if k < len(self.enqueued) \
+            else self.sampler.propose(k, view)
         self.storage.add_trial(tid, p.params_unit, self.space.from_unit(p.params_unit), p.phase,
                                ts.parent_id(view, p.parent), self.trial_seed(tid), 0, ts.duration_s(0))
         return tid

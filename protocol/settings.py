@@ -114,7 +114,8 @@ class RunSettings:
     """scheduler: plain (every parameter set at the last rung) or halving (successive halving over the
     ladder, keeping 1/eta of each rung); ladder: the screening rungs, the last being the full trial;
     judge, audit: see their classes; lease_s: how long a worker may hold a task; engine_choice: how
-    `--engine auto` chose the tier (None: the engine was given)."""
+    `--engine auto` chose the tier (None: the engine was given); enqueued: parameter sets (unit cube) given
+    by the user, evaluated first and in order before the sampler proposes (`--enqueue`)."""
 
     scheduler: str = "plain"
     ladder: tuple[Rung, ...] = (Rung(),)
@@ -123,6 +124,7 @@ class RunSettings:
     audit: AuditPolicy = field(default_factory=AuditPolicy)
     lease_s: float = 60.0
     engine_choice: EngineChoice | None = None
+    enqueued: tuple[tuple[float, ...], ...] = ()
 
     SCHEMA: ClassVar[dict[str, str]] = {
         "scheduler": f"one of {', '.join(SCHEDULERS)}",
@@ -135,6 +137,7 @@ class RunSettings:
         "engine_choice": "null, or how --engine auto chose the tier: {engine, mode, cached, rungs_added, spearman, "
                          "top_overlap, top_k, median_distance_ratio, n_moving, n_random, n_bests, spec_hash, "
                          "reason, tiers}",
+        "enqueued": "list of parameter sets, each a list of numbers in [0, 1] (the unit cube), all one length",
     }
 
     def __post_init__(self) -> None:
@@ -156,6 +159,7 @@ class RunSettings:
                 object.__setattr__(self, name, cls.from_dict(getattr(self, name)))
         if self.engine_choice is not None and not isinstance(self.engine_choice, EngineChoice):
             object.__setattr__(self, "engine_choice", EngineChoice.from_dict(self.engine_choice))
+        object.__setattr__(self, "enqueued", _unit_sets(self.enqueued))
 
     @property
     def top(self) -> int:
@@ -181,7 +185,8 @@ class RunSettings:
     def to_dict(self) -> dict[str, Any]:
         return {"scheduler": self.scheduler, "ladder": [r.to_dict() for r in self.ladder], "eta": self.eta,
                 "judge": self.judge.to_dict(), "audit": self.audit.to_dict(), "lease_s": self.lease_s,
-                "engine_choice": None if self.engine_choice is None else self.engine_choice.to_dict()}
+                "engine_choice": None if self.engine_choice is None else self.engine_choice.to_dict(),
+                "enqueued": [list(u) for u in self.enqueued]}
 
     @classmethod
     def from_dict(cls, d: Any) -> RunSettings:
@@ -192,6 +197,24 @@ class RunSettings:
                                   expected=cls.SCHEMA["ladder"])
             kw["ladder"] = tuple(Rung.from_dict(r) for r in kw["ladder"])
         return cls(**kw)
+
+
+def _unit_sets(value: Any) -> tuple[tuple[float, ...], ...]:
+    """Enqueued parameter sets as tuples of floats, each in the unit cube, all one length."""
+    expected = RunSettings.SCHEMA["enqueued"]
+    if not isinstance(value, list | tuple) or not all(isinstance(u, list | tuple) for u in value):
+        raise ConfigError("run settings field 'enqueued' is not a list of lists", received=str(value)[:80],
+                          expected=expected)
+    sets = []
+    for u in value:
+        if not all(isinstance(x, int | float) and not isinstance(x, bool) and 0.0 <= x <= 1.0 for x in u):
+            raise ConfigError("an enqueued parameter set is not in the unit cube", received=str(u)[:80],
+                              expected=expected)
+        sets.append(tuple(float(x) for x in u))
+    if len({len(u) for u in sets}) > 1:
+        raise ConfigError("enqueued parameter sets differ in length", received=sorted({len(u) for u in sets}),
+                          expected=expected)
+    return tuple(sets)
 
 
 def _known(d: Any, cls: type, what: str) -> dict[str, Any]:
@@ -209,6 +232,7 @@ def _known(d: Any, cls: type, what: str) -> dict[str, Any]:
 
 
 PROMOTED = "promoted"   # the phase of a row that re-runs its parent at the next rung
+ENQUEUED = "enqueued"   # the phase of a parameter set the user gave (--enqueue)
 TASKS = ("trial", "judge", "audit")
 
 
