@@ -149,15 +149,9 @@ def enqueued(args: argparse.Namespace) -> tuple[tuple[float, ...], ...]:
     if not args.enqueue:
         return ()
     from spinefarm.cli.sim_commands import load_params_file
-    from spinefarm.coordinator.problem import is_test_objective, sphere_space
-    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.coordinator.problem import search_space
 
-    if is_test_objective(args.morphology):
-        space, controller = sphere_space(args.morphology), None
-    else:
-        morph = load_morphology(args.morphology)
-        controller = args.controller or morph.controllers[0]
-        space = morph.param_space(controller)
+    space, controller = search_space(args.morphology, args.controller)
     units = []
     for path in args.enqueue:
         params, given = load_params_file(Path(path))

@@ -36,6 +36,18 @@ def sphere_space(morphology: str) -> ParamSpace:
     return ParamSpace(morphology, tuple(ParamSpec(f"x{i}", -1.0, 1.0, "1") for i in range(n)))
 
 
+def search_space(morphology: str, controller: str | None = None) -> tuple[ParamSpace, str | None]:
+    """The parameter space a run of `morphology` (a built-in, a spec file or sphere[:N]) searches, and the name
+    of its controller space (None for the test objective)."""
+    if is_test_objective(morphology):
+        return sphere_space(morphology), None
+    from spinefarm.robot.morphology.registry import load_morphology
+
+    morph = load_morphology(morphology)
+    name = controller or morph.controllers[0]
+    return morph.param_space(name), name
+
+
 def build_run_config(run_id: str, morphology: str, *, objective: str = "distance", seed: int = 0,
                      controller: str | None = None, duration_s: float | None = None,
                      trial_overrides: dict[str, Any] | None = None, robust: dict[str, Any] | None = None

@@ -71,7 +71,7 @@ class SearchSettings:
         lengths = sorted({len(u) for u in self.enqueued} - {n_params})
         if lengths:
             raise ConfigError("an enqueued parameter set does not fit the run's space", received=f"{lengths[0]} values",
-                              expected=f"{n_params} (the {config.controller} space of {config.morphology})")
+                              expected=f"{n_params} values (the space of {config.morphology})")
         return self._run_settings(judge_rung(config, self.judge))
 
     def _run_settings(self, judge: JudgePolicy) -> RunSettings:

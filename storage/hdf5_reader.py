@@ -152,11 +152,7 @@ class Hdf5Reader(BaseStorage):
         return self._n
 
     def trial(self, trial_id: int) -> TrialRecord:
-        if not 0 <= trial_id < self._n:
-            raise StorageError("no such trial", received=trial_id, expected=f"0 <= id < {self._n}")
-        group = self._file["trials"]
-        row = {c.name: group[c.name][trial_id : trial_id + 1] for c in COLUMNS}
-        return TrialRecord.from_columns(row, 0)
+        return self.records([trial_id])[0]
 
     def best(self, k: int) -> list[TrialRecord]:
         return self.records(self.best_ids(k))
@@ -168,7 +164,8 @@ class Hdf5Reader(BaseStorage):
             return []
         rows = sorted({int(i) for i in ids})
         if rows[0] < 0 or rows[-1] >= self._n:
-            raise StorageError("no such trial", received=[i for i in ids if not 0 <= i < self._n][:5],
+            bad = [i for i in ids if not 0 <= i < self._n]
+            raise StorageError("no such trial", received=bad[0] if len(bad) == 1 else bad[:5],
                                expected=f"0 <= id < {self._n}")
         group = self._file["trials"]
         if rows[-1] - rows[0] + 1 == len(rows):  # a run of ids: one slice

@@ -37,9 +37,8 @@ def trials_page(storage: Annotated[Hdf5Reader, Depends(run_storage)],
                 limit: Annotated[int, Query(ge=1, le=1000, description="trials in the page")] = 100,
                 status: Annotated[TrialStatus | None, Query(description="only trials of this status")] = None
                 ) -> dict[str, Any]:
-    ids = np.arange(storage.n_trials())
-    if status is not None:
-        ids = ids[storage.columns()["status"][: ids.size] == status.stored]
+    ids = np.arange(storage.n_trials()) if status is None else np.flatnonzero(
+        storage.columns()["status"] == status.stored)
     page = [trial_view(storage, rec) for rec in storage.records(ids[offset:offset + limit].tolist())]
     return {"run_id": storage.run_meta().run_id, "status": None if status is None else status.value,
             "total": int(ids.size), "offset": offset, "limit": limit, "trials": page}
