@@ -48,7 +48,8 @@ def _run_args(p: argparse.ArgumentParser, local: bool) -> None:
     p.add_argument("--run-id", help="run id (default <morphology>-<time>-<random>)")
     p.add_argument("--seed", type=checks.seed, default=0, help="run seed: fixes every sampled vector by trial number")
     p.add_argument("--objective", default="distance",
-                   help="distance (default), speed, cot_distance or pareto (front of speed and COT)")
+                   help="distance (default), speed, cot_distance, pareto (front of speed and COT) or cot:S "
+                        "(the least COT among gaits of at least S cm/s, e.g. cot:6.13)")
     p.add_argument("--sampler", default=None,
                    help="cmaes (default: CMA-ES with IPOP restarts), paper (Monte Carlo then hill climbing, "
                         "the paper's), tpe (Optuna TPE) or random; stored with the run")

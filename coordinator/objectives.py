@@ -39,13 +39,41 @@ OBJECTIVES: dict[str, Callable[[TrialResult], float]] = {
     "cot_distance": _cot_penalised,
     "pareto": _pareto_scalar,
 }
+# `cot:S`: the least COT among gaits of at least S cm/s (a speed to keep, e.g. a published gait's)
+COT_AT_SPEED = "cot:"
+OBJECTIVE_NAMES = (*OBJECTIVES, f"{COT_AT_SPEED}MIN_SPEED_CM_S")
+
+
+def cot_at_speed(min_speed_cm_s: float) -> Callable[[TrialResult], float]:
+    """Any gait of at least min_speed_cm_s outranks every slower one: the fast ones score 1 + 1/(1 + COT)
+    in (1, 2], the slower ones speed / min_speed_cm_s in [0, 1), so a search first reaches the speed and
+    then lowers the COT while it keeps it."""
+
+    def score(r: TrialResult) -> float:
+        if not math.isfinite(r.speed_cm_s) or r.speed_cm_s <= 0.0:
+            return 0.0
+        if r.speed_cm_s < min_speed_cm_s:
+            return r.speed_cm_s / min_speed_cm_s
+        return 1.0 + 1.0 / (1.0 + max(r.cot, 0.0)) if math.isfinite(r.cot) else 1.0
+
+    return score
 
 
 def objective_fn(name: str) -> Callable[[TrialResult], float]:
+    if isinstance(name, str) and name.startswith(COT_AT_SPEED):
+        text = name[len(COT_AT_SPEED):]
+        try:
+            min_speed_cm_s = float(text)
+        except ValueError:
+            min_speed_cm_s = math.nan
+        if not (math.isfinite(min_speed_cm_s) and min_speed_cm_s > 0.0):
+            raise ConfigError("the cot objective's speed to keep is not a positive number of cm/s",
+                              received=name, expected=f"{COT_AT_SPEED}S with S > 0 cm/s, e.g. cot:6.13")
+        return cot_at_speed(min_speed_cm_s)
     try:
         return OBJECTIVES[name]
-    except KeyError:
-        raise ConfigError("unknown objective", received=name, expected=sorted(OBJECTIVES)) from None
+    except (KeyError, TypeError):
+        raise ConfigError("unknown objective", received=name, expected=list(OBJECTIVE_NAMES)) from None
 
 
 def robust_objective(fn: Callable[[TrialResult], float], name: str) -> Callable[[TrialResult], float]:

@@ -27,6 +27,7 @@ def test_help_lists_the_service_commands():
     (("search", "no-such-robot", "--trials", "5", "--workers", "0", "--api-port", "-1"), "no-such-robot"),
     (("search", "sphere:3", "--trials", "0", "--workers", "0", "--api-port", "-1"), "trials out of range"),
     (("search", "sphere:3", "--objective", "fame", "--workers", "0", "--api-port", "-1"), "unknown objective"),
+    (("search", "sphere:3", "--objective", "cot:fast", "--workers", "0", "--api-port", "-1"), "'cot:fast'"),
     (("search", "sphere:3", "--sampler", "annealing", "--workers", "0", "--api-port", "-1"), "unknown sampler"),
     (("search", "--resume", "missing.h5", "--workers", "0"), "cannot resume"),
     (("search", "--workers", "0"), "no morphology given"),

@@ -126,3 +126,29 @@ def test_episodes_per_rung_must_match_the_rungs(capsys, tmp_path):
                      "--out", str(tmp_path / "r.h5")])
         lines = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
         assert code == 2 and len(lines) == 1 and message in lines[0], lines
+
+
+def _result(speed_cm_s: float, cot: float) -> TrialResult:
+    return TrialResult(status=TrialStatus.COMPLETE, reason="", distance_m=speed_cm_s / 10, ntrt_distance_cm=0.0,
+                       speed_cm_s=speed_cm_s, work_j=1.0, cot=cot, sim_time_s=10.0, wall_time_s=1.0, mass_kg=2.0,
+                       seed=7)
+
+
+def test_the_cot_objective_ranks_every_gait_of_the_speed_above_every_slower_one_then_by_cot():
+    score = objective_fn("cot:6.13")
+    kept = [_result(6.13, 2.5), _result(6.5, 2.1), _result(20.0, 9.0)]
+    slower = [_result(6.12, 0.5), _result(3.0, 0.1), _result(0.0, math.inf), _result(math.nan, math.nan)]
+    assert min(score(r) for r in kept) > max(score(r) for r in slower)
+    assert score(kept[1]) > score(kept[0]) > score(kept[2])  # among the fast ones: the cheaper, the better
+    assert score(slower[0]) > score(slower[1]) > score(slower[2]) == score(slower[3]) == 0.0  # the faster, better
+    # per episode, as a robust run scores it
+    eps = tuple(_episode(k, d) for k, d in enumerate([0.4, 0.1, 0.3, 0.2]))
+    r = TrialResult(TrialStatus.COMPLETE, "", 0.25, 25.0, 2.5, 5.0, 1.0, 10.0, 4.0, 2.0, 7, episodes=eps)
+    assert robust_objective(objective_fn("cot:3"), "min")(r) == pytest.approx(1.0 / 3)  # speeds 4, 1, 3, 2
+
+
+@pytest.mark.parametrize("name", ["cot:", "cot:fast", "cot:0", "cot:-1", "cot:nan", "cot:inf", "COT:5"])
+def test_a_bad_cot_objective_names_what_was_given_and_what_is_expected(name):
+    with pytest.raises(ConfigError) as err:
+        objective_fn(name)
+    assert name in str(err.value) and ("cot:6.13" in str(err.value) or "cot:MIN_SPEED_CM_S" in str(err.value))
