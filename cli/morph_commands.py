@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -35,6 +36,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also run N replays with the start pose jittered by 1e-6 cm and report "
                         "their spread")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--gait", metavar="OUT.json", default=None,
+                   help="also write the parameter set as a `trial --params` file (NTRT's controller space, named "
+                        "physical values): to run it under this model's defaults or start a search from it "
+                        "(--enqueue)")
     add_engine_argument(p)
     p.set_defaults(func=cmd_replay)
 
@@ -96,13 +101,19 @@ def replay_summary(report: Any) -> dict[str, Any]:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from spinefarm.worker.replay import JITTER_CM, parameter_folder, replay, replay_spread
+    from spinefarm.worker.replay import JITTER_CM, gait_file, parameter_folder, replay, replay_spread
 
     if not 0 <= args.seeds <= 100:
         raise ConfigError("--seeds out of range", received=args.seeds, expected="0 to 100 jittered replays")
+    if args.gait is not None:
+        checks.output_path("--gait", args.gait, (".json",))
     engine = args.engine or DEFAULT_ENGINE
     args.path = parameter_folder(args.path)
     report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix, engine=engine)
+    if args.gait is not None:
+        Path(args.gait).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.gait).write_text(json.dumps(gait_file(report), indent=1) + "\n")
+        print(f"wrote the parameter set to {args.gait} (`spinefarm trial --params {args.gait}`)", file=sys.stderr)
     s = replay_summary(report)
     if args.seeds:
         spread = replay_spread(args.path, args.morphology, args.seeds, duration_s=args.duration,

@@ -179,6 +179,20 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
                         REFERENCES.get(morph.name))
 
 
+def gait_file(report: ReplayReport) -> dict:
+    """The replayed parameter set as a `spinefarm trial --params` file (named physical values of NTRT's
+    controller space): to run it under this model's own defaults, or to start a search from it (--enqueue)."""
+    from spinefarm.robot.morphology.registry import load_morphology
+
+    space = load_morphology(report.morphology).controller_space("ntrt").param_space
+    r = report.result
+    return {"morphology": report.morphology, "controller": "ntrt",
+            "params": space.to_named(space.from_unit(report.unit_params)),
+            "source": {"ntrt_parameters": str(report.parameters.folder), "replay": "NTRT's 2014 motor, dt 1 ms",
+                       "ntrt_distance_cm": r.ntrt_distance_cm, "speed_cm_s": r.speed_cm_s, "cot": r.cot,
+                       "sim_time_s": r.sim_time_s}}
+
+
 JITTER_CM = 1e-6  # spec 0a.5: perturbations this small already spread the tetrahedral complex's distance
 
 

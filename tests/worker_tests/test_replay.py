@@ -183,3 +183,22 @@ def test_replay_spread_over_jittered_start_poses(capsys):
     assert spread["n"] == 2 and len(spread["ntrt_distance_cm"]) == 2 and spread["jitter_cm"] == 1e-6
     assert spread["min_cm"] <= spread["median_cm"] <= spread["max_cm"]
     assert main(["replay", str(_folder("tetrahedral-complex")), "--seeds", "-1"]) == 2
+
+
+def test_replay_writes_the_set_as_a_gait_file_that_trial_runs_alike(tmp_path: Path, capsys):
+    gait = tmp_path / "gaits" / "ntrt-octahedral.json"
+    assert main(["replay", "octahedral-complex", "--duration", "0.3", "--json", "--gait", str(gait)]) == 0
+    replayed = json.loads(capsys.readouterr().out)
+    g = json.loads(gait.read_text())
+    assert g["morphology"] == "octahedral-complex" and g["controller"] == "ntrt"
+    space = load_morphology("octahedral-complex").controller_space("ntrt").param_space
+    assert list(g["params"]) == space.names
+    published = unit_params(load_morphology("octahedral-complex"), read_parameter_set(_folder("octahedral-complex")))
+    assert np.allclose(space.to_unit(space.from_named(g["params"])), published, rtol=0, atol=1e-12)
+    # under the replay's settings the file runs the replay again
+    assert main(["trial", "octahedral-complex", "--params", str(gait), "--duration", "0.3", "--dt", "0.001",
+                 "--motor-model", "ntrt2014", "--engine-option", "friction_anchor=false", "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["ntrt_distance_cm"] == pytest.approx(replayed["ntrt_distance_cm"], rel=1e-9)
+    assert main(["replay", "octahedral-complex", "--gait", str(tmp_path / "gait.txt")]) == 2
+    assert "--gait has the wrong extension" in capsys.readouterr().err
