@@ -8,6 +8,8 @@ import re
 import subprocess
 import sys
 
+import pytest
+
 from tests.coordinator_tests.procs import ROOT
 
 BLOCK = re.compile(r"<!-- paper_table bullet 4 s: begin -->(.*?)<!-- paper_table bullet 4 s: end -->", re.S)
@@ -52,3 +54,18 @@ def test_a_gait_of_a_subfolder_is_set_beside_its_spines_paper_figures():
     bad = subprocess.run([sys.executable, "bench/paper_table.py", "--gaits", "robust/nothing"], cwd=ROOT,
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode != 0 and "robust/nothing" in bad.stderr
+
+
+@pytest.mark.slow
+def test_the_efficient_gaits_beat_the_papers_speed_and_cot_at_the_median():
+    """docs/results.md, "The paper's speed at less cost": each examples/gaits/efficient gait over 16 perturbed
+    episodes at its full trial length is faster than the paper's gait and costs less, at the median."""
+    gaits = sorted(f"efficient/{p.stem}" for p in (ROOT / "examples" / "gaits" / "efficient").glob("*.json"))
+    assert gaits == ["efficient/octahedral-complex", "efficient/tetrahedral-complex"]
+    r = subprocess.run([sys.executable, "bench/paper_table.py", "--episodes", "16", "--configs", "bullet", "--gaits",
+                        ",".join(gaits)], cwd=ROOT, capture_output=True, text=True, timeout=1800)
+    assert r.returncode == 0, r.stderr[-2000:]
+    for gait, row in json.loads(r.stdout.strip().splitlines()[-1])["spines"].items():
+        assert row["median_speed_cm_s"] > row["paper_speed_cm_s"], (gait, row)
+        assert row["median_cot"] < row["paper_cot"], (gait, row)
+        assert row["configs"]["bullet"]["failed"] == 0
