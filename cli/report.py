@@ -25,6 +25,8 @@ def progress(core: Any) -> tuple[int, int, str, str]:
     width = 24
     fill = int(width * done / max(budget, 1))
     best_s = f"{best[0].distance_m:.3f} m" if best else "-"
+    if best and core.study.storage.run_meta().objective not in ("distance", "speed"):
+        best_s += f" ({_g(best[0].speed_cm_s, 3)} cm/s, COT {_g(best[0].cot, 3)})"  # what a COT objective trades
     eta = "-" if st["eta_s"] is None else f"{st['eta_s']:.0f}s"
     text = f"{st['trials_failed']} failed, {st['rate_trials_s']:.1f}/s, best {best_s}"
     return done, budget, text, (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{budget} trials ({st['trials_failed']} "

@@ -67,3 +67,12 @@ def test_a_short_search_then_export(tmp_path):
     g, top = json.loads(gait.read_text()), Hdf5Storage.open_read(out).best(1)[0]
     assert g["source"]["trial_id"] == top.trial_id and list(g["params"].values()) == list(top.params)
     assert list(g["params"]) == ["x0", "x1", "x2"]
+
+
+def test_a_cot_objective_search_reports_the_speed_and_cost_it_trades(tmp_path):
+    out = tmp_path / "cot.h5"
+    r = run("search", "sphere:3", "--objective", "cot:5", "--trials", "30", "--workers", "1", "--out", str(out),
+            "--api-port", "-1")
+    assert r.returncode == 0, r.stderr
+    assert "30/30 trials" in r.stderr and " cm/s, COT " in r.stderr  # the progress line names both
+    assert "cot:5 " in r.stdout  # the report names the objective beside the score's parts
