@@ -81,6 +81,7 @@ class ReplayReport:
     duration_s: float
     result: TrialResult
     reference: NtrtReference | None
+    params_named: dict[str, float]  # the set as NTRT's controller space's physical values, by name
 
     @property
     def diverged(self) -> bool:
@@ -175,19 +176,16 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
                       engine=engine, engine_options={"friction_anchor": False} if engine == "bullet" else {},
                       pose_jitter_cm=pose_jitter_cm)
     result = simulate(morph, u, cfg, seed).result
+    space = morph.controller_space("ntrt").param_space
     return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result,
-                        REFERENCES.get(morph.name))
+                        REFERENCES.get(morph.name), space.to_named(space.from_unit(u)))
 
 
 def gait_file(report: ReplayReport) -> dict:
     """The replayed parameter set as a `spinefarm trial --params` file (named physical values of NTRT's
     controller space): to run it under this model's own defaults, or to start a search from it (--enqueue)."""
-    from spinefarm.robot.morphology.registry import load_morphology
-
-    space = load_morphology(report.morphology).controller_space("ntrt").param_space
     r = report.result
-    return {"morphology": report.morphology, "controller": "ntrt",
-            "params": space.to_named(space.from_unit(report.unit_params)),
+    return {"morphology": report.morphology, "controller": "ntrt", "params": dict(report.params_named),
             "source": {"ntrt_parameters": str(report.parameters.folder), "replay": "NTRT's 2014 motor, dt 1 ms",
                        "ntrt_distance_cm": r.ntrt_distance_cm, "speed_cm_s": r.speed_cm_s, "cot": r.cot,
                        "sim_time_s": r.sim_time_s}}

@@ -73,8 +73,12 @@ def test_search_then_rerun_draw_and_export_a_stored_trial(spec, tmp_path, capsys
         assert len(list(csv.DictReader(fh))) == 4  # every trial written
 
 
-def test_ntrt_parameters_replay_on_it(spec, capsys):
+def test_ntrt_parameters_replay_on_it_and_run_from_their_gait_file(spec, tmp_path, capsys):
+    gait = tmp_path / "ntrt.json"
     assert main(["replay", str(PUBLISHED["tetraspine-ntrt"]), "--morphology", str(spec), "--duration", "0.1",
-                 "--json"]) == 0
+                 "--json", "--gait", str(gait)]) == 0
     out = _json(capsys)
     assert out["morphology"] == ROBOT and out["sim_time_s"] == pytest.approx(0.1)
+    assert json.loads(gait.read_text())["morphology"] == ROBOT
+    assert main(["trial", str(spec), "--params", str(gait), "--duration", "0.1", "--json"]) == 0
+    assert _json(capsys)["status"] == "complete"
