@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from spinefarm.cli import checks
 from spinefarm.protocol.errors import ConfigError
@@ -49,12 +48,9 @@ def cmd_export(args: argparse.Namespace) -> int:
                 write_csv(storage, fh, ids)
             print(f"wrote {len(ids)} Pareto-front trials to {args.pareto}", file=sys.stderr)
     if args.gait is not None:
-        import json
+        from spinefarm.storage.export import gait_params, write_gait
 
-        from spinefarm.storage.export import gait_params
-
-        Path(args.gait).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.gait).write_text(json.dumps(gait_params(storage, args.trial), indent=1) + "\n")
+        write_gait(args.gait, gait_params(storage, args.trial))
         which = "the best trial" if args.trial is None else f"trial {args.trial}"
         print(f"wrote the parameters of {which} to {args.gait}", file=sys.stderr)
     return 0

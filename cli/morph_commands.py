@@ -111,8 +111,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     args.path = parameter_folder(args.path)
     report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix, engine=engine)
     if args.gait is not None:
-        Path(args.gait).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.gait).write_text(json.dumps(gait_file(report), indent=1) + "\n")
+        from spinefarm.storage.export import write_gait
+
+        write_gait(args.gait, gait_file(report))
         print(f"wrote the parameter set to {args.gait} (`spinefarm trial --params {args.gait}`)", file=sys.stderr)
     s = replay_summary(report)
     if args.seeds:

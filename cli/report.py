@@ -14,6 +14,8 @@ import threading
 from pathlib import Path
 from typing import Any
 
+DISTANCE_OBJECTIVES = ("distance", "speed")  # an objective that is a score part already, shown as that part
+
 
 def progress(core: Any) -> tuple[int, int, str, str]:
     """(trials done, budget, what follows a progress bar, the whole line for a log)."""
@@ -25,7 +27,7 @@ def progress(core: Any) -> tuple[int, int, str, str]:
     width = 24
     fill = int(width * done / max(budget, 1))
     best_s = f"{best[0].distance_m:.3f} m" if best else "-"
-    if best and core.study.storage.run_meta().objective not in ("distance", "speed"):
+    if best and core.study.storage.run_meta().objective not in DISTANCE_OBJECTIVES:
         best_s += f" ({_g(best[0].speed_cm_s, 3)} cm/s, COT {_g(best[0].cot, 3)})"  # what a COT objective trades
     eta = "-" if st["eta_s"] is None else f"{st['eta_s']:.0f}s"
     text = f"{st['trials_failed']} failed, {st['rate_trials_s']:.1f}/s, best {best_s}"
@@ -85,7 +87,7 @@ def _objective_text(meta: Any, b: Any) -> str:
         spec = RobustSpec.from_dict(meta.run["robust"])
         return (f"objective {_g(b.objective)} ({spec.statistic} of {meta.objective} over "
                 f"{spec.episodes_for(b.duration_s)} episodes) · medians: ")
-    return "" if meta.objective in ("distance", "speed") else f"{meta.objective} {_g(b.objective)} · "
+    return "" if meta.objective in DISTANCE_OBJECTIVES else f"{meta.objective} {_g(b.objective)} · "
 
 
 def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose: bool = False,

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import csv
+import json
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, TextIO
 
 from spinefarm.storage.base import BaseStorage
@@ -59,3 +61,9 @@ def gait_params(storage: BaseStorage, trial_id: int | None = None) -> dict[str, 
                        "sampler": meta.sampler.get("name", meta.sampler.get("kind")),
                        "speed_cm_s": b.speed_cm_s, "cot": b.cot, "distance_m": b.distance_m,
                        "sim_time_s": b.sim_time_s, "verification": b.verification or "not_checked"}}
+
+
+def write_gait(path: str | Path, gait: dict[str, Any]) -> None:
+    """A gait (gait_params, or any `spinefarm trial --params` dict) as its JSON file, folders made."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(json.dumps(gait, indent=1) + "\n")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 from spinefarm.protocol.errors import ConfigError, MorphologySpecError
+from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.results import TrialResult
 from spinefarm.robot.engines import DEFAULT_ENGINE
 from spinefarm.robot.morphology.model import Morphology
@@ -81,7 +82,7 @@ class ReplayReport:
     duration_s: float
     result: TrialResult
     reference: NtrtReference | None
-    params_named: dict[str, float]  # the set as NTRT's controller space's physical values, by name
+    param_space: ParamSpace  # NTRT's controller space on this robot, which unit_params lie in
 
     @property
     def diverged(self) -> bool:
@@ -150,13 +151,18 @@ def detect_morphology(folder: str | Path) -> str:
                       expected=f"a path through one of {sorted(ROBOT_FOLDERS)}, or --morphology NAME")
 
 
-def unit_params(morph: Morphology, params: NtrtParameterSet) -> np.ndarray:
-    """Unit-cube vector of the NTRT space: edge file i fills coupling slot N_e - 1 - i."""
+def ntrt_space(morph: Morphology) -> NtrtTableSpace:
+    """The robot's NTRT controller space, the one published sets are written in."""
     space = morph.controller_space("ntrt")
     if not isinstance(space, NtrtTableSpace):
         raise MorphologySpecError("replay needs NTRT's controller space", received=type(space).__name__,
                                   expected="NtrtTableSpace")
-    return space.unit_from_ntrt_files(params.node, list(params.edges))
+    return space
+
+
+def unit_params(morph: Morphology, params: NtrtParameterSet, space: NtrtTableSpace | None = None) -> np.ndarray:
+    """Unit-cube vector of the NTRT space: edge file i fills coupling slot N_e - 1 - i."""
+    return (space or ntrt_space(morph)).unit_from_ntrt_files(params.node, list(params.edges))
 
 
 def replay(folder: str | Path, morphology: str | Morphology | None = None, *, duration_s: float | None = None,
@@ -169,23 +175,24 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
 
     morph = load_morphology(morphology or detect_morphology(folder))
     params = read_parameter_set(folder, suffix)
-    u = unit_params(morph, params)
+    space = ntrt_space(morph)
+    u = unit_params(morph, params, space)
     duration = duration_s or morph.duration_s
     # NTRT's Bullet 2.81 had no friction anchors; its motor caps are per 1 ms step (spec 0a.3)
     cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model="ntrt2014", controller="ntrt",
                       engine=engine, engine_options={"friction_anchor": False} if engine == "bullet" else {},
                       pose_jitter_cm=pose_jitter_cm)
     result = simulate(morph, u, cfg, seed).result
-    space = morph.controller_space("ntrt").param_space
     return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result,
-                        REFERENCES.get(morph.name), space.to_named(space.from_unit(u)))
+                        REFERENCES.get(morph.name), space.param_space)
 
 
 def gait_file(report: ReplayReport) -> dict:
     """The replayed parameter set as a `spinefarm trial --params` file (named physical values of NTRT's
     controller space): to run it under this model's own defaults, or to start a search from it (--enqueue)."""
-    r = report.result
-    return {"morphology": report.morphology, "controller": "ntrt", "params": dict(report.params_named),
+    r, space = report.result, report.param_space
+    return {"morphology": report.morphology, "controller": "ntrt",
+            "params": space.to_named(space.from_unit(report.unit_params)),
             "source": {"ntrt_parameters": str(report.parameters.folder), "replay": "NTRT's 2014 motor, dt 1 ms",
                        "ntrt_distance_cm": r.ntrt_distance_cm, "speed_cm_s": r.speed_cm_s, "cot": r.cot,
                        "sim_time_s": r.sim_time_s}}
