@@ -85,6 +85,22 @@ def test_samples_are_clipped_to_the_cube(storage):
     assert xs.min() == 0.0 and xs.max() == 1.0
 
 
+def test_without_startup_trials_a_climb_steps_around_its_running_start(storage):
+    """--enqueue a start and --startup-trials 0: while the start runs, the next trials step around it (a
+    uniform sample would be a Monte Carlo trial the climb did not ask for)."""
+    from spinefarm.protocol.states import TrialStatus
+
+    s = GaussianHillClimbSampler(3, seed=6, sigma=0.01, startup_trials=0)
+    assert s.propose(0, storage).phase == "monte_carlo"  # nothing stored: nothing to step around
+    start = np.array([0.2, 0.4, 0.6])
+    storage.add_trial(0, start, start, "enqueued", -1, 0)
+    p = record(storage, s)
+    assert (p.phase, p.parent) == ("gaussian", 0)
+    assert np.abs(p.params_unit - start).max() < 0.1
+    storage.finish_trial(0, result(0, 0.0, status=TrialStatus.FAILED, reason="diverged"), 0.0)
+    assert record(storage, s).parent == 1  # a failed start is no centre: the next live trial is
+
+
 def test_failed_trials_are_never_centres(storage):
     from spinefarm.protocol.states import TrialStatus
 
