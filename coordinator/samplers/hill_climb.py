@@ -42,7 +42,6 @@ class GaussianHillClimbSampler(BaseSampler):
         step = self.sigma * rng.standard_normal(self.n_params)
         return Proposal(np.clip(centre + step, 0.0, 1.0), GAUSSIAN, parent)
 
-
     def _centres(self, trial_id: int, storage: BaseStorage) -> list[int]:
         best = storage.best_ids(self.top_k)
         if best:
