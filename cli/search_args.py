@@ -54,13 +54,16 @@ def _run_args(p: argparse.ArgumentParser, local: bool) -> None:
                    help="cmaes (default: CMA-ES with IPOP restarts), paper (Monte Carlo then hill climbing, "
                         "the paper's), tpe (Optuna TPE) or random; stored with the run")
     p.add_argument("--controller", help="controller parameter space (default: the morphology's)")
-    p.add_argument("--sigma", type=float, default=0.005, help="Gaussian step in the unit cube (default 0.005)")
+    p.add_argument("--sigma", type=float, default=None,
+                   help="step in the unit cube: the paper sampler's Gaussian sigma (default 0.005), CMA-ES's initial "
+                        "sigma0 (default 0.3)")
     p.add_argument("--top-k", type=int, default=1, help="climb from the k best trials (default 1)")
     p.add_argument("--startup-trials", type=int, help="Monte Carlo trials before climbing (default half)")
     p.add_argument("--enqueue", action="append", default=None, metavar="GAIT.json",
                    help="evaluate this parameter file's set first (a `trial --params` file, e.g. a shipped gait or "
                         "`export --gait`); repeatable, in order; counts in --trials; the samplers go on from it "
-                        "(`--sampler paper --startup-trials 0` climbs from the best of them)")
+                        "(`--sampler paper --startup-trials 0` climbs from the best of them; `--sampler cmaes` centres "
+                        "its first distribution on the first of them)")
 
 
 def _trial_args(p: argparse.ArgumentParser) -> None:

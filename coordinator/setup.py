@@ -47,7 +47,7 @@ class SearchSettings:
 
     trials: int
     sampler: str = DEFAULT_SAMPLER
-    sigma: float = 0.005
+    sigma: float | None = None   # None: the sampler's default step (paper 0.005, cmaes sigma0 0.3)
     top_k: int = 1
     startup_trials: int | None = None   # None: half the budget is Monte Carlo
     lease_s: float = 60.0
@@ -101,7 +101,8 @@ def make_meta(config: RunConfig, settings: SearchSettings) -> RunMeta:
     space = config.space()
     sampler = make_sampler(settings.sampler, len(space), config.seed, budget=settings.trials,
                            objective=config.objective, sigma=settings.sigma, top_k=settings.top_k,
-                           startup_trials=settings.startup_trials)
+                           startup_trials=settings.startup_trials,
+                           start=settings.enqueued[0] if settings.enqueued else None)
     return RunMeta(run_id=config.run_id, morphology=config.morphology, controller=config.controller,
                    param_names=tuple(space.names),
                    param_lows=tuple(space.lows.tolist()), param_highs=tuple(space.highs.tolist()),

@@ -63,7 +63,8 @@ class BaseSampler:
     @classmethod
     def from_dict(cls, d: dict[str, Any], n_params: int) -> BaseSampler:
         """Rebuild from describe() output (the stored run's `sampler` attribute)."""
-        return cls(n_params, int(d["seed"]), **{k: kind(d[k]) for k, kind in cls.settings})
+        # a setting added later is missing from older files: the sampler's default then
+        return cls(n_params, int(d["seed"]), **{k: kind(d[k]) for k, kind in cls.settings if k in d})
 
 
 class FinishedPrefix:

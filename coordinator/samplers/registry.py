@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from spinefarm.coordinator.samplers.base import BaseSampler
@@ -27,16 +28,23 @@ def sampler_class(name: str) -> type[BaseSampler]:
         raise ConfigError("unknown sampler", received=name, expected=", ".join(sorted(SAMPLERS))) from None
 
 
-def make_sampler(name: str, n_params: int, seed: int, *, budget: int, objective: str, sigma: float = 0.005,
-                 top_k: int = 1, startup_trials: int | None = None) -> BaseSampler:
-    """A new run's sampler from the search settings (the paper's options apply to `paper` only)."""
+def make_sampler(name: str, n_params: int, seed: int, *, budget: int, objective: str, sigma: float | None = None,
+                 top_k: int = 1, startup_trials: int | None = None, start: Sequence[float] | None = None
+                 ) -> BaseSampler:
+    """A new run's sampler from the search settings. sigma: the paper sampler's step or CMA-ES's sigma0 (None:
+    each one's default); top_k and startup_trials: the paper's (startup_trials also TPE's); start: the first
+    enqueued parameter set, where CMA-ES centres its first distribution."""
     cls = sampler_class(name)
     if cls is GaussianHillClimbSampler:
         startup = budget // 2 if startup_trials is None else startup_trials
-        return GaussianHillClimbSampler(n_params, seed, sigma=sigma, top_k=top_k, startup_trials=startup)
+        return GaussianHillClimbSampler(n_params, seed, sigma=0.005 if sigma is None else sigma, top_k=top_k,
+                                        startup_trials=startup)
     if cls is TpeSampler:
         return TpeSampler(n_params, seed, startup_trials=10 if startup_trials is None else startup_trials,
                           multi_objective=objective == "pareto")
+    if cls is CmaEsSampler:
+        return CmaEsSampler(n_params, seed, sigma0=0.3 if sigma is None else sigma,
+                            mean0=None if start is None else tuple(float(v) for v in start))
     return cls(n_params, seed)
 
 

@@ -228,6 +228,42 @@ def test_cmaes_needs_two_parameters():
         make_sampler("cmaes", 1, 0, budget=10, objective="distance")
 
 
+def test_cmaes_starts_from_the_enqueued_set_with_the_given_sigma(tmp_path):
+    """--sampler cmaes --enqueue GAIT --sigma S: the first generation is drawn around the enqueued set at step S
+    (not around the cube's centre), and a resumed run rebuilds that start from the run file."""
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
+
+    start = (0.1, 0.85, 0.3)
+    config = build_run_config("r", "sphere:3", seed=4)
+    settings = SearchSettings(trials=30, sampler="cmaes", sigma=0.01, enqueued=(start,))
+    core, storage = new_run(config, settings, tmp_path / "run.h5")
+    assert core.study.sampler.mean0 == start
+    for tid in range(6):
+        assert core.study.ask() == tid
+    rows = np.array([storage.trial(t).params_unit for t in range(6)])
+    assert storage.trial(0).phase == "enqueued" and np.allclose(rows[0], start)
+    assert np.abs(rows[1:] - start).max() < 0.06  # 6 sigma; around the centre 0.5 they would be ~0.4 away
+    expected = core.study.sampler.propose(6, storage)
+    storage.close()
+    core2, storage2 = resume_run(tmp_path / "run.h5")
+    assert core2.study.sampler.mean0 == start
+    assert np.array_equal(core2.study.sampler.propose(6, storage2).params_unit, expected.params_unit)
+    storage2.close()
+    plain = make_sampler("cmaes", 3, 4, budget=30, objective="distance")
+    assert (plain.mean0, plain.sigma0) == (None, 0.3)  # no start, no --sigma: the defaults
+
+
+def test_cmaes_rejects_a_start_outside_the_cube_and_reads_files_from_before_starts():
+    with pytest.raises(ConfigError, match=r"outside the unit cube; received \[1.5\]"):
+        make_sampler("cmaes", 3, 0, budget=10, objective="distance", start=(0.2, 1.5, 0.3))
+    with pytest.raises(ConfigError, match="does not fit the run's space; received '2 values'"):
+        make_sampler("cmaes", 3, 0, budget=10, objective="distance", start=(0.2, 0.3))
+    older = {"name": "cmaes", "kind": "CmaEsSampler", "seed": 3, "sigma0": 0.3, "population_size": 7,
+             "population_growth": 2.0}  # a run file written before cmaes had a start point
+    assert sampler_from_dict(older, 3).mean0 is None
+
+
 @pytest.mark.parametrize("name", ["cmaes", "tpe"])
 def test_the_sampler_is_stored_with_the_run_and_rebuilt_on_resume(tmp_path, name):
     from spinefarm.coordinator.problem import build_run_config
