@@ -35,6 +35,9 @@ def make_sampler(name: str, n_params: int, seed: int, *, budget: int, objective:
     each one's default); top_k and startup_trials: the paper's (startup_trials also TPE's); start: the first
     enqueued parameter set, where CMA-ES centres its first distribution."""
     cls = sampler_class(name)
+    if sigma is not None and cls not in (GaussianHillClimbSampler, CmaEsSampler):
+        raise ConfigError(f"--sigma does not apply to the {name} sampler", received=sigma,
+                          expected="no --sigma, or --sampler paper or cmaes")
     if cls is GaussianHillClimbSampler:
         startup = budget // 2 if startup_trials is None else startup_trials
         return GaussianHillClimbSampler(n_params, seed, sigma=0.005 if sigma is None else sigma, top_k=top_k,

@@ -262,6 +262,8 @@ def test_cmaes_rejects_a_start_outside_the_cube_and_reads_files_from_before_star
     older = {"name": "cmaes", "kind": "CmaEsSampler", "seed": 3, "sigma0": 0.3, "population_size": 7,
              "population_growth": 2.0}  # a run file written before cmaes had a start point
     assert sampler_from_dict(older, 3).mean0 is None
+    with pytest.raises(ConfigError, match=r"--sigma does not apply to the tpe sampler; received 0.1"):
+        make_sampler("tpe", 3, 0, budget=10, objective="distance", sigma=0.1)
 
 
 @pytest.mark.parametrize("name", ["cmaes", "tpe"])
