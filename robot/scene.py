@@ -27,6 +27,8 @@ class SceneConfig:
     kind: flat | slope (plane tilted by slope_deg about +X, rising toward -z) | rough (seeded
     heightfield of rough_amplitude_cm with rough_wavelength_cm) | obstacles (flat ground with bars
     across z of obstacle_height_cm x obstacle_depth_cm every obstacle_spacing_cm).
+    ground_half_extent_cm: the ground's half width in x and z (NTRT's box: 500 cm, a 10 m square); a gait
+    fast enough to reach its edge within a trial falls off it, so longer or faster trials need a larger one.
     collision_filter: "all" (every segment pair may collide, as NTRT), "neighbours" (each segment
     touches only the terrain and its neighbours in the chain), "auto" (neighbours on flat ground
     and slopes, all pairs on rough ground and obstacles).
@@ -42,6 +44,7 @@ class SceneConfig:
     obstacle_depth_cm: float = bounded(5.0, 0.0, 200.0, low_inclusive=False)
     obstacle_spacing_cm: float = bounded(60.0, 1.0, 1000.0)
     collision_filter: str = "all"
+    ground_half_extent_cm: float = bounded(GROUND_HALF_EXTENT_CM, 10.0, 1e5)
 
     def __post_init__(self) -> None:
         if self.kind not in SCENE_BUILDERS:
@@ -51,7 +54,10 @@ class SceneConfig:
         check_fields(self, "scene.")
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        d = asdict(self)
+        if d["ground_half_extent_cm"] == GROUND_HALF_EXTENT_CM:  # NTRT's: left out, as before the field was
+            del d["ground_half_extent_cm"]                      # (stored configs and their hashes unchanged)
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> SceneConfig:
@@ -128,7 +134,7 @@ def _glibc_sin(x: np.ndarray) -> np.ndarray:
 
 def _rough_heights(cfg: SceneConfig) -> Heightfield:
     spacing = cfg.rough_wavelength_cm / 8.0
-    n = int(2 * GROUND_HALF_EXTENT_CM / spacing) + 1
+    n = int(2 * cfg.ground_half_extent_cm / spacing) + 1
     coords = (np.arange(n) - (n - 1) / 2) * spacing
     x, z = np.meshgrid(coords, coords)  # rows along z, columns along x
     rng = np.random.default_rng(cfg.rough_seed)
@@ -158,13 +164,19 @@ def scene_kind(name: str, filter_auto: str) -> Callable[[TerrainBuilder], Terrai
 
 
 _AUTO_FILTER: dict[str, str] = {}
-_HALF = (GROUND_HALF_EXTENT_CM, GROUND_HALF_HEIGHT_CM, GROUND_HALF_EXTENT_CM)
-_FLAT = Box((0.0, GROUND_TOP_CM - GROUND_HALF_HEIGHT_CM, 0.0), _HALF)
+
+
+def _half(cfg: SceneConfig) -> tuple[float, float, float]:
+    return (cfg.ground_half_extent_cm, GROUND_HALF_HEIGHT_CM, cfg.ground_half_extent_cm)
+
+
+def _flat_box(cfg: SceneConfig) -> Box:
+    return Box((0.0, GROUND_TOP_CM - GROUND_HALF_HEIGHT_CM, 0.0), _half(cfg))
 
 
 @scene_kind("flat", "neighbours")
 def _flat(cfg: SceneConfig, friction: float, pairs: str, extent_z: tuple[float, float]) -> Terrain:
-    return Terrain(friction, (_FLAT,), pairs=pairs)
+    return Terrain(friction, (_flat_box(cfg),), pairs=pairs)
 
 
 @scene_kind("slope", "neighbours")
@@ -173,7 +185,7 @@ def _slope(cfg: SceneConfig, friction: float, pairs: str, extent_z: tuple[float,
     # rotation about +X by a: the plane rises toward -z for a > 0 and passes through (0, 0.5, 0)
     quat = (math.sin(a / 2), 0.0, 0.0, math.cos(a / 2))
     centre = (0.0, GROUND_TOP_CM - GROUND_HALF_HEIGHT_CM * math.cos(a), -GROUND_HALF_HEIGHT_CM * math.sin(a))
-    return Terrain(friction, (Box(centre, _HALF, quat),), pairs=pairs)
+    return Terrain(friction, (Box(centre, _half(cfg), quat),), pairs=pairs)
 
 
 @scene_kind("rough", "all")
@@ -187,15 +199,16 @@ def _obstacles(cfg: SceneConfig, friction: float, pairs: str, extent_z: tuple[fl
     z_lo, z_hi = extent_z
     bars = []
     hy, hz = cfg.obstacle_height_cm / 2, cfg.obstacle_depth_cm / 2
+    edge = cfg.ground_half_extent_cm
     z = z_hi + cfg.obstacle_spacing_cm / 2
-    while z < GROUND_HALF_EXTENT_CM:
-        bars.append(Box((0.0, GROUND_TOP_CM + hy, z), (GROUND_HALF_EXTENT_CM, hy, hz)))
+    while z < edge:
+        bars.append(Box((0.0, GROUND_TOP_CM + hy, z), (edge, hy, hz)))
         z += cfg.obstacle_spacing_cm
     z = z_lo - cfg.obstacle_spacing_cm / 2
-    while z > -GROUND_HALF_EXTENT_CM:
-        bars.append(Box((0.0, GROUND_TOP_CM + hy, z), (GROUND_HALF_EXTENT_CM, hy, hz)))
+    while z > -edge:
+        bars.append(Box((0.0, GROUND_TOP_CM + hy, z), (edge, hy, hz)))
         z -= cfg.obstacle_spacing_cm
-    return Terrain(friction, (_FLAT, *bars), pairs=pairs)
+    return Terrain(friction, (_flat_box(cfg), *bars), pairs=pairs)
 
 
 def build_terrain(cfg: SceneConfig, default_friction: float, robot_extent_z_cm: tuple[float, float]) -> Terrain:

@@ -85,7 +85,7 @@ class TrialConfig:
         return self.dt_s if self.dt_s is not None else engine_spec(self.engine).default_dt_s
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return {**asdict(self), "scene": self.scene.to_dict()}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> TrialConfig:

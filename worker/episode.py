@@ -94,10 +94,15 @@ def check_state(poses: np.ndarray, last: np.ndarray, masses: np.ndarray, sstate:
         return f"diverged: kinetic energy {kinetic:.3g} J exceeds {cfg.max_kinetic_energy_j:g} J"
     # heights count from the terrain under each segment (a slope or rough ground is not a divergence)
     surface = surface_height_cm(terrain, poses[:, 0], poses[:, 2])
-    surface = np.where(np.isfinite(surface), surface, GROUND_TOP_CM)  # off the terrain's edge: ground level
+    off_edge = ~np.isfinite(surface)
+    surface = np.where(off_edge, GROUND_TOP_CM, surface)  # off the terrain's edge: ground level
     y_m = (poses[:, 1] - surface) * scoring.CM
     if y_m.min() < cfg.min_height_m or y_m.max() > cfg.max_height_m:
         b = int(np.argmax(np.maximum(cfg.min_height_m - y_m, y_m - cfg.max_height_m)))
+        if off_edge[b] and y_m[b] < cfg.min_height_m:  # a fast gait walked off the ground, nothing diverged
+            return (f"fell off the ground's edge: segment {b} at x {poses[b, 0]:.0f} cm, z {poses[b, 2]:.0f} cm, "
+                    f"beyond the ground's half width of {cfg.scene.ground_half_extent_cm:g} cm (a larger one: "
+                    f"--scene {cfg.scene.kind},ground_half_extent_cm=...)")
         return (f"diverged: segment {b} height {y_m[b]:.3g} m outside "
                 f"[{cfg.min_height_m:g}, {cfg.max_height_m:g}] m")
     # very short strings (the ribbed spine's 0.3 cm muscles, 1.2 cm node to node) are judged against

@@ -130,3 +130,24 @@ def test_scene_from_the_command_line_and_into_the_run_file(tmp_path):
     stored = read_meta(tmp_path / "run.h5").trial_config["scene"]
     assert stored == scene  # the HDF5 file records the scene its trials ran on
     assert TrialConfig.from_dict(read_meta(tmp_path / "run.h5").trial_config).scene.kind == "rough"
+
+
+def test_a_robot_off_the_grounds_edge_is_told_so_and_a_larger_ground_keeps_it_on():
+    """NTRT's ground is a 10 m square; a gait that reaches its edge falls, and the reason says so (not a
+    divergence) with the scene field that makes a larger one."""
+    morph = load_morphology("tetraspine-ntrt")
+    u = random_unit_params(morph, 1)
+    small = TrialConfig(duration_s=1.0, scene=SceneConfig(ground_half_extent_cm=10.0))  # narrower than the robot
+    r = run_trial(morph, u, small, 1)
+    assert r.status == TrialStatus.FAILED
+    assert r.reason.startswith("fell off the ground's edge: segment "), r.reason
+    assert "half width of 10 cm" in r.reason and "--scene flat,ground_half_extent_cm=" in r.reason
+    ntrt = TrialConfig(duration_s=1.0)
+    assert run_trial(morph, u, ntrt, 1).status == TrialStatus.COMPLETE
+    # NTRT's size is the default and is left out of stored configs, so their hashes are those from before the field
+    explicit = TrialConfig(duration_s=1.0, scene=SceneConfig(ground_half_extent_cm=500.0))
+    assert "ground_half_extent_cm" not in ntrt.to_dict()["scene"] and explicit.config_hash() == ntrt.config_hash()
+    large = TrialConfig(duration_s=1.0, scene=SceneConfig(ground_half_extent_cm=1000.0))
+    assert TrialConfig.from_dict(large.to_dict()) == large and large.config_hash() != ntrt.config_hash()
+    with pytest.raises(ConfigError, match=r"scene\.ground_half_extent_cm"):
+        SceneConfig(ground_half_extent_cm=1.0)
