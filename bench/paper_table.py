@@ -8,6 +8,7 @@ interquartile range of speed and COT, beside the paper's figures. Prints one JSO
 
     python bench/paper_table.py [--episodes 16] [--configs bullet,bullet_converged,mujoco] [--workers 2]
     python bench/paper_table.py --episodes 3 --duration 4 --configs bullet      # the reduced form the tests run
+    python bench/paper_table.py --gaits efficient/tetraspine --scene flat,ground_half_extent_cm=1000  # a 20 m ground
 """
 
 from __future__ import annotations
@@ -35,18 +36,21 @@ CONFIG_NAMES = {"bullet": "Bullet, 1 ms (default)", "bullet_converged": "Bullet,
 DEFAULT_RANDOMIZE = "friction=0.1,start_jitter_cm=0.5"
 
 
-def episode(gait: str, config: str, k: int, randomize: str, seed: int, duration_s: float | None) -> dict:
+def episode(gait: str, config: str, k: int, randomize: str, seed: int, duration_s: float | None,
+            scene: str | None = None) -> dict:
     """One episode of one gait in one engine configuration (runs in a pool process)."""
     from spinefarm.cli.sim_commands import load_params_file
     from spinefarm.protocol.robust import RobustSpec, draw_episode, parse_randomize
     from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.scene import parse_scene
     from spinefarm.worker.robust import episode_world, run_worlds
     from spinefarm.worker.trial import TrialConfig
 
     path = GAITS / f"{gait}.json"
     params, controller = load_params_file(path)
     morph = load_morphology(json.loads(path.read_text())["morphology"])
-    cfg = TrialConfig(duration_s=duration_s, controller=controller, **CONFIGS[config])
+    cfg = TrialConfig(duration_s=duration_s, controller=controller, scene=parse_scene(scene) if scene else {},
+                      **CONFIGS[config])
     spec = RobustSpec(episodes=k + 1, randomize=parse_randomize(randomize))
     world = episode_world(morph, cfg, draw_episode(spec, seed, k))
     r = run_worlds([world], params, controller)[0]
@@ -121,6 +125,8 @@ def command(result: dict, tolerance: float | None = None) -> str:
         parts.append(f"--randomize {result['randomize']}")
     if result["seed"]:
         parts.append(f"--seed {result['seed']}")
+    if result.get("scene"):
+        parts.append(f"--scene {result['scene']}")
     if tolerance:
         parts.append(f"--tolerance {tolerance:g}")
     return " ".join([*parts, "--write-docs"])
@@ -137,6 +143,7 @@ def main() -> None:
     ap.add_argument("--randomize", default=DEFAULT_RANDOMIZE, help="each episode's draw, as search --randomize")
     ap.add_argument("--seed", type=checks.seed, default=0, help="the episodes' seed (episode k: from (seed, k))")
     ap.add_argument("--duration", type=float, default=None, help="trial length (default: each morphology's)")
+    ap.add_argument("--scene", default=None, help="what the gaits run on, as trial --scene (default: NTRT's ground)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--write-docs", action="store_true", help="put the table into docs/results.md")
     ap.add_argument("--tolerance", type=float, default=None,
@@ -154,10 +161,19 @@ def main() -> None:
     if bad or args.episodes < 1:
         sys.exit(f"paper_table: unknown config or gait {bad} or episodes {args.episodes}; expected configs of "
                  f"{list(CONFIGS)}, gaits of examples/gaits/, episodes >= 1")
+    if args.scene:
+        from spinefarm.protocol.errors import ConfigError
+        from spinefarm.robot.scene import parse_scene
+
+        try:
+            parse_scene(args.scene)  # a bad scene is told here, once, not by every episode
+        except ConfigError as e:
+            sys.exit(f"paper_table: --scene: {e}")
     t0 = time.perf_counter()
     jobs = [(g, c, k) for g in gaits for c in configs for k in range(args.episodes)]
     with ProcessPoolExecutor(args.workers) as pool:
-        futures = [pool.submit(episode, g, c, k, args.randomize, args.seed, args.duration) for g, c, k in jobs]
+        futures = [pool.submit(episode, g, c, k, args.randomize, args.seed, args.duration, args.scene)
+                   for g, c, k in jobs]
         for done, fut in enumerate(as_completed(futures), 1):  # progress on stderr, one line per episode
             r = fut.result()
             print(f"{done}/{len(jobs)} {r['gait']} {r['config']} episode {r['episode']}: {r['speed_cm_s']:.3f} cm/s "
@@ -172,7 +188,7 @@ def main() -> None:
                      **{k: head.get(k) for k in ("median_speed_cm_s", "iqr_speed_cm_s", "median_cot")},
                      "configs": per}
     result = {"episodes": args.episodes, "randomize": args.randomize, "seed": args.seed, "duration": args.duration,
-              "spines": spines, "wall_time_s": time.perf_counter() - t0, "rows": rows}
+              "scene": args.scene, "spines": spines, "wall_time_s": time.perf_counter() - t0, "rows": rows}
     if args.write_docs:
         write_docs(result, command(result, args.tolerance), args.configs, args.tolerance)
     print(json.dumps(result))

@@ -56,6 +56,27 @@ def test_a_gait_of_a_subfolder_is_set_beside_its_spines_paper_figures():
     assert bad.returncode != 0 and "robust/nothing" in bad.stderr
 
 
+def test_the_table_runs_on_the_scene_it_is_given():
+    """--scene reaches every episode (a ground narrower than the robot: it falls off its edge) and the command
+    that re-creates the table; a bad scene is refused once, by name."""
+    r = subprocess.run([sys.executable, "bench/paper_table.py", "--episodes", "1", "--duration", "1", "--configs",
+                        "bullet", "--gaits", "tetraspine", "--workers", "1",
+                        "--scene", "flat,ground_half_extent_cm=10"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    result = json.loads(r.stdout.strip().splitlines()[-1])
+    assert result["scene"] == "flat,ground_half_extent_cm=10"
+    assert result["rows"][0]["status"] == "failed"
+    assert result["rows"][0]["reason"].startswith("fell off the ground's edge"), result["rows"][0]["reason"]
+    sys.path.insert(0, str(ROOT / "bench"))
+    import paper_table
+
+    assert "--scene flat,ground_half_extent_cm=10" in paper_table.command(result)
+    bad = subprocess.run([sys.executable, "bench/paper_table.py", "--gaits", "tetraspine", "--scene", "flat,width=3"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert bad.returncode != 0 and "--scene: bad scene field; received 'width=3'" in bad.stderr
+
+
 @pytest.mark.slow
 def test_the_efficient_gaits_beat_the_papers_speed_and_cot_at_the_median():
     """docs/results.md, "The paper's speed at less cost": each examples/gaits/efficient gait over 16 perturbed
