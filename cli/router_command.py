@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from spinefarm.cli import checks
-from spinefarm.cli.stop_signals import stop_on_signals
+from spinefarm.cli.stop_signals import stop_on_signals, wait_for_stop
 from spinefarm.protocol.errors import ConfigError
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
                           expected="endpoints free to listen on and readable certificates") from exc
     print(f"router {session.zid()} listening on {', '.join(listen)}", flush=True)
     try:
-        stop.wait()
+        wait_for_stop(stop)
     finally:
         closer = threading.Thread(target=session.close, daemon=True)
         closer.start()

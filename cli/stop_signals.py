@@ -5,6 +5,10 @@ A Python signal handler runs in the main thread between two bytecodes, possibly 
 the lock inside a threading.Event (in Event.wait, several times a second): a handler calling Event.set()
 then waits for that lock for ever, and so does every later signal. The handler here only appends to a
 list; a daemon thread sees the list grow and sets the event.
+
+A signal sent to the process may be delivered to any thread that does not block it, Zenoh's runtime threads
+among them; Python then runs the handler only when the main thread next runs bytecode. A main thread blocked
+without a timeout (Event.wait()) would never run it: wait with `wait_for_stop`, which wakes every POLL_S.
 """
 
 from __future__ import annotations
@@ -38,6 +42,13 @@ def stop_on_signals(stop: threading.Event, signals: tuple[int, ...] = (signal.SI
 
     threading.Thread(target=watch, name="stop-signals", daemon=True).start()
     return seen
+
+
+def wait_for_stop(stop: threading.Event) -> None:
+    """Block the main thread until `stop` is set, waking every POLL_S so that a signal delivered to another
+    thread is handled (see the module's docstring)."""
+    while not stop.wait(POLL_S):
+        pass
 
 
 def _die_with_parent() -> None:  # runs in the child between fork and exec

@@ -116,3 +116,22 @@ def _stranger(tmp_path):
     path.write_text(f"worker:{secrets.token_hex(16)}\n")
     path.chmod(0o600)
     return path
+
+
+def test_the_router_stops_on_a_sigterm_that_reaches_one_of_zenohs_threads():
+    """A signal to the process may land on any of its threads; one on a Zenoh runtime thread once left the
+    router's main thread waiting for ever (the handler runs only when the main thread runs Python)."""
+    import ctypes
+    import signal
+
+    router = start_router("--listen", free_endpoint())
+    try:
+        others = [int(t) for t in os.listdir(f"/proc/{router.pid}/task") if int(t) != router.pid]
+        assert others, "the router runs no thread besides its main one"
+        libc = ctypes.CDLL(None, use_errno=True)
+        assert libc.tgkill(router.pid, others[-1], int(signal.SIGTERM)) == 0, os.strerror(ctypes.get_errno())
+        assert router.wait(10) == 0 and "router stopped" in router.stdout.read()
+    finally:
+        if router.poll() is None:
+            router.kill()
+            router.wait()
