@@ -93,6 +93,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"warning: the Zenoh session did not close within {CLOSE_WITHIN_S:g} s; stopping without it",
               file=sys.stderr, flush=True)
     print("router stopped", flush=True)
-    # A stop once seen took over 10 s under load (CI); nothing is left to save, so the exit waits for no
-    # runtime thread of Zenoh's, in the close or at the interpreter's shutdown.
+    # a router keeps nothing to save, so the exit waits for no runtime thread of Zenoh's, in the close or at
+    # the interpreter's shutdown
     os._exit(0)
