@@ -13,6 +13,7 @@ Failed trials and non-finite objectives rank below every complete trial.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -40,8 +41,10 @@ class CmaEsSampler(BaseSampler):
     name = "cmaes"
     settings = (("sigma0", float), ("population_size", int), ("population_growth", float), ("mean0", _unit_point))
 
-    def __init__(self, n_params: int, seed: int, *, sigma0: float = 0.3, population_size: int | None = None,
-                 population_growth: float = 2.0, mean0: tuple[float, ...] | None = None) -> None:
+    default_sigma0 = 0.3
+
+    def __init__(self, n_params: int, seed: int, *, sigma0: float = default_sigma0, population_size: int | None = None,
+                 population_growth: float = 2.0, mean0: Sequence[float] | None = None) -> None:
         super().__init__(n_params, seed)
         if n_params < 2:
             raise ConfigError("cmaes needs at least 2 parameters", received=n_params, expected=">= 2")

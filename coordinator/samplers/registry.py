@@ -38,16 +38,15 @@ def make_sampler(name: str, n_params: int, seed: int, *, budget: int, objective:
     if sigma is not None and cls not in (GaussianHillClimbSampler, CmaEsSampler):
         raise ConfigError(f"--sigma does not apply to the {name} sampler", received=sigma,
                           expected="no --sigma, or --sampler paper or cmaes")
+    step = {} if sigma is None else {"sigma": sigma}  # None: the sampler's own default
     if cls is GaussianHillClimbSampler:
         startup = budget // 2 if startup_trials is None else startup_trials
-        return GaussianHillClimbSampler(n_params, seed, sigma=0.005 if sigma is None else sigma, top_k=top_k,
-                                        startup_trials=startup)
+        return GaussianHillClimbSampler(n_params, seed, **step, top_k=top_k, startup_trials=startup)
     if cls is TpeSampler:
         return TpeSampler(n_params, seed, startup_trials=10 if startup_trials is None else startup_trials,
                           multi_objective=objective == "pareto")
     if cls is CmaEsSampler:
-        return CmaEsSampler(n_params, seed, sigma0=0.3 if sigma is None else sigma,
-                            mean0=None if start is None else tuple(float(v) for v in start))
+        return CmaEsSampler(n_params, seed, sigma0=step.get("sigma", CmaEsSampler.default_sigma0), mean0=start)
     return cls(n_params, seed)
 
 
