@@ -29,13 +29,6 @@ FROM deps AS code
 COPY pyproject.toml setup.py README.md /src/
 COPY docs /src/docs
 COPY spinefarm /src/spinefarm
-COPY protocol /src/protocol
-COPY robot /src/robot
-COPY worker /src/worker
-COPY coordinator /src/coordinator
-COPY storage /src/storage
-COPY api /src/api
-COPY cli /src/cli
 RUN pip install -q --no-deps ${OFFLINE:+--no-index} --find-links /wheels --target /pkg /src \
  && mv /pkg/bin /pkg-bin
 

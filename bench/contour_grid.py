@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+
 from spinefarm.api.contour import bandwidth_for, kernel_mean
 
 

@@ -121,6 +121,7 @@ def fsync_cost(workers: list[int], batches: list[int], trials: int, tmp: Path) -
 def resume_cost(tmp: Path, rows: int) -> dict:
     """Time to reopen a killed SWMR writer's file for writing (read via SWMR, rewrite, replace)."""
     import numpy as np
+
     from spinefarm.protocol.results import TrialResult
     from spinefarm.protocol.states import TrialStatus
     from spinefarm.storage.hdf5 import Hdf5Storage

@@ -34,6 +34,7 @@ _QEMU_QUIET = ("warning: TCG doesn't support",)
 def fingerprint(gait: Path, engine: str, duration_s: float, seed: int = 1) -> dict:
     """One trial of a gait file in this process: its score's bits and hashes of its path and final poses."""
     import numpy as np
+
     from spinefarm.robot.trial_config import TrialConfig
     from spinefarm.worker.trial import simulate
 

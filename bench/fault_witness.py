@@ -24,6 +24,7 @@ from spinefarm.storage.hdf5_reader import read_run  # noqa: E402
 def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) -> int:
     """The worker protocol (pull, run, carry results with the next request) with an acknowledgement log."""
     import zenoh
+
     from spinefarm.coordinator.service import zenoh_config
     from spinefarm.protocol.envelope import decode_message, encode_message
     from spinefarm.protocol.run import RunConfig
@@ -101,6 +102,7 @@ def wait(pred, timeout_s: float, what: str) -> None:
 
 def check_file(out: Path, budget: int, acks: list[tuple[int, float]]) -> dict:
     import numpy as np
+
     from spinefarm.protocol.errors import StorageError
 
     try:

@@ -27,10 +27,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench.fault_witness import acked, check_file, coordinator, spawn, wait, witness  # noqa: E402
 from spinefarm.cli.service_commands import free_port  # noqa: E402
 from spinefarm.protocol import keys  # noqa: E402
-
-from bench.fault_witness import acked, check_file, coordinator, spawn, wait, witness  # noqa: E402
 
 
 # --- parts ---------------------------------------------------------------------------------------------
@@ -134,6 +133,7 @@ def _one_reissue(run_id: str, tmp: Path) -> float:
 def hostile_peer(tmp: Path, n: int = 500) -> dict:
     """A peer that knows a real worker's id sends forged results and malformed messages."""
     import zenoh
+
     from spinefarm.coordinator.problem import build_run_config
     from spinefarm.coordinator.service import CoordinatorService, zenoh_config
     from spinefarm.coordinator.setup import SearchSettings, new_run

@@ -20,9 +20,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from spinefarm.storage.hdf5_reader import read_meta  # noqa: E402
-
 from spinefarm import load_run  # noqa: E402
+from spinefarm.storage.hdf5_reader import read_meta  # noqa: E402
 
 
 def summary(path: Path, paper_speed_cm_s: float, workers: int) -> dict:

@@ -148,6 +148,7 @@ def start_processes(net: Net, path: Path, run_id: str, tmp: Path) -> tuple[Proc,
 def forge(endpoint: str, run_id: str, n: int) -> None:
     """A peer that submits results for leases it was never given, under its own and others' worker ids."""
     import zenoh
+
     from spinefarm.coordinator.service import zenoh_config
     from spinefarm.protocol import keys
     from spinefarm.protocol.envelope import encode_message

@@ -16,6 +16,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_density_factor, with_gains, with_strings

@@ -25,6 +25,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
+
 from spinefarm.worker.calibrate import spearman  # the one rank correlation, shared with calibrate
 from spinefarm.worker.replay import PUBLISHED_DIR
 

@@ -21,6 +21,7 @@ import time
 import mujoco
 import numpy as np
 import pybullet as pb
+
 from spinefarm.worker.engines.bullet import BulletPhysics
 from spinefarm.worker.engines.mujoco import MujocoPhysics
 

@@ -45,6 +45,7 @@ import sys
 import time
 
 import numpy as np
+
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import GroundSpec

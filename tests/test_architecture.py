@@ -2,7 +2,7 @@
 
 Each part is some files or folders; a "never" says no file of part A may import a file of part B, directly or
 through files that belong to no part. Imports are read from the syntax tree (lazy imports inside functions
-count), with `spinefarm.<folder>` mapped back to the repository's folders as pyproject's package-dir does.
+count); `spinefarm.a.b` is the file spinefarm/a/b.py (or the package spinefarm/a/b/).
 """
 
 from __future__ import annotations
@@ -12,15 +12,13 @@ import json
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-FOLDERS = ("protocol", "robot", "worker", "coordinator", "storage", "api", "cli", "spinefarm")
+FOLDERS = ("spinefarm",)
 
 
 def module_file(dotted: str) -> Path | None:
     parts = dotted.split(".")
     if parts[0] != "spinefarm":
         return None
-    if len(parts) > 1 and parts[1] in FOLDERS[:-1]:
-        parts = parts[1:]
     base = ROOT.joinpath(*parts)
     for candidate in (base.with_suffix(".py"), base / "__init__.py"):
         if candidate.is_file():
@@ -79,8 +77,8 @@ def test_no_never_of_the_whiteboard_is_broken():
 
 def test_the_check_sees_a_broken_never(tmp_path):
     """The reader finds lazy imports through the namespace, so a never can fail."""
-    path = ROOT / "coordinator" / "core.py"
-    assert ROOT / "protocol" / "work.py" in imports_of(path)
+    path = ROOT / "spinefarm" / "coordinator" / "core.py"
+    assert ROOT / "spinefarm" / "protocol" / "work.py" in imports_of(path)
     probe = tmp_path / "probe.py"
     probe.write_text("def f():\n    from spinefarm.worker.engines.bullet import BulletPhysics\n")
-    assert imports_of(probe) == {ROOT / "worker" / "engines" / "bullet.py"}
+    assert imports_of(probe) == {ROOT / "spinefarm" / "worker" / "engines" / "bullet.py"}

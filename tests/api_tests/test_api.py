@@ -11,12 +11,12 @@ import h5py
 import httpx
 import numpy as np
 import pytest
+
 from spinefarm.api.app import create_app
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.runlock import RunLock
 from spinefarm.storage.status import write_status
-
 from tests.coordinator_tests.helpers import wait_for
 from tests.http_server import served
 from tests.storage_tests.conftest import make_meta, result

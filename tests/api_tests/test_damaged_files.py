@@ -102,7 +102,6 @@ def test_a_status_file_with_a_lone_surrogate_is_served(tmp_path):
     """An old status file holding a worker id like "\\ud800" must not turn /runs into 500 for good."""
     from spinefarm.api.app import create_app
     from spinefarm.storage.status import status_path
-
     from tests.http_server import served
 
     run_file(tmp_path / "run.h5", "odd")

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from spinefarm.storage.hdf5_reader import read_run
 
+from spinefarm.storage.hdf5_reader import read_run
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
 
@@ -79,7 +79,6 @@ def write_failing_run(path: Path) -> None:
     """A run file with failed trials (what a real search writes when trials diverge or raise)."""
     from spinefarm.protocol.states import TrialStatus
     from spinefarm.storage.hdf5 import Hdf5Storage
-
     from tests.storage_tests.conftest import make_meta, result
 
     s = Hdf5Storage.create(path, make_meta("failing-view", n_params=3))

@@ -9,8 +9,8 @@ import urllib.request
 
 import numpy as np
 import pytest
-from spinefarm.storage.hdf5_reader import read_run
 
+from spinefarm.storage.hdf5_reader import read_run
 from tests.api_tests.conftest import SPEC_ROBOT
 from tests.api_tests.test_dashboard_browser import ARTIFACTS
 from tests.coordinator_tests.helpers import wait_for

@@ -10,8 +10,8 @@ import urllib.request
 
 import numpy as np
 import pytest
-from spinefarm.storage.hdf5_reader import read_run
 
+from spinefarm.storage.hdf5_reader import read_run
 from tests.api_tests.test_dashboard_browser import ARTIFACTS
 from tests.coordinator_tests.helpers import wait_for
 
@@ -159,7 +159,6 @@ def test_workers_left_out_and_a_raised_fidelity_are_shown(browser, tmp_path):
     """What the coordinator's status says went on beside the trials (tests/coordinator_tests/test_core.py makes
     both happen): the run page names each worker left out with why, and why the judge raised the fidelity."""
     from spinefarm.storage.status import read_status, write_status
-
     from tests.api_tests.test_dashboard_browser import Server, free_port, spinefarm
 
     out = tmp_path / "left.h5"

@@ -8,11 +8,11 @@ import urllib.request
 
 import numpy as np
 import pytest
+
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.worker.render import rod_segments, string_segments
-
 from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, free_port, spinefarm
 from tests.coordinator_tests.helpers import wait_for
 
@@ -156,7 +156,6 @@ def test_without_the_simulator_the_3d_view_says_so(browser, run_file):
 def test_a_picture_cache_folder_that_cannot_be_made_draws_in_a_temporary_one(run_file, tmp_path, caplog):
     """A read-only home or a mistyped SPINEFARM_CACHE_DIR: the gait is still drawn (it was a 500)."""
     from spinefarm.api.app import create_app
-
     from tests.http_server import served
 
     blocked = tmp_path / "a-file"
@@ -173,7 +172,6 @@ def test_a_full_picture_cache_is_an_error_in_words(run_file, tmp_path):
     import subprocess
 
     from spinefarm.api.app import create_app
-
     from tests.http_server import served
 
     mnt = tmp_path / "fs"

@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pandas as pd
 import pytest
-from spinefarm.storage.hdf5_reader import read_run
 
 import spinefarm
+from spinefarm.storage.hdf5_reader import read_run
 from tests.coordinator_tests.procs import ROOT
 
 

@@ -12,7 +12,6 @@ from pathlib import Path
 
 from spinefarm.cli.local_workers import LocalWorkers
 from spinefarm.storage.hdf5_reader import read_run
-
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
 

@@ -11,9 +11,9 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from spinefarm.cli.main import main
 from spinefarm.worker.replay import PUBLISHED
-
 from tests.coordinator_tests.procs import ROOT
 
 ROBOT = "my-spine"

@@ -70,7 +70,7 @@ def test_the_wheel_carries_docs_data_and_browser_assets(wheel_tree):
                    "spinefarm/worker/replay_data/OctahedralComplex/paper-2014-06-07/logs/bestParameters-default_node-0.nnw"):
         assert needed in names, needed
     # every script and style the dashboard page loads
-    page = (ROOT / "api" / "static" / "index.html").read_text()
+    page = (ROOT / "spinefarm" / "api" / "static" / "index.html").read_text()
     for asset in re.findall(r'"/static/([^"]+)"', page):
         assert f"spinefarm/api/static/{asset}" in names, asset
 

@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 from spinefarm.storage.status import read_status
-
 from tests.coordinator_tests.helpers import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]

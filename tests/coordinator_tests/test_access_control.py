@@ -7,11 +7,11 @@ import time
 
 import pytest
 import zenoh
+
 from spinefarm.coordinator.service import zenoh_config
 from spinefarm.protocol import keys
 from spinefarm.protocol.credentials import load_credentials
 from spinefarm.protocol.errors import ConfigError
-
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, spinefarm, status, stop, wait_status
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import pytest
+
 from spinefarm.coordinator.setup import build_core
 from spinefarm.protocol.envelope import decode, decode_message, encode, encode_message
 from spinefarm.protocol.results import TrialResult
@@ -12,7 +13,6 @@ from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult, Verdict
 from spinefarm.protocol.work import RunInfo, WorkGrant, WorkRequest
-
 from tests.coordinator_tests.helpers import sphere_core
 
 

@@ -8,8 +8,8 @@ import json
 
 import numpy as np
 import pytest
-from spinefarm.storage.hdf5_reader import Hdf5Reader
 
+from spinefarm.storage.hdf5_reader import Hdf5Reader
 from tests.cli_tests.test_errors import one_line_error, run
 
 pytestmark = pytest.mark.integration
@@ -78,7 +78,6 @@ def test_a_gait_written_by_export_travels_to_the_bit():
 
     from spinefarm.cli.run_setup import enqueued
     from spinefarm.robot.morphology.registry import load_morphology
-
     from tests.coordinator_tests.procs import ROOT
 
     for name in ("tetraspine", "tetrahedral-complex", "ribbed"):

@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 import pytest
+
 from spinefarm.coordinator.fidelity import HalvingTrialScheduler, parse_rungs
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.results import TrialResult
@@ -15,7 +16,6 @@ from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.storage.memory import InMemoryStorage
-
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, stop, wait_status, worker
 
@@ -86,7 +86,6 @@ def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(
         stop(coord, *workers)
     # the API counts evaluations against the evaluations planned, parameter sets against the budget
     from spinefarm.api.app import create_app
-
     from tests.http_server import served
 
     with served(create_app(runs_dir=tmp_path)) as client:
@@ -188,7 +187,6 @@ def _study(sampler_name: str, rungs: HalvingTrialScheduler | None, budget: int =
     from spinefarm.coordinator.samplers import make_sampler
     from spinefarm.coordinator.study import Study
     from spinefarm.protocol.params import ParamSpace, ParamSpec
-
     from tests.storage_tests.conftest import make_meta
 
     st = InMemoryStorage()

@@ -8,6 +8,7 @@ import math
 from dataclasses import replace
 
 import pytest
+
 from spinefarm.coordinator.scheduler import MAX_GRANT, Scheduler
 from spinefarm.protocol import limits
 from spinefarm.protocol.envelope import SCHEMA_VERSION, decode, encode
@@ -15,7 +16,6 @@ from spinefarm.protocol.errors import MessageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.protocol.submissions import Verdict
-
 from tests.coordinator_tests.helpers import FakeClock, sphere_core
 from tests.coordinator_tests.test_core import ask, assert_unchanged, res, snapshot, submit
 

@@ -1,4 +1,4 @@
-"""Heavy imports stay at the edges: zenoh only in */service.py, h5py only in storage/, no pybullet here."""
+"""Heavy imports stay at the edges: zenoh only in */service.py, h5py only in spinefarm/storage/, no pybullet here."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-OWN = ["protocol/keys.py", "protocol/envelope.py", "protocol/work.py", "protocol/submissions.py", "coordinator",
-       "storage", "api", "cli/service_commands.py",
-       "cli/search_loop.py", "cli/run_setup.py", "cli/search_args.py", "cli/report.py", "cli/export_command.py",
-       "worker/service.py", "bench/coordinator_throughput.py"]
+OWN = [*(f"spinefarm/{p}" for p in (
+    "protocol/keys.py", "protocol/envelope.py", "protocol/work.py", "protocol/submissions.py", "coordinator", "storage",
+    "api", "cli/service_commands.py", "cli/search_loop.py", "cli/run_setup.py", "cli/search_args.py", "cli/report.py",
+    "cli/export_command.py", "worker/service.py")), "bench/coordinator_throughput.py"]
 
 
 def loaded_after(statement: str) -> set[str]:
@@ -47,7 +47,7 @@ def test_heavy_import_statements_live_only_at_the_edges():
         if re.search(r"^\s*(import|from) zenoh\b", text, re.M):
             assert rel.endswith("service.py"), rel
         if re.search(r"^\s*(import|from) h5py\b", text, re.M):
-            assert rel.startswith("storage/"), rel
+            assert rel.startswith("spinefarm/storage/"), rel
         assert not re.search(r"^\s*(import|from) pybullet\b", text, re.M), rel
 
 

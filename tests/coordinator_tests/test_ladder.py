@@ -10,9 +10,9 @@ import sys
 import time
 
 import numpy as np
+
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.status import read_status
-
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import ROOT, coordinator, stop
 
@@ -95,7 +95,6 @@ def test_an_audit_finds_the_worker_that_disagrees_and_quarantines_it(tmp_path):
     finally:
         stop(coord, *workers)
     from spinefarm.api.app import create_app
-
     from tests.http_server import served
 
     with served(create_app(runs_dir=tmp_path)) as client:

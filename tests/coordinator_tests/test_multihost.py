@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 import pytest
-from spinefarm.storage.hdf5_reader import read_run
 
+from spinefarm.storage.hdf5_reader import read_run
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT, status
 from tests.netns import ThreeHosts, netns_unavailable

@@ -11,7 +11,6 @@ import time
 
 from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.storage.probe import check_eof
-
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import ROOT, coordinator, spinefarm, stop, wait_status
 from tests.coordinator_tests.test_run_file_faults import finished_run

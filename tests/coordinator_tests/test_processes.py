@@ -7,9 +7,9 @@ import signal
 import httpx
 import numpy as np
 import pytest
+
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import read_run
-
 from tests.coordinator_tests.helpers import free_endpoint, wait_for
 from tests.coordinator_tests.procs import coordinator, spinefarm, status, stop, wait_status, worker
 

@@ -11,10 +11,10 @@ import re
 from pathlib import Path
 
 import pytest
+
 from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.storage.hdf5 import read_run
-
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, spinefarm, stop, wait_status
 

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.storage.hdf5 import Hdf5Storage
-
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
 
@@ -83,7 +83,6 @@ def test_a_worker_that_cannot_reproduce_the_spec_hash_stops_the_run(tmp_path):
     from spinefarm.coordinator.service import CoordinatorService
     from spinefarm.coordinator.setup import SearchSettings, new_run
     from spinefarm.protocol.settings import JudgePolicy
-
     from tests.coordinator_tests.helpers import free_endpoint
 
     config = build_run_config("forged-spec", "tetraspine-ntrt", duration_s=0.2)

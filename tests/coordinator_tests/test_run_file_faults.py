@@ -12,11 +12,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+
 from spinefarm.coordinator.setup import resume_run
 from spinefarm.protocol.errors import StorageError
 from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.storage.status import read_status
-
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core
 from tests.coordinator_tests.procs import ROOT, coordinator, stop, wait_status
 from tests.coordinator_tests.test_core import ask, res, submit

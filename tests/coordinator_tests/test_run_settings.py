@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+
 from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.samplers import SAMPLERS
 from spinefarm.coordinator.samplers.base import BaseSampler, Proposal, trial_rng
@@ -20,7 +21,6 @@ from spinefarm.protocol.states import TrialStatus
 from spinefarm.protocol.submissions import ResultSubmission, SubmittedResult
 from spinefarm.protocol.work import WorkGrant, WorkRequest
 from spinefarm.storage.hdf5_reader import read_meta
-
 from tests.coordinator_tests.helpers import FakeClock
 
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from spinefarm.storage import pareto
 from spinefarm.storage.hdf5 import Hdf5Storage
-
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, stop, worker
 

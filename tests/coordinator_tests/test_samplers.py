@@ -6,6 +6,7 @@ import re
 
 import numpy as np
 import pytest
+
 from spinefarm.coordinator.samplers import (
     DEFAULT_SAMPLER,
     SAMPLERS,
@@ -18,7 +19,6 @@ from spinefarm.coordinator.samplers import (
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.schema import PHASE_PATTERN
-
 from tests.storage_tests.conftest import make_meta, result
 
 

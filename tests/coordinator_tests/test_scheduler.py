@@ -5,9 +5,9 @@ from __future__ import annotations
 import itertools
 
 import pytest
+
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.protocol.errors import ConfigError
-
 from tests.coordinator_tests.helpers import FakeClock
 
 

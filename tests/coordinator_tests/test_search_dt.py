@@ -6,8 +6,8 @@ import subprocess
 import sys
 
 import numpy as np
-from spinefarm.storage.hdf5_reader import read_run
 
+from spinefarm.storage.hdf5_reader import read_run
 from tests.coordinator_tests.procs import ROOT
 
 

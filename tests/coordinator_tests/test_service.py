@@ -8,6 +8,7 @@ import time
 
 import pytest
 import zenoh
+
 from spinefarm.coordinator.service import CoordinatorService, zenoh_config
 from spinefarm.protocol import keys
 from spinefarm.protocol.envelope import decode, decode_message, encode_message
@@ -15,7 +16,6 @@ from spinefarm.protocol.submissions import ResultAck
 from spinefarm.protocol.work import RunInfo, WorkGrant, WorkRequest
 from spinefarm.storage.status import read_status
 from spinefarm.worker.service import WorkerService, ZenohAccess
-
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
 
 pytestmark = pytest.mark.integration

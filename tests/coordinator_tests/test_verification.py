@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
+
 from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.protocol.envelope import decode_message
@@ -15,7 +16,6 @@ from spinefarm.protocol.submissions import ResultAck, ResultSubmission, Submitte
 from spinefarm.protocol.work import WorkGrant, WorkRequest
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.worker.service import build_evaluator
-
 from tests.coordinator_tests.helpers import FakeClock
 
 

@@ -12,11 +12,11 @@ import sys
 import pytest
 import yaml
 import zenoh
+
 from spinefarm.cli.router_command import guarded, router_config
 from spinefarm.coordinator.service import zenoh_config
 from spinefarm.protocol import keys
 from spinefarm.protocol.credentials import load_credentials
-
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import ROOT, spinefarm, stop, wait_status
 

@@ -3,6 +3,7 @@
 from dataclasses import dataclass
 
 import pytest
+
 from spinefarm.protocol.errors import ConfigError, bounded, check_fields, whole
 
 

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import pytest
-from spinefarm.protocol.envelope import decode
 
+from spinefarm.protocol.envelope import decode
 from tests.coordinator_tests.helpers import sphere_core
 from tests.coordinator_tests.test_core import ask
 from tests.coordinator_tests.test_hostile_peers import assert_unchanged, snapshot

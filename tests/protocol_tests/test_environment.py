@@ -11,6 +11,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
 from spinefarm.protocol.environment import describe_differences, differences, environment_record
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from spinefarm.protocol.errors import ParameterError
 from spinefarm.protocol.params import ParamSpace, ParamSpec
 from spinefarm.robot.morphology.registry import load_morphology

@@ -4,6 +4,7 @@ the worker's whole result batch, so the worker cuts every note to the limit befo
 from __future__ import annotations
 
 import pytest
+
 from spinefarm.protocol.errors import MessageError
 from spinefarm.protocol.results import MAX_EXTRA_TEXT_CHARS, TrialResult, fit_extras
 from spinefarm.protocol.states import TrialStatus

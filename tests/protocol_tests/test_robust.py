@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from spinefarm.cli.main import main
 from spinefarm.coordinator.objectives import objective_fn, robust_objective
 from spinefarm.protocol.envelope import decode_message, encode_message

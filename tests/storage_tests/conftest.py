@@ -3,6 +3,7 @@ from __future__ import annotations
 import time
 
 import pytest
+
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.protocol.states import TrialStatus

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import h5py
 import numpy as np
+
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import read_run
-
 from tests.storage_tests.conftest import make_meta, result
 
 

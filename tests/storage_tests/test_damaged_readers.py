@@ -84,7 +84,6 @@ def _garble(path):
 
 def test_invalid_utf8_in_stored_cells_gives_no_500_and_no_traceback(files, tmp_path):
     from spinefarm.api.app import create_app
-
     from tests.http_server import served
 
     good, _ = files
@@ -114,7 +113,6 @@ def test_export_of_a_damaged_file_gives_one_line(files, tmp_path):
 
 def test_a_405_names_what_is_allowed_and_trials_csv_is_documented_as_csv(files):
     from spinefarm.api.app import create_app
-
     from tests.http_server import served
 
     good, _ = files

@@ -7,11 +7,11 @@ import dataclasses
 
 import numpy as np
 import pytest
+
 from spinefarm.protocol.robust import EpisodeResult
 from spinefarm.storage.episodes import EPISODE_NAMES
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import Hdf5Reader, read_episodes
-
 from tests.storage_tests.conftest import make_meta, result
 
 

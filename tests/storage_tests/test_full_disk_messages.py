@@ -8,9 +8,9 @@ import subprocess
 import sys
 
 import pytest
+
 from spinefarm.coordinator.setup import resume_run
 from spinefarm.protocol.errors import StorageError
-
 from tests.coordinator_tests.procs import ROOT
 from tests.coordinator_tests.test_run_file_faults import finished_run, small_fs  # noqa: F401 (a fixture)
 

@@ -10,11 +10,11 @@ import time
 import h5py
 import numpy as np
 import pytest
+
 from spinefarm.protocol.errors import StorageError
 from spinefarm.storage.export import best_table, write_csv
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import read_meta, read_run, snapshot
-
 from tests.storage_tests.conftest import make_meta, result
 
 

@@ -13,8 +13,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from spinefarm.storage.hdf5_reader import read_run
 
+from spinefarm.storage.hdf5_reader import read_run
 from tests.coordinator_tests.procs import ROOT
 
 SHIM_SOURCE = Path(__file__).parent / "data" / "nolock.c"

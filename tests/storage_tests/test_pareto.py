@@ -9,13 +9,13 @@ import sys
 
 import numpy as np
 import pytest
+
 from spinefarm.api.app import create_app
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage import pareto
 from spinefarm.storage.export import write_csv
 from spinefarm.storage.hdf5 import Hdf5Storage
-
 from tests.coordinator_tests.procs import ROOT
 from tests.http_server import served
 

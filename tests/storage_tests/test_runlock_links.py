@@ -9,10 +9,10 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from spinefarm.coordinator.setup import resume_run
 from spinefarm.protocol.errors import StorageError
 from spinefarm.storage.hdf5_reader import read_run
-
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core
 from tests.coordinator_tests.procs import ROOT, coordinator, stop, wait_status
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.states import TrialStatus
-
 from tests.storage_tests.conftest import result
 
 

@@ -20,10 +20,10 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.storage.validate import row_problems
-
 from tests.storage_tests.conftest import result
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.engines import engine_names
 from spinefarm.robot.morphology.structure import Rod, RodMaterial, String, StringMaterial, StructureSpec

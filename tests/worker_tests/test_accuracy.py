@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import pytest
+
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.accuracy import pareto
 from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial

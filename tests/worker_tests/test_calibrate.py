@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+
 from spinefarm.api.app import create_app
 from spinefarm.protocol.engine_choice import EngineChoice
 from spinefarm.protocol.errors import ConfigError
@@ -16,7 +17,6 @@ from spinefarm.protocol.settings import RunSettings
 from spinefarm.robot.morphology.registry import builtin_path, load_morphology
 from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.worker.calibrate import agreement, decide
-
 from tests.coordinator_tests.procs import ROOT
 from tests.http_server import served
 

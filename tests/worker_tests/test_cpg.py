@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from spinefarm.worker.control.cpg import SLOW_RATE_STEP, CpgIntegrator, CpgNetwork
 
 

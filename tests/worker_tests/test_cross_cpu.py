@@ -9,21 +9,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from spinefarm.robot import fixedmath as fm
 
 from bench.cross_cpu import compare
+from spinefarm.robot import fixedmath as fm
 
 ROOT = Path(__file__).resolve().parents[2]
+PACKAGE = ROOT / "spinefarm"
 # every module a trial's numbers pass through (drawing, the morphology contract and the accuracy sweeps only read
 # results and are left out)
-MODEL_PATH = [*sorted((ROOT / "robot").rglob("*.py")),
-              *[ROOT / "worker" / f for f in ("trial.py", "episode.py", "setup.py", "scoring.py", "verify.py",
+MODEL_PATH = [*sorted((PACKAGE / "robot").rglob("*.py")),
+              *[PACKAGE / "worker" / f for f in ("trial.py", "episode.py", "setup.py", "scoring.py", "verify.py",
                                               "replay.py", "loop.py", "batch.py")],
-              *sorted((ROOT / "worker" / "engines").glob("*.py")), *sorted((ROOT / "worker" / "sim").glob("*.py")),
-              *sorted((ROOT / "worker" / "control").glob("*.py"))]
+              *(p for sub in ("engines", "sim", "control") for p in sorted((PACKAGE / "worker" / sub).glob("*.py")))]
 BLAS_CALLS = {"dot", "matmul", "einsum", "inner", "vdot", "tensordot", "outer", "kron"}
 # LAPACK's eigenvalues give the stable-step estimate; their result is rounded (fixedmath.round_significant)
-ALLOWED = {("worker/sim/stability.py", "np.linalg.eigvalsh")}
+ALLOWED = {("spinefarm/worker/sim/stability.py", "np.linalg.eigvalsh")}
 
 
 def _blas_uses(path: Path, rel: str | None = None) -> list[str]:
@@ -49,7 +49,7 @@ def test_no_blas_in_the_model_path():
 def test_the_scan_sees_a_blas_call(tmp_path):
     bad = tmp_path / "probe.py"
     bad.write_text("import numpy as np\n\ndef f(a, b):\n    return a @ b + np.linalg.norm(a) + a.dot(b)\n")
-    assert len(_blas_uses(bad, "worker/sim/probe.py")) == 3
+    assert len(_blas_uses(bad, "spinefarm/worker/sim/probe.py")) == 3
 
 
 # numpy's transcendental ufuncs run its own vectorised code on AVX-512 CPUs (X86_V4) and glibc's elsewhere: the
@@ -89,7 +89,8 @@ def test_the_scan_sees_a_vectorised_sine_but_not_a_compiled_one(tmp_path):
     probe = tmp_path / "probe.py"
     probe.write_text("import numpy as np\nfrom numba import njit\n\n@njit(cache=True)\ndef k(x):\n"
                      "    return np.sin(x)\n\ndef f(x):\n    return np.arctan2(x, 1.0) + np.exp(x)\n")
-    assert [u.split(": ")[1] for u in _vectorised_libm_uses(probe, "robot/probe.py")] == ["np.arctan2", "np.exp"]
+    uses = _vectorised_libm_uses(probe, "spinefarm/robot/probe.py")
+    assert [u.split(": ")[1] for u in uses] == ["np.arctan2", "np.exp"]
 
 
 def test_fixedmath_equals_numpy_to_rounding():

@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import pytest
+
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.engines import ENGINES, check_engine_options, engine_names, engine_spec
 from spinefarm.robot.trial_config import TrialConfig

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.spaces import followable_limits

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
+
 from spinefarm.cli.sim_commands import load_params_file
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.trial import TrialConfig, run_trial

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+
 from spinefarm.robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
 from spinefarm.robot.spaces import NtrtTableSpace
@@ -22,7 +23,6 @@ from spinefarm.worker.contract import (
 )
 from spinefarm.worker.sim import strings as sk
 from spinefarm.worker.trial import TrialConfig, simulate, string_tables
-
 from tests.worker_tests.helpers import ENGINES
 
 

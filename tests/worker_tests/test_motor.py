@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from spinefarm.worker.sim.strings import motor_ntrt2014, motor_physical
 
 K, TMAX, V, A = 1000.0, 7000.0, 24.0, 10000.0

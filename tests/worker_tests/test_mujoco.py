@@ -10,6 +10,7 @@ import sys
 import mujoco
 import numpy as np
 import pytest
+
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.bodies import build_bodies
@@ -19,7 +20,6 @@ from spinefarm.worker.engines.mujoco import MujocoPhysics, MujocoSettings
 from spinefarm.worker.setup import SetupCache
 from spinefarm.worker.sim import strings as sk
 from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial, simulate
-
 from tests.worker_tests.helpers import ENGINES, PassiveRig, two_rod_structure
 
 V_CM_S, A_CM_S2 = 24.0, 10000.0
@@ -116,7 +116,6 @@ def test_absurd_stiffness_fails_as_diverged_on_mujoco(tmp_path, monkeypatch):
 
 def test_spec_file_robot_runs_on_mujoco(tmp_path, capsys):
     from spinefarm.cli.main import main
-
     from tests.worker_tests.test_specfile import GOOD
 
     path = tmp_path / "chain.yaml"

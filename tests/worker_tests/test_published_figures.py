@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.trial import random_unit_params, run_trial, simulate

@@ -9,6 +9,7 @@ from statistics import median
 import mujoco
 import numpy as np
 import pytest
+
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
 from spinefarm.robot.reach import REACH_MARGIN_CM, reachable_rod_pairs

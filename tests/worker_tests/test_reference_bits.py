@@ -8,8 +8,8 @@ import io
 import json
 
 import pytest
-from spinefarm.cli.main import main
 
+from spinefarm.cli.main import main
 from tests.worker_tests.reference_bits import DATA, cases, distances
 
 REFERENCE = json.loads(DATA.read_text())

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from spinefarm.cli.main import main
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.bodies import build_bodies

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pybullet as pb
 import pytest
+
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.bodies import build_bodies

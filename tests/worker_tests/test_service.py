@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 import pytest
+
 from spinefarm.coordinator.service import CoordinatorService
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.run import RunConfig
@@ -22,7 +23,6 @@ from spinefarm.worker.service import (
     default_worker_id,
     sphere_result,
 )
-
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
 
 pytestmark = pytest.mark.integration
@@ -144,6 +144,7 @@ class HandRolledCoordinator:
 
     def __init__(self, endpoint: str, config: RunConfig, refuse_results: bool) -> None:
         import zenoh
+
         from spinefarm.coordinator.service import zenoh_config
         from spinefarm.protocol import keys
         from spinefarm.protocol.envelope import encode, encode_message

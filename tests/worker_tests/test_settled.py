@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
+
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.setup import SetupCache
 from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate, simulate_batch

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from spinefarm.cli.main import main
 from spinefarm.protocol.errors import MorphologySpecError, UnknownMorphologyError
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.model import ControlSpec, Morphology
@@ -13,7 +14,6 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_density_factor, with_gains, with_strings
 from spinefarm.worker.sim.stability import estimate_stable_step
 from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
-
 from tests.worker_tests.helpers import mass_between_anchors
 
 

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pybullet as pb
 import pytest
+
 from spinefarm.worker.engines.couple import wrench_to_force_pairs
 from spinefarm.worker.sim import strings as sk
-
 from tests.worker_tests.helpers import ENGINES, PassiveRig, mass_between_anchors, two_rod_structure
 
 

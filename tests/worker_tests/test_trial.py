@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+
 from spinefarm.protocol.errors import ParameterError
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.registry import load_morphology

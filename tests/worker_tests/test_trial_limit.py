@@ -11,6 +11,7 @@ import threading
 import time
 
 import pytest
+
 from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.protocol.work import TrialAssignment
@@ -24,7 +25,6 @@ from spinefarm.worker.sandbox import (
     simulated_s,
     task_kind,
 )
-
 from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, spinefarm, stop
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
+
 from spinefarm.cli.main import main
 from spinefarm.worker.motion import record_every_s
 

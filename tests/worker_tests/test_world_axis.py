@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from spinefarm.protocol.results import TrialResult
 from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.engines import engine_names

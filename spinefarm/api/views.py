@@ -1,0 +1,114 @@
+"""Storage rows and status turned into JSON-ready dicts (named parameters, every score part)."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spinefarm.api.run_state import derive_state, live_figures
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, planned_evaluations
+from spinefarm.storage.status import read_status
+
+
+def _num(x: float) -> float | None:
+    return x if math.isfinite(x) else None
+
+
+def judge_of(meta: Any) -> str:
+    """How the run re-simulates its bests: in another engine at its step, or at a finer step."""
+    rung = meta.settings.judge.rung
+    if rung.engine:
+        return f"{rung.engine} at {1e3 * (rung.dt_s or 2.5e-4):g} ms"
+    return "the search's engine at a finer step" + (f" ({1e3 * rung.dt_s:g} ms)" if rung.dt_s else "")
+
+
+def verdict_label(rec: TrialRecord, meta: Any) -> str:
+    """"holds" only within tolerance at the same engine; a cross-engine judgement: "judged in ENGINE"."""
+    if rec.verification == "judged":
+        return f"judged in {meta.settings.judge.rung.engine or 'the judge engine'}"
+    return rec.verification or "not_checked"
+
+
+def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
+    meta = storage.run_meta()
+    names = meta.param_names
+    return {
+        "trial_id": rec.trial_id, "status": rec.status, "reason": rec.reason, "phase": rec.phase,
+        "parent": rec.parent if rec.parent >= 0 else None, "seed": rec.seed,
+        "objective": _num(rec.objective),
+        "scores": {k: _num(getattr(rec, k)) for k in SCORE_COLUMNS},
+        "params": dict(zip(names, rec.params, strict=True)),
+        "params_unit": dict(zip(names, rec.params_unit, strict=True)),
+        "worker_id": rec.worker_id or None,
+        "finished_at_unix_s": _num(rec.finished_at_unix_s),
+        "verification": {"verdict": rec.verification or "not_checked", "label": verdict_label(rec, meta),
+                         "fine_step_distance_m": _num(rec.verify_distance_m),
+                         "screen_distance_m": _num(rec.distance_m), "judge_distance_m": _num(rec.verify_distance_m),
+                         "screen_to_judge_ratio": _num(rec.judge_ratio),
+                         "reason": rec.verify_reason or None, "judge": judge_of(meta)},
+        "audit": {"state": rec.audit or "not_audited", "distance_m": _num(rec.audit_distance_m),
+                  "worker_id": rec.audit_worker_id or None},
+        "pareto_front": bool(rec.pareto_front),
+        "engine": rec.engine or None, "dt_s": _num(rec.dt_s), "settle_s": _num(rec.settle_s),
+        "rung": rec.rung, "duration_s": _num(rec.duration_s),
+    }
+
+
+def rung_lengths_s(settings: Any) -> list[float] | None:
+    """A multi-fidelity run's trial lengths, short to full (None for a run of one length)."""
+    if settings.scheduler != "halving" or len(settings.ladder) < 2:
+        return None
+    return [float(d) for d in settings.durations_s()]
+
+
+def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
+    """The run's status from its file alone (state, counts, best, rate and ETA), with what only a live
+    coordinator knows (leases, workers) from its status file when there is one. path: the file as the API
+    was given it, for the commands that reopen or resume it."""
+    meta = storage.run_meta()
+    counts = storage.counts()
+    live = read_status(path) or {}
+    age = time.time() - live.get("updated_at_unix_s", 0.0)
+    finished = counts["complete"] + counts["failed"]
+    planned = planned_evaluations(meta.trials_budget, meta.settings)
+    n_trials = storage.n_trials()
+    state = derive_state(path, n_trials, finished, planned, live, age)
+    cols = storage.columns() if n_trials else {}
+    finished_at = np.asarray(cols.get("finished_at_unix_s", []), dtype=float)
+    steps = np.asarray(cols.get("dt_s", []), dtype=float)
+    steps = steps[np.isfinite(steps)]
+    best = storage.best(1)
+    shown = str(path)
+    tc = meta.trial_config
+    return {
+        "run_id": meta.run_id, "file": path.name, "morphology": meta.morphology,
+        "objective": meta.objective, "state": state, "trials_budget": meta.trials_budget,
+        "trials_planned": planned,
+        "parameter_sets_sampled": storage.count_rung(0),
+        "trials_done": finished, "trials_complete": counts["complete"], "trials_failed": counts["failed"],
+        "trials_leased": live.get("trials_leased") if state == "running" else None,
+        "trials_queued": live.get("trials_queued") if state == "running" else None,
+        **live_figures(state, live, age, finished_at, max(0, planned - finished)),
+        "best": trial_view(storage, best[0]) if best else None,
+        # a finished run keeps the last the coordinator knew (who ran, who was quarantined); a stopped one shows none
+        "workers": live.get("workers", []) if state in ("running", "stalled", "done") else [],
+        "audit": {**storage.audit_counts(), "fraction": meta.settings.audit.fraction,
+                  "tolerance": meta.settings.audit.tolerance,
+                  "environments": (live.get("audit") or {}).get("environments", [])},
+        "fidelity_raised": live.get("fidelity_raised"),
+        "unservable_workers": (live.get("unservable_workers") or {}) if state in ("running", "stalled", "done") else {},
+        "status_age_s": age if live else None,
+        "started_at_unix_s": _num(meta.created_at_unix_s),
+        "controller": meta.controller or (tc.get("controller") if tc else None),
+        "engine": (tc.get("engine") or "bullet") if meta.morphology_spec else None,
+        "step_s": float(np.median(steps)) if steps.size else None,
+        "sampler": (meta.sampler or {}).get("name"),
+        "rungs_s": rung_lengths_s(meta.settings),
+        "reopen_command": f"spinefarm api {shown}",
+        "resume_command": f"spinefarm search --resume {shown}" if state in ("stopped", "failed", "empty") else None,
+    }

@@ -1,0 +1,191 @@
+"""The coordinator's Zenoh edge: queryables for run info, work, results and config; worker liveliness.
+
+The only coordinator module that imports zenoh. By default the coordinator is itself a Zenoh router
+listening on loopback, so a local run needs no separate daemon; `connect` joins an existing router.
+A background thread expires leases, flushes storage at a bounded interval and writes the status file.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import zenoh
+
+from spinefarm.coordinator.core import CoordinatorCore
+from spinefarm.protocol import keys
+from spinefarm.protocol.credentials import Credentials, is_loopback
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.status import write_status
+
+log = logging.getLogger("spinefarm.coordinator")
+DEFAULT_LISTEN = ("tcp/127.0.0.1:7447",)
+
+
+def zenoh_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str] = (),
+                 config_file: str | Path | None = None, credentials: Credentials | None = None) -> zenoh.Config:
+    """A Zenoh config: a JSON5 file passed through (TLS, access control), then our explicit settings.
+
+    Multicast scouting is off: peers meet only through explicit endpoints, never a stray network.
+    credentials: authenticate with them, and (when listening) refuse every session without them.
+    """
+    try:
+        conf = zenoh.Config.from_file(str(config_file)) if config_file else zenoh.Config()
+    except Exception as exc:  # zenoh raises its own error type for unreadable files
+        raise ConfigError(f"cannot read Zenoh config {config_file}: {exc}", expected="a JSON5 file") from exc
+    conf.insert_json5("mode", json.dumps(mode))
+    if listen:
+        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    if credentials is not None:
+        for key, value in credentials.zenoh_settings(accept=bool(listen)).items():
+            conf.insert_json5(key, value)
+    elif any(not is_loopback(e) for e in listen):
+        log.warning("listening on %s without --credentials: anyone who reaches it can take and return work",
+                    ", ".join(e for e in listen if not is_loopback(e)))
+    return conf
+
+
+def _payload(query: zenoh.Query) -> bytes:
+    return query.payload.to_bytes() if query.payload is not None else b""
+
+
+class CoordinatorService:
+    def __init__(self, core: CoordinatorCore, storage: BaseStorage, *, listen: Sequence[str] = DEFAULT_LISTEN,
+                 connect: Sequence[str] = (), zenoh_config_file: str | Path | None = None,
+                 status_file_for: str | Path | None = None, flush_interval_s: float = 1.0,
+                 tick_s: float = 0.1, credentials: Credentials | None = None) -> None:
+        self.core = core
+        self.storage = storage
+        mode = "router" if listen and not connect else "peer"
+        self._conf = zenoh_config(mode, listen, connect, zenoh_config_file, credentials)
+        self._status_for = status_file_for
+        self.flush_interval_s = flush_interval_s
+        self.tick_s = tick_s
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._session: zenoh.Session | None = None
+        self._entities: list = []
+
+    def start(self) -> CoordinatorService:
+        try:
+            self._session = s = zenoh.open(self._conf)
+        except Exception as exc:
+            raise ConfigError(f"cannot open the Zenoh session: {exc}",
+                              expected="free listen endpoints / a reachable router") from exc
+        run = self.core.run_id
+        self._entities = [
+            s.declare_queryable(keys.run_info(run), self._on_info),
+            s.declare_queryable(keys.work(run), self._guard(self.core.handle_work)),
+            s.declare_queryable(keys.results(run), self._guard(self.core.handle_results)),
+            s.declare_queryable(f"{keys.run_prefix(run)}/config/*", self._on_config),
+            s.declare_queryable(keys.problem(run), self._guard(self.core.handle_problem)),
+            s.liveliness().declare_subscriber(keys.all_worker_tokens(), self._on_liveliness, history=True),
+        ]
+        self._thread = threading.Thread(target=self._housekeeping, name="coordinator-housekeeping",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    # --- callbacks (zenoh threads) ----------------------------------------------------------------
+    def _guard(self, handler: Callable[[bytes], bytes | None]) -> Callable[[zenoh.Query], None]:
+        def on_query(query: zenoh.Query) -> None:
+            # `with` finalises the query at once; a reference kept elsewhere (a logged traceback)
+            # would otherwise hold the requester until its timeout.
+            with query:
+                try:
+                    answer = handler(_payload(query))
+                    if answer is not None:  # None: the core stopped taking work (see CoordinatorCore.failure)
+                        query.reply(query.key_expr, answer)
+                except Exception:  # a transport callback must never die: log and keep serving
+                    log.exception("query on %s failed", query.key_expr)
+        return on_query
+
+    def _on_info(self, query: zenoh.Query) -> None:
+        with query:
+            try:
+                query.reply(keys.run_info(self.core.run_id), self.core.run_info())
+            except Exception:
+                log.exception("run info query failed")
+
+    def _on_config(self, query: zenoh.Query) -> None:
+        with query:
+            try:
+                config_hash = str(query.key_expr).rsplit("/", 1)[-1]
+                query.reply(query.key_expr, self.core.handle_config(config_hash))
+            except Exception:
+                log.exception("config query failed")
+
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        try:
+            worker_id = keys.worker_id_of_token(str(sample.key_expr))
+            if worker_id is None:
+                return
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self.core.worker_lost(worker_id)
+            else:
+                self.core.worker_seen(worker_id)
+        except Exception:
+            log.exception("liveliness event failed")
+
+    # --- housekeeping -----------------------------------------------------------------------------
+    def _housekeeping(self) -> None:
+        last_flush = time.monotonic()
+        while not self._stop.wait(self.tick_s):
+            try:
+                self.core.tick()
+                if time.monotonic() - last_flush >= self.flush_interval_s:
+                    self.flush()
+                    last_flush = time.monotonic()
+            except Exception:
+                log.exception("housekeeping failed")
+
+    def flush(self) -> None:
+        with self.core.lock:
+            self.core.commit()
+            status = self.core.status()
+        if self._status_for is not None:
+            try:
+                write_status(self._status_for, status)
+            except OSError as exc:  # a full disk must not stop housekeeping (leases still expire)
+                log.warning("cannot write the status file: %s", exc)
+
+    def wait_done(self, timeout_s: float | None = None, poll_s: float = 0.05) -> bool:
+        end = None if timeout_s is None else time.monotonic() + timeout_s
+        while not self.core.done and self.core.failure is None:
+            if end is not None and time.monotonic() >= end:
+                return False
+            time.sleep(poll_s)
+        return True
+
+    def close(self) -> None:
+        """Stop serving, store everything, release the file and the session."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+        for e in self._entities:
+            try:
+                e.undeclare()
+            except Exception:
+                log.debug("undeclare failed", exc_info=True)
+        self._entities = []
+        try:
+            self.flush()
+            if self._status_for is not None and self.core.write_failure is None:
+                status = self.core.status()
+                if status["state"] != "done":
+                    status["state"] = "stopped"
+                write_status(self._status_for, status)
+        finally:
+            with self.core.lock:
+                self.storage.close()
+            if self._session is not None:
+                self._session.close()
+                self._session = None

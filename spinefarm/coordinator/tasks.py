@@ -1,0 +1,250 @@
+"""Tasks beside the search's own trials, run by workers like any trial: the judge and the audit.
+
+- The judge re-simulates every new full-length best at the judge's rung before it counts (a finer
+  step in the same engine, or another engine). Same engine: "holds" when the distance changes by at
+  most the tolerance, else "not_reproduced" (then it never counts as best and the next best is judged).
+  Another engine: "judged", the judge's distance is the one reported and the screen-to-judge ratio is
+  stored; it fails only when the judge's run fails.
+- The audit re-simulates a fraction of the results (and every new best) on another worker at the same
+  fidelity; a disagreement marks the result (it never counts as best), and its worker (PeerBook).
+- The judge takes at most its share of the workers' time while the search runs (JudgePolicy.share): a new
+  best's judge waits while the judge's runs so far took more than that share of the time spent in the
+  judge's runs and the trials together; once the search is over the best is judged whatever it cost.
+- The judge watches the screen: once three judged ratios in a row (trial-id order; bests that move 10 cm or
+  more in either run) have a median outside [1 - drift, 1 + drift], the ladder's fidelity is raised for every
+  trial leased from then on (the judge's engine at 4x the judge's step when the judge is another engine, else
+  half the step).
+
+Task state lives in storage (verification and audit columns: pending, then the verdict), so a restarted
+coordinator issues pending tasks again. In the lease scheduler a task is a negative key, never a row id.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from spinefarm.protocol.results import TrialResult
+from spinefarm.protocol.settings import RunSettings, TaskFidelity
+from spinefarm.protocol.states import AuditState, Verification
+from spinefarm.storage.base import BaseStorage
+
+log = logging.getLogger("spinefarm.coordinator")
+JUDGE, AUDIT, REFEREE = 1, 2, 3
+_KINDS = {JUDGE: "judge", AUDIT: "audit", REFEREE: "referee"}
+_KEY_STRIDE = 4
+_DRIFT_WINDOW = 3
+# a best that barely moves says nothing of the screen: a few millimetres of step error are a factor of 4 on the
+# first bests of a search, which move a few centimetres, and once halved the step stays halved all run
+_DRIFT_MIN_DISTANCE_M = 0.1
+
+
+def task_key(kind: int, trial_id: int) -> int:
+    return -(_KEY_STRIDE * trial_id + kind)
+
+
+def split_key(key: int) -> tuple[str, int]:
+    """("trial", id) for a row, ("judge" | "audit" | "referee", id of the row it checks) for a task."""
+    if key >= 0:
+        return "trial", key
+    return _KINDS[-key % _KEY_STRIDE], -key // _KEY_STRIDE
+
+
+def relative_change(a: float, b: float) -> float:
+    return abs(a - b) / max(abs(b), 1e-9)
+
+
+def judge_verdict(distance_m: float, cross_engine: bool, engine: str, r: TrialResult,
+                  tolerance: float) -> tuple[Verification, str]:
+    """The judge's verdict on a stored distance from its re-simulation `r` (and its perturbed run)."""
+    if not r.ok:
+        return Verification.NOT_REPRODUCED, f"{engine or 'judge'} run {r.status}: {r.reason}"
+    if cross_engine:
+        return Verification.JUDGED, ""
+    reasons = []
+    runs = [("finer step", r.distance_m)]
+    if "perturbed_distance_m" in r.extras:
+        runs.append(("perturbed", float(r.extras["perturbed_distance_m"])))
+    for name, d in runs:
+        change = relative_change(d, distance_m) if math.isfinite(d) else math.inf
+        if change > tolerance:
+            reasons.append(f"{name} run moved {d:.4g} m against {distance_m:.4g} m ({change:.1%} > {tolerance:.0%})")
+    return (Verification.NOT_REPRODUCED, "; ".join(reasons)) if reasons else (Verification.HOLDS, "")
+
+
+class TaskBook:
+    """Issues judge and audit tasks through the lease scheduler and stores what they find (lock held)."""
+
+    def __init__(self, storage: BaseStorage, settings: RunSettings, run_engine: str | None, seed: int,
+                 judged: bool) -> None:
+        self.storage = storage
+        self.settings = settings
+        self.run_engine = run_engine
+        self.seed = seed
+        self.judged = judged   # the run has a judge (test objectives only when one is named)
+        self.pending: set[int] = set()   # task keys issued and not yet settled
+        self.judge_wall_s = 0.0   # the judge's runs settled since this coordinator started (pacing only)
+
+    # --- fidelity -----------------------------------------------------------------------------------
+    @property
+    def judge_engine(self) -> str | None:
+        return self.settings.judge.rung.engine
+
+    def drift(self) -> str | None:
+        """Why the screen is no longer trusted (three judged ratios in a row drifted), or None."""
+        cols = self.storage.columns()
+        moved = np.fmax(cols["distance_m"], cols["verify_distance_m"]) >= _DRIFT_MIN_DISTANCE_M
+        ratios = cols["judge_ratio"][np.isfinite(cols["judge_ratio"]) & moved]
+        d = self.settings.judge.drift
+        for i in range(len(ratios) - _DRIFT_WINDOW + 1):
+            m = float(np.median(ratios[i:i + _DRIFT_WINDOW]))
+            if not 1 - d <= m <= 1 + d:
+                return f"median screen-to-judge ratio {m:.3g} of {_DRIFT_WINDOW} judged bests outside " \
+                       f"[{1 - d:.3g}, {1 + d:.3g}]"
+        return None
+
+    def trial_fidelity(self, rung: int, raised: bool) -> TaskFidelity:
+        r = self.settings.ladder[rung]
+        if not raised:
+            return TaskFidelity.of("trial", r)
+        judge = self.settings.judge.rung
+        if judge.engine is not None and judge.engine != (r.engine or self.run_engine):
+            return TaskFidelity("trial", judge.engine, None if judge.dt_s is None else 4 * judge.dt_s, r.settle_s)
+        step = r.dt_s if r.dt_s is not None else (None if judge.dt_s is None else 4 * judge.dt_s)
+        return TaskFidelity("trial", r.engine, None if step is None else step / 2, r.settle_s)
+
+    def task_fidelity(self, key: int) -> TaskFidelity:
+        kind, tid = split_key(key)
+        if kind == "judge":
+            return TaskFidelity.of("judge", self.settings.judge.rung, self.settings.judge.perturb)
+        row = self.storage.trial(tid)  # an audit (and its referee) re-runs the row exactly as it ran
+        dt = row.dt_s if math.isfinite(row.dt_s) else None
+        settle = row.settle_s if math.isfinite(row.settle_s) else None
+        return TaskFidelity("audit", row.engine or None, dt, settle)
+
+    def excluded(self, key: int) -> set[str]:
+        """Workers that may not run task `key`: an audit goes to another worker than the result's, a
+        referee to a third one."""
+        kind, tid = split_key(key)
+        if kind not in ("audit", "referee"):
+            return set()
+        row = self.storage.trial(tid)
+        return {row.worker_id, row.audit_worker_id} if kind == "referee" else {row.worker_id}
+
+    # --- issuing ------------------------------------------------------------------------------------
+    def restart(self) -> list[int]:
+        """Task keys to issue again after a restart: every pending verification and audit."""
+        cols = self.storage.columns()
+        keys = [task_key(JUDGE, int(t)) for t in np.flatnonzero(cols["verification"] == Verification.PENDING.stored)]
+        keys += [task_key(AUDIT, int(t)) for t in np.flatnonzero(cols["audit"] == AuditState.PENDING.stored)]
+        keys += [task_key(REFEREE, int(t)) for t in np.flatnonzero(cols["audit"] == AuditState.DISPUTED.stored)]
+        self.pending.update(keys)
+        return keys
+
+    def judge_due(self, top_rung: int, search_over: bool = False) -> tuple[int | None, list[int]]:
+        """(the best's judge task key if it is due, queued judge keys of overtaken bests to drop). While the
+        search runs, a judge is due only within the judge's share of the workers' time."""
+        if not (self.judged and self.settings.judge.enabled):
+            return None, []
+        best = self.storage.best_ids(1)
+        if not best:
+            return None, []
+        tid = best[0]
+        cols = self.storage.columns()
+        key = task_key(JUDGE, tid)
+        if int(cols["rung"][tid]) < top_rung or cols["verification"][tid] != Verification.NOT_CHECKED.stored:
+            return None, []  # a screened best is provisional; a judged or pending one is on its way
+        if not search_over and self.over_share(cols["wall_time_s"]):
+            return None, []
+        self.storage.set_verification(tid, Verification.PENDING)
+        self.pending.add(key)
+        return key, [k for k in self.pending if k != key and split_key(k)[0] == "judge"]
+
+    def over_share(self, trial_wall_s: np.ndarray) -> bool:
+        """Has the judge taken more than its share of the time spent in its runs and the trials'?"""
+        share = self.settings.judge.share
+        trials_s = float(np.sum(trial_wall_s, where=np.isfinite(trial_wall_s)))
+        return self.judge_wall_s * (1.0 - share) > share * trials_s
+
+    def drop(self, key: int) -> None:
+        """A task no longer wanted (an overtaken best's judge, an audit nobody can run)."""
+        self.pending.discard(key)
+        kind, tid = split_key(key)
+        if kind == "judge":
+            self.storage.set_verification(tid, Verification.NOT_CHECKED)
+        elif kind == "audit":
+            self.storage.set_audit(tid, AuditState.NOT_AUDITED)
+        # a referee nobody can run leaves the result disputed (it does not count as best)
+
+    def audit_due(self, tid: int) -> int | None:
+        """The audit task of a just stored result, if it is to be audited: a fraction of them and
+        every new best."""
+        a = self.settings.audit
+        if not a.enabled:
+            return None
+        best = self.storage.best_ids(1)
+        drawn = np.random.default_rng([self.seed, tid, 0xA0D17]).random() < a.fraction
+        if not (drawn or (best and best[0] == tid)):
+            return None
+        key = task_key(AUDIT, tid)
+        self.storage.set_audit(tid, AuditState.PENDING)
+        self.pending.add(key)
+        return key
+
+    def best_audit_due(self) -> int | None:
+        """The audit of the current best if it has none: a result that becomes best later (the one before
+        it fell) is audited too."""
+        best = self.storage.best_ids(1)
+        if not (self.settings.audit.enabled and best):
+            return None
+        if self.storage.columns()["audit"][best[0]] != AuditState.NOT_AUDITED.stored:
+            return None
+        key = task_key(AUDIT, best[0])
+        self.storage.set_audit(best[0], AuditState.PENDING)
+        self.pending.add(key)
+        return key
+
+    # --- results --------------------------------------------------------------------------------------
+    def settle_judge(self, tid: int, r: TrialResult) -> None:
+        if math.isfinite(r.wall_time_s):
+            self.judge_wall_s += r.wall_time_s
+        row = self.storage.trial(tid)
+        engine = str(r.extras.get("engine", "")) or (self.judge_engine or "")
+        cross = self.judge_engine is not None and self.judge_engine != (row.engine or self.run_engine)
+        verdict, reason = judge_verdict(row.distance_m, cross, engine, r, self.settings.judge.tolerance)
+        ratio = row.distance_m / r.distance_m if r.ok and r.distance_m != 0 else math.nan
+        self.storage.set_verification(tid, verdict, r.distance_m, reason, ratio)
+        if verdict == Verification.NOT_REPRODUCED:
+            log.warning("best trial %d not reproduced: %s", tid, reason)
+
+    def settle_audit(self, tid: int, r: TrialResult, worker_id: str) -> list[tuple[str, bool]]:
+        """Store an audit; (worker, agreed) for each worker it judged. A disagreement is refereed by a
+        third worker before anybody is blamed (the referee task is returned by `referee_due`)."""
+        row = self.storage.trial(tid)
+        if _same(r, row.status == "complete", row.distance_m, self.settings.audit.tolerance):
+            self.storage.set_audit(tid, AuditState.AGREES, r.distance_m, worker_id)
+            return [(row.worker_id, True), (worker_id, True)]
+        self.storage.set_audit(tid, AuditState.DISPUTED, r.distance_m, worker_id)
+        self.pending.add(task_key(REFEREE, tid))
+        log.warning("audit of trial %d disputed: worker %s measured %.6g m, worker %s %.6g m; a third worker "
+                    "referees", tid, row.worker_id, row.distance_m, worker_id, r.distance_m)
+        return []
+
+    def settle_referee(self, tid: int, r: TrialResult) -> list[tuple[str, bool]]:
+        """The third worker's run decides a disputed audit: whoever it contradicts is wrong (the result's
+        worker when it matches neither)."""
+        row = self.storage.trial(tid)
+        tol = self.settings.audit.tolerance
+        if _same(r, row.status == "complete", row.distance_m, tol):
+            self.storage.set_audit(tid, AuditState.OVERRULED, row.audit_distance_m, row.audit_worker_id)
+            return [(row.audit_worker_id, False), (row.worker_id, True)]
+        self.storage.set_audit(tid, AuditState.DISAGREES, row.audit_distance_m, row.audit_worker_id)
+        log.warning("result of trial %d from worker %s not reproduced by two other workers", tid, row.worker_id)
+        return [(row.worker_id, False)]
+
+
+def _same(r: TrialResult, ok: bool, distance_m: float, tolerance: float) -> bool:
+    """`r` reproduces a stored outcome (both failed, or both complete within the relative tolerance)."""
+    return r.ok == ok and (not ok or relative_change(r.distance_m, distance_m) <= tolerance)

@@ -1,0 +1,296 @@
+"""Do the two tiers rank this robot's gaits alike? (`spinefarm calibrate`, `search --engine auto`)
+
+Seeded random gaits plus the bests of a short search on the fast tier (a hill climb from the best random
+gait) run on both tiers (MuJoCo and Bullet, each at its default step and options, after a settle phase).
+From their distances: the Spearman rank correlation, how many of MuJoCo's top 10 are among Bullet's top 10,
+and the median distance ratio (MuJoCo / Bullet) over the gaits that move at least 1 cm in Bullet; and for
+each tier its cost (CPU s per simulated s) and its step error (median relative change of the distance at
+half the step, over a few gaits that move). The fast tier passes when rho >= 0.9, the overlap >= 8 of 10
+and the ratio is within [0.9, 1.1]; a search then screens on MuJoCo, otherwise it runs on Bullet.
+
+Results are cached as JSON by the spec's hash, the calibration's settings and a digest of the simulating
+code and engine versions (cache_dir()): a change of either engine's model calibrates again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import json
+import math
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spinefarm.protocol.errors import ConfigError, bounded, check_fields, whole
+from spinefarm.protocol.run import json_hash
+from spinefarm.robot.morphology.registry import load_morphology
+
+RHO_MIN = 0.9
+TOP_K = 10
+OVERLAP_MIN = 8  # of TOP_K (scaled down when fewer gaits run)
+RATIO_RANGE = (0.9, 1.1)
+MOVING_M = 0.01
+STEP_ERROR_GAITS = 4  # gaits per tier re-run at half the step
+SEARCH_SIGMA = 0.1  # the short search's step in the unit cube
+TIERS = ("mujoco", "bullet")
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """gaits: seeded random gaits (seeds 1..gaits); search_trials: a short search on MuJoCo (a Gaussian
+    hill climb from the best random gait, seeds after those), whose `bests` best join them; trials of
+    duration_s after a settle_s settle; jobs: processes."""
+
+    gaits: int = whole(40, 3, 100_000)
+    search_trials: int = whole(40, 0, 100_000)
+    bests: int = whole(10, 0, 100_000)
+    duration_s: float = bounded(5.0, 0.0, 3600.0, low_inclusive=False)
+    settle_s: float = bounded(1.0, 0.0, 60.0)
+    controller: str | None = None
+    jobs: int = whole(1, 1, 100_000)
+
+    def __post_init__(self) -> None:
+        check_fields(self, "calibration ")
+        if self.bests > self.search_trials:
+            raise ConfigError("calibration bests exceed the search's trials", received=self.bests,
+                              expected=f"at most {self.search_trials}")
+
+    def key(self) -> str:
+        """What the result depends on besides the robot (not the number of processes)."""
+        return json_hash({k: v for k, v in dataclasses.asdict(self).items() if k != "jobs"})
+
+
+def ranks(x: np.ndarray) -> np.ndarray:
+    """Average ranks (ties share their mean rank)."""
+    order = np.argsort(x, kind="mergesort")
+    r = np.empty(len(x))
+    r[order] = np.arange(len(x), dtype=float)
+    for v in np.unique(x):
+        tie = x == v
+        if tie.sum() > 1:
+            r[tie] = r[tie].mean()
+    return r
+
+
+def spearman(a: np.ndarray, b: np.ndarray) -> float:
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3:
+        return math.nan
+    ra, rb = ranks(a[ok]), ranks(b[ok])
+    if ra.std() == 0 or rb.std() == 0:
+        return math.nan
+    return float(np.corrcoef(ra, rb)[0, 1])
+
+
+def agreement(bullet: np.ndarray, mujoco: np.ndarray, top: int = TOP_K) -> dict[str, Any]:
+    """Spearman rho, top-`top` overlap and the median distance ratio over gaits moving >= MOVING_M in Bullet."""
+    ok = np.isfinite(bullet) & np.isfinite(mujoco)
+    moving = ok & (np.abs(bullet) >= MOVING_M)
+    k = min(top, int(ok.sum()))
+    idx = np.flatnonzero(ok)
+    top_b = set(idx[np.argsort(-bullet[ok], kind="stable")[:k]])
+    top_m = set(idx[np.argsort(-mujoco[ok], kind="stable")[:k]])
+    return {"n": int(ok.sum()), "spearman": spearman(bullet, mujoco), "top_overlap": len(top_b & top_m), "top_k": k,
+            "n_moving": int(moving.sum()),
+            "median_distance_ratio": float(np.median(mujoco[moving] / bullet[moving])) if moving.any() else None,
+            "failed": {"bullet": int((~np.isfinite(bullet)).sum()), "mujoco": int((~np.isfinite(mujoco)).sum())}}
+
+
+def decide(agree: dict[str, Any]) -> tuple[str, str]:
+    """("mujoco" or "bullet", why): MuJoCo screens when it ranks and measures as Bullet does."""
+    need = math.ceil(OVERLAP_MIN * agree["top_k"] / TOP_K)
+    rho, ratio = agree["spearman"], agree["median_distance_ratio"]
+    fails = []
+    if not (isinstance(rho, float) and rho >= RHO_MIN):
+        fails.append(f"rho {rho:.3f} < {RHO_MIN}")
+    if agree["top_overlap"] < need:
+        fails.append(f"top-{agree['top_k']} overlap {agree['top_overlap']} < {need}")
+    if ratio is None or not RATIO_RANGE[0] <= ratio <= RATIO_RANGE[1]:
+        shown = "none (no gait moves)" if ratio is None else f"{ratio:.3f}"
+        fails.append(f"distance ratio {shown} outside [{RATIO_RANGE[0]}, {RATIO_RANGE[1]}]")
+    if fails:
+        return "bullet", "the fast tier disagrees: " + "; ".join(fails)
+    return "mujoco", (f"the fast tier agrees: rho {rho:.3f} >= {RHO_MIN}, top-{agree['top_k']} overlap "
+                      f"{agree['top_overlap']} >= {need}, distance ratio {ratio:.3f} in [{RATIO_RANGE[0]}, "
+                      f"{RATIO_RANGE[1]}]")
+
+
+_CACHE = None  # one SetupCache per process
+
+
+def _trial(job: tuple) -> tuple[float, float]:
+    """(distance m or nan, CPU s per simulated s) of one trial."""
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial import run_trial
+
+    global _CACHE
+    _CACHE = _CACHE or SetupCache(8)
+    source, unit, seed, engine, dt_scale, settings = job
+    morph = load_morphology(source)
+    cfg = TrialConfig(duration_s=settings.duration_s, settle_s=settings.settle_s, engine=engine)
+    if dt_scale != 1.0:
+        cfg = dataclasses.replace(cfg, dt_s=cfg.step_s * dt_scale)
+    t0 = time.process_time()
+    r = run_trial(morph, np.asarray(unit), cfg, seed, controller=settings.controller, setup=_CACHE)
+    return (r.distance_m if r.ok else math.nan), (time.process_time() - t0) / max(r.sim_time_s, 1e-9)
+
+
+def _run(jobs: list[tuple], processes: int) -> list[tuple[float, float]]:
+    if processes <= 1:
+        return [_trial(j) for j in jobs]
+    with ProcessPoolExecutor(processes) as pool:
+        return list(pool.map(_trial, jobs))
+
+
+def _step_error(source: str, gaits: list, distances: np.ndarray, engine: str, settings: CalibrationSettings
+                ) -> float | None:
+    """Median |d(dt) - d(dt/2)| / |d(dt/2)| over the first STEP_ERROR_GAITS gaits that move."""
+    moving = [i for i in np.argsort(-np.abs(np.nan_to_num(distances)))
+              if np.isfinite(distances[i]) and abs(distances[i]) >= MOVING_M][:STEP_ERROR_GAITS]
+    if not moving:
+        return None
+    half = _run([(source, gaits[i][0], gaits[i][1], engine, 0.5, settings) for i in moving], settings.jobs)
+    errs = [abs(distances[i] - h) / abs(h) for i, (h, _) in zip(moving, half, strict=True) if np.isfinite(h) and h]
+    return float(np.median(errs)) if errs else None
+
+
+def _short_search(source: str, gaits: list, screen: list, s: CalibrationSettings) -> list:
+    """A Gaussian hill climb on MuJoCo (sigma SEARCH_SIGMA in the unit cube, `jobs` proposals a round) from the
+    best random gait: [((unit vector, seed), (distance, cost))] of its search_trials trials."""
+    rng = np.random.default_rng(0)
+    distances = np.nan_to_num([d for d, _ in screen], nan=-np.inf)
+    best_u, best_d = np.asarray(gaits[int(np.argmax(distances))][0]), float(np.max(distances))
+    out: list = []
+    seed = len(gaits)
+    while len(out) < s.search_trials:
+        batch = []
+        for _ in range(min(s.jobs, s.search_trials - len(out))):
+            seed += 1
+            batch.append((tuple(np.clip(best_u + rng.normal(0.0, SEARCH_SIGMA, best_u.shape), 0.0, 1.0)), seed))
+        results = _run([(source, u, k, "mujoco", 1.0, s) for u, k in batch], s.jobs)
+        for g, r in zip(batch, results, strict=True):
+            out.append((g, r))
+            if np.isfinite(r[0]) and r[0] > best_d:
+                best_u, best_d = np.asarray(g[0]), r[0]
+    return out
+
+
+def calibrate(source: str, settings: CalibrationSettings) -> dict[str, Any]:
+    """Run the calibration of a robot (built-in name or spec file) and return its figures and decision."""
+    from spinefarm.worker.trial import random_unit_params
+
+    t_wall = time.time()
+    morph = load_morphology(source)
+    s = settings
+    gaits = [(tuple(random_unit_params(morph, seed, s.controller)), seed) for seed in range(1, s.gaits + 1)]
+    screen = _run([(source, u, seed, "mujoco", 1.0, s) for u, seed in gaits], s.jobs)
+    searched = _short_search(source, gaits, screen, s)
+    gaits += [g for g, _ in searched]
+    screen += [r for _, r in searched]
+    found = np.array([d for d, _ in screen[s.gaits:]])
+    bests = [s.gaits + int(i) for i in np.argsort(-np.nan_to_num(found, nan=-np.inf), kind="stable")[:s.bests]]
+    chosen = list(range(s.gaits)) + bests
+    mujoco = np.array([screen[i][0] for i in chosen])
+    judged = _run([(source, gaits[i][0], gaits[i][1], "bullet", 1.0, s) for i in chosen], s.jobs)
+    bullet = np.array([d for d, _ in judged])
+    agree = agreement(bullet, mujoco)
+    engine, why = decide(agree)
+    cost = {"mujoco": float(np.median([screen[i][1] for i in chosen])),
+            "bullet": float(np.median([c for _, c in judged]))}
+    picked = [gaits[i] for i in chosen]
+    tiers = {t: {"cpu_s_per_sim_s": cost[t],
+                 "step_error": _step_error(source, picked, d, t, s)} for t, d in (("mujoco", mujoco),
+                                                                                  ("bullet", bullet))}
+    return {"robot": morph.name, "source": str(source), "spec_hash": morph.spec_hash(),
+            "settings": dataclasses.asdict(s), "n_random": s.gaits, "n_bests": len(bests), **agree,
+            "tiers": tiers, "thresholds": {"spearman": RHO_MIN, "top_overlap": f"{OVERLAP_MIN} of {TOP_K}",
+                                           "median_distance_ratio": list(RATIO_RANGE)},
+            "decision": engine, "reason": why,
+            "distance_m": {"mujoco": _finite_list(mujoco), "bullet": _finite_list(bullet)},
+            "wall_s": time.time() - t_wall}
+
+
+def _finite_list(x: np.ndarray) -> list[float | None]:
+    return [round(float(v), 6) if np.isfinite(v) else None for v in x]
+
+
+def cache_dir() -> Path:
+    """$SPINEFARM_CACHE_DIR, else $XDG_CACHE_HOME/spinefarm, else ~/.cache/spinefarm; calibrations in calibration/."""
+    root = os.environ.get("SPINEFARM_CACHE_DIR")
+    if not root:
+        root = str(Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "spinefarm")
+    return Path(root) / "calibration"
+
+
+# what decides how a trial moves: the model, the control law and both engines' code and versions
+SIMULATING_CODE = ("robot", "worker/engines", "worker/sim", "worker/control", "worker/loop.py", "worker/trial.py")
+ENGINE_PACKAGES = ("mujoco", "pybullet", "numpy", "numba")
+
+
+def code_digest(paths: list[Path], packages: tuple[str, ...] = ()) -> str:
+    """A digest of the contents of the .py files under `paths` (files or folders) and the packages' versions."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    h = hashlib.sha256()
+    for path in paths:
+        files = sorted(path.rglob("*.py")) if path.is_dir() else [path]
+        for f in files:
+            if f.is_file():
+                h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    for name in packages:
+        try:
+            h.update(f"{name}=={version(name)}".encode())
+        except PackageNotFoundError:
+            h.update(f"{name} absent".encode())
+    return h.hexdigest()[:12]
+
+
+@functools.lru_cache(maxsize=1)
+def simulating_code_digest() -> str:
+    root = Path(__file__).resolve().parents[1]  # the installed spinefarm package (or the checkout)
+    return code_digest([root / p for p in SIMULATING_CODE], ENGINE_PACKAGES)
+
+
+def cache_path(source: str, settings: CalibrationSettings) -> Path:
+    return cache_dir() / (f"{load_morphology(source).spec_hash()}-{settings.key()}-"
+                          f"{simulating_code_digest()}.json")
+
+
+def calibration(source: str, settings: CalibrationSettings, refresh: bool = False) -> tuple[dict[str, Any], bool]:
+    """(the calibration of this robot under these settings, whether it came from the cache)."""
+    path = cache_path(source, settings)
+    if not refresh and path.is_file():
+        try:
+            return json.loads(path.read_text()), True
+        except (OSError, ValueError):
+            pass  # a damaged entry is computed again
+    result = clean(calibrate(source, settings))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(result))
+        tmp.replace(path)
+    except OSError as exc:  # a read-only home in a container: the figures still count, only uncached
+        print(f"warning: the calibration is not cached ({exc.strerror or exc}: {path.parent}); set "
+              "SPINEFARM_CACHE_DIR to a writable folder to keep it", file=sys.stderr)
+    return result, False
+
+
+def clean(v: Any) -> Any:
+    """The same structure with non-finite floats as None (strict JSON)."""
+    if isinstance(v, dict):
+        return {k: clean(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [clean(x) for x in v]
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
