@@ -17,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 
+from spinefarm.robot.spaces import controller_space
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 # (settle s, scored s): the first 0.5 s and 1 s unsettled, then 1 s after a 0.5 s and a 1 s settle
@@ -27,7 +29,7 @@ def at_rest(morphology: str) -> dict[str, float]:
     """A sidewinding gait whose amplitudes are zero: the CPG at rest."""
     from spinefarm.robot.morphology.registry import load_morphology
 
-    names = load_morphology(morphology).controller_space("sidewinding").param_space.names
+    names = controller_space(load_morphology(morphology), "sidewinding").param_space.names
     values = {"frequency_offset_hz": 0.5, "frequency_gain_hz": 0.5, "amplitude_offset_cm_s": 0.0,
               "amplitude_gain_cm_s": 0.0, "descending_command": 1.0}
     return {n: values.get(n, 0.0) for n in names}

@@ -26,6 +26,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+from spinefarm.robot.spaces import controller_space
+
 
 def node_targets(morph, space, physical: np.ndarray) -> tuple[float, float]:
     """(intrinsic frequency Hz, target amplitude cm/s) of the CPG nodes of a gait."""
@@ -38,7 +40,7 @@ def one(morph_name: str, controller: str, seed: int, duration_s: float, settle_s
     from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
 
     morph = load_morphology(morph_name)
-    space = morph.controller_space(controller)
+    space = controller_space(morph, controller)
     u = random_unit_params(morph, seed, controller)
     physical = space.param_space.from_unit(u)
     freq_hz, amp_cm_s = node_targets(morph, space, physical)

@@ -49,6 +49,7 @@ import numpy as np
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import GroundSpec
+from spinefarm.robot.spaces import controller_space
 from spinefarm.worker.control.cpg import CpgIntegrator
 from spinefarm.worker.engines.bullet import BulletPhysics
 from spinefarm.worker.sim import strings as sk
@@ -59,7 +60,7 @@ def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
     morph = load_morphology(morph_name)
     cfg = TrialConfig()
     dt = cfg.step_s
-    space = morph.controller_space()
+    space = controller_space(morph)
     net = space.network(space.param_space.from_unit(random_unit_params(morph, seed)))
     bodies = build_bodies(morph.structure)
     geom = build_strings(morph.structure, bodies)
@@ -276,7 +277,7 @@ def cpg_cost(morph_name: str, seed: int, updates: int = 5000) -> dict:
     from spinefarm.worker.control.cpg import rk4_advance
 
     morph = load_morphology(morph_name)
-    space = morph.controller_space()
+    space = controller_space(morph)
     net = space.network(space.param_space.from_unit(random_unit_params(morph, seed)))
     out = {}
     plans = (("as_run", morph.control.cpg_update_period_s, TrialConfig().cpg_max_step_s),

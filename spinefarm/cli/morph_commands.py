@@ -6,13 +6,13 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from spinefarm.cli import checks, render_motion
+from spinefarm.cli.recorded_trial import load_record, simulate_recorded
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.sim_commands import add_engine_argument
 from spinefarm.protocol.errors import ConfigError
@@ -159,58 +159,6 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 # -- render --------------------------------------------------------------------------------------
-def _load_record(path: Path, morph_name: str) -> dict[str, np.ndarray]:
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            record = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as exc:
-        raise ConfigError("cannot read the trajectory file", received=str(path),
-                          expected="an .npz written by `spinefarm trial --record`") from exc
-    stored = str(record.get("morphology", morph_name))
-    if stored != morph_name:
-        raise ConfigError("the trajectory was recorded on another morphology", received=stored,
-                          expected=morph_name)
-    return record
-
-
-def _params(morph: Any, path: Path | None, seed: int) -> tuple[Any, str | None]:
-    from spinefarm.worker.trial import random_unit_params
-
-    if path is None:
-        return random_unit_params(morph, seed), None
-    from spinefarm.worker.replay import PUBLISHED, parameter_folder
-
-    if path.is_dir() or str(path) in PUBLISHED:
-        from spinefarm.worker.replay import read_parameter_set, unit_params
-
-        return unit_params(morph, read_parameter_set(parameter_folder(path))), "ntrt"
-    from spinefarm.cli.sim_commands import load_params_file
-
-    return load_params_file(path)
-
-
-def simulate_recorded(args: argparse.Namespace, morph: Any, every_s: Callable[[float], float]
-                      ) -> tuple[Any, dict[str, np.ndarray]]:
-    """(outcome, recorded arrays) of the short trial `render` draws: --params (else random parameters from
-    --random-seed), --duration (else at most 5 s), --engine, --motor-model, recorded every every_s(duration)
-    seconds; saved to --record when given."""
-    from spinefarm.worker.trial import TrialConfig, simulate
-
-    params, controller = _params(morph, args.params, args.random_seed)
-    duration = args.duration or min(morph.duration_s, 5.0)
-    overrides: dict[str, Any] = {"duration_s": duration, "record_every_s": every_s(duration),
-                                 "controller": controller}
-    if args.motor_model:
-        overrides["motor_model"] = args.motor_model
-    if args.engine:
-        overrides["engine"] = args.engine
-    outcome = simulate(morph, params, TrialConfig(**overrides), args.random_seed)
-    record = outcome.trajectory.arrays() if outcome.trajectory else {}
-    if args.record is not None:
-        np.savez_compressed(args.record, **record, morphology=morph.name)
-    return outcome, record
-
-
 def cmd_render(args: argparse.Namespace) -> int:
     from spinefarm.robot.bodies import build_bodies
     from spinefarm.robot.morphology.registry import load_morphology
@@ -236,7 +184,7 @@ def cmd_render(args: argparse.Namespace) -> int:
             print(f"note: the trial ended early ({outcome.result.reason}); drawing what was recorded")
         frames = frames_from_record(record, args.frames or 6, n_bodies, n_strings)
     elif args.record is not None:
-        frames = frames_from_record(_load_record(args.record, morph.name), args.frames or 6, n_bodies, n_strings)
+        frames = frames_from_record(load_record(args.record, morph.name), args.frames or 6, n_bodies, n_strings)
     else:
         if args.frames not in (None, 1):
             raise ConfigError("--frames needs a trajectory", received=args.frames,

@@ -39,11 +39,11 @@ def _stored_motion(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
 
 
 def _fresh_motion(args: argparse.Namespace, morph: Any) -> dict[str, Any]:
-    from spinefarm.cli.morph_commands import _load_record, simulate_recorded
+    from spinefarm.cli.recorded_trial import load_record, simulate_recorded
     from spinefarm.worker.motion import motion_document, record_every_s
 
     if args.duration is None and args.params is None and args.record is not None:
-        return motion_document(morph, _load_record(args.record, morph.name), None, f"{morph.name}: {args.record}")
+        return motion_document(morph, load_record(args.record, morph.name), None, f"{morph.name}: {args.record}")
     outcome, record = simulate_recorded(args, morph, record_every_s)
     return motion_document(morph, record, outcome.result, morph.name)
 

@@ -10,6 +10,7 @@ import sys
 
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot.spaces import param_space
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,7 +44,7 @@ def cmd_morphologies(args: argparse.Namespace) -> int:
     for name in builtin_names():
         m = load_morphology(name)
         rows.append({"name": name, "segments": m.structure.n_segments, "strings": len(m.structure.strings),
-                     "controllers": list(m.controllers), "parameters": len(m.param_space()),
+                     "controllers": list(m.controllers), "parameters": len(param_space(m)),
                      "description": m.description})
     if args.json:
         print(json.dumps(rows, indent=2))

@@ -15,6 +15,7 @@ from spinefarm.cli import checks
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.protocol.errors import ParameterError
 from spinefarm.robot.engines import DEFAULT_ENGINE
+from spinefarm.robot.spaces import param_space
 
 if TYPE_CHECKING:
     from spinefarm.robot.morphology.model import Morphology
@@ -190,7 +191,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
     outcome = simulate(morph, params, cfg, seed)
     r = outcome.result
     if args.record is not None and outcome.trajectory is not None:
-        space = morph.param_space(controller)
+        space = param_space(morph, controller)
         np.savez_compressed(args.record, **outcome.trajectory.arrays(), morphology=morph.name,
                             morphology_json=json.dumps(morph.to_dict()), params_json=json.dumps(
                                 space.to_named(_physical(morph, params, controller))),
@@ -304,7 +305,7 @@ def _stored_trial(path: Path, trial_id: int | None
 
 
 def _physical(morph: Morphology, params: np.ndarray | dict, controller: str | None) -> np.ndarray:
-    return morph.param_space(controller).physical(params)
+    return param_space(morph, controller).physical(params)
 
 
 def _best_of_run(path: Path, n: int = 1) -> tuple[list[ParamSet], RunMeta]:

@@ -15,6 +15,7 @@ from spinefarm.protocol.keys import check_run_id
 from spinefarm.protocol.params import ParamSpace, ParamSpec
 from spinefarm.protocol.robust import RobustSpec
 from spinefarm.protocol.run import RunConfig
+from spinefarm.robot.spaces import param_space
 
 if TYPE_CHECKING:
     from spinefarm.robot.morphology.model import Morphology
@@ -45,7 +46,7 @@ def search_space(morphology: str, controller: str | None = None) -> tuple[ParamS
 
     morph = load_morphology(morphology)
     name = controller or morph.controllers[0]
-    return morph.param_space(name), name
+    return param_space(morph, name), name
 
 
 def build_run_config(run_id: str, morphology: str, *, objective: str = "distance", seed: int = 0,
@@ -84,7 +85,7 @@ def run_config_for(run_id: str, morphology: Morphology | dict[str, Any], *, obje
     from spinefarm.robot.trial_config import TrialConfig
 
     morph = morphology if isinstance(morphology, Morphology) else Morphology.from_dict(morphology)
-    space = morph.param_space(controller)
+    space = param_space(morph, controller)
     tc_dict = TrialConfig().to_dict()
     tc_dict.update(trial_overrides or {})
     if duration_s is not None:

@@ -285,3 +285,18 @@ def make_controller_space(name: str, morph: Morphology) -> BaseControllerSpace:
     if name not in SPACES:
         raise ConfigError("unknown controller space", received=name, expected=sorted(SPACES))
     return SPACES[name](morph)
+
+
+def controller_space(morph: Morphology, controller: str | None = None) -> BaseControllerSpace:
+    """`morph`'s controller space `controller` (None: the first it lists): one it lists, or a bounded variant
+    of one (space_base)."""
+    name = controller or morph.controllers[0]
+    if name not in morph.controllers and space_base(name) not in morph.controllers:
+        raise ConfigError(f"morphology {morph.name!r} has no controller space {name!r}",
+                          received=name, expected=list(morph.controllers))
+    return make_controller_space(name, morph)
+
+
+def param_space(morph: Morphology, controller: str | None = None) -> ParamSpace:
+    """The parameters of `morph`'s controller space `controller` (None: the first it lists)."""
+    return controller_space(morph, controller).param_space

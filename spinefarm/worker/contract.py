@@ -15,6 +15,7 @@ from spinefarm.protocol.errors import SpinefarmError
 from spinefarm.robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
 from spinefarm.robot.engines import DEFAULT_ENGINE
 from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.spaces import controller_space, param_space
 from spinefarm.robot.trial_config import TrialConfig
 
 
@@ -27,7 +28,7 @@ class CheckResult:
 
 def passive_params(morph: Morphology, seed: int = 1) -> np.ndarray:
     """A seeded random parameter vector (unit cube) with every CPG amplitude at its smallest value."""
-    space = morph.param_space()
+    space = param_space(morph)
     physical = space.from_unit(np.random.default_rng(seed).random(len(space)))
     amplitude = [i for i, n in enumerate(space.names) if "amplitude" in n]
     for i in amplitude:
@@ -54,7 +55,7 @@ def check_builds(morph: Morphology) -> CheckResult:
     bodies = build_bodies(morph.structure)
     geom = build_strings(morph.structure, bodies)
     for controller in morph.controllers:
-        space = morph.controller_space(controller)
+        space = controller_space(morph, controller)
         space.network(space.param_space.from_unit(np.full(len(space.param_space), 0.5)))
     string_tables(morph, geom.start_length_cm, {})
     return CheckResult("builds", True, f"{len(bodies)} segments, {len(geom.start_length_cm)} strings, "
@@ -121,7 +122,7 @@ def check_deterministic(morph: Morphology, engine: str = DEFAULT_ENGINE) -> Chec
     from spinefarm.worker.trial import simulate
 
     name = "two runs agree"
-    u = np.random.default_rng(7).random(len(morph.param_space()))
+    u = np.random.default_rng(7).random(len(param_space(morph)))
     cfg = _step_config(morph, engine, duration_s=0.5, record_every_s=0.1)
     a, b = simulate(morph, u, cfg, 3), simulate(morph, u, cfg, 3)
     if not a.result.ok:

@@ -16,6 +16,7 @@ from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.protocol.work import TrialAssignment
+from spinefarm.robot.spaces import param_space
 from spinefarm.worker.tasks import physics_evaluator, with_fault
 
 Evaluator = Callable[[TrialAssignment], TrialResult | None]  # None: abandoned (the worker is stopping)
@@ -83,7 +84,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
     morphology = Morphology.from_dict(config.morphology_spec)
     trial_config = TrialConfig.from_dict(config.trial_config)
     built = {"spec_hash": morphology.spec_hash(),
-             "space_hash": morphology.param_space(config.controller).space_hash(),
+             "space_hash": param_space(morphology, config.controller).space_hash(),
              "trial_config_hash": trial_config.config_hash()}
     for name, value in built.items():
         if getattr(config, name) != value:

@@ -15,7 +15,7 @@ from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.results import TrialResult
 from spinefarm.robot.engines import DEFAULT_ENGINE
 from spinefarm.robot.morphology.model import Morphology
-from spinefarm.robot.spaces import NtrtTableSpace
+from spinefarm.robot.spaces import NtrtTableSpace, controller_space
 
 # NTRT folder name -> built-in NTRT-era morphology
 ROBOT_FOLDERS = {
@@ -154,7 +154,7 @@ def detect_morphology(folder: str | Path) -> str:
 
 def ntrt_space(morph: Morphology) -> NtrtTableSpace:
     """The robot's NTRT controller space, the one published sets are written in."""
-    space = morph.controller_space("ntrt")
+    space = controller_space(morph, "ntrt")
     if not isinstance(space, NtrtTableSpace):
         raise MorphologySpecError("replay needs NTRT's controller space", received=type(space).__name__,
                                   expected="NtrtTableSpace")

@@ -21,6 +21,7 @@ from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.reach import reachable_rod_pairs
 from spinefarm.robot.scene import build_terrain
+from spinefarm.robot.spaces import controller_space
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.control.law import string_tables
 from spinefarm.worker.engines.base import BasePhysics, EngineFactory, engine_class
@@ -33,7 +34,7 @@ class TrialSetup:
 
     def __init__(self, morph: Morphology, cfg: TrialConfig, controller: str | None) -> None:
         self.morph, self.cfg, self.controller = morph, cfg, controller
-        self.space = morph.controller_space(controller)  # built once: 1-5 ms for the NTRT spaces
+        self.space = controller_space(morph, controller)  # built once: 1-5 ms for the NTRT spaces
         self.engine_cls = engine_class(cfg.engine)
         self.settings = self.engine_cls.settings_from_options(cfg.engine_options)
         self.bodies = build_bodies(morph.structure)

@@ -24,6 +24,7 @@ from spinefarm.protocol.results import TrialResult
 from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.spaces import param_space
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.batch import Batch, Timing, Trajectory, World
 from spinefarm.worker.control.law import ControlLaw, string_tables
@@ -164,4 +165,4 @@ def run_trial(morphology: Morphology | str | Mapping, params: np.ndarray | Mappi
 
 def random_unit_params(morph: Morphology, seed: int, controller: str | None = None) -> np.ndarray:
     """A seeded uniform sample of the controller space's unit cube."""
-    return np.random.default_rng(seed).random(len(morph.param_space(controller)))
+    return np.random.default_rng(seed).random(len(param_space(morph, controller)))

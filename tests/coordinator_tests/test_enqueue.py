@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from spinefarm.robot.spaces import param_space
 from spinefarm.storage.hdf5_reader import Hdf5Reader
 from tests.cli_tests.test_errors import one_line_error, run
 
@@ -85,5 +86,5 @@ def test_a_gait_written_by_export_travels_to_the_bit():
         gait = json.loads(path.read_text())
         args = argparse.Namespace(enqueue=[str(path)], morphology=name, controller=gait["controller"])
         (unit,) = enqueued(args)
-        space = load_morphology(name).param_space(gait["controller"])
+        space = param_space(load_morphology(name), gait["controller"])
         assert space.from_unit(unit).tolist() == [gait["params"][n] for n in space.names], name

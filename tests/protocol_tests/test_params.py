@@ -8,6 +8,7 @@ import pytest
 from spinefarm.protocol.errors import ParameterError
 from spinefarm.protocol.params import ParamSpace, ParamSpec
 from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.spaces import controller_space, param_space
 
 
 def space() -> ParamSpace:
@@ -34,17 +35,17 @@ def test_bad_vectors_are_named(vector, words):
 
 def test_ntrt_tetraspine_space_counts():
     morph = load_morphology("tetraspine-ntrt")
-    sp = morph.controller_space("ntrt")
+    sp = controller_space(morph, "ntrt")
     assert len(sp.param_space) == 116 and sp.n_edges == 57
     assert len(sp.couplings) == 132  # 12 nodes x 11
-    assert len(load_morphology("tetraspine").param_space("sidewinding")) == 9
+    assert len(param_space(load_morphology("tetraspine"), "sidewinding")) == 9
 
 
 def test_ntrt_slot_quirk():
     """rp from the index difference: a pair in adjacent joints closer than M in index uses row 1."""
     from spinefarm.robot.spaces import table_slots
 
-    sp = load_morphology("tetraspine-ntrt").controller_space("ntrt")
+    sp = controller_space(load_morphology("tetraspine-ntrt"), "ntrt")
     slots = table_slots(6)
     by_pair = {(c.target, c.source): slots[c.slot] for c in sp.couplings}
     assert by_pair[(7, 2)] == (1, 1, 2)  # index difference 5 < M = 6, joints 1 and 0
@@ -53,7 +54,7 @@ def test_ntrt_slot_quirk():
 
 
 def test_edge_file_order_is_reversed_into_slots():
-    sp = load_morphology("tetraspine-ntrt").controller_space("ntrt")
+    sp = controller_space(load_morphology("tetraspine-ntrt"), "ntrt")
     edges = [(i / 100, 1 - i / 100) for i in range(sp.n_edges)]
     u = sp.unit_from_ntrt_files((0.1, 0.2), edges)
     assert u[0] == 0.1 and u[1] == 0.2

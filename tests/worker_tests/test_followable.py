@@ -9,7 +9,7 @@ import pytest
 
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.robot.spaces import followable_limits
+from spinefarm.robot.spaces import controller_space, followable_limits, param_space
 from spinefarm.worker.trial import TrialConfig, run_trial
 
 BUILT_INS = ["tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed"]
@@ -18,7 +18,7 @@ BUILT_INS = ["tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed"
 @pytest.mark.parametrize("name", BUILT_INS)
 def test_bounds_lie_inside_ntrt_and_every_corner_is_followable(name):
     morph = load_morphology(name)
-    ntrt, bounded = morph.controller_space("ntrt"), morph.controller_space("ntrt-followable")
+    ntrt, bounded = controller_space(morph, "ntrt"), controller_space(morph, "ntrt-followable")
     assert bounded.param_space.names == ntrt.param_space.names
     assert np.all(bounded.param_space.lows >= ntrt.param_space.lows)
     assert np.all(bounded.param_space.highs <= ntrt.param_space.highs)
@@ -42,8 +42,8 @@ def test_bounds_lie_inside_ntrt_and_every_corner_is_followable(name):
 
 def test_the_followable_space_runs_and_unknown_spaces_are_refused():
     morph = load_morphology("tetraspine-ntrt")
-    u = np.random.default_rng(4).random(len(morph.param_space("ntrt-followable")))
+    u = np.random.default_rng(4).random(len(param_space(morph, "ntrt-followable")))
     r = run_trial(morph, u, TrialConfig(duration_s=0.5, controller="ntrt-followable"))
     assert r.ok and math.isfinite(r.distance_m)
     with pytest.raises(ConfigError, match="no controller space 'sidewinding-followable'"):
-        morph.param_space("sidewinding-followable")
+        param_space(morph, "sidewinding-followable")

@@ -10,6 +10,7 @@ import pytest
 
 from spinefarm.cli.sim_commands import load_params_file
 from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.spaces import param_space
 from spinefarm.worker.trial import TrialConfig, run_trial
 
 ROOT = Path(__file__).resolve().parents[2] / "examples" / "gaits"
@@ -26,6 +27,6 @@ def test_a_shipped_gait_loads_and_runs_for_one_second(path):
     record = json.loads(path.read_text())
     assert record["morphology"] == path.stem and controller
     morph = load_morphology(path.stem)
-    assert list(params) == morph.param_space(controller).names
+    assert list(params) == param_space(morph, controller).names
     r = run_trial(morph, params, TrialConfig(duration_s=1.0, controller=controller))
     assert r.ok and r.distance_m > 0

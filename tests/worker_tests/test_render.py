@@ -11,6 +11,7 @@ from spinefarm.cli.main import main
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.spaces import param_space
 from spinefarm.worker.render import Frame, frames_from_record, initial_frame, render, rod_segments
 from spinefarm.worker.trial import TrialConfig, simulate
 
@@ -52,7 +53,7 @@ def test_initial_pose_picture(tmp_path: Path):
 def test_trajectory_strip_colours_strings_by_tension(tmp_path: Path):
     morph = load_morphology("tetrahedral-complex")
     bodies = build_bodies(morph.structure)
-    u = np.random.default_rng(4).random(len(morph.param_space()))
+    u = np.random.default_rng(4).random(len(param_space(morph)))
     rec = simulate(morph, u, TrialConfig(duration_s=0.4, record_every_s=0.05), 0).trajectory.arrays()
     frames = frames_from_record(rec, 3, len(bodies), len(morph.structure.strings))
     assert [f.time_s for f in frames] == pytest.approx([0.0, 0.2, 0.4])

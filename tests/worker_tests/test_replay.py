@@ -12,6 +12,7 @@ import pytest
 from spinefarm.cli.main import main
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.spaces import controller_space, param_space
 from spinefarm.worker.replay import (
     PUBLISHED_DIR,
     REFERENCES,
@@ -68,9 +69,9 @@ def test_edge_file_i_fills_slot_ne_minus_1_minus_i(tmp_path: Path):
     assert tuple(u[:2]) == (0.1, 0.2)
     for slot in range(26):
         assert tuple(u[2 + 2 * slot: 4 + 2 * slot]) == edges[25 - slot]
-    names = morph.param_space().names
+    names = param_space(morph).names
     assert names[2] == "coupling_r0_0_0_weight" and u[2] == edges[-1][0]  # slot (0,0,0) <- the last file
-    physical = morph.param_space().from_unit(u)
+    physical = param_space(morph).from_unit(u)
     assert physical[3] == pytest.approx(-math.pi + 2 * math.pi * edges[-1][1])
 
 
@@ -115,7 +116,7 @@ def test_published_sets_map_to_the_spec_values(name: str, n_edges: int, f: float
     morph = load_morphology(name)
     params = read_parameter_set(_folder(name))
     assert len(params.edges) == n_edges
-    physical = morph.param_space().from_unit(unit_params(morph, params))
+    physical = param_space(morph).from_unit(unit_params(morph, params))
     assert physical[0] == pytest.approx(f, abs=1e-3)
     assert physical[1] == pytest.approx(amp, abs=1e-3)
     weights = physical[2::2]
@@ -192,7 +193,7 @@ def test_replay_writes_the_set_as_a_gait_file_that_trial_runs_alike(tmp_path: Pa
     replayed = json.loads(capsys.readouterr().out)
     g = json.loads(gait.read_text())
     assert g["morphology"] == "octahedral-complex" and g["controller"] == "ntrt"
-    space = load_morphology("octahedral-complex").controller_space("ntrt").param_space
+    space = controller_space(load_morphology("octahedral-complex"), "ntrt").param_space
     assert list(g["params"]) == space.names
     published = unit_params(load_morphology("octahedral-complex"), read_parameter_set(_folder("octahedral-complex")))
     assert np.allclose(space.to_unit(space.from_named(g["params"])), published, rtol=0, atol=1e-12)

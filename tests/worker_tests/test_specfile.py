@@ -12,6 +12,7 @@ from spinefarm.cli.main import main
 from spinefarm.protocol.errors import MorphologySpecError, UnknownMorphologyError
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
 from spinefarm.robot.morphology.specfile import SPEC_DIR, builtin_spec, load_spec_file, parse_spec
+from spinefarm.robot.spaces import param_space
 
 GOOD = textwrap.dedent("""\
     name: bar-chain
@@ -68,7 +69,7 @@ def test_good_file_builds_what_it_says(tmp_path: Path):
     assert morph.control.gains("muscle").position_gain_n_per_m == 500
     assert morph.control.gains("tendon") is None
     assert s.string_material("tendon").damping_n_s_per_m == 3
-    assert len(morph.param_space()) == 2 + 2 * (3 * 3 * 4 // 2 - 3)
+    assert len(param_space(morph)) == 2 + 2 * (3 * 3 * 4 // 2 - 3)
 
 
 def test_spec_file_runs_through_the_registry_and_trial_command(tmp_path: Path, capsys):

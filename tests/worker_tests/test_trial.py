@@ -15,6 +15,7 @@ from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.structure import StringMaterial
 from spinefarm.robot.morphology.variants import with_strings
+from spinefarm.robot.spaces import controller_space, param_space
 from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial, simulate
 
 
@@ -68,7 +69,7 @@ def test_bad_parameters_raise_named_errors():
     bad[3] = np.nan
     with pytest.raises(ParameterError, match="non-finite"):
         run_trial(morph, bad, TrialConfig(duration_s=0.01))
-    named = morph.param_space().to_named(morph.param_space().from_unit(random_unit_params(morph, 1)))
+    named = param_space(morph).to_named(param_space(morph).from_unit(random_unit_params(morph, 1)))
     named["cpg_frequency_coef_hz"] = 99.0
     with pytest.raises(ParameterError, match="outside its bounds"):
         run_trial(morph, named, TrialConfig(duration_s=0.01))
@@ -129,7 +130,7 @@ def test_default_cpg_sub_step_keeps_the_bits_of_1ms_sub_steps_on_ntrt_networks(n
 
     morph = load_morphology(name)
     u = random_unit_params(morph, 4)
-    space = morph.controller_space()
+    space = controller_space(morph)
     period = morph.control.cpg_update_period_s
     assert CpgIntegrator(space.network(space.param_space.from_unit(u))).plan(period) == (1e-3, round(period / 1e-3))
     auto, fixed = (run_trial(morph, u, TrialConfig(duration_s=0.5, cpg_max_step_s=cap), 4) for cap in (None, 1e-3))
@@ -141,7 +142,7 @@ def test_a_2ms_screen_of_a_sidewinding_gait_takes_one_cpg_step_per_update_at_no_
 
     morph = load_morphology("tetraspine")
     u = random_unit_params(morph, 3, "sidewinding")
-    space = morph.controller_space("sidewinding")
+    space = controller_space(morph, "sidewinding")
     network = space.network(space.param_space.from_unit(u))
     one, fine = CpgIntegrator(network), CpgIntegrator(network, 1e-3 / 16)
     assert one.plan(2e-3) == (2e-3, 1)
@@ -182,13 +183,13 @@ def test_settle_phase_scores_locomotion_from_the_settled_pose(engine):
 
 def test_a_reused_setup_builds_the_controller_space_once(monkeypatch):
     """The NTRT spaces take milliseconds to build; trials sharing a set-up share the space too."""
-    from spinefarm.robot.morphology.model import Morphology
+    from spinefarm.robot import spaces
     from spinefarm.worker.setup import SetupCache
 
     built = []
-    original = Morphology.controller_space
-    monkeypatch.setattr(Morphology, "controller_space",
-                        lambda self, controller=None: built.append(controller) or original(self, controller))
+    original = spaces.make_controller_space
+    monkeypatch.setattr(spaces, "make_controller_space",
+                        lambda name, morph: built.append(name) or original(name, morph))
     morph = load_morphology("tetrahedral-complex")
     cfg = TrialConfig(duration_s=0.05, engine="mujoco", dt_s=0.002)
     cache = SetupCache()

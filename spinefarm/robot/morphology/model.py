@@ -6,14 +6,9 @@ import hashlib
 import json
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING
 
 from spinefarm.protocol.errors import ConfigError, MorphologySpecError, bounded, check_fields
 from spinefarm.robot.morphology.structure import StructureSpec
-
-if TYPE_CHECKING:
-    from spinefarm.protocol.params import ParamSpace
-    from spinefarm.robot.spaces import BaseControllerSpace
 
 
 @dataclass(frozen=True)
@@ -86,18 +81,6 @@ class Morphology:
         if unknown:
             raise MorphologySpecError("impedance gains name string tags the structure lacks",
                                       received=unknown, expected=f"tags among {sorted(tags)}")
-
-    def controller_space(self, controller: str | None = None) -> BaseControllerSpace:
-        from spinefarm.robot.spaces import make_controller_space, space_base
-
-        name = controller or self.controllers[0]
-        if name not in self.controllers and space_base(name) not in self.controllers:
-            raise ConfigError(f"morphology {self.name!r} has no controller space {name!r}",
-                              received=name, expected=list(self.controllers))
-        return make_controller_space(name, self)
-
-    def param_space(self, controller: str | None = None) -> ParamSpace:
-        return self.controller_space(controller).param_space
 
     def to_dict(self) -> dict:
         return {
