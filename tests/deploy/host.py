@@ -234,7 +234,7 @@ def wheelhouse(python: str, target: Path, extras: Sequence[str]) -> dict[str, ob
         requirements = sh(python, ROOT / "deploy" / "requirements.py", ROOT / "pyproject.toml", ",".join(extras))
         (part / "requirements.txt").write_text(requirements.stdout)
         sh(python, "-m", "pip", "wheel", "-q", "--wheel-dir", part, "-r", part / "requirements.txt",
-           "setuptools>=68", "wheel", "pip", timeout_s=1500, env=dict(os.environ, PIP_DISABLE_PIP_VERSION_CHECK="1"))
+           "setuptools>=77", "wheel", "pip", timeout_s=1500, env=dict(os.environ, PIP_DISABLE_PIP_VERSION_CHECK="1"))
         os.replace(part, cache)
     for old in target.glob("*.whl"):
         old.unlink()
