@@ -276,25 +276,17 @@ SPACES: dict[str, type[BaseControllerSpace]] = {"ntrt": NtrtTableSpace, "sidewin
                                                 NtrtFollowableSpace.name: NtrtFollowableSpace}
 
 
-def space_base(name: str) -> str:
-    """The space a morphology must list to allow `name` (a bounded variant allows as its base does)."""
-    return getattr(SPACES.get(name), "base", name)
-
-
-def make_controller_space(name: str, morph: Morphology) -> BaseControllerSpace:
-    if name not in SPACES:
-        raise ConfigError("unknown controller space", received=name, expected=sorted(SPACES))
-    return SPACES[name](morph)
-
-
 def controller_space(morph: Morphology, controller: str | None = None) -> BaseControllerSpace:
     """`morph`'s controller space `controller` (None: the first it lists): one it lists, or a bounded variant
-    of one (space_base)."""
+    of one (a space's `base`: it is allowed as its base is)."""
     name = controller or morph.controllers[0]
-    if name not in morph.controllers and space_base(name) not in morph.controllers:
+    space = SPACES.get(name)
+    if name not in morph.controllers and getattr(space, "base", name) not in morph.controllers:
         raise ConfigError(f"morphology {morph.name!r} has no controller space {name!r}",
                           received=name, expected=list(morph.controllers))
-    return make_controller_space(name, morph)
+    if space is None:
+        raise ConfigError("unknown controller space", received=name, expected=sorted(SPACES))
+    return space(morph)
 
 
 def param_space(morph: Morphology, controller: str | None = None) -> ParamSpace:

@@ -187,9 +187,8 @@ def test_a_reused_setup_builds_the_controller_space_once(monkeypatch):
     from spinefarm.worker.setup import SetupCache
 
     built = []
-    original = spaces.make_controller_space
-    monkeypatch.setattr(spaces, "make_controller_space",
-                        lambda name, morph: built.append(name) or original(name, morph))
+    original = spaces.SPACES["ntrt"]
+    monkeypatch.setitem(spaces.SPACES, "ntrt", lambda morph: built.append("ntrt") or original(morph))
     morph = load_morphology("tetrahedral-complex")
     cfg = TrialConfig(duration_s=0.05, engine="mujoco", dt_s=0.002)
     cache = SetupCache()

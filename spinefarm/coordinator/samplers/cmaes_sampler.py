@@ -42,9 +42,7 @@ class CmaEsSampler(BaseSampler):
     name = "cmaes"
     settings = (("sigma0", float), ("population_size", int), ("population_growth", float), ("mean0", _unit_point))
 
-    default_sigma0 = 0.3
-
-    def __init__(self, n_params: int, seed: int, *, sigma0: float = default_sigma0, population_size: int | None = None,
+    def __init__(self, n_params: int, seed: int, *, sigma0: float = 0.3, population_size: int | None = None,
                  population_growth: float = 2.0, mean0: Sequence[float] | None = None) -> None:
         super().__init__(n_params, seed)
         if n_params < 2:

@@ -38,16 +38,20 @@ def make_sampler(name: str, n_params: int, seed: int, *, budget: int, objective:
     if sigma is not None and cls not in (GaussianHillClimbSampler, CmaEsSampler):
         raise ConfigError(f"--sigma does not apply to the {name} sampler", received=sigma,
                           expected="no --sigma, or --sampler paper or cmaes")
-    step = {} if sigma is None else {"sigma": sigma}  # None: the sampler's own default
     if cls is GaussianHillClimbSampler:
         startup = budget // 2 if startup_trials is None else startup_trials
-        return GaussianHillClimbSampler(n_params, seed, **step, top_k=top_k, startup_trials=startup)
+        return GaussianHillClimbSampler(n_params, seed, **_given("sigma", sigma), top_k=top_k, startup_trials=startup)
     if cls is TpeSampler:
         return TpeSampler(n_params, seed, startup_trials=10 if startup_trials is None else startup_trials,
                           multi_objective=objective == "pareto")
     if cls is CmaEsSampler:
-        return CmaEsSampler(n_params, seed, sigma0=step.get("sigma", CmaEsSampler.default_sigma0), mean0=start)
+        return CmaEsSampler(n_params, seed, **_given("sigma0", sigma), mean0=start)
     return cls(n_params, seed)
+
+
+def _given(keyword: str, value: float | None) -> dict[str, float]:
+    """`keyword=value` when a value was given; none given: the sampler's own default."""
+    return {} if value is None else {keyword: value}
 
 
 def sampler_from_dict(d: dict[str, Any], n_params: int) -> BaseSampler:
