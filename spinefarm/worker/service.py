@@ -9,6 +9,7 @@ retry, never exit. The only worker module that imports zenoh.
 
 from __future__ import annotations
 
+import enum
 import json
 import logging
 import os
@@ -95,6 +96,15 @@ class WorkerTimings:
                 raise ConfigError(f"{what} out of range", received=getattr(self, name), expected="seconds > 0")
         if not self.idle_exit_s >= 0:
             raise ConfigError("idle_exit_s out of range", received=self.idle_exit_s, expected="seconds >= 0")
+
+
+class _Next(enum.Enum):
+    """What the loop does after serving a run once."""
+
+    AGAIN = "again"         # ask again at once
+    BACK_OFF = "back off"   # wait, longer each time, then ask again
+    RAN = "ran"             # trials ran: the back-off starts over
+    EXIT = "exit"           # the worker's run is over
 
 
 class WorkerService:
@@ -290,46 +300,56 @@ class WorkerService:
                 self.stop.wait(backoff.next())
                 continue
             idle_since = None
-            carried = tuple(self._pending.get(run_id, {}).values())
-            req = encode_message(WorkRequest(self.worker_id, self.batch.size(), carried, self.engines,
-                                             self.environment))
-            grants, refused = self._query(session, keys.work(run_id), req, WorkGrant)
-            if not grants:
-                if refused and carried:
-                    self._submit(session)  # let the result path decide what to do with them
-                if self._silent():
-                    log.warning("the coordinator of run %s has been silent for %.0f s: its run is over here",
-                                run_id, time.monotonic() - self._last_heard)
-                    self._done_runs.add(run_id)
-                    if self.run_id is not None:
-                        return
-                    self._last_heard = time.monotonic()  # a roaming worker gives the next run its own time
-                    continue
+            step = self._serve(session, run_id)
+            if step is _Next.EXIT:
+                return
+            if step is _Next.BACK_OFF:
                 self.stop.wait(backoff.next())
-                continue
-            self._last_heard = time.monotonic()
-            grant = grants[0]
-            self._apply(run_id, grant.verdicts)
-            if grant.run_done:
-                self._done_runs.add(run_id)
-                if self.exit_when_done and self.run_id is not None:
-                    return  # a roaming worker looks for another open run first
-                continue
-            if not grant.assignments:
-                self.stop.wait(grant.retry_after_s)
-                continue
-            evaluate = self._evaluator(session, run_id, grant.config_hash, grant.assignments[0])
-            if evaluate is None:
-                # Leases expire on the coordinator; nothing is lost by not running them.
-                if run_id in self.unservable:
-                    self._done_runs.add(run_id)  # a roaming worker looks for another run
-                    if self.run_id is not None:
-                        self.exit_code = 3
-                        return
-                self.stop.wait(backoff.next())
-                continue
-            backoff.reset()
-            self._run_batch(session, run_id, evaluate, grant.assignments)
+            elif step is _Next.RAN:
+                backoff.reset()
+
+    def _serve(self, session: zenoh.Session, run_id: str) -> _Next:
+        """One request for work in run `run_id` (this run's results ride along) and, if granted, its trials."""
+        carried = tuple(self._pending.get(run_id, {}).values())
+        req = encode_message(WorkRequest(self.worker_id, self.batch.size(), carried, self.engines, self.environment))
+        grants, refused = self._query(session, keys.work(run_id), req, WorkGrant)
+        if not grants:
+            return self._unanswered(session, run_id, resubmit=bool(refused and carried))
+        self._last_heard = time.monotonic()
+        grant = grants[0]
+        self._apply(run_id, grant.verdicts)
+        if grant.run_done:
+            self._done_runs.add(run_id)
+            # a worker given its run exits; a roaming one looks for another open run first
+            return _Next.EXIT if self.exit_when_done and self.run_id is not None else _Next.AGAIN
+        if not grant.assignments:
+            self.stop.wait(grant.retry_after_s)
+            return _Next.AGAIN
+        evaluate = self._evaluator(session, run_id, grant.config_hash, grant.assignments[0])
+        if evaluate is None:
+            # Leases expire on the coordinator; nothing is lost by not running them.
+            if run_id in self.unservable:
+                self._done_runs.add(run_id)  # a roaming worker looks for another run
+                if self.run_id is not None:
+                    self.exit_code = 3
+                    return _Next.EXIT
+            return _Next.BACK_OFF
+        self._run_batch(session, run_id, evaluate, grant.assignments)
+        return _Next.RAN
+
+    def _unanswered(self, session: zenoh.Session, run_id: str, resubmit: bool) -> _Next:
+        """No grant came back. A coordinator silent for its timeout has ended its run (--exit-when-done)."""
+        if resubmit:
+            self._submit(session)  # let the result path decide what to do with the refused request's results
+        if not self._silent():
+            return _Next.BACK_OFF
+        log.warning("the coordinator of run %s has been silent for %.0f s: its run is over here",
+                    run_id, time.monotonic() - self._last_heard)
+        self._done_runs.add(run_id)
+        if self.run_id is not None:
+            return _Next.EXIT
+        self._last_heard = time.monotonic()  # a roaming worker gives the next run its own time
+        return _Next.AGAIN
 
     def _run_batch(self, session: zenoh.Session, run_id: str, evaluate: Evaluator,
                    assignments: tuple[TrialAssignment, ...]) -> None:
