@@ -4,18 +4,34 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from spinefarm.storage.status import read_status
 from tests.coordinator_tests.helpers import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
+# processes started and not yet seen to exit, with the files their standard error goes to: tests/conftest.py
+# shows their last lines when a test fails
+STARTED: list[tuple[list[str], Path, subprocess.Popen]] = []
 
 
 def spinefarm(*args: str, quiet: bool = True) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "spinefarm", *args], cwd=ROOT,
-                            stdout=subprocess.PIPE if quiet else None,
-                            stderr=subprocess.DEVNULL if quiet else None, text=True)
+    if not quiet:
+        return subprocess.Popen([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, text=True)
+    with tempfile.NamedTemporaryFile("w", prefix="spinefarm-", suffix=".log", delete=False) as log:
+        proc = subprocess.Popen([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, stdout=subprocess.PIPE,
+                                stderr=log, text=True)
+    STARTED.append((list(args), Path(log.name), proc))
+    return proc
+
+
+def forget_exited() -> None:
+    """Drop the logs of processes that have exited (after each test)."""
+    for entry in list(STARTED):
+        if entry[2].poll() is not None:
+            entry[1].unlink(missing_ok=True)
+            STARTED.remove(entry)
 
 
 def coordinator(endpoint: str, out: Path, *extra: str) -> subprocess.Popen:
