@@ -12,6 +12,15 @@ from tests.coordinator_tests.procs import ROOT
 from tests.netns import netns_unavailable
 
 
+def _log_tails(workdir, lines: int = 12) -> str:
+    """The last lines of the coordinator's and each worker's log (pytest's folder for them does not outlive CI)."""
+    parts = []
+    for log in sorted([workdir / "coordinator.log", *workdir.glob("w*.log")]):
+        if log.exists():
+            parts.append(f"--- {log.name}\n" + "\n".join(log.read_text(errors="replace").splitlines()[-lines:]))
+    return "\n".join(parts)
+
+
 def test_a_short_soak_reaches_its_exact_budget_through_every_fault(tmp_path):
     netns = netns_unavailable() is None
     r = subprocess.run([sys.executable, str(ROOT / "bench" / "soak.py"), "--minutes", "0.4", "--seed", "2", "--dir",
@@ -22,7 +31,8 @@ def test_a_short_soak_reaches_its_exact_budget_through_every_fault(tmp_path):
     assert not out["timed_out"] and out["exact_budget"], out
     assert out["lost"] == 0 and out["duplicated"] == 0 and out["forged_complete"] == 0, out
     assert out["hung_processes"] == [] and out["waiting"] == 0, out
-    assert out["workers_timed_out"] == 0, out  # every worker heard "done", none waited out its timeout
+    # every worker heard "done", none waited out its timeout
+    assert out["workers_timed_out"] == 0, (out, _log_tails(tmp_path))
     faults = out["faults"]
     assert faults["unexpected_coordinator_exits"] == 0 and faults["unexpected_worker_exits"] == 0, out
     assert faults.get("coordinator_kill", 0) >= 1 and faults.get("forge") == 1, out
