@@ -123,6 +123,7 @@ class CoordinatorCore(TaskDispatch):
             verdicts = self._settle_all(req.worker_id, req.results)  # before "done": they may finish it
             if verdicts is None:
                 return None
+            self._take_back_unreported(req.worker_id)
             if self.study.done:
                 self._drop_unservable_tasks()
             if self.done:
@@ -137,6 +138,16 @@ class CoordinatorCore(TaskDispatch):
             assignments = tuple(self._assignment(ls) for ls in leases)
         retry = 0.0 if assignments else self.idle_retry_s
         return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False, verdicts))
+
+    def _take_back_unreported(self, worker_id: str) -> None:
+        """A worker asks for work with every trial it ran in hand (results ride along, or went before): a lease it
+        still holds was in a grant it never received (the reply came after its query timed out, or was lost), or
+        one it gave up (its coordinator fell silent, its engine failed to start). Issued again at once, no attempt
+        counted, rather than after the lease runs out."""
+        lost = self.scheduler.take_back(worker_id)
+        if lost:
+            log.warning("worker %s asked for work without the %d trial(s) it holds (%s): a grant it never got; "
+                        "issued again", worker_id, len(lost), ", ".join(map(str, lost[:8])))
 
     def handle_results(self, payload: bytes) -> bytes | None:
         """A ResultAck (or an error); None: no answer, the run file can no longer be written."""

@@ -89,6 +89,24 @@ def test_lost_worker_trials_go_to_the_next_worker_and_its_late_results_are_dropp
     assert storage.counts()["complete"] == 0
 
 
+def test_trials_of_a_grant_whose_reply_never_arrived_are_issued_again_at_the_next_request():
+    core, storage, _ = sphere_core(lease_s=60.0)
+    lost = ask(core, "w1", n=2).assignments  # the worker's query timed out before this reply came
+    again = ask(core, "w1", n=3).assignments  # it asks again with nothing in hand, long before the lease ends
+    assert [a.trial_id for a in again] == [a.trial_id for a in lost] + [2]
+    assert {a.lease_id for a in again}.isdisjoint(a.lease_id for a in lost)
+    assert core.scheduler.n_leased == 3
+    old, new = lost[0], again[0]
+    assert submit(core, [(old.lease_id, res(old))]) == {0: Verdict.STALE}
+    assert submit(core, [(new.lease_id, res(new))]) == {0: Verdict.STORED}
+    # results riding along settle their trials first: nothing is taken back, the next trials come
+    rest = [(a.lease_id, res(a)) for a in again[1:]]
+    carried = tuple(SubmittedResult(lease, r) for lease, r in rest)
+    grant = decode_message(core.handle_work(encode_message(WorkRequest("w1", 2, carried))), WorkGrant)
+    assert [a.trial_id for a in grant.assignments] == [3, 4]
+    assert all(storage.trial(t).status == "complete" for t in (0, 1, 2))
+
+
 def test_unknown_trial_wrong_seed_and_foreign_lease_are_dropped():
     core, storage, _ = sphere_core()
     (a,) = ask(core).assignments
