@@ -19,13 +19,16 @@ from tests.coordinator_tests.helpers import free_endpoint
 from tests.coordinator_tests.procs import coordinator, spinefarm, stop, wait_status
 
 BANDS = {"hang": [0.0, 0.15], "crash": [0.15, 0.3]}
+# narrow bands for a longer run: its poisoned trials come late, after every worker is seen alive (the status
+# file that shows it is written about every second, and short trials run faster than that)
+NARROW_BANDS = {"hang": [0.0, 0.025], "crash": [0.025, 0.05]}
 ON_WORKERS = re.compile(r"\(3 attempts\) on (\d+) workers?: (.*)$")
 
 
-def poisoned_run(out: Path, run_id: str, trials: int, seed: int) -> None:
+def poisoned_run(out: Path, run_id: str, trials: int, seed: int, bands: dict = BANDS) -> None:
     """The seed fixes each trial's parameters, so which trials are poisoned (by trial number)."""
     cfg = build_run_config(run_id, "sphere:2", seed=seed, duration_s=0.05)
-    cfg = dataclasses.replace(cfg, trial_config={"duration_s": 0.05, "poison": BANDS})
+    cfg = dataclasses.replace(cfg, trial_config={"duration_s": 0.05, "poison": bands})
     _, storage = new_run(cfg, SearchSettings(trials=trials, sampler="random", lease_s=30.0), out)
     storage.close()
 
@@ -63,20 +66,20 @@ def requeued_on(out: Path, names: list[str]) -> dict[int, list[str]]:
     return seen
 
 
-def poison_rows(out: Path) -> list[tuple[int, str, str]]:
+def poison_rows(out: Path, bands: dict = BANDS) -> list[tuple[int, str, str]]:
     """(trial id, status, reason) of every trial in a poison band."""
     _, cols = read_run(out)
     return [(i, cols["status"][i].decode(), cols["reason"][i].decode()) for i in range(len(cols["status"]))
-            if cols["params_unit"][i, 0] < BANDS["crash"][1]]
+            if cols["params_unit"][i, 0] < bands["crash"][1]]
 
 
 @pytest.mark.slow
 def test_a_hanging_or_crashing_trial_is_tried_by_three_distinct_workers(tmp_path, monkeypatch):
     out = tmp_path / "run.h5"
-    poisoned_run(out, "elsewhere", 22, seed=18)  # poisoned: 10 (crash), 20 (hang), 21 (crash)
+    poisoned_run(out, "elsewhere", 80, seed=102, bands=NARROW_BANDS)  # poisoned: 60 (crash), 63 (hang)
     names = ["w0", "w1", "w2"]
     sampled_before_all_alive = run_workers(out, "elsewhere", names, 0.3, monkeypatch)
-    rows = poison_rows(out)
+    rows = poison_rows(out, NARROW_BANDS)
     requeued = requeued_on(out, names)
     checked = 0
     for tid, status, reason in rows:
@@ -87,7 +90,7 @@ def test_a_hanging_or_crashing_trial_is_tried_by_three_distinct_workers(tmp_path
             assert m.group(1) == "3" and sorted(m.group(2).split(", ")) == names, (tid, reason)
             assert sorted(requeued[tid]) == names, (tid, requeued[tid])  # once on each worker
             checked += 1
-    assert len(rows) == 3 and checked >= 1, (sampled_before_all_alive, rows)
+    assert [tid for tid, _, _ in rows] == [60, 63] and checked >= 1, (sampled_before_all_alive, rows)
 
 
 @pytest.mark.slow
