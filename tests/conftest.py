@@ -26,9 +26,9 @@ def pytest_runtest_makereport(item, call):
     if report.failed:
         for args, path, _ in procs.STARTED:
             try:
-                tail = path.read_text(errors="replace").splitlines()[-40:]
+                tail = procs.log_tail(path, 40)
             except OSError:
                 continue
-            report.sections.append((f"stderr of spinefarm {' '.join(args)[:120]}", "\n".join(tail)))
+            report.sections.append((f"stderr of spinefarm {' '.join(args)[:120]}", tail))
     if report.when == "teardown":
         procs.forget_exited()

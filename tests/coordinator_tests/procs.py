@@ -26,6 +26,11 @@ def spinefarm(*args: str, quiet: bool = True) -> subprocess.Popen:
     return proc
 
 
+def log_tail(path: Path, lines: int) -> str:
+    """The last lines of a process's log file."""
+    return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+
+
 def forget_exited() -> None:
     """Drop the logs of processes that have exited (after each test)."""
     for entry in list(STARTED):

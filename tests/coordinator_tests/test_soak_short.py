@@ -8,7 +8,7 @@ import json
 import subprocess
 import sys
 
-from tests.coordinator_tests.procs import ROOT
+from tests.coordinator_tests.procs import ROOT, log_tail
 from tests.netns import netns_unavailable
 
 
@@ -17,7 +17,7 @@ def _log_tails(workdir, lines: int = 12) -> str:
     parts = []
     for log in sorted([workdir / "coordinator.log", *workdir.glob("w*.log")]):
         if log.exists():
-            parts.append(f"--- {log.name}\n" + "\n".join(log.read_text(errors="replace").splitlines()[-lines:]))
+            parts.append(f"--- {log.name}\n" + log_tail(log, lines))
     return "\n".join(parts)
 
 
