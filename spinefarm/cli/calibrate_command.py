@@ -7,6 +7,7 @@ import json
 import shutil
 from typing import TYPE_CHECKING
 
+from spinefarm.cli.profile_argument import add_profile_argument, profile_from
 from spinefarm.cli.robot_argument import add_robot_argument
 
 if TYPE_CHECKING:
@@ -43,6 +44,7 @@ def add_calibration_arguments(p: argparse.ArgumentParser, prefix: str = "") -> N
     if not prefix:
         p.add_argument("--controller", default=None, help="controller space (default: the robot's first)")
         p.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
+        add_profile_argument(p)
 
 
 def settings_from(args: argparse.Namespace, prefix: str = "", controller: str | None = None, jobs: int = 1
@@ -54,7 +56,7 @@ def settings_from(args: argparse.Namespace, prefix: str = "", controller: str | 
     return CalibrationSettings(gaits=get[f"{key}gaits"], search_trials=get[f"{key}search_trials"],
                                bests=get[f"{key}bests"], duration_s=get[f"{key}duration"],
                                settle_s=get[f"{key}settle"], controller=get.get("controller", controller),
-                               jobs=get.get("jobs", jobs))
+                               jobs=get.get("jobs", jobs), profile=tuple(profile_from(args).items()))
 
 
 def summary(result: dict, cached: bool) -> str:

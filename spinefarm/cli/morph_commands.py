@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from spinefarm.cli import checks, render_motion
+from spinefarm.cli.profile_argument import add_profile_argument, profile_from
 from spinefarm.cli.recorded_trial import load_record, simulate_recorded
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.sim_commands import add_engine_argument
@@ -42,6 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "physical values): to run it under this model's defaults or start a search from it "
                         "(--enqueue)")
     add_engine_argument(p)
+    add_profile_argument(p)
     p.set_defaults(func=cmd_replay)
 
     r = sub.add_parser("render", help="draw a gait: a PNG strip or a video (rods dark, strings coloured by tension)",
@@ -110,7 +112,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
         checks.output_path("--gait", args.gait, (".json",))
     engine = args.engine or DEFAULT_ENGINE
     args.path = parameter_folder(args.path)
-    report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix, engine=engine)
+    profile = profile_from(args)
+    report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix, engine=engine,
+                    profile=profile)
     if args.gait is not None:
         from spinefarm.storage.export import write_gait
 
@@ -119,7 +123,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     s = replay_summary(report)
     if args.seeds:
         spread = replay_spread(args.path, args.morphology, args.seeds, duration_s=args.duration,
-                               suffix=args.suffix, engine=engine)
+                               suffix=args.suffix, engine=engine, profile=profile)
         d = np.array([r.result.ntrt_distance_cm for r in spread if not r.diverged])
         ratios = [r.ratio for r in spread if r.ratio is not None]
         s["spread"] = {"jitter_cm": JITTER_CM, "n": len(spread),

@@ -6,6 +6,7 @@ import argparse
 import os
 
 from spinefarm.cli import checks, engine_auto
+from spinefarm.cli.profile_argument import add_profile_argument
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.robust_args import add_robust_args
 
@@ -67,6 +68,7 @@ def _run_args(p: argparse.ArgumentParser, local: bool) -> None:
 
 
 def _trial_args(p: argparse.ArgumentParser) -> None:
+    add_profile_argument(p)
     p.add_argument("--engine", default=None, help="physics engine of every trial: auto (the default of search: "
                    "MuJoCo when a calibration finds it ranks the robot's gaits as Bullet does, else Bullet), "
                    "bullet (the coordinator's default) or mujoco")

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spinefarm.cli import checks
+from spinefarm.cli.profile_argument import add_profile_argument, profile_from
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.protocol.errors import ParameterError
 from spinefarm.robot.engines import DEFAULT_ENGINE
@@ -52,6 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "'rough,rough_amplitude_cm=3' or 'flat,collision_filter=neighbours' (see docs/model.md)")
     add_engine_argument(p)
     add_engine_option_argument(p)
+    add_profile_argument(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--record", type=Path, default=None, help="save the trajectory to FILE.npz")
     p.add_argument("--record-every", type=float, default=0.01, help="recording interval in seconds")
@@ -69,6 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     a.add_argument("--controller", default=None)
     a.add_argument("--jobs", type=int, default=2, help="worker processes")
     add_engine_argument(a)
+    add_profile_argument(a)
     a.add_argument("--out", type=Path, default=Path("accuracy"), help="output prefix for .json and .png")
     a.add_argument("--json", action="store_true",
                    help="print one JSON object (the table goes to standard error)")
@@ -91,7 +94,7 @@ def add_engine_option_argument(p: argparse.ArgumentParser) -> None:
 
 def trial_overrides(args: argparse.Namespace) -> dict[str, Any]:
     """TrialConfig overrides from the flags `trial`, `search` and `coordinator` share (--dt, --engine,
-    --engine-option, --scene, --settle, --motor-model; those a command lacks are skipped). TrialConfig
+    --engine-option, --scene, --settle, --motor-model, --profile; those a command lacks are skipped). TrialConfig
     validates the values."""
     out: dict[str, Any] = {}
     dt = getattr(args, "dt", None)
@@ -112,6 +115,8 @@ def trial_overrides(args: argparse.Namespace) -> dict[str, Any]:
         from spinefarm.robot.scene import parse_scene
 
         out["scene"] = parse_scene(args.scene)
+    if getattr(args, "profile", None) is not None:
+        out["profile"] = profile_from(args)
     return out
 
 
@@ -340,6 +345,8 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
         if base is not None and base.get("engine", DEFAULT_ENGINE) != args.engine:
             base.pop("engine_options", None)  # the run's options belong to its own engine
         base = {**(base or {}), "engine": args.engine}
+    if args.profile is not None:
+        base = {**(base or {}), "profile": profile_from(args)}
     seeds = args.seeds if args.seeds is not None else (3 if args.quick else 5)
     report = run_accuracy(args.morphology, quick=args.quick, seeds=seeds, duration_s=args.duration, jobs=args.jobs,
                           best=best, controller=controller, base=base,

@@ -11,6 +11,7 @@ from typing import Any
 
 from spinefarm.protocol.errors import ConfigError, bounded, check_fields
 from spinefarm.robot.engines import DEFAULT_ENGINE, check_engine_options, engine_spec
+from spinefarm.robot.profile import check_constants, engine_options, profile_hash
 from spinefarm.robot.scene import SceneConfig
 
 MOTOR_MODEL_NAMES = ("physical", "ntrt2014")
@@ -35,6 +36,8 @@ class TrialConfig:
     reflex holding the posture); distance, speed, work and COT count from the pose at its end,
     NTRT's distance (ntrt_distance_cm) still from the start. 0: scored from the start.
     pose_jitter_cm: seeded Gaussian offset of every segment's start position (0: the seed is unused).
+    profile: named physical constants laid over the robot and the engine (robot.profile, `--profile FILE`);
+    carried with the config so that every worker applies them.
     auto_dt: use min(dt_s, dt_safety_factor * the string network's stable-step estimate).
     refuse_unstable_dt: raise ConfigError for a dt_s above that estimate (known to be unstable).
     """
@@ -63,9 +66,15 @@ class TrialConfig:
     record_every_s: float | None = bounded(None, 1e-6, 10.0)
     scene: SceneConfig = field(default_factory=SceneConfig)
     extras: dict[str, float] = field(default_factory=dict)
+    profile: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         check_fields(self)
+        object.__setattr__(self, "profile", check_constants(self.profile))
+        twice = sorted(set(engine_options(self.profile, self.engine)) & set(self.engine_options or {}))
+        if twice:
+            raise ConfigError("an engine option is set by both the profile and engine_options", received=twice,
+                              expected="each option in one of them")
         if not isinstance(self.engine_options, Mapping):
             raise ConfigError("engine_options is not a mapping", received=self.engine_options,
                               expected="{option: value} of the engine's settings")
@@ -85,15 +94,23 @@ class TrialConfig:
         return self.dt_s if self.dt_s is not None else engine_spec(self.engine).default_dt_s
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "scene": self.scene.to_dict()}
+        """Every field, and with a profile its hash (robot.profile.profile_hash), kept in run files; no profile
+        keys without a profile (so configs from before profiles keep their hash)."""
+        d = {**asdict(self), "scene": self.scene.to_dict()}
+        if self.profile:
+            d["profile_hash"] = profile_hash(self.profile)
+        else:
+            del d["profile"]
+        return d
 
     @classmethod
     def from_dict(cls, d: Mapping) -> TrialConfig:
+        d = {k: v for k, v in d.items() if k != "profile_hash"}  # derived from the profile: to_dict writes it anew
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
             raise ConfigError("unknown trial config fields", received=unknown, expected=sorted(known))
-        return cls(**dict(d))
+        return cls(**d)
 
     def config_hash(self) -> str:
         blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))

@@ -32,6 +32,7 @@ import numpy as np
 from spinefarm.protocol.errors import ConfigError, bounded, check_fields, whole
 from spinefarm.protocol.run import json_hash
 from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.profile import profile_hash
 
 RHO_MIN = 0.9
 TOP_K = 10
@@ -56,6 +57,7 @@ class CalibrationSettings:
     settle_s: float = bounded(1.0, 0.0, 60.0)
     controller: str | None = None
     jobs: int = whole(1, 1, 100_000)
+    profile: tuple[tuple[str, float], ...] = ()  # (name, value) pairs of a profile (robot.profile), sorted
 
     def __post_init__(self) -> None:
         check_fields(self, "calibration ")
@@ -64,8 +66,10 @@ class CalibrationSettings:
                               expected=f"at most {self.search_trials}")
 
     def key(self) -> str:
-        """What the result depends on besides the robot (not the number of processes)."""
-        return json_hash({k: v for k, v in dataclasses.asdict(self).items() if k != "jobs"})
+        """What the result depends on besides the robot (not the number of processes): with a profile, its hash
+        (none without, so that calibrations from before profiles keep their key)."""
+        key = {k: v for k, v in dataclasses.asdict(self).items() if k not in ("jobs", "profile")}
+        return json_hash({**key, "profile_hash": profile_hash(dict(self.profile))} if self.profile else key)
 
 
 def ranks(x: np.ndarray) -> np.ndarray:
@@ -136,7 +140,8 @@ def _trial(job: tuple) -> tuple[float, float]:
     _CACHE = _CACHE or SetupCache(8)
     source, unit, seed, engine, dt_scale, settings = job
     morph = load_morphology(source)
-    cfg = TrialConfig(duration_s=settings.duration_s, settle_s=settings.settle_s, engine=engine)
+    cfg = TrialConfig(duration_s=settings.duration_s, settle_s=settings.settle_s, engine=engine,
+                      profile=dict(settings.profile))
     if dt_scale != 1.0:
         cfg = dataclasses.replace(cfg, dt_s=cfg.step_s * dt_scale)
     t0 = time.process_time()
@@ -211,6 +216,7 @@ def calibrate(source: str, settings: CalibrationSettings) -> dict[str, Any]:
                  "step_error": _step_error(source, picked, d, t, s)} for t, d in (("mujoco", mujoco),
                                                                                   ("bullet", bullet))}
     return {"robot": morph.name, "source": str(source), "spec_hash": morph.spec_hash(),
+            "profile_hash": profile_hash(dict(s.profile)),
             "settings": dataclasses.asdict(s), "n_random": s.gaits, "n_bests": len(bests), **agree,
             "tiers": tiers, "thresholds": {"spearman": RHO_MIN, "top_overlap": f"{OVERLAP_MIN} of {TOP_K}",
                                            "median_distance_ratio": list(RATIO_RANGE)},

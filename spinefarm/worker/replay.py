@@ -5,6 +5,7 @@ controller space, run the NTRT-era morphology with the 2014 motor at 1 ms, compa
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -168,9 +169,10 @@ def unit_params(morph: Morphology, params: NtrtParameterSet, space: NtrtTableSpa
 
 def replay(folder: str | Path, morphology: str | Morphology | None = None, *, duration_s: float | None = None,
            suffix: str = "default", seed: int = 0, pose_jitter_cm: float = 0.0,
-           engine: str = DEFAULT_ENGINE) -> ReplayReport:
+           engine: str = DEFAULT_ENGINE, profile: Mapping[str, float] | None = None) -> ReplayReport:
     """Run NTRT's published parameters on the NTRT-era morphology (2014 motor, 1 ms, one sub-step,
-    no friction anchors in Bullet; `engine` "mujoco" runs the same on MuJoCo's default contacts)."""
+    no friction anchors in Bullet; `engine` "mujoco" runs the same on MuJoCo's default contacts), under a
+    profile's constants if given (robot.profile)."""
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.trial import TrialConfig, simulate
 
@@ -182,7 +184,7 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     # NTRT's Bullet 2.81 had no friction anchors; its motor caps are per 1 ms step (spec 0a.3)
     cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model="ntrt2014", controller="ntrt",
                       engine=engine, engine_options={"friction_anchor": False} if engine == "bullet" else {},
-                      pose_jitter_cm=pose_jitter_cm)
+                      pose_jitter_cm=pose_jitter_cm, profile=dict(profile or {}))
     result = simulate(morph, u, cfg, seed).result
     return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result,
                         REFERENCES.get(morph.name), space.param_space)
@@ -203,10 +205,10 @@ JITTER_CM = 1e-6  # spec 0a.5: perturbations this small already spread the tetra
 
 
 def replay_spread(folder: str | Path, morphology: str | Morphology | None, seeds: int, *,
-                  duration_s: float | None = None, suffix: str = "default", engine: str = DEFAULT_ENGINE
-                  ) -> list[ReplayReport]:
+                  duration_s: float | None = None, suffix: str = "default", engine: str = DEFAULT_ENGINE,
+                  profile: Mapping[str, float] | None = None) -> list[ReplayReport]:
     """Replays with the start pose jittered by JITTER_CM (seeds 1..seeds): a distribution, not one sample."""
     return [replay(folder, morphology, duration_s=duration_s, suffix=suffix, seed=s, pose_jitter_cm=JITTER_CM,
-                   engine=engine)
+                   engine=engine, profile=profile)
             for s in range(1, seeds + 1)]
 

@@ -20,6 +20,7 @@ from spinefarm.protocol.robust import EpisodeDraw, EpisodeResult, RobustSpec, dr
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.variants import with_density_factor
+from spinefarm.robot.profile import apply_profile, engine_only
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.setup import SetupCache
 from spinefarm.worker.trial import simulate_batch
@@ -37,12 +38,14 @@ class World(NamedTuple):
 def episode_world(morph: Morphology, cfg: TrialConfig, draw: EpisodeDraw) -> World:
     """The world of one draw: friction x friction_scale (of the scene's, the config's or the robot's), rod
     density x mass_scale, the draw's start jitter, and rough ground seeded by the draw when asked."""
+    morph = apply_profile(morph, cfg.profile)  # scaled below: the worlds' configs keep its engine constants only
     base = cfg.scene.friction if cfg.scene.friction is not None else \
         cfg.ground_friction if cfg.ground_friction is not None else morph.ground_friction
     scene = dataclasses.replace(cfg.scene, friction=None)
     if draw.rough_seed >= 0:
         scene = dataclasses.replace(scene, kind="rough", rough_seed=draw.rough_seed)
     config = dataclasses.replace(cfg, ground_friction=base * draw.friction_scale, scene=scene,
+                                 profile=engine_only(cfg.profile),
                                  pose_jitter_cm=draw.start_jitter_cm or cfg.pose_jitter_cm)
     world_morph = morph if draw.mass_scale == 1.0 else with_density_factor(morph, draw.mass_scale)
     return World(draw, world_morph, config)

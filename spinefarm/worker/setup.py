@@ -19,6 +19,7 @@ from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.cpg_network import CpgNetwork
 from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.profile import engine_options
 from spinefarm.robot.reach import reachable_rod_pairs
 from spinefarm.robot.scene import build_terrain
 from spinefarm.robot.spaces import controller_space
@@ -36,7 +37,8 @@ class TrialSetup:
         self.morph, self.cfg, self.controller = morph, cfg, controller
         self.space = controller_space(morph, controller)  # built once: 1-5 ms for the NTRT spaces
         self.engine_cls = engine_class(cfg.engine)
-        self.settings = self.engine_cls.settings_from_options(cfg.engine_options)
+        self.settings = self.engine_cls.settings_from_options({**engine_options(cfg.profile, cfg.engine),
+                                                               **cfg.engine_options})
         self.bodies = build_bodies(morph.structure)
         self.geom = build_strings(morph.structure, self.bodies, cfg.relocate_anchors)
         self.masses = np.array([b.mass_kg for b in self.bodies])

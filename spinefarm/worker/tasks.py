@@ -19,6 +19,7 @@ from typing import Any
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.work import TrialAssignment
+from spinefarm.robot.profile import ground_friction
 
 FAULT_SCALE_ENV = "SPINEFARM_FAULT_DISTANCE_SCALE"
 _REPORTED_PACKAGES = ("numpy", "numba", "pybullet", "mujoco", "spinefarm")
@@ -135,7 +136,8 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
             return with_fault(run_episodes(morphology, params, cfg, a.seed, k, controller=controller, setup=setup))
         r = run_trial(morphology, params, cfg, a.seed, controller=controller, setup=setup)
         if a.fidelity is not None and a.fidelity.perturb:
-            friction = cfg.ground_friction if cfg.ground_friction is not None else morphology.ground_friction
+            friction = cfg.ground_friction if cfg.ground_friction is not None \
+                else ground_friction(morphology, cfg.profile)
             p = run_trial(morphology, params, perturbed(cfg, friction), a.seed, controller=controller)
             r = dataclasses.replace(r, extras={**r.extras, "perturbed_distance_m": p.distance_m if p.ok else
                                                float("nan")})

@@ -24,6 +24,7 @@ from spinefarm.protocol.results import TrialResult
 from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.profile import apply_profile
 from spinefarm.robot.spaces import param_space
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.batch import Batch, Timing, Trajectory, World
@@ -86,7 +87,7 @@ def _simulate(morphology: Morphology | str | Mapping, params: list, cfg: TrialCo
               controller: str | None, scene_factory: EngineFactory | None, setup: TrialSetup | SetupCache | None
               ) -> tuple[list[TrialOutcome | None], dict]:
     t_wall = time.perf_counter()
-    morph = load_morphology(morphology)
+    morph = apply_profile(load_morphology(morphology), cfg.profile)
     controller = controller or cfg.controller
     for seed in seeds:
         if not isinstance(seed, int | np.integer) or seed < 0:

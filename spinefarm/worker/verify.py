@@ -13,6 +13,7 @@ import numpy as np
 
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
+from spinefarm.robot.profile import ground_friction
 from spinefarm.worker.trial import TrialConfig, run_trial
 
 
@@ -51,7 +52,8 @@ def verification_configs(config: TrialConfig, settings: VerifySettings,
     fine = dataclasses.replace(config, dt_s=config.step_s / settings.refine, auto_dt=False)
     out = [("fine", fine)]
     if settings.perturb:
-        friction = (config.ground_friction if config.ground_friction is not None else morph.ground_friction)
+        friction = (config.ground_friction if config.ground_friction is not None
+                    else ground_friction(morph, config.profile))
         out.append(("perturbed", dataclasses.replace(
             fine, pose_jitter_cm=settings.pose_jitter_cm, ground_friction=friction * (1 + settings.friction_change))))
     return out
