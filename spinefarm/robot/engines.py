@@ -13,6 +13,8 @@ Abilities (what the trial loop may use beyond BasePhysics' required methods):
                  can run many steps in one compiled call (worker.loop)
   snapshot       snapshot(world) / restore(world, state): a world's whole state, put back into any world of the
                  same model so that it goes on in the same bits (a settled start, worker.settled)
+  set_state      set_state(world, poses, velocities): every body's pose and velocity written at once, e.g. a
+                 recorded state a fit's window starts from (worker.fit)
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from typing import Any
 
 from spinefarm.protocol.errors import ConfigError
 
-ABILITIES = frozenset({"reset", "velocities", "compiled_step", "snapshot"})
+ABILITIES = frozenset({"reset", "velocities", "compiled_step", "snapshot", "set_state"})
 DEFAULT_ENGINE = "bullet"  # the judge: a trial config without an engine runs here
 
 
@@ -120,7 +122,7 @@ ENGINES: dict[str, EngineSpec] = {spec.name: spec for spec in (
         EngineOption("cone_friction", _B, False),
         _GRAVITY,
         EngineOption("friction_anchor", _B, True),
-    ), frozenset({"velocities"}), "pybullet, the judge: hard contacts, 1 ms default step", "pybullet"),
+    ), frozenset({"velocities", "set_state"}), "pybullet, the judge: hard contacts, 1 ms default step", "pybullet"),
     EngineSpec("mujoco", "spinefarm.worker.engines.mujoco", "MujocoPhysics", 1e-3, (
         EngineOption("integrator", _S, "implicitfast", choices=("euler", "implicit", "implicitfast", "rk4")),
         EngineOption("cone", _S, "elliptic", choices=("pyramidal", "elliptic")),
@@ -137,8 +139,8 @@ ENGINES: dict[str, EngineSpec] = {spec.name: spec for spec in (
         EngineOption("noslip_iterations", _I, 0, low=0, high=10_000),
         EngineOption("margin_cm", _F, 0.0, low=0.0, high=10.0),
         _GRAVITY,
-    ), frozenset({"reset", "velocities", "compiled_step", "snapshot"}), "MuJoCo, the fast screen: soft contacts",
-        "mujoco"),
+    ), frozenset({"reset", "velocities", "compiled_step", "snapshot", "set_state"}),
+        "MuJoCo, the fast screen: soft contacts", "mujoco"),
 )}
 
 

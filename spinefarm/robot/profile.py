@@ -150,3 +150,17 @@ def engine_only(constants: Mapping[str, float]) -> dict[str, float]:
 def ground_friction(morph: Morphology, constants: Mapping[str, float]) -> float:
     """The robot's ground friction under the profile."""
     return float(constants.get("ground_friction", morph.ground_friction))
+
+
+def current_value(morph: Morphology, name: str, engine: str, options: Mapping[str, object]) -> float:
+    """A constant's value in this robot and engine setting (a material's without a tag: its first tag's)."""
+    c, tag = constant(name)
+    if c.where == "spec":
+        return float(morph.to_dict()[c.field])
+    if c.where in MATERIALS:
+        materials = morph.to_dict()["structure"][MATERIALS[c.where]]
+        return float(materials[tag if tag is not None else sorted(materials)[0]][c.field])
+    from spinefarm.robot.engines import engine_spec
+
+    return float(options.get(c.field, engine_spec(c.where).option(c.field).default)) if c.where == engine \
+        else float(engine_spec(c.where).option(c.field).default)

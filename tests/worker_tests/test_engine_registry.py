@@ -15,7 +15,8 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.engines.base import BasePhysics, engine_class
 
 ABILITY_METHODS = {"reset": ("reset",), "velocities": ("velocities", "set_velocity"),
-                   "compiled_step": ("compiled_worlds",), "snapshot": ("snapshot", "restore")}
+                   "compiled_step": ("compiled_worlds",), "snapshot": ("snapshot", "restore"),
+                   "set_state": ("set_state",)}
 
 
 @pytest.mark.parametrize("name", engine_names())

@@ -28,6 +28,9 @@ Optional abilities, declared in the engine's registry entry (spinefarm.robot.eng
   snapshot(world), restore(world, state)
                                   "snapshot": a world's whole state, and putting it back into a world of the same
                                   model, which then goes on in the same bits (worker.settled)
+  set_state(world, poses, velocities)
+                                  "set_state": every body's pose (nb, 7) COM cm + quaternion x, y, z, w and
+                                  velocity (nb, 6) cm/s and rad/s, world frame, one write per body
   compiled_worlds()               "compiled_step": per world (address of a C function void step(uint64 model,
                                   uint64 data), model address, data address, state (nb, k), pose_columns (7,)
                                   int64, wrench (nb, 6)), for the compiled loop of worker.loop
@@ -112,6 +115,11 @@ class BasePhysics:
     def restore(self, world: int, state: Any) -> None:
         """ability "snapshot": world `world` takes a state from snapshot()."""
         raise NotImplementedError(f"engine {self.name} has no restore")
+
+    def set_state(self, world: int, poses: np.ndarray, velocities: np.ndarray) -> None:
+        """ability "set_state": world `world`'s bodies at poses (nb, 7) COM cm + quaternion (x, y, z, w) with
+        velocities (nb, 6) linear cm/s and angular rad/s, world frame."""
+        raise NotImplementedError(f"engine {self.name} has no set_state")
 
     def compiled_worlds(self) -> list[tuple]:
         """ability "compiled_step": each world's (step function address, model address, data address, state,

@@ -145,6 +145,9 @@ class BulletPhysics(BasePhysics):
         """Set one body's world-frame velocity; for checks and tests."""
         self.worlds[world].set_velocity(index, linear_cm_s, angular_rad_s)
 
+    def set_state(self, world: int, poses: np.ndarray, velocities: np.ndarray) -> None:
+        self.worlds[world].set_state(poses, velocities)
+
     def body_dynamics(self, index: int, world: int = 0) -> tuple:
         return self.worlds[world].body_dynamics(index)
 
@@ -282,6 +285,13 @@ class BulletWorld:
         """Set one body's world-frame velocity; for checks and tests."""
         pb.resetBaseVelocity(self.body_ids[index], list(map(float, linear_cm_s)), list(map(float, angular_rad_s)),
                              physicsClientId=self.client)
+
+    def set_state(self, poses: np.ndarray, velocities: np.ndarray) -> None:
+        """Every body at poses (nb, 7) with velocities (nb, 6), world frame (the base frame is the COM)."""
+        for b, pose, vel in zip(self.body_ids, poses.tolist(), velocities.tolist(), strict=True):
+            pb.resetBasePositionAndOrientation(b, pose[:3], pose[3:], physicsClientId=self.client)
+            pb.resetBaseVelocity(b, vel[:3], vel[3:], physicsClientId=self.client)
+        self._poses = np.asarray(poses, dtype=float).copy()
 
     def body_dynamics(self, index: int) -> tuple:
         return pb.getDynamicsInfo(self.body_ids[index], -1, physicsClientId=self.client)

@@ -208,6 +208,16 @@ class MujocoPhysics(BasePhysics):
         self.qvel[world][index, :3] = linear_cm_s
         self.qvel[world][index, 3:] = fm.matvec(rot.T, angular_rad_s)
 
+    def set_state(self, world: int, poses: np.ndarray, velocities: np.ndarray) -> None:
+        """Every body at poses (nb, 7) with velocities (nb, 6), world frame; the contact guard looks afresh."""
+        self.qpos[world][:, :3] = poses[:, :3]
+        self.qpos[world][:, 3] = poses[:, 6]  # MuJoCo's quaternion is (w, x, y, z)
+        self.qpos[world][:, 4:] = poses[:, 3:6]
+        self.qvel[world][:, :3] = velocities[:, :3]
+        for b in range(self.n_bodies):  # a free joint's angular velocity is in the body frame
+            self.qvel[world][b, 3:] = fm.matvec(quaternion_matrix(poses[b, 3:]).T, velocities[b, 3:])
+        self._steps[world] = self._safe_until[world] = 0
+
     def contact_count(self, world: int = 0) -> int:
         return int(self.data[world].ncon)
 

@@ -1,0 +1,137 @@
+"""Multiple shooting: many short windows, each simulated from the recorded state at its start.
+
+Every window is one world of one engine batch: its bodies are put at the recorded poses with velocities by
+finite differences (one state write per body, the engine's "set_state"), and its strings follow the recorded
+rest lengths (the recording's "rest_lengths" drive: no controller, no motor, the string law on the given rest
+lengths, so a window needs no controller state from before it). The simulated poses are kept at the recorded
+samples inside the window.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from spinefarm.protocol.errors import ConfigError
+from spinefarm.robot.engines import engine_spec
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.profile import apply_profile
+from spinefarm.robot.trial_config import TrialConfig
+from spinefarm.worker.control.law import string_tables
+from spinefarm.worker.fit.recording import Recording, RecordingError
+from spinefarm.worker.fit.state import engine_poses, rest_lengths_cm, velocities
+from spinefarm.worker.setup import TrialSetup
+from spinefarm.worker.sim import strings as sk
+
+
+@dataclass(frozen=True)
+class Window:
+    """start: the recording's row the window starts from; rows: the rows checked inside it (after the start)."""
+
+    start: int
+    rows: tuple[int, ...]
+
+
+def plan_windows(rec: Recording, window_s: float, stride_s: float, skip_s: float = 0.0) -> list[Window]:
+    """Windows of window_s starting every stride_s from skip_s on, each checked at every recorded sample in it."""
+    t = rec.time_s
+    out, t0 = [], t[0] + skip_s
+    while t0 + window_s <= t[-1] + 1e-9:
+        start = int(np.searchsorted(t, t0 - 1e-9))
+        rows = np.flatnonzero((t > t[start] + 1e-9) & (t <= t[start] + window_s + 1e-9))
+        if len(rows):
+            out.append(Window(start, tuple(int(r) for r in rows)))
+        t0 += stride_s
+    if not out:
+        raise RecordingError(f"{rec.where}too short for one window", received=f"{t[-1] - t[0]:g} s",
+                             expected=f"at least {skip_s + window_s:g} s")
+    return out
+
+
+def run_windows(morph: Morphology, cfg: TrialConfig, rec: Recording, windows: list[Window]) -> list[np.ndarray]:
+    """Per window its simulated poses (len(rows), nb, 7) COM cm + quaternion (x, y, z, w) at its rows' times;
+    a window that diverged holds NaN from there."""
+    if rec.rest_length_m is None:
+        raise RecordingError(f"{rec.where}no rest lengths to drive the strings", received="no rest_length_m",
+                             expected="a recording with rest lengths (docs/recordings.md)")
+    if not engine_spec(cfg.engine).can("set_state"):
+        raise ConfigError("the engine cannot start from a recorded state", received=cfg.engine,
+                          expected="an engine with the set_state ability")
+    morph = apply_profile(morph, cfg.profile)
+    setup = TrialSetup(morph, cfg, None)
+    rec.check_robot(len(setup.bodies), len(morph.structure.strings), morph.name)
+    out = _batch(setup, rec, windows)
+    retry = [w for w, o in enumerate(out) if o is None]
+    if retry:  # the engine asked for other settings (MuJoCo's contact guard): those windows again, in them
+        again = dataclasses.replace(cfg, engine_options={**cfg.engine_options, "segment_contacts": "scene"})
+        for w, poses in zip(retry, run_windows(morph, again, rec, [windows[w] for w in retry]), strict=True):
+            out[w] = poses
+    return out  # type: ignore[return-value]
+
+
+def _batch(setup: TrialSetup, rec: Recording, windows: list[Window]) -> list[np.ndarray | None]:
+    dt, n_w = setup.dt, len(windows)
+    poses_rec, vel_rec = engine_poses(rec), velocities(rec)
+    t = rec.time_s
+    n_steps = max(int(round((t[w.rows[-1]] - t[w.start]) / dt)) for w in windows)
+    check = [{int(round((t[r] - t[w.start]) / dt)): i for i, r in enumerate(w.rows)} for w in windows]
+    rest = [rest_lengths_cm(rec, t[w.start] + dt * np.arange(n_steps)) for w in windows]
+    params, state = string_tables(setup.morph, setup.geom.start_length_cm, {})
+    params[:, sk.P_MODE] = sk.MODE_FIXED  # the rest lengths are given: no motor, no controller
+    g = setup.geom
+    banks = [sk.StringBank(len(setup.bodies), g.body_a, g.body_b, g.anchor_a_cm, g.anchor_b_cm, params, state.copy())
+             for _ in windows]
+    engine, owned = setup.scene(None, None, n_w)
+    out = [np.full((len(w.rows), len(setup.bodies), 7), np.nan) for w in windows]
+    try:
+        for w, win in enumerate(windows):
+            engine.set_state(w, poses_rec[win.start], vel_rec[win.start])
+            banks[w].state[:, sk.S_LPREV] = _previous_lengths(banks[w], poses_rec, t, win.start, dt)
+        active = np.ones(n_w, dtype=bool)
+        force = np.zeros((n_w, len(setup.bodies), 3))
+        torque = np.zeros_like(force)
+        cpg = np.zeros(1)
+        step = [0]
+
+        def run(k: int, live: np.ndarray) -> None:
+            for _ in range(k):
+                j = step[0]
+                poses = engine.read_poses()
+                for w in np.flatnonzero(live):
+                    if j in check[w]:
+                        out[w][check[w][j]] = poses[w]
+                    bank = banks[w]
+                    bank.state[:, sk.S_REST] = rest[w][j]
+                    if bank.step(poses[w], cpg, dt, sk.MOTOR_PHYSICAL) != sk.STATUS_OK:
+                        live[w] = False
+                    force[w], torque[w] = bank.force, bank.torque
+                engine.apply_wrenches(force, torque, live)
+                engine.step(live)
+                step[0] += 1
+
+        engine.advance(run, n_steps, active, n_steps)
+        end = engine.read_poses()
+        for w in np.flatnonzero(active):
+            if n_steps in check[w]:
+                out[w][check[w][n_steps]] = end[w]
+        return [None if w in engine.retries else out[w] for w in range(n_w)]
+    finally:
+        if owned:
+            engine.close()
+
+
+def _lengths(bank: sk.StringBank, poses: np.ndarray) -> np.ndarray:
+    """(n_strings,) anchor-to-anchor lengths (cm) at poses (nb, 7)."""
+    sk.world_anchors(poses, bank.body_a, bank.anchor_a, bank.wa)
+    sk.world_anchors(poses, bank.body_b, bank.anchor_b, bank.wb)
+    return np.linalg.norm(bank.wb - bank.wa, axis=1)
+
+
+def _previous_lengths(bank: sk.StringBank, poses: np.ndarray, t: np.ndarray, row: int, dt: float) -> np.ndarray:
+    """The strings' lengths one step before the recorded row (its lengths less dt times their rate, a central
+    difference of the recorded samples): the damping's first rate is then the recorded one."""
+    lo, hi = max(row - 1, 0), min(row + 1, len(t) - 1)
+    rate = (_lengths(bank, poses[hi]) - _lengths(bank, poses[lo])) / (t[hi] - t[lo])
+    return _lengths(bank, poses[row]) - rate * dt
