@@ -63,17 +63,23 @@ def _read_native(z: np.lib.npyio.NpzFile, path: Path) -> Recording:
 
 
 def _read_trial_record(z: np.lib.npyio.NpzFile, path: Path) -> Recording:
-    """`spinefarm trial --record`: poses (n, nb, 7) cm + quaternion (x, y, z, w), rest lengths in cm,
-    tensions in N, the parameters and trial config as JSON."""
-    poses = z["poses"]
+    """`spinefarm trial --record`: the trajectory's arrays, the parameters and trial config as JSON."""
     config = json.loads(str(z["trial_config_json"])) if "trial_config_json" in z.files else {}
-    drive = {"kind": "controller", "controller": config.get("controller"),
-             "params": json.loads(str(z["params_json"])) if "params_json" in z.files else {}}
-    rest = z["rest_length_cm"] * 0.01 if "rest_length_cm" in z.files else None
-    return Recording(time_s=z["time_s"], position_m=poses[:, :, :3] * 0.01, quat_wxyz=poses[:, :, [6, 3, 4, 5]],
-                     rest_length_m=rest, tension_n=z["tension_n"] if "tension_n" in z.files else None,
-                     drive=drive, scene=config.get("scene", {}), source=str(path),
-                     morphology=str(z["morphology"]) if "morphology" in z.files else "")
+    params = json.loads(str(z["params_json"])) if "params_json" in z.files else {}
+    return from_trajectory({k: z[k] for k in z.files}, config, params, str(path),
+                           str(z["morphology"]) if "morphology" in z.files else "")
+
+
+def from_trajectory(arrays: dict[str, np.ndarray], config: dict, params: dict, source: str = "",
+                    morphology: str = "") -> Recording:
+    """A Recording of a trial's trajectory (worker.batch.Trajectory.arrays(): poses (n, nb, 7) cm + quaternion
+    (x, y, z, w), rest lengths in cm, tensions in N) under its trial config (a dict) and named parameters."""
+    poses = arrays["poses"]
+    rest = arrays["rest_length_cm"] * 0.01 if "rest_length_cm" in arrays else None
+    return Recording(time_s=arrays["time_s"], position_m=poses[:, :, :3] * 0.01, quat_wxyz=poses[:, :, [6, 3, 4, 5]],
+                     rest_length_m=rest, tension_n=arrays.get("tension_n"),
+                     drive={"kind": "controller", "controller": config.get("controller"), "params": params},
+                     scene=config.get("scene", {}), source=source, morphology=morphology)
 
 
 def read_ntrt(folder: Path) -> Recording:
