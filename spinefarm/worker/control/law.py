@@ -28,7 +28,7 @@ from spinefarm.robot.morphology.structure import NEWTON
 from spinefarm.worker.control.cpg import CpgIntegrator, rk4_advance
 from spinefarm.worker.sim import strings as sk
 
-MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014}
+MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014, "ntrt2026": sk.MOTOR_NTRT2026}
 STATUS_OK, STATUS_NONFINITE = sk.STATUS_OK, sk.STATUS_NONFINITE
 
 
