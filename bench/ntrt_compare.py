@@ -105,6 +105,9 @@ def compare(spine: str, config: str, morphology: str, motor_model: str, duration
     ntrt = read_recording(folder)
     t0 = time.time()
     ours = simulate_ours(folder, morphology, motor_model, duration_s, engine, options or {})
+    n_ntrt = ntrt["len_cm"].shape[1]  # NTRT records its CPG strings, created after the passive ones (spec 0a.8)
+    for col in ("len_cm", "rest_cm", "tension"):
+        ours[col] = ours[col][:, -n_ntrt:]
     rows = []
     for t in times:
         i = int(np.searchsorted(ours["time_s"], t - 1e-9))
