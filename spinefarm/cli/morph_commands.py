@@ -18,6 +18,7 @@ from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.sim_commands import add_engine_argument
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.engines import DEFAULT_ENGINE
+from spinefarm.robot.trial_config import MOTOR_MODEL_NAMES
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Replay NTRT's published parameters for a robot (shipped with spinefarm: "
                                    "tetraspine-ntrt, tetrahedral-complex, octahedral-complex, ribbed) or a "
                                    "folder of NTRT .nnw files on the matching NTRT-era morphology with NTRT's "
-                                   "2014 motor at 1 ms, and print distance, speed and COT beside NTRT's own "
+                                   "motor at 1 ms, and print distance, speed and COT beside NTRT's own "
                                    "figure.")
     p.add_argument("path", metavar="ROBOT_OR_FOLDER",
                    help="a robot with published parameters (e.g. octahedral-complex) or a folder holding "
@@ -42,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also write the parameter set as a `trial --params` file (NTRT's controller space, named "
                         "physical values): to run it under this model's defaults or start a search from it "
                         "(--enqueue)")
+    p.add_argument("--motor-model", choices=MOTOR_MODEL_NAMES, default=None,
+                   help="default: the motor of the NTRT code the morphology mirrors (ntrt2014; ntrt2026 for "
+                        "tetraspine-ntrt2026, the model of NTRT's recorded runs)")
     add_engine_argument(p)
     add_profile_argument(p)
     p.set_defaults(func=cmd_replay)
@@ -64,7 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--duration", type=float, default=None, help="simulate this many seconds and draw them")
     r.add_argument("--random-seed", type=checks.seed, default=0,
                    help="seed of random parameters when --params is absent")
-    r.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
+    r.add_argument("--motor-model", choices=MOTOR_MODEL_NAMES, default=None)
     add_engine_argument(r)
     render_motion.add_arguments(r)
     r.set_defaults(func=cmd_render)
@@ -80,6 +84,7 @@ def replay_summary(report: Any) -> dict[str, Any]:
     ref = report.reference
     return {k: _finite(v) for k, v in {
         "morphology": report.morphology,
+        "motor_model": report.motor_model,
         "scored_segment": report.scored_segment,
         "path": str(report.folder),
         "node_values": list(report.parameters.node),
@@ -114,7 +119,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     args.path = parameter_folder(args.path)
     profile = profile_from(args)
     report = replay(args.path, args.morphology, duration_s=args.duration, suffix=args.suffix, engine=engine,
-                    profile=profile)
+                    profile=profile, motor_model=args.motor_model)
     if args.gait is not None:
         from spinefarm.storage.export import write_gait
 
@@ -123,7 +128,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     s = replay_summary(report)
     if args.seeds:
         spread = replay_spread(args.path, args.morphology, args.seeds, duration_s=args.duration,
-                               suffix=args.suffix, engine=engine, profile=profile)
+                               suffix=args.suffix, engine=engine, profile=profile,
+                               motor_model=args.motor_model)
         d = np.array([r.result.ntrt_distance_cm for r in spread if not r.diverged])
         ratios = [r.ratio for r in spread if r.ratio is not None]
         s["spread"] = {"jitter_cm": JITTER_CM, "n": len(spread),
@@ -136,7 +142,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(json.dumps(s))
         return 1 if report.diverged else 0
     print(f"replay of {s['path']} on {s['morphology']} ({s['n_edge_files']} edge files, node "
-          f"{s['node_values'][0]:g}, {s['node_values'][1]:g}; NTRT 2014 motor, dt 1 ms, {engine})")
+          f"{s['node_values'][0]:g}, {s['node_values'][1]:g}; NTRT motor {report.motor_model}, dt 1 ms, {engine})")
     if report.diverged:
         print(f"  DIVERGED: {report.result.reason}; the figures below are from the last sane state")
     print(f"  NTRT distance {s['ntrt_distance_cm']:9.2f} cm in {s['sim_time_s']:.2f} s "

@@ -17,6 +17,7 @@ from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.protocol.errors import ParameterError
 from spinefarm.robot.engines import DEFAULT_ENGINE
 from spinefarm.robot.spaces import param_space
+from spinefarm.robot.trial_config import MOTOR_MODEL_NAMES
 
 if TYPE_CHECKING:
     from spinefarm.robot.morphology.model import Morphology
@@ -44,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="physics step in seconds (default: the engine's, 0.001 for Bullet; see docs/engines.md), "
                         "or 'auto' for half the string network's stable-step estimate")
     p.add_argument("--controller", default=None, help="controller space (e.g. ntrt, sidewinding)")
-    p.add_argument("--motor-model", choices=("physical", "ntrt2014"), default=None)
+    p.add_argument("--motor-model", choices=MOTOR_MODEL_NAMES, default=None)
     p.add_argument("--seed", type=checks.seed, default=None, help="trial seed (default: the random seed or 0)")
     p.add_argument("--settle", type=float, default=None, metavar="S",
                    help="settle this long with the CPG at rest and score locomotion from there (default 0)")

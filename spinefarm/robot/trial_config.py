@@ -14,7 +14,7 @@ from spinefarm.robot.engines import DEFAULT_ENGINE, check_engine_options, engine
 from spinefarm.robot.profile import check_constants, engine_options, profile_hash
 from spinefarm.robot.scene import SceneConfig
 
-MOTOR_MODEL_NAMES = ("physical", "ntrt2014")
+MOTOR_MODEL_NAMES = ("physical", "ntrt2014", "ntrt2026")
 MAX_DURATION_S = 3600.0  # the longest trial a config takes
 
 
@@ -28,7 +28,8 @@ class TrialConfig:
     engine: a registered physics backend (robot.engines: "bullet", "mujoco"); engine_options: that backend's
     own settings (solver iterations, friction anchors, contact parameters), checked against the registry here.
     motor_model: "physical" (limits in cm/s and cm/s^2, independent of dt) or "ntrt2014" (NTRT's
-    per-step caps, only faithful at dt = 1 ms, for replaying published gaits).
+    per-step caps, only faithful at dt = 1 ms, for replaying published gaits) or "ntrt2026" (NTRT's current
+    motor, V dt per step and no acceleration limit, the one its recordings were made with).
     cpg_update_period_s: NTRT's controlTime (CPG output held in between).
     cpg_max_step_s: the CPG's RK4 sub-step cap; None: 1 ms, longer for a network slow enough
     (worker.control.cpg.CpgIntegrator).

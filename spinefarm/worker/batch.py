@@ -27,18 +27,20 @@ from spinefarm.worker.sim import strings as sk
 @dataclass
 class Trajectory:
     """Recorded at a chosen rate: time_s (n,), poses (n, n_bodies, 7) cm + quaternion,
-    tension_n (n, n_strings), cpg_output_cm_s (n, n_nodes), rest_length_cm (n, n_strings)."""
+    tension_n (n, n_strings), cpg_output_cm_s (n, n_nodes), rest_length_cm (n, n_strings), length_cm
+    (n, n_strings) each string's anchor distance at the control law's evaluation."""
 
     time_s: list[float] = field(default_factory=list)
     poses: list[np.ndarray] = field(default_factory=list)
     tension_n: list[np.ndarray] = field(default_factory=list)
     cpg_output_cm_s: list[np.ndarray] = field(default_factory=list)
     rest_length_cm: list[np.ndarray] = field(default_factory=list)
+    length_cm: list[np.ndarray] = field(default_factory=list)
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {"time_s": np.array(self.time_s), "poses": np.array(self.poses),
                 "tension_n": np.array(self.tension_n), "cpg_output_cm_s": np.array(self.cpg_output_cm_s),
-                "rest_length_cm": np.array(self.rest_length_cm)}
+                "rest_length_cm": np.array(self.rest_length_cm), "length_cm": np.array(self.length_cm)}
 
     def add(self, t: float, poses: np.ndarray, law: ControlLaw, world: int) -> None:
         self.time_s.append(t)
@@ -46,6 +48,7 @@ class Trajectory:
         self.tension_n.append(law.tension[world] / NEWTON)
         self.cpg_output_cm_s.append(law.cpg_output_cm_s[world].copy())
         self.rest_length_cm.append(law.state[world, :, sk.S_REST].copy())
+        self.length_cm.append(law.state[world, :, sk.S_LPREV].copy())
 
 
 @dataclass(frozen=True)

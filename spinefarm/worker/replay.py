@@ -1,9 +1,10 @@
 """Replaying NTRT's published gaits (spec 4.4, 4.5, 8): read the .nnw files, map them into the NTRT
-controller space, run the NTRT-era morphology with the 2014 motor at 1 ms, compare with NTRT's figure.
+controller space, run the NTRT-era morphology with that code's motor at 1 ms, compare with NTRT's figure.
 """
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -26,6 +27,34 @@ ROBOT_FOLDERS = {
     "Ribbed": "ribbed",
     "ribDemo": "ribbed",
 }
+
+
+# NTRT's recorded runs (ntrt-recordings: a run-info.json beside params/) were made with NTRT's current code;
+# a robot whose model of that code exists runs on it
+RECORDED_RUN_MORPHOLOGY = {"tetraspine-ntrt": "tetraspine-ntrt2026", "ribbed": "ribbed-ntrt2026",
+                           "octahedral-complex": "octahedral-complex-ntrt2026"}
+
+
+def ntrt_motor(morph: Morphology) -> str:
+    """The NTRT motor of the code the morphology mirrors (extra.ntrt_code_year; 2014 when not said)."""
+    return "ntrt2026" if dict(morph.extra).get("ntrt_code_year", 2014) >= 2026 else "ntrt2014"
+
+
+def recorded_run(folder: str | Path) -> NtrtReference | None:
+    """NTRT's own distance for a recorded run's folder (its run-info.json), or None for a bare .nnw folder."""
+    info_path = Path(folder) / "run-info.json"
+    if not info_path.is_file():
+        return None
+    try:
+        info = json.loads(info_path.read_text())
+        dist = info["runs"]["A"]["dist"]
+        steps = int(info["steps"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError("run-info.json is not an NTRT recording's", received=str(info_path),
+                          expected="JSON with steps and runs.A.dist (ntrt-recordings/README.md)") from exc
+    if not dist:  # an aborted run has no score
+        return None
+    return NtrtReference(float(dist), steps * 0.001, f"NTRT's recorded run ({info_path})")
 
 
 # NTRT's published parameter sets ship with the package (data, Apache-2.0: LICENSE and NOTICE beside them)
@@ -85,6 +114,7 @@ class ReplayReport:
     result: TrialResult
     reference: NtrtReference | None
     param_space: ParamSpace  # NTRT's controller space on this robot, which unit_params lie in
+    motor_model: str = "ntrt2014"
 
     @property
     def diverged(self) -> bool:
@@ -126,7 +156,8 @@ def read_nnw(path: Path) -> tuple[float, float]:
 def read_parameter_set(folder: str | Path, suffix: str = "default") -> NtrtParameterSet:
     """The node file and edge files 0..N-1 of `folder` (or its logs/ subfolder)."""
     root = Path(folder)
-    logs = root / "logs" if (root / "logs").is_dir() else root
+    # NTRT's own logs/, a recording's params/ (ntrt-recordings), or the files themselves
+    logs = next((root / sub for sub in ("logs", "params") if (root / sub).is_dir()), root)
     if not logs.is_dir():
         raise ConfigError("NTRT parameter folder not found", received=str(root),
                           expected="a folder holding logs/bestParameters-*.nnw")
@@ -145,10 +176,12 @@ def read_parameter_set(folder: str | Path, suffix: str = "default") -> NtrtParam
 
 
 def detect_morphology(folder: str | Path) -> str:
-    """The built-in NTRT-era morphology named by an NTRT robot folder in `folder`'s path."""
+    """The built-in NTRT-era morphology named by an NTRT robot folder in `folder`'s path (the model of NTRT's
+    current code for a recorded run, where there is one)."""
     for part in reversed(Path(folder).resolve().parts):
         if part in ROBOT_FOLDERS:
-            return ROBOT_FOLDERS[part]
+            name = ROBOT_FOLDERS[part]
+            return RECORDED_RUN_MORPHOLOGY.get(name, name) if (Path(folder) / "run-info.json").is_file() else name
     raise ConfigError("cannot tell the robot from the path", received=str(folder),
                       expected=f"a path through one of {sorted(ROBOT_FOLDERS)}, or --morphology NAME")
 
@@ -169,10 +202,12 @@ def unit_params(morph: Morphology, params: NtrtParameterSet, space: NtrtTableSpa
 
 def replay(folder: str | Path, morphology: str | Morphology | None = None, *, duration_s: float | None = None,
            suffix: str = "default", seed: int = 0, pose_jitter_cm: float = 0.0,
-           engine: str = DEFAULT_ENGINE, profile: Mapping[str, float] | None = None) -> ReplayReport:
-    """Run NTRT's published parameters on the NTRT-era morphology (2014 motor, 1 ms, one sub-step,
-    no friction anchors in Bullet; `engine` "mujoco" runs the same on MuJoCo's default contacts), under a
-    profile's constants if given (robot.profile)."""
+           engine: str = DEFAULT_ENGINE, profile: Mapping[str, float] | None = None,
+           motor_model: str | None = None) -> ReplayReport:
+    """Run NTRT's published parameters on the NTRT-era morphology (the motor of its NTRT code, 1 ms, one
+    sub-step, no friction anchors in Bullet; `engine` "mujoco" runs the same on MuJoCo's default contacts),
+    under a profile's constants if given (robot.profile). A recorded run's folder is compared with NTRT's
+    recorded distance."""
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.trial import TrialConfig, simulate
 
@@ -182,12 +217,14 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     u = unit_params(morph, params, space)
     duration = duration_s or morph.duration_s
     # NTRT's Bullet 2.81 had no friction anchors; its motor caps are per 1 ms step (spec 0a.3)
-    cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model="ntrt2014", controller="ntrt",
+    motor_model = motor_model or ntrt_motor(morph)
+    cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model=motor_model, controller="ntrt",
                       engine=engine, engine_options={"friction_anchor": False} if engine == "bullet" else {},
                       pose_jitter_cm=pose_jitter_cm, profile=dict(profile or {}))
     result = simulate(morph, u, cfg, seed).result
-    return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result,
-                        REFERENCES.get(morph.name), space.param_space)
+    reference = recorded_run(folder) or REFERENCES.get(morph.name)
+    return ReplayReport(morph.name, morph.scored_segment, Path(folder), params, u, duration, result, reference,
+                        space.param_space, motor_model)
 
 
 def gait_file(report: ReplayReport) -> dict:
@@ -196,7 +233,8 @@ def gait_file(report: ReplayReport) -> dict:
     r, space = report.result, report.param_space
     return {"morphology": report.morphology, "controller": "ntrt",
             "params": space.to_named(space.from_unit(report.unit_params)),
-            "source": {"ntrt_parameters": str(report.parameters.folder), "replay": "NTRT's 2014 motor, dt 1 ms",
+            "source": {"ntrt_parameters": str(report.parameters.folder),
+                       "replay": f"NTRT's motor {report.motor_model}, dt 1 ms",
                        "ntrt_distance_cm": r.ntrt_distance_cm, "speed_cm_s": r.speed_cm_s, "cot": r.cot,
                        "sim_time_s": r.sim_time_s}}
 
@@ -206,9 +244,9 @@ JITTER_CM = 1e-6  # spec 0a.5: perturbations this small already spread the tetra
 
 def replay_spread(folder: str | Path, morphology: str | Morphology | None, seeds: int, *,
                   duration_s: float | None = None, suffix: str = "default", engine: str = DEFAULT_ENGINE,
-                  profile: Mapping[str, float] | None = None) -> list[ReplayReport]:
+                  profile: Mapping[str, float] | None = None, motor_model: str | None = None) -> list[ReplayReport]:
     """Replays with the start pose jittered by JITTER_CM (seeds 1..seeds): a distribution, not one sample."""
     return [replay(folder, morphology, duration_s=duration_s, suffix=suffix, seed=s, pose_jitter_cm=JITTER_CM,
-                   engine=engine, profile=profile)
+                   engine=engine, profile=profile, motor_model=motor_model)
             for s in range(1, seeds + 1)]
 

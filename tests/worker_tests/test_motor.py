@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spinefarm.worker.sim.strings import motor_ntrt2014, motor_physical
+from spinefarm.worker.sim.strings import motor_ntrt2014, motor_ntrt2026, motor_physical
 
 K, TMAX, V, A = 1000.0, 7000.0, 24.0, 10000.0
 
@@ -59,3 +59,19 @@ def test_ntrt2014_motor_caps_are_per_step():
     assert np.isclose(rest - new, A * 1e-6)  # 0.01 cm per step, i.e. 10 cm/s at 1 ms
     new_half = motor_ntrt2014(rest, 20.0, 30.0, K, TMAX, V, A, 0.1, 0.1, 0.0, 5e-4)
     assert np.isclose((rest - new_half) / 5e-4, 5.0)  # and 5 cm/s at 0.5 ms: speed tied to dt
+
+
+def test_ntrt2026_motor_moves_v_dt_a_step_without_an_acceleration_limit():
+    """NTRT's current motor (spec 3.3 [H]): each step's move is the asked-for change clamped to V dt, whatever
+    the string's elongation rate. NTRT's recorded TetraSpine runs (V = 7) let the inner strings' rest lengths
+    out of their start by exactly 0.07 cm in their first 10 steps."""
+    v_h = 7.0
+    rest = 24.189064495158576  # ntrt-recordings TetraSpine random-00, string 3: start length, t = 0.01 rest 24.119064
+    for _ in range(10):
+        rest = motor_ntrt2026(rest, 20.0, 24.2, 10000.0, TMAX, v_h, 0.1, 0.1, 1e-3)
+    assert np.isclose(rest, 24.119064, atol=1e-6)
+    assert np.isclose(motor_ntrt2026(30.0, 29.999, 30.0, K, TMAX, V, 0.1, 0.1, 1e-3), 29.999)  # small: all of it
+    assert np.isclose(motor_ntrt2026(30.0, 20.0, 30.0, K, TMAX, V, 0.1, 0.1, 5e-4), 30.0 - V * 5e-4)
+    # above the tension limit the target moves out to L - T_max / k, so the motor lets out
+    assert np.isclose(motor_ntrt2026(22.0, 10.0, 30.0, K, TMAX, V, 0.1, 0.1, 1e-3), 22.0 + V * 1e-3)
+    assert motor_ntrt2026(0.102, 0.0, 0.2, K, TMAX, V, 0.1, 0.1, 1e-3) == 0.1  # never below the minimum

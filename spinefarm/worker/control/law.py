@@ -13,7 +13,8 @@ Compiled structures are plain tuples of arrays (numba types them once):
   strings (body_a (s,), body_b (s,), anchor_a (s, 3), anchor_b (s, 3) cm, params (B, s, N_PARAM),
            state (B, s, N_STATE), force (B, nb, 3), torque (B, nb, 3), tension (B, s), work (B, 1),
            world anchors a, b (B, s, 3), string force (B, s, 3))
-  clock   (steps (B,) int64 taken in this phase, cpg_every (steps per CPG update, 0: CPG held), dt_s, motor mode)
+  clock   (steps (B,) int64 taken in this phase, cpg_every (steps per CPG update, 0: CPG held), dt_s, motor mode,
+           quiet (B,) int64: 1 until the world's first step, which then runs without the law (motor ntrt2026))
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from spinefarm.robot.morphology.structure import NEWTON
 from spinefarm.worker.control.cpg import CpgIntegrator, rk4_advance
 from spinefarm.worker.sim import strings as sk
 
-MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014}
+MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014, "ntrt2026": sk.MOTOR_NTRT2026}
 STATUS_OK, STATUS_NONFINITE = sk.STATUS_OK, sk.STATUS_NONFINITE
 
 
@@ -38,7 +39,12 @@ def law_step_world(cpg, strings, clock, b, poses):
     (nb, 3). Returns the string kernel's status; the world's step count advances only on success."""
     state, omega, amp, indptr, source, wc, rate, h, n_sub, scratch, out = cpg
     body_a, body_b, anc_a, anc_b, params, sstate, force, torque, tension, work, wa, wb, sforce = strings
-    steps, every, dt, motor = clock
+    steps, every, dt, motor, quiet = clock
+    if quiet[b]:  # NTRT's first world step runs before its first model step: no string forces, no control
+        quiet[b] = 0
+        force[b][:] = 0.0
+        torque[b][:] = 0.0
+        return STATUS_OK
     n = steps[b]
     if every > 0 and (n + 1) % every == 0:
         rk4_advance(state[b], (omega[b], amp[b], indptr[b], source[b], wc[b], rate[b]), h[b], n_sub[b], scratch[b],
@@ -148,6 +154,8 @@ class ControlLaw:
                         np.zeros((n_worlds, n_strings, 3)), np.zeros((n_worlds, n_strings, 3)))
         self.steps = np.zeros(n_worlds, dtype=np.int64)
         self.status = np.zeros(n_worlds, dtype=np.int64)
+        # NTRT's current code steps the world once before the model's first step (its recordings' t = 0 row)
+        self.quiet = np.full(n_worlds, int(self.motor == sk.MOTOR_NTRT2026), dtype=np.int64)
         self.begin_phase(0, 1.0)
 
     def begin_phase(self, cpg_every: int, dt_s: float) -> None:
@@ -158,7 +166,7 @@ class ControlLaw:
         n_sub = np.array([p[1] for p in plans], dtype=np.int64)
         self.cpg = (*self._cpg_const, h, n_sub, self._scratch, self.cpg_output_cm_s)
         self.steps[:] = 0
-        self.clock = (self.steps, int(cpg_every), float(dt_s), int(self.motor))
+        self.clock = (self.steps, int(cpg_every), float(dt_s), int(self.motor), self.quiet)
 
     def step(self, poses: np.ndarray, active: np.ndarray) -> int:
         """One step of every active world: poses (B, nb, 7) -> self.force, self.torque (B, nb, 3). Returns how

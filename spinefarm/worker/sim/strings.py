@@ -17,7 +17,7 @@ S_REST, S_LPREV, S_V, S_U = range(4)
 N_STATE = 4
 
 MODE_FIXED, MODE_IMPEDANCE, MODE_DRIVEN = 0, 1, 2
-MOTOR_PHYSICAL, MOTOR_NTRT2014 = 0, 1
+MOTOR_PHYSICAL, MOTOR_NTRT2014, MOTOR_NTRT2026 = 0, 1, 2
 
 STATUS_OK, STATUS_NONFINITE = 0, 1
 
@@ -78,6 +78,21 @@ def motor_ntrt2014(rest, target, length, k, tmax, vmax, amax, lmin, lact, vc, dt
                 if delta == 0.0:
                     delta = -_sign(vc) * a * dt
             rest += delta
+    if rest < lmin:
+        rest = lmin
+    return rest
+
+
+@njit(cache=True)
+def motor_ntrt2026(rest, target, length, k, tmax, vmax, lmin, lact, dt):
+    """NTRT's current motor (spec 3.3 [H], since 2014-12): the 2014 rules without the acceleration limit,
+    each step's move clamped to V dt. Its recorded runs (ntrt-recordings) were made with it."""
+    if k * (length - target) > tmax:
+        target = length - tmax / k
+    delta = target - rest
+    if length > lact or delta > 0.0:
+        step = vmax * dt
+        rest += min(max(delta, -step), step)
     if rest < lmin:
         rest = lmin
     return rest
@@ -165,6 +180,9 @@ def string_step(poses, geometry, params, state, cpg_out, dt, motor_mode, outputs
                 new_rest, state[i, S_U] = motor_physical(
                     rest, target, length, k, params[i, P_TMAX], params[i, P_V], params[i, P_A],
                     params[i, P_LMIN], params[i, P_LACT], state[i, S_U], dt)
+            elif motor_mode == MOTOR_NTRT2026:
+                new_rest = motor_ntrt2026(rest, target, length, k, params[i, P_TMAX], params[i, P_V],
+                                          params[i, P_LMIN], params[i, P_LACT], dt)
             else:
                 new_rest = motor_ntrt2014(rest, target, length, k, params[i, P_TMAX], params[i, P_V],
                                           params[i, P_A], params[i, P_LMIN], params[i, P_LACT], v_old, dt)
