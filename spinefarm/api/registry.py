@@ -81,16 +81,14 @@ class _File:
 
 
 def _looks(path: Path) -> tuple[Any, ...]:
-    """What a run's status is built from, cheaply: the run file's and the status file's identity, size and
-    mtime, and whether a writer holds the run. A change rebuilds the status at once."""
-    def mark(p: Path) -> tuple[int, ...]:
-        try:
-            st = p.stat()
-        except OSError:
-            return ()
-        return st.st_ino, st.st_size, st.st_mtime_ns
-
-    return mark(path), mark(status_path(path)), writer_holds(path)
+    """What changes a run's status at once, cheaply: the run file replaced (resume, compress at close), a
+    status file appearing or going, a writer taking or leaving the run. A live run's rows and status file
+    change at every flush: those wait for the interval."""
+    try:
+        inode = path.stat().st_ino
+    except OSError:
+        inode = 0
+    return inode, status_path(path).exists(), writer_holds(path)
 
 
 @dataclass

@@ -73,3 +73,49 @@ def test_every_good_file_is_served_under_cpu_load_and_concurrent_requests(tmp_pa
         proc.wait(30)
     assert set(seen) == {200} and seen[200] >= 2 * CLIENTS, (seen, proc.stderr.read()[-2000:])
     assert not missing, f"{len(missing)} responses left out runs, e.g. {missing[:3]}"
+
+
+# The probe's reading child, its read slowed to 8 s (past the first deadline of 5 s) while RUN.h5.slow exists.
+SLOW_WHILE_MARKED = """
+import sys
+import spinefarm.storage.probe as probe
+READ = "try:\\n"  # the read, after the child has started
+probe._PROBE_CODE = probe._PROBE_CODE.replace(READ, (
+    "import os, time\\n"
+    "if os.path.exists(sys.argv[1] + '.slow'):\\n"
+    "    time.sleep(8)\\n") + READ, 1)
+"""
+
+
+def test_a_good_file_replaced_and_read_again_slowly_stays_served(tmp_path):
+    """Resume and compress-at-close replace a run file: its new read may run out of time on a busy machine;
+    meanwhile the run is "still reading" with its last good state, never missing."""
+    import shutil
+
+    from spinefarm.cli.service_commands import free_port
+
+    d = tmp_path / "runs"
+    d.mkdir()
+    run_file(d / "kept.h5", "kept")
+    port = free_port()
+    args = ["api", "--runs-dir", str(d), "--port", str(port)]
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_WHILE_MARKED + "from spinefarm.cli.main import main\n"
+                             f"sys.exit(main({args!r}))"], cwd=ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        url = f"http://127.0.0.1:{port}"
+        wait_for(lambda: _ok(url + "/health"), timeout_s=60, what="the API")
+        assert [r["run_id"] for r in httpx.get(url + "/runs", timeout=60).json()] == ["kept"]
+        (d / "kept.h5.slow").touch()
+        shutil.copy(d / "kept.h5", tmp_path / "copy.h5")
+        os.replace(tmp_path / "copy.h5", d / "kept.h5")  # a new inode: read again, slowly
+        end = time.monotonic() + 12
+        while time.monotonic() < end:
+            assert [r["run_id"] for r in httpx.get(url + "/runs", timeout=30).json()] == ["kept"]
+            assert httpx.get(url + "/runs/kept", timeout=30).status_code == 200
+            time.sleep(0.3)
+    finally:
+        proc.terminate()
+        proc.wait(30)
+    err = proc.stderr.read()
+    assert "still reading" in err and "did not finish within 5 s" in err, err[-2000:]
