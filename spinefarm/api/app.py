@@ -28,7 +28,10 @@ def create_app(run_files: Sequence[str | Path] = (), runs_dir: str | Path | None
         app.state.registry = RunRegistry([Path(f) for f in run_files],
                                          Path(runs_dir) if runs_dir is not None else None)
         app.state.pictures = PictureCache(Path(picture_cache_dir) if picture_cache_dir is not None else None)
-        yield
+        try:
+            yield
+        finally:
+            app.state.registry.close()
 
     responses = {404: {"model": ErrorResponse}, 409: {"model": ErrorResponse}, 422: {"model": ErrorResponse}}
     app = FastAPI(title="spinefarm", summary="Status and results of gait searches (read-only)",

@@ -12,13 +12,50 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pydantic import BaseModel, ValidationError
 
+from spinefarm.api.schemas import Worker
 from spinefarm.storage.runlock import lock_path
+from spinefarm.storage.status import read_status, status_path
 
 # A status file not rewritten for this long, while its coordinator still holds the file, means it is stuck.
 STALE_STATUS_S = 10.0
 # The rate of a running search without a status file: the last finished trials, over at most this window.
 RATE_TRIALS = 50
+
+
+class LiveStatus(BaseModel):
+    """What run_view takes from the status sidecar, with the types it serves them as (other keys pass)."""
+
+    state: str = "running"
+    updated_at_unix_s: float = 0.0
+    trials_leased: int | None = None
+    trials_queued: int | None = None
+    rate_trials_s: float | None = None
+    eta_s: float | None = None
+    workers: list[Worker] = []
+    audit: dict[str, Any] | None = None
+    fidelity_raised: str | None = None
+    unservable_workers: dict[str, str] | None = None
+
+
+def read_live(run_path: Path) -> tuple[dict[str, Any], str | None]:
+    """The status sidecar if it is well formed, else ({}, why): a hand-edited or foreign one is set aside
+    (the run's state then comes from its file alone) and named, never served half-valid."""
+    live = read_status(run_path)
+    if not live:
+        return {}, None
+    try:
+        LiveStatus.model_validate(live)
+        environments = (live.get("audit") or {}).get("environments", [])
+        if not isinstance(environments, list):
+            raise ValueError(f"audit.environments is {type(environments).__name__}, not a list")
+    except (ValidationError, ValueError) as exc:
+        first = exc.errors()[0] if isinstance(exc, ValidationError) else {"loc": (), "msg": str(exc)}
+        where = ".".join(str(x) for x in first["loc"]) or "the file"
+        return {}, (f"status file {status_path(run_path)} is malformed and left out: {where}: {first['msg']}; "
+                    f"received {str(first.get('input', ''))[:80]!r}")
+    return live, None
 
 
 def writer_holds(run_path: str | Path) -> bool:

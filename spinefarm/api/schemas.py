@@ -96,6 +96,8 @@ class RunStatus(BaseModel):
     best: Trial | None
     workers: list[Worker]
     status_age_s: float | None
+    status_file_error: str | None = Field(None, description="why the run's status file (RUN.h5.status.json) "
+                                          "was set aside; the state then comes from the run file alone")
     started_at_unix_s: float | None = None
     controller: str | None = None
     engine: str | None = Field(None, description="the engine of every trial (null: a test objective)")

@@ -9,10 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from spinefarm.api.run_state import derive_state, live_figures
+from spinefarm.api.run_state import derive_state, live_figures, read_live
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, planned_evaluations
-from spinefarm.storage.status import read_status
 
 
 def _num(x: float) -> float | None:
@@ -72,7 +71,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     was given it, for the commands that reopen or resume it."""
     meta = storage.run_meta()
     counts = storage.counts()
-    live = read_status(path) or {}
+    live, status_error = read_live(path)
     age = time.time() - live.get("updated_at_unix_s", 0.0)
     finished = counts["complete"] + counts["failed"]
     planned = planned_evaluations(meta.trials_budget, meta.settings)
@@ -103,6 +102,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "fidelity_raised": live.get("fidelity_raised"),
         "unservable_workers": (live.get("unservable_workers") or {}) if state in ("running", "stalled", "done") else {},
         "status_age_s": age if live else None,
+        "status_file_error": status_error,
         "started_at_unix_s": _num(meta.created_at_unix_s),
         "controller": meta.controller or (tc.get("controller") if tc else None),
         "engine": (tc.get("engine") or "bullet") if meta.morphology_spec else None,

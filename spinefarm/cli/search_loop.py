@@ -180,6 +180,9 @@ class SearchSession:
             print(f"stopped with everything stored; continue with: spinefarm search --resume {path}",
                   file=sys.stderr)
             code = 130
+        if self.service.close_warnings:  # e.g. a disk full at the end: every result is stored all the same
+            print(f"warning: {'; '.join(self.service.close_warnings)}; every result is stored in {path}",
+                  file=sys.stderr)
         print(describe_best(core, path, getattr(self.args, "verbose", False)), flush=True)
         return code
 

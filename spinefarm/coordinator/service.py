@@ -21,7 +21,7 @@ from spinefarm.protocol import keys
 from spinefarm.protocol.credentials import Credentials, is_loopback
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.storage.base import BaseStorage
-from spinefarm.storage.status import write_status
+from spinefarm.storage.status import write_final_status, write_status
 
 log = logging.getLogger("spinefarm.coordinator")
 DEFAULT_LISTEN = ("tcp/127.0.0.1:7447",)
@@ -73,6 +73,7 @@ class CoordinatorService:
         self._thread: threading.Thread | None = None
         self._session: zenoh.Session | None = None
         self._entities: list = []
+        self.close_warnings: list[str] = []  # what close() could not do although every result is stored
 
     def start(self) -> CoordinatorService:
         try:
@@ -177,15 +178,19 @@ class CoordinatorService:
                 log.debug("undeclare failed", exc_info=True)
         self._entities = []
         try:
-            self.flush()
-            if self._status_for is not None and self.core.write_failure is None:
+            self.core.commit()
+            with self.core.lock:
                 status = self.core.status()
-                if status["state"] != "done":
+            if self._status_for is not None:
+                if self.core.write_failure is None and status["state"] != "done":
                     status["state"] = "stopped"
-                write_status(self._status_for, status)
+                # a full disk here loses no result (each was synced before its ack): said, never raised
+                self.close_warnings = [w for w in [write_final_status(self._status_for, status)] if w]
         finally:
             with self.core.lock:
                 self.storage.close()
+            if getattr(self.storage, "close_warning", None):
+                self.close_warnings.append(self.storage.close_warning)
             if self._session is not None:
                 self._session.close()
                 self._session = None

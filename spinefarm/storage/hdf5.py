@@ -93,6 +93,7 @@ class Hdf5Storage(InMemoryStorage):
         self._rebuild_ranking()
         self.read_only = file is None
         self.write_error: str | None = None  # set once a write failed: nothing is written after it
+        self.close_warning: str | None = None  # what close() could not do (compress) with every row stored
         self.fsync = True  # False: flush hands rows to the OS only (bench/coordinator_throughput.py compares)
         self._lock: RunLock | None = None
         self._datasets = {c.name: file["trials"][c.name] for c in COLUMNS} if file is not None else {}
@@ -282,7 +283,8 @@ class Hdf5Storage(InMemoryStorage):
             _replace_with_copy(real, ".compress-tmp", meta, cols, read_episodes(real), live=False, lock=self._lock)
             _fsync_dir(real)
         except (OSError, StorageError, ValueError) as exc:
-            log.warning("run file %s left uncompressed: %s", self.path, _reason(exc))
+            self.close_warning = f"run file {self.path} left uncompressed ({_reason(exc)}): it is complete, only larger"
+            log.info(self.close_warning)
 
     def close(self) -> None:
         try:

@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 
 from spinefarm.protocol.envelope import SCHEMA_VERSION
-from spinefarm.protocol.errors import StorageError
+from spinefarm.protocol.errors import SpinefarmError, StorageError
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.storage import episodes as ep
 from spinefarm.storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
@@ -52,9 +52,35 @@ def write_meta(f: h5py.File, meta: RunMeta) -> None:
 
 
 def meta_of(f: h5py.File, path: Path) -> RunMeta:
+    """The run metadata, checked against the table it describes: a file edited by hand (or by another tool)
+    gives one StorageError naming what does not fit, never a traceback further on."""
     if f.attrs.get("file_schema_version") != FILE_SCHEMA_VERSION:
         raise StorageError(f"{path} is not a spinefarm run file of this version",
                            received=f.attrs.get("file_schema_version"), expected=FILE_SCHEMA_VERSION)
+    try:
+        meta = _parse_meta(f)
+    except (KeyError, ValueError, TypeError, SpinefarmError) as exc:
+        raise StorageError(f"run file {path} has unreadable metadata: {str(exc).splitlines()[0][:200]}",
+                           expected="the attributes a spinefarm run file is written with") from exc
+    _check_shapes(f, meta, path)
+    return meta
+
+
+def _check_shapes(f: h5py.File, meta: RunMeta, path: Path) -> None:
+    """Every parameter attribute names the same parameters, as many as the table's parameter columns."""
+    counts = {name: len(getattr(meta, name)) for name in _TUPLE_FIELDS}
+    trials = f.get("trials")
+    for name in VECTOR_COLUMNS:
+        ds = trials.get(name) if isinstance(trials, h5py.Group) else None
+        if isinstance(ds, h5py.Dataset) and len(ds.shape) == 2:
+            counts[f"/trials/{name} columns"] = int(ds.shape[1])
+    if len(set(counts.values())) > 1:
+        raise StorageError(f"run file {path} does not fit together: its parameter attributes and columns "
+                           "disagree", received=", ".join(f"{k} {v}" for k, v in counts.items()),
+                           expected=f"{counts['param_names']} everywhere (one per parameter name)")
+
+
+def _parse_meta(f: h5py.File) -> RunMeta:
     kw: dict[str, Any] = {}
     for fld in fields(RunMeta):
         if fld.name == "environment" and fld.name not in f.attrs:

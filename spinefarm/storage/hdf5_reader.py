@@ -139,6 +139,9 @@ class Hdf5Reader(BaseStorage):
             self._n = int(empty[0]) if empty.size else n
             self._cols = _LazyColumns(group, self._n)
             self._cols._cache["status"] = status[: self._n]
+        except _DAMAGED as exc:
+            self._file.close()
+            raise _damaged(self.path, exc) from exc
         except BaseException:
             self._file.close()
             raise

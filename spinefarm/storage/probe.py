@@ -19,6 +19,7 @@ handling SIGTERM. Two guards:
 from __future__ import annotations
 
 import os
+import select
 import struct
 import subprocess
 import sys
@@ -28,12 +29,14 @@ from pathlib import Path
 from spinefarm.protocol.errors import StorageError
 
 PROBE_TIMEOUT_S = 10.0
+START_TIMEOUT_S = 120.0  # a child that has not even imported h5py by then: the machine is overloaded
 _SIGNATURE = b"\x89HDF\r\n\x1a\n"
 _SAID = 3  # the child's exit code when it read the file and said what is wrong (its last stderr line)
 _PROBE_CODE = (
     "import sys\n"
     "from spinefarm.protocol.errors import StorageError\n"
     "from spinefarm.storage.hdf5_reader import read_run\n"
+    "print('ready', flush=True)\n"
     "try:\n"
     "    meta, cols = read_run(sys.argv[1], swmr=sys.argv[2] == 'swmr')\n"
     "except StorageError as exc:\n"
@@ -84,27 +87,66 @@ def check_eof(path: str | Path, settle_s: float = 0.3) -> None:
         time.sleep(0.05)
 
 
-def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S) -> str:
-    """Read the whole file in a child process within `timeout_s`; its run id, else StorageError."""
+def probe(path: str | Path, timeout_s: float = PROBE_TIMEOUT_S, start_timeout_s: float = START_TIMEOUT_S) -> str:
+    """Read the whole file in a child process within `timeout_s`; its run id, else StorageError.
+
+    The deadline counts from when the child has started (imported h5py): on a busy machine that start alone
+    can take longer than the read, and a file must not count as damaged because the machine is busy. The start
+    has its own, longer deadline (`start_timeout_s`)."""
     path = Path(path)
     check_eof(path)
     clear_stale_write_flags(path)  # a killed writer's file: plain HDF5 readers can open it from now on
     mode = "swmr" if open_for_writing(path) else "plain"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    child = subprocess.Popen([sys.executable, "-P", "-c", _PROBE_CODE, str(path), mode], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, env=env, stdin=subprocess.DEVNULL)
     try:
-        r = subprocess.run([sys.executable, "-P", "-c", _PROBE_CODE, str(path), mode], capture_output=True,
-                           text=True, timeout=timeout_s, env=env, stdin=subprocess.DEVNULL)
+        said = _started(child, start_timeout_s)
+        if said is None:
+            raise StorageError(f"reading run file {path} did not start within {start_timeout_s:g} s",
+                               expected="a machine less busy (the reading child process was not even running)")
+        out, err = child.communicate(timeout=timeout_s)
+        out = said + out
     except subprocess.TimeoutExpired:
         raise StorageError(f"reading run file {path} did not finish within {timeout_s:g} s",
                            expected="an undamaged run file (this one is truncated or corrupted, or the machine "
                                     "was too busy to read it in time)") from None
-    if r.returncode != 0:
-        lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()]
-        last = lines[-1] if lines else f"exit code {r.returncode}"
-        if r.returncode == _SAID:
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.communicate()
+    return _verdict(path, child.returncode, out.decode("utf-8", "replace"), err.decode("utf-8", "replace"))
+
+
+def _started(child: subprocess.Popen, timeout_s: float) -> bytes | None:
+    """What the child wrote once it said "ready" (or ended) within `timeout_s`; None if it did not."""
+    assert child.stdout is not None
+    fd = child.stdout.fileno()
+    end = time.monotonic() + timeout_s
+    seen = b""
+    while b"\n" not in seen:
+        left = end - time.monotonic()
+        if left <= 0:
+            return None
+        ready, _, _ = select.select([fd], [], [], left)
+        if ready:
+            chunk = os.read(fd, 64)
+            if not chunk:
+                break  # it ended before a word: communicate() collects why from stderr
+            seen += chunk
+    return seen
+
+
+def _verdict(path: Path, returncode: int, out: str, err: str) -> str:
+    """The run id the child printed after "ready", else the StorageError its exit code and stderr mean."""
+    if returncode != 0:
+        lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+        last = lines[-1] if lines else f"exit code {returncode}"
+        if returncode == _SAID:
             raise StorageError(last[:400])
         raise StorageError(f"cannot read run file {path}: {last[:300]}", expected="an undamaged run file")
-    return r.stdout.strip()
+    lines = out.strip().splitlines()
+    return lines[-1] if len(lines) > 1 else ""
 
 
 def _superblock(path: str | Path) -> bytes | None:

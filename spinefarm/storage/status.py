@@ -18,10 +18,34 @@ def status_path(run_path: str | Path) -> Path:
 
 
 def write_status(run_path: str | Path, status: dict[str, Any]) -> None:
+    """Replace the status file atomically; a write that fails (a full disk) leaves the old one and no .tmp."""
     target = status_path(run_path)
     tmp = target.with_name(target.name + ".tmp")
-    tmp.write_text(json.dumps(status, allow_nan=False, default=str))
-    os.replace(tmp, target)
+    try:
+        tmp.write_text(json.dumps(status, allow_nan=False, default=str))
+        os.replace(tmp, target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_final_status(run_path: str | Path, status: dict[str, Any]) -> str | None:
+    """The coordinator's last status: None once written, else what went wrong. The old file would go on
+    saying "running", so when the new one cannot be written (a full disk) the old one is removed and the write
+    tried once more in the space it freed; failing that there is none, and readers take the state from the run
+    file (api.run_state)."""
+    try:
+        write_status(run_path, status)
+        return None
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+    path = status_path(run_path)
+    path.unlink(missing_ok=True)
+    try:
+        write_status(run_path, status)
+    except OSError:
+        return f"the disk is full ({why}): the status file {path} is left out (the run file says the state)"
+    return f"the disk is full ({why}): the status file {path} was rewritten in the space of the old one"
 
 
 def read_status(run_path: str | Path) -> dict[str, Any] | None:

@@ -193,8 +193,10 @@ def test_real_server_reads_a_live_run_and_serves_snapshots(tmp_path):
         assert httpx.get(f"{base}/runs/live").json()["trials_done"] == 2
         writer.finish_trial(7, result(7, 42.0, seed=107), 42.0)  # the run goes on while served
         writer.flush()
-        st = httpx.get(f"{base}/runs/live").json()
-        assert st["trials_done"] == 3 and st["best"]["trial_id"] == 7
+        # a run's status is read once per interval for every request (api.registry.VIEW_INTERVAL_S): seen next
+        wait_for(lambda: httpx.get(f"{base}/runs/live").json()["trials_done"] == 3, timeout_s=5, poll_s=0.2,
+                 what="the new row in the run's status")
+        assert httpx.get(f"{base}/runs/live").json()["best"]["trial_id"] == 7
         r = httpx.get(f"{base}/runs/live/file")
         with h5py.File(io.BytesIO(r.content), "r") as f:
             assert f["trials/distance_m"][7] == 42.0

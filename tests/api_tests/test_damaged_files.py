@@ -113,18 +113,19 @@ def test_a_status_file_with_a_lone_surrogate_is_served(tmp_path):
         assert client.get("/runs/odd").status_code == 200
 
 
-# The probe's reading child, slowed as a busy machine slows a child's start: 8 s the first time, 6 s after
-# (longer than the first deadline of 5 s, shorter than the second of 10 s); a marker file counts the reads.
+# The probe's reading child, its read slowed (after it said it started, so the read's own deadline counts):
+# 8 s the first time, 6 s after (longer than the first deadline of 5 s, shorter than the second of 10 s); a
+# marker file counts the reads.
 SLOW_FIRST_READ = """
 import sys
 import spinefarm.storage.probe as probe
-probe._PROBE_CODE = (
-    "import os, sys, time\\n"
+READY = "print('ready', flush=True)\\n"
+probe._PROBE_CODE = probe._PROBE_CODE.replace(READY, READY + (
+    "import os, time\\n"
     "marker = sys.argv[1] + '.first-read'\\n"
     "first = not os.path.exists(marker)\\n"
     "open(marker, 'w').close()\\n"
-    "time.sleep(8 if first else 6)\\n"
-) + probe._PROBE_CODE
+    "time.sleep(8 if first else 6)\\n"))
 """
 
 

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Query
+from pydantic import ValidationError
 
 from spinefarm.api.analysis import analysis_view, columns_view
 from spinefarm.api.contour import CONTOUR_VALUES, contour_view
@@ -18,6 +20,7 @@ from spinefarm.storage.hdf5_reader import Hdf5Reader
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 files_router = APIRouter(tags=["runs"])
+log = logging.getLogger("spinefarm.api")
 
 
 @files_router.get("/damaged-files", summary="Run files the API leaves out (damaged, or not run files), and why")
@@ -26,22 +29,29 @@ def damaged_files(reg: Annotated[RunRegistry, Depends(registry)]) -> list[dict[s
     return [{"file": str(path), "reason": why} for path, why in reg.damaged()]
 
 
+def _status(path: Path) -> dict[str, Any]:
+    """A run's status entry, checked as /runs serves it: a file that cannot give one fails here, alone."""
+    with Hdf5Reader(path) as reader:
+        return RunStatus.model_validate(run_view(reader, path)).model_dump()
+
+
 @router.get("", response_model=list[RunStatus], summary="Every run and its status")
 def list_runs(reg: Annotated[RunRegistry, Depends(registry)]) -> list[dict[str, Any]]:
     out = []
     for path in reg.runs().values():
         try:
-            with Hdf5Reader(path) as reader:
-                out.append(run_view(reader, path))
-        except StorageError:
-            continue  # a file being replaced (resume) shows up again on the next call
+            out.append(reg.view(path, lambda path=path: _status(path)))
+        except (StorageError, ValidationError, ValueError, KeyError, TypeError, OSError) as exc:
+            # one run that cannot be shown (a file being replaced, or tampered with) never takes down the list:
+            # it is named in /damaged-files until it can be shown again
+            log.warning("cannot show %s now: %s", path, str(exc).splitlines()[0][:300])
     return out
 
 
 @router.get("/{run_id}", response_model=RunStatus, summary="Status of one run")
-def get_run(storage: Annotated[Hdf5Reader, Depends(run_storage)],
+def get_run(reg: Annotated[RunRegistry, Depends(registry)],
             path: Annotated[Path, Depends(run_path)]) -> dict[str, Any]:
-    return run_view(storage, path)
+    return reg.view(path, lambda: _status(path))
 
 
 @router.get("/{run_id}/columns", summary="Every trial as columns (row i = trial i), parameters by name")
