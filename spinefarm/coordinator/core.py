@@ -70,6 +70,10 @@ class CoordinatorCore(TaskDispatch):
         self.failure: str | None = None  # why the run cannot go on (a worker cannot build it)
         self.unservable_workers: dict[str, str] = {}  # worker -> why it cannot serve this run (others do)
         self.drift = self.tasks.drift()  # why the screen's fidelity was raised (None: it was not)
+        self.audit_comparisons = {"exact": 0, "tolerance": 0}   # what audits were held to (tasks.settle_audit)
+        self.code_digest: str | None = None   # the run's simulating code: workers of another are left out
+        self.holder = ""   # this coordinator's session (start time and Zenoh id), told to workers in grants
+        self.claims: dict[str, str] = {}   # other coordinators that claimed this run -> what was done
         self._judge_best()
 
     @property
@@ -120,6 +124,7 @@ class CoordinatorCore(TaskDispatch):
             return req
         with self.lock:
             self.peers.heard(req.worker_id, req.engines, req.environment)
+            self._check_code(req.worker_id, req.code_digest)
             verdicts = self._settle_all(req.worker_id, req.results)  # before "done": they may finish it
             if verdicts is None:
                 return None
@@ -129,15 +134,24 @@ class CoordinatorCore(TaskDispatch):
             if self.done:
                 self.told_done.add(req.worker_id)
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True,
-                                                verdicts))
+                                                verdicts, self.holder))
             if self.peers.is_quarantined(req.worker_id) or req.worker_id in self.unservable_workers:
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, False,
-                                                verdicts))
+                                                verdicts, self.holder))
             leases = self.scheduler.grant(req.worker_id, req.capacity, self._ask, self._eligible)
             self._store_given_up()
             assignments = tuple(self._assignment(ls) for ls in leases)
         retry = 0.0 if assignments else self.idle_retry_s
-        return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False, verdicts))
+        return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False, verdicts,
+                                        self.holder))
+
+    def _check_code(self, worker_id: str, digest: str | None) -> None:
+        """A worker whose simulating code is not the run's is left out: its distances would differ, unmarked
+        (lock held)."""
+        if self.code_digest is None or digest == self.code_digest or worker_id in self.unservable_workers:
+            return
+        said = f"digest {digest[:12]}" if digest else "no code digest (an older install)"
+        self._leave_out(worker_id, f"runs other simulating code: {said}, the run's is {self.code_digest[:12]}")
 
     def _take_back_unreported(self, worker_id: str) -> None:
         """A worker asks for work with every trial it ran in hand (results ride along, or went before): a lease it
@@ -187,6 +201,8 @@ class CoordinatorCore(TaskDispatch):
         tid = result.trial_id
         if not 0 <= tid < storage.n_trials():
             return Verdict.UNKNOWN
+        if worker_id in self.unservable_workers:  # left out (other code, a run it cannot build): nothing of it
+            return Verdict.INVALID
         if unreadable:  # a failed stand-in (protocol.submissions): it answers the trial's own seed
             result = replace(result, seed=int(storage.columns()["seed"][tid]))
         for kind in (JUDGE, AUDIT, REFEREE):  # a task's result quotes the task's lease and the row it checks
@@ -300,8 +316,17 @@ class CoordinatorCore(TaskDispatch):
         """The worker gets no more work of this run; what it holds goes to the others (lock held)."""
         self.unservable_workers[worker_id] = reason[:300]
         self.scheduler.take_back(worker_id)
-        log.warning("worker %s cannot serve run %s (%s); other workers serve it, so the run goes on without it",
-                    worker_id, self.run_id, reason)
+        log.warning("worker %s is left out of run %s (%s); the run goes on without it", worker_id, self.run_id, reason)
+
+    def claimed(self, other: str) -> None:
+        """Another coordinator declared itself holder of this run (a copy of its file resumed on this network)."""
+        with self.lock:
+            if other in self.claims:
+                return
+            self.claims[other] = "refused: this coordinator holds the run" if other > self.holder else \
+                "claims to have held it first (a partition that healed?)"
+            log.error("another coordinator (session %s) claims run %s, held here by %s: %s; workers serve this one",
+                      other, self.run_id, self.holder, self.claims[other])
 
     def run_info(self) -> bytes:
         return encode_message(RunInfo(self.run_id, self.config_hash, self.study.budget, self.study.done))

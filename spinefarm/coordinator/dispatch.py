@@ -26,8 +26,11 @@ class TaskDispatch:
         return self.study.ask()
 
     def _eligible(self, key: int, worker_id: str) -> bool:
-        """May `worker_id` run `key`: it runs that engine, and an audit goes to another worker."""
-        if worker_id in self.tasks.excluded(key) or self.peers.is_quarantined(worker_id):
+        """May `worker_id` run `key`: it runs that engine, and an audit goes to another identity."""
+        if self.peers.is_quarantined(worker_id):
+            return False
+        checked = self.tasks.excluded(key)
+        if checked and (worker_id in checked or not self.peers.may_check(worker_id, checked)):
             return False
         return self.peers.runs(worker_id, self._fidelity(key).engine or self.tasks.run_engine)
 
@@ -83,10 +86,23 @@ class TaskDispatch:
         self.scheduler.push_front(key)
         return Verdict.STALE
 
-    def _quarantine(self, worker_id: str) -> None:
-        """Take back everything a worker just quarantined holds (lock held)."""
-        self.scheduler.take_back(worker_id)
-        log.warning("worker %s quarantined: its audited results disagree with other workers'", worker_id)
+    def _quarantine(self, worker_ids: list[str], why: str) -> None:
+        """Take back everything workers just quarantined hold; mark every row they stored and have it re-run by
+        another identity (lock held)."""
+        if not worker_ids:
+            return
+        for w in worker_ids:
+            self.scheduler.take_back(w)
+        reruns = self.tasks.mark_quarantined(worker_ids)
+        for key in reruns:
+            self.scheduler.push_front(key)
+        log.warning("worker(s) %s quarantined (%s); %d of their results marked and re-run elsewhere",
+                    ", ".join(worker_ids), why, len(reruns))
+
+    def identified(self, worker_id: str, sessions: set[str]) -> None:
+        """The Zenoh sessions that answered for `worker_id` (the service's probe)."""
+        with self.lock:
+            self._quarantine(self.peers.identified(worker_id, sessions), "its session's other worker was")
 
     def _settle_task(self, key: int, worker_id: str, result: TrialResult) -> Verdict:
         """A judge's or an audit's result (lock held)."""
@@ -106,12 +122,14 @@ class TaskDispatch:
                 log.warning("the judge no longer trusts the screen (%s): raising the screen's fidelity", drift)
             self.drift = drift
         else:
-            settle = self.tasks.settle_audit if kind == "audit" else self.tasks.settle_referee
-            for wid, agrees in (settle(tid, result, worker_id) if kind == "audit" else settle(tid, result)):
-                was = self.peers.is_quarantined(wid)
-                self.peers.audited(wid, agrees)
-                if self.peers.is_quarantined(wid) and not was:
-                    self._quarantine(wid)
+            row = self.study.storage.trial(tid)
+            exact = self.peers.same_environment(row.worker_id, worker_id)
+            judged = self.tasks.settle_audit(tid, result, worker_id, exact) if kind == "audit" \
+                else self.tasks.settle_referee(tid, result, exact)
+            self.audit_comparisons["exact" if exact else "tolerance"] += 1
+            for wid, agrees in judged:
+                self._quarantine(self.peers.audited(wid, agrees), "its audited results disagree with other "
+                                                                  "workers'")
             if kind == "audit" and task_key(REFEREE, tid) in self.tasks.pending:
                 self.scheduler.push_front(task_key(REFEREE, tid))
         self._judge_best()

@@ -3,6 +3,12 @@
 The only coordinator module that imports zenoh. By default the coordinator is itself a Zenoh router
 listening on loopback, so a local run needs no separate daemon; `connect` joins an existing router.
 A background thread expires leases, flushes storage at a bounded interval and writes the status file.
+
+One writer per run: the coordinator declares a liveliness token naming its session under its run; one that
+finds an earlier holder of its run on the network (a copy of the run's file resumed beside the original)
+refuses to start, and the original logs the claim and shows it in its status. Grants name the holder, and
+workers stay with it. Another thread asks each new worker's identity queryable and keeps the Zenoh session
+id of the reply (Zenoh sets it, the worker does not choose it): audits go to another session.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import zenoh
 
 from spinefarm.coordinator.core import CoordinatorCore
 from spinefarm.protocol import keys
+from spinefarm.protocol.code_digest import code_digest
 from spinefarm.protocol.credentials import Credentials, is_loopback
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.storage.base import BaseStorage
@@ -25,6 +32,8 @@ from spinefarm.storage.status import write_final_status, write_status
 
 log = logging.getLogger("spinefarm.coordinator")
 DEFAULT_LISTEN = ("tcp/127.0.0.1:7447",)
+PROBE_TIMEOUT_S = 2.0   # a worker's identity queryable answers in milliseconds; a gone worker is asked again later
+PROBE_AGAIN_S = 5.0
 
 
 def zenoh_config(mode: str, listen: Sequence[str] = (), connect: Sequence[str] = (),
@@ -82,7 +91,11 @@ class CoordinatorService:
             raise ConfigError(f"cannot open the Zenoh session: {exc}",
                               expected="free listen endpoints / a reachable router") from exc
         run = self.core.run_id
-        self._entities = [
+        self.core.holder = f"{time.time_ns() // 1_000_000}-{s.zid()}"
+        self.core.code_digest = self.core.code_digest or code_digest()
+        self.core.peers.verify_identity = True
+        self._hold(s, run)
+        self._entities += [
             s.declare_queryable(keys.run_info(run), self._on_info),
             s.declare_queryable(keys.work(run), self._guard(self.core.handle_work)),
             s.declare_queryable(keys.results(run), self._guard(self.core.handle_results)),
@@ -93,7 +106,55 @@ class CoordinatorService:
         self._thread = threading.Thread(target=self._housekeeping, name="coordinator-housekeeping",
                                         daemon=True)
         self._thread.start()
+        threading.Thread(target=self._probe_identities, name="coordinator-identities", daemon=True).start()
         return self
+
+    def _hold(self, s: zenoh.Session, run: str) -> None:
+        """Declare this coordinator the run's holder; refuse (ConfigError) if another held it first."""
+        holder = self.core.holder
+        self._entities = [s.liveliness().declare_token(keys.holder_token(run, holder))]
+        others = set()
+        for reply in s.liveliness().get(keys.all_holder_tokens(run), timeout=PROBE_TIMEOUT_S):
+            if reply.ok is not None:
+                others.add(keys.holder_of_token(str(reply.ok.key_expr)))
+        earlier = sorted(o for o in others if o < holder)
+        if earlier:
+            self._entities[0].undeclare()
+            self._entities = []
+            s.close()
+            self._session = None
+            raise ConfigError(f"run {run} is already held by another coordinator on this network (session "
+                              f"{earlier[0]}): a copy of its file cannot serve it while that one runs",
+                              expected="the original coordinator stopped, or the copy resumed on another network")
+        self._entities.append(s.liveliness().declare_subscriber(keys.all_holder_tokens(run), self._on_holder))
+
+    def _on_holder(self, sample: zenoh.Sample) -> None:
+        try:
+            other = keys.holder_of_token(str(sample.key_expr))
+            if sample.kind == zenoh.SampleKind.PUT and other != self.core.holder:
+                self.core.claimed(other)
+        except Exception:
+            log.exception("holder event failed")
+
+    def _probe_identities(self) -> None:
+        """Ask each new worker's identity queryable; the sessions that answer are its identity."""
+        asked: dict[str, float] = {}
+        while not self._stop.wait(0.1):
+            with self.core.lock:
+                todo = [w for w in self.core.peers.unidentified() if asked.get(w, 0.0) <= time.monotonic()]
+            for wid in todo:
+                session = self._session
+                if session is None or self._stop.is_set():
+                    return
+                try:
+                    sessions = {str(r.replier_id.zid) for r in session.get(
+                        keys.worker_identity(wid), timeout=PROBE_TIMEOUT_S, consolidation=zenoh.ConsolidationMode.NONE)
+                        if r.ok is not None and r.replier_id is not None}
+                    if sessions:
+                        self.core.identified(wid, sessions)
+                except Exception:
+                    log.exception("identity probe of worker %s failed", wid)
+                asked[wid] = time.monotonic() + PROBE_AGAIN_S
 
     # --- callbacks (zenoh threads) ----------------------------------------------------------------
     def _guard(self, handler: Callable[[bytes], bytes | None]) -> Callable[[zenoh.Query], None]:

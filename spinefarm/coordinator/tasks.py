@@ -138,7 +138,8 @@ class TaskBook:
         """Task keys to issue again after a restart: every pending verification and audit."""
         cols = self.storage.columns()
         keys = [task_key(JUDGE, int(t)) for t in np.flatnonzero(cols["verification"] == Verification.PENDING.stored)]
-        keys += [task_key(AUDIT, int(t)) for t in np.flatnonzero(cols["audit"] == AuditState.PENDING.stored)]
+        rerun = np.isin(cols["audit"], (AuditState.PENDING.stored, AuditState.QUARANTINED.stored))
+        keys += [task_key(AUDIT, int(t)) for t in np.flatnonzero(rerun)]
         keys += [task_key(REFEREE, int(t)) for t in np.flatnonzero(cols["audit"] == AuditState.DISPUTED.stored)]
         self.pending.update(keys)
         return keys
@@ -174,8 +175,8 @@ class TaskBook:
         kind, tid = split_key(key)
         if kind == "judge":
             self.storage.set_verification(tid, Verification.NOT_CHECKED)
-        elif kind == "audit":
-            self.storage.set_audit(tid, AuditState.NOT_AUDITED)
+        elif kind == "audit" and self.storage.columns()["audit"][tid] != AuditState.QUARANTINED.stored:
+            self.storage.set_audit(tid, AuditState.NOT_AUDITED)   # a quarantined worker's row stays untrusted
         # a referee nobody can run leaves the result disputed (it does not count as best)
 
     def audit_due(self, tid: int) -> int | None:
@@ -219,30 +220,61 @@ class TaskBook:
         if verdict == Verification.NOT_REPRODUCED:
             log.warning("best trial %d not reproduced: %s", tid, reason)
 
-    def settle_audit(self, tid: int, r: TrialResult, worker_id: str) -> list[tuple[str, bool]]:
-        """Store an audit; (worker, agreed) for each worker it judged. A disagreement is refereed by a
-        third worker before anybody is blamed (the referee task is returned by `referee_due`)."""
+    def mark_quarantined(self, worker_ids: list[str]) -> list[int]:
+        """Every complete row of quarantined workers is marked and re-run by another identity (an audit);
+        the audit task keys to issue (rows already being audited or refereed keep their task)."""
+        cols = self.storage.columns()
+        mine = np.isin(cols["worker_id"], [w.encode("utf-8", "replace")[:64] for w in worker_ids])
+        rows = mine & (cols["status"] == b"complete") & ~np.isin(
+            cols["audit"], (AuditState.DISAGREES.stored, AuditState.DISPUTED.stored))
+        keys = []
+        for tid in np.flatnonzero(rows).tolist():
+            self.storage.set_audit(tid, AuditState.QUARANTINED)
+            key = task_key(AUDIT, tid)
+            if key not in self.pending:
+                self.pending.add(key)
+                keys.append(key)
+        return keys
+
+    def settle_audit(self, tid: int, r: TrialResult, worker_id: str, exact: bool) -> list[tuple[str, bool]]:
+        """Store an audit; (worker, agreed) for each worker it judged. exact: both ran the same code in the same
+        environment, so only the same bits agree (else the tolerance). A disagreement is refereed by a third
+        worker before anybody is blamed; the re-run of a quarantined worker's row needs no referee."""
         row = self.storage.trial(tid)
-        if _same(r, row.status == "complete", row.distance_m, self.settings.audit.tolerance):
+        how = _comparison(exact, self.settings.audit.tolerance)
+        tol = 0.0 if exact else self.settings.audit.tolerance
+        if _same(r, row.status == "complete", row.distance_m, tol):
             self.storage.set_audit(tid, AuditState.AGREES, r.distance_m, worker_id)
             return [(row.worker_id, True), (worker_id, True)]
+        if row.audit == AuditState.QUARANTINED:
+            self.storage.set_audit(tid, AuditState.DISAGREES, r.distance_m, worker_id)
+            log.warning("re-run of trial %d (its worker %s is quarantined) by worker %s: %.17g m against %.17g m "
+                        "(%s)", tid, row.worker_id, worker_id, r.distance_m, row.distance_m, how)
+            return []
         self.storage.set_audit(tid, AuditState.DISPUTED, r.distance_m, worker_id)
         self.pending.add(task_key(REFEREE, tid))
-        log.warning("audit of trial %d disputed: worker %s measured %.6g m, worker %s %.6g m; a third worker "
-                    "referees", tid, row.worker_id, row.distance_m, worker_id, r.distance_m)
+        log.warning("audit of trial %d disputed (%s): worker %s measured %.17g m, worker %s %.17g m; a third "
+                    "worker referees", tid, how, row.worker_id, row.distance_m, worker_id, r.distance_m)
         return []
 
-    def settle_referee(self, tid: int, r: TrialResult) -> list[tuple[str, bool]]:
+    def settle_referee(self, tid: int, r: TrialResult, exact: bool) -> list[tuple[str, bool]]:
         """The third worker's run decides a disputed audit: whoever it contradicts is wrong (the result's
         worker when it matches neither)."""
         row = self.storage.trial(tid)
-        tol = self.settings.audit.tolerance
+        tol = 0.0 if exact else self.settings.audit.tolerance
         if _same(r, row.status == "complete", row.distance_m, tol):
             self.storage.set_audit(tid, AuditState.OVERRULED, row.audit_distance_m, row.audit_worker_id)
             return [(row.audit_worker_id, False), (row.worker_id, True)]
         self.storage.set_audit(tid, AuditState.DISAGREES, row.audit_distance_m, row.audit_worker_id)
         log.warning("result of trial %d from worker %s not reproduced by two other workers", tid, row.worker_id)
         return [(row.worker_id, False)]
+
+
+def _comparison(exact: bool, tolerance: float) -> str:
+    """What an audit's verdict was held to, for its log line."""
+    if exact:
+        return "exact: same code and environment"
+    return f"within {tolerance:.0%}: the workers' environments differ or are unknown"
 
 
 def _same(r: TrialResult, ok: bool, distance_m: float, tolerance: float) -> bool:

@@ -84,3 +84,23 @@ def worker_id_of_token(key: str) -> str | None:
         return None
     rest = key[len(prefix):]
     return rest if _RUN_ID.match(rest) else None
+
+
+def worker_identity(worker_id: str) -> str:
+    """Queryable a worker declares in its own session: the coordinator asks it and reads the Zenoh session id
+    of the reply (set by Zenoh, not by the worker), so two worker ids in one session are one identity."""
+    return f"{ROOT}/identity/{check_worker_id(worker_id)}"
+
+
+def holder_token(run_id: str, holder: str) -> str:
+    """Liveliness token of the coordinator holding a run (holder: its start time and session id), so a copy
+    of the run's file resumed on the same network sees that the run is held."""
+    return f"{run_prefix(run_id)}/holder/{check_worker_id(holder)}"
+
+
+def all_holder_tokens(run_id: str) -> str:
+    return f"{run_prefix(run_id)}/holder/*"
+
+
+def holder_of_token(key: str) -> str:
+    return key.rsplit("/", 1)[-1]

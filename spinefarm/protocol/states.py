@@ -46,6 +46,7 @@ class AuditState(StrEnum):
     DISPUTED = "disputed"        # they differ: a third worker referees
     DISAGREES = "disagrees"      # the referee sided with the auditor: the result (and its worker) is wrong
     OVERRULED = "overruled"      # the referee sided with the result: the auditor is wrong
+    QUARANTINED = "quarantined"  # its worker was found wrong elsewhere: re-run by another identity, not trusted
 
     @property
     def stored(self) -> bytes:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from spinefarm.protocol import limits
+from spinefarm.protocol.code_digest import check_digest
 from spinefarm.protocol.envelope import FlatMessage, finite, get_field
 from spinefarm.protocol.errors import ConfigError, MessageError
 from spinefarm.protocol.settings import TaskFidelity
@@ -27,6 +28,7 @@ class WorkRequest:
     results: tuple[SubmittedResult, ...] = ()
     engines: tuple[str, ...] | None = None      # the engines this worker can run (None: not said)
     environment: dict[str, str] | None = None   # what this worker runs on (python, packages, CPU)
+    code_digest: str | None = None   # its simulating code (protocol.code_digest); None: not said (an old install)
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"worker_id": self.worker_id, "capacity": self.capacity,
@@ -35,6 +37,8 @@ class WorkRequest:
             d["engines"] = list(self.engines)
         if self.environment is not None:
             d["environment"] = dict(self.environment)
+        if self.code_digest is not None:
+            d["code_digest"] = self.code_digest
         return d
 
     @classmethod
@@ -48,8 +52,10 @@ class WorkRequest:
         if len(items) > limits.MAX_BATCH:
             raise MessageError("work request carries too many results", received=len(items),
                                expected=f"at most {limits.MAX_BATCH}")
+        digest = data.get("code_digest")
         return cls(worker_id, capacity, tuple(SubmittedResult.from_dict(i) for i in items),
-                   _engines(data.get("engines")), _environment(data.get("environment")))
+                   _engines(data.get("engines")), _environment(data.get("environment")),
+                   None if digest is None else check_digest(digest, "work request field 'code_digest'"))
 
 
 def _engines(value: Any) -> tuple[str, ...] | None:
@@ -128,6 +134,7 @@ class WorkGrant:
     """The coordinator's answer to a WorkRequest.
 
     An empty grant says why: `run_done` (budget met, stop asking) or wait `retry_after_s`.
+    coordinator: the session of the coordinator holding the run (a worker stays with it while it answers).
     """
 
     KIND = "work_grant"
@@ -137,12 +144,13 @@ class WorkGrant:
     retry_after_s: float = 0.0
     run_done: bool = False
     verdicts: tuple[tuple[int, Verdict], ...] = ()   # for the results the request carried
+    coordinator: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return {"run_id": self.run_id, "config_hash": self.config_hash,
                 "assignments": [a.to_dict() for a in self.assignments],
                 "retry_after_s": self.retry_after_s, "run_done": self.run_done,
-                "verdicts": ResultAck(self.verdicts).to_dict()["verdicts"]}
+                "verdicts": ResultAck(self.verdicts).to_dict()["verdicts"], "coordinator": self.coordinator}
 
     @classmethod
     def from_dict(cls, data: Any) -> WorkGrant:
@@ -152,7 +160,8 @@ class WorkGrant:
         return cls(get_field(data, "run_id", str, what), get_field(data, "config_hash", str, what),
                    tuple(TrialAssignment.from_dict(a) for a in items),
                    finite(get_field(data, "retry_after_s", (int, float), what), "retry_after_s", what),
-                   get_field(data, "run_done", bool, what), verdicts)
+                   get_field(data, "run_done", bool, what), verdicts,
+                   limits.check_text(data.get("coordinator", ""), "work grant field 'coordinator'", 120))
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,10 @@ from spinefarm.protocol.states import STORED_STATUSES, AuditState, TrialStatus, 
 from spinefarm.storage import pareto
 from spinefarm.storage.schema import RunMeta, TrialRecord
 
-# A result whose audit found it wrong, or is still refereeing it, never counts as best.
-DISQUALIFYING_AUDITS = (AuditState.DISAGREES.stored, AuditState.DISPUTED.stored)
+# A result whose audit found it wrong, or is still refereeing it, or whose worker was quarantined (until
+# another identity reproduces it), never counts as best.
+DISQUALIFYING_AUDITS = (AuditState.DISAGREES.stored, AuditState.DISPUTED.stored,
+                        AuditState.QUARANTINED.stored)
 
 
 class BaseStorage:

@@ -22,6 +22,7 @@ from pathlib import Path
 import zenoh
 
 from spinefarm.protocol import keys
+from spinefarm.protocol.code_digest import code_digest
 from spinefarm.protocol.envelope import decode_message, encode_message
 from spinefarm.protocol.errors import ConfigError, MessageError, SpinefarmError
 from spinefarm.protocol.results import TrialResult, fit_for_protocol
@@ -107,6 +108,11 @@ class _Next(enum.Enum):
     EXIT = "exit"           # the worker's run is over
 
 
+def _answer_identity(query: zenoh.Query) -> None:
+    with query:
+        query.reply(query.key_expr, b"")
+
+
 class WorkerService:
     def __init__(self, access: ZenohAccess, *, run_id: str | None = None, worker_id: str | None = None,
                  batch: int | None = None, engines: tuple[str, ...] | None = None, exit_when_done: bool = False,
@@ -116,6 +122,8 @@ class WorkerService:
         self.worker_id = keys.check_worker_id(worker_id or default_worker_id())
         self.engines = available_engines(engines)
         self.environment = environment()
+        self.code_digest = code_digest()
+        self._holders: dict[str, str] = {}   # run id -> the coordinator session whose grants this worker follows
         self.run_id = keys.check_run_id(run_id) if run_id else None
         if batch is not None and not 1 <= batch <= 4096:
             raise ConfigError("batch out of range", received=batch, expected="1 <= batch <= 4096, or auto")
@@ -270,6 +278,8 @@ class WorkerService:
             self.exit_code = connector.exit_code or self.exit_code
             return self.exit_code
         token = session.liveliness().declare_token(keys.worker_token(self.worker_id))
+        # the coordinator reads this session's id from the reply: the worker's identity for audits
+        identity = session.declare_queryable(keys.worker_identity(self.worker_id), _answer_identity)
         mark_ready(self.worker_id)
         try:
             self._loop(session)
@@ -277,6 +287,7 @@ class WorkerService:
             self._submit(session)
             for sandbox in self._sandboxes:
                 sandbox.close()
+            identity.undeclare()
             token.undeclare()
             session.close()
         return self.exit_code
@@ -311,12 +322,13 @@ class WorkerService:
     def _serve(self, session: zenoh.Session, run_id: str) -> _Next:
         """One request for work in run `run_id` (this run's results ride along) and, if granted, its trials."""
         carried = tuple(self._pending.get(run_id, {}).values())
-        req = encode_message(WorkRequest(self.worker_id, self.batch.size(), carried, self.engines, self.environment))
+        req = encode_message(WorkRequest(self.worker_id, self.batch.size(), carried, self.engines, self.environment,
+                                         self.code_digest))
         grants, refused = self._query(session, keys.work(run_id), req, WorkGrant)
         if not grants:
             return self._unanswered(session, run_id, resubmit=bool(refused and carried))
         self._last_heard = time.monotonic()
-        grant = grants[0]
+        grant = self._holder_grant(run_id, grants)
         self._apply(run_id, grant.verdicts)
         if grant.run_done:
             self._done_runs.add(run_id)
@@ -336,6 +348,17 @@ class WorkerService:
             return _Next.BACK_OFF
         self._run_batch(session, run_id, evaluate, grant.assignments)
         return _Next.RAN
+
+    def _holder_grant(self, run_id: str, grants: list[WorkGrant]) -> WorkGrant:
+        """The grant of the coordinator this worker served in the run while it answers (a second coordinator
+        answering for the same run, a copy of its file, is not followed), else the first."""
+        held = self._holders.get(run_id)
+        grant = next((g for g in grants if g.coordinator == held), grants[0])
+        if len(grants) > 1:
+            log.warning("%d coordinators answer for run %s (%s); serving %s", len(grants), run_id,
+                        ", ".join(g.coordinator for g in grants), grant.coordinator)
+        self._holders[run_id] = grant.coordinator
+        return grant
 
     def _unanswered(self, session: zenoh.Session, run_id: str, resubmit: bool) -> _Next:
         """No grant came back. A coordinator silent for its timeout has ended its run (--exit-when-done)."""

@@ -11,6 +11,7 @@ import zenoh
 
 from spinefarm.coordinator.service import CoordinatorService, zenoh_config
 from spinefarm.protocol import keys
+from spinefarm.protocol.code_digest import code_digest
 from spinefarm.protocol.envelope import decode, decode_message, encode_message
 from spinefarm.protocol.submissions import ResultAck
 from spinefarm.protocol.work import RunInfo, WorkGrant, WorkRequest
@@ -111,13 +112,13 @@ def test_a_vanished_liveliness_token_reissues_its_leases_at_once(endpoint, clien
         s = client()
         token = s.liveliness().declare_token(keys.worker_token("ghost"))
         wait_for(lambda: "ghost" in core.scheduler.workers, what="liveliness PUT")
-        grant = decode_message(query(s, keys.work(core.run_id), encode_message(WorkRequest("ghost", 3))),
+        grant = decode_message(query(s, keys.work(core.run_id), encode_message(_req("ghost", 3))),
                                WorkGrant)
         assert len(grant.assignments) == 3 and core.scheduler.n_leased == 3
         token.undeclare()
         wait_for(lambda: core.scheduler.n_queued == 3, what="re-issue after token loss")
         assert not core.scheduler.workers["ghost"].alive
-        other = decode_message(query(s, keys.work(core.run_id), encode_message(WorkRequest("w2", 3))),
+        other = decode_message(query(s, keys.work(core.run_id), encode_message(_req("w2", 3))),
                                WorkGrant)
         assert [a.trial_id for a in other.assignments] == [a.trial_id for a in grant.assignments]
     finally:
@@ -147,7 +148,7 @@ def test_results_ack_over_zenoh_is_idempotent(endpoint, client):
     service = CoordinatorService(core, storage, listen=[endpoint]).start()
     try:
         s = client()
-        (a,) = decode_message(query(s, keys.work(core.run_id), encode_message(WorkRequest("w1", 1))),
+        (a,) = decode_message(query(s, keys.work(core.run_id), encode_message(_req("w1", 1))),
                               WorkGrant).assignments
         r = TrialResult(TrialStatus.COMPLETE, "", 1.0, 0, 0, 0, 0, 1, 0, 1, a.seed, trial_id=a.trial_id)
         sub = encode_message(ResultSubmission("w1", (SubmittedResult(a.lease_id, r),)))
@@ -157,3 +158,8 @@ def test_results_ack_over_zenoh_is_idempotent(endpoint, client):
         assert storage.counts()["complete"] == 1
     finally:
         service.close()
+
+
+def _req(worker_id: str, n: int) -> WorkRequest:
+    """A request as this install's workers send it (with their code's digest)."""
+    return WorkRequest(worker_id, n, code_digest=code_digest())
