@@ -99,8 +99,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise ParameterError("calibrate needs a robot", received="nothing",
                              expected="a built-in name (spinefarm morphologies) or a .yaml spec file")
     settings = settings_from(args)  # every value checked before the robot is loaded or a trial runs
-    if choose_stable_default(args, load_morphology(args.morphology), TIERS):
+    morph = load_morphology(args.morphology)
+    if choose_stable_default(args, morph, TIERS):
         settings = settings_from(args)
+    elif settings.dt_s is not None:  # a step every trial would refuse, refused before the first
+        from spinefarm.robot.trial_config import TrialConfig
+        from spinefarm.worker.episode import choose_step
+
+        choose_step(morph, TrialConfig(dt_s=settings.dt_s))
     with Waiting("calibration", "trials") as wait:
         if not args.json and (args.refresh or not cache_path(args.morphology, settings).is_file()):
             print(f"calibrating the tiers on {args.morphology}: up to {trials_in(settings)} trials on "
