@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import sys
 from typing import TYPE_CHECKING
 
+from spinefarm.cli.default_step import AUTO, choose_stable_default, step_overrides
 from spinefarm.cli.profile_argument import add_profile_argument, profile_from
 from spinefarm.cli.robot_argument import add_robot_argument
 
@@ -45,6 +47,10 @@ def add_calibration_arguments(p: argparse.ArgumentParser, prefix: str = "") -> N
         p.add_argument("--controller", default=None, help="controller space (default: the robot's first)")
         p.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
         add_profile_argument(p)
+        p.add_argument("--dt", default=None, metavar="S|auto",
+                       help="physics step of both tiers in seconds, or 'auto' (half the string network's "
+                            "stable-step estimate, at most each tier's default); default: each tier's default "
+                            "step, or 'auto' for a robot that default is unstable for")
 
 
 def settings_from(args: argparse.Namespace, prefix: str = "", controller: str | None = None, jobs: int = 1
@@ -53,10 +59,13 @@ def settings_from(args: argparse.Namespace, prefix: str = "", controller: str | 
 
     get = vars(args)
     key = prefix.replace("-", "_")
+    # a search's own numeric --dt is its engine's step, not the calibration's; its 'auto' is both
+    dt = get.get("dt") if not prefix or get.get("dt") == AUTO else None
     return CalibrationSettings(gaits=get[f"{key}gaits"], search_trials=get[f"{key}search_trials"],
                                bests=get[f"{key}bests"], duration_s=get[f"{key}duration"],
                                settle_s=get[f"{key}settle"], controller=get.get("controller", controller),
-                               jobs=get.get("jobs", jobs), profile=tuple(profile_from(args).items()))
+                               jobs=get.get("jobs", jobs), profile=tuple(profile_from(args).items()),
+                               **step_overrides(dt))
 
 
 def summary(result: dict, cached: bool) -> str:
@@ -77,8 +86,10 @@ def summary(result: dict, cached: bool) -> str:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
+    from spinefarm.cli.waiting import Waiting
     from spinefarm.protocol.errors import ParameterError
-    from spinefarm.worker.calibrate import cache_dir, calibration, clean
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.worker.calibrate import TIERS, cache_dir, cache_path, calibration, clean, trials_in
 
     if args.cache_dir:
         print(cache_dir())
@@ -90,6 +101,20 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if not args.morphology:
         raise ParameterError("calibrate needs a robot", received="nothing",
                              expected="a built-in name (spinefarm morphologies) or a .yaml spec file")
-    result, cached = calibration(args.morphology, settings_from(args), refresh=args.refresh)
+    settings = settings_from(args)  # every value checked before the robot is loaded or a trial runs
+    morph = load_morphology(args.morphology)
+    if choose_stable_default(args, morph, TIERS):
+        settings = settings_from(args)
+    elif settings.dt_s is not None:  # a step every trial would refuse, refused before the first
+        from spinefarm.robot.trial_config import TrialConfig
+        from spinefarm.worker.episode import choose_step
+
+        choose_step(morph, TrialConfig(dt_s=settings.dt_s))
+    with Waiting("calibration", "trials") as wait:
+        if not args.json and (args.refresh or not cache_path(args.morphology, settings).is_file()):
+            print(f"calibrating the tiers on {args.morphology}: up to {trials_in(settings)} trials on "
+                  f"{settings.jobs} process{'es' if settings.jobs > 1 else ''} (cached after the first time)",
+                  file=sys.stderr, flush=True)
+        result, cached = calibration(args.morphology, settings, refresh=args.refresh, progress=wait)
     print(json.dumps(clean({**result, "cached": cached})) if args.json else summary(result, cached))
     return 0

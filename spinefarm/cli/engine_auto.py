@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
+import threading
 from typing import Any
 
 from spinefarm.cli.stop_signals import die_with_parent
@@ -70,7 +72,11 @@ def choose_engine(args: argparse.Namespace) -> Any:
 
 def calibrate_in_child(morphology: str, settings: Any) -> tuple[dict[str, Any], bool]:
     """`spinefarm calibrate --json` in its own process: calibrating runs both simulators, and the search's own
-    process (the coordinator) never loads one. (the calibration, whether it came from the cache)"""
+    process (the coordinator) never loads one. Its progress lines pass through to this standard error (drawn
+    for a terminal when this is one). Ended with the search: terminated on any exception (Ctrl-C's
+    KeyboardInterrupt included), killed by the kernel if the search dies first; its pool ends with it
+    (worker.pool). (the calibration, whether it came from the cache)"""
+    from spinefarm.cli.waiting import FORCE_TTY_ENV
     from spinefarm.protocol.errors import ConfigError
 
     cmd = [sys.executable, "-P", "-m", "spinefarm", "calibrate", morphology, "--json",
@@ -79,9 +85,46 @@ def calibrate_in_child(morphology: str, settings: Any) -> tuple[dict[str, Any], 
            "--settle", repr(settings.settle_s), "--jobs", str(settings.jobs)]
     if settings.controller:
         cmd += ["--controller", settings.controller]
-    r = subprocess.run(cmd, capture_output=True, text=True, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent)
-    if r.returncode != 0:
-        lines = [ln for ln in r.stderr.strip().splitlines() if ln.strip()] or [f"exit code {r.returncode}"]
-        raise ConfigError(f"spinefarm calibrate {morphology} failed: {lines[-1][:300]}")
-    result = json.loads(r.stdout.strip().splitlines()[-1])
+    if settings.auto_dt or settings.dt_s is not None:
+        cmd += ["--dt", "auto" if settings.auto_dt else repr(settings.dt_s)]
+    env = {**os.environ, FORCE_TTY_ENV: "1" if sys.stderr.isatty() else "0"}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env,
+                            preexec_fn=die_with_parent)
+    tail = bytearray()
+    relay = threading.Thread(target=_relay, args=(proc.stderr, tail), name="calibration-stderr", daemon=True)
+    relay.start()
+    try:
+        out = proc.stdout.read().decode(errors="replace")
+        code = proc.wait()
+        relay.join(timeout=5.0)
+    except BaseException:
+        _end(proc)
+        raise
+    if code != 0:
+        lines = [ln for ln in tail.decode(errors="replace").splitlines() if ln.strip()] or [f"exit code {code}"]
+        raise ConfigError(f"spinefarm calibrate {morphology} failed: {lines[-1].split(chr(13))[-1][:300]}")
+    result = json.loads(out.strip().splitlines()[-1])
     return result, bool(result.pop("cached", False))
+
+
+def _relay(stream: Any, tail: bytearray) -> None:
+    """Copy the child's standard error to ours as it comes, keeping its last few kB for an error message."""
+    out = getattr(sys.stderr, "buffer", None)
+    while chunk := os.read(stream.fileno(), 4096):
+        if out is not None:
+            out.write(chunk)
+            out.flush()
+        else:  # a standard error without bytes (replaced by a test's capture)
+            sys.stderr.write(chunk.decode(errors="replace"))
+        tail.extend(chunk)
+        del tail[:-4096]
+
+
+def _end(proc: subprocess.Popen, grace_s: float = 3.0) -> None:
+    """SIGTERM (its pool then gets SIGKILL from the kernel), SIGKILL after `grace_s`."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=grace_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()

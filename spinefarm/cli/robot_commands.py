@@ -82,11 +82,13 @@ def cmd_spec(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
+    from spinefarm.cli.waiting import Waiting
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.contract import run_contract
 
     morph = load_morphology(args.morphology)
-    results = run_contract(morph, args.engine)
+    with Waiting(f"checking {morph.name}", "checks") as wait:
+        results = run_contract(morph, args.engine, progress=wait)
     ok = all(r.passed for r in results)
     if args.json:
         print(json.dumps({"morphology": morph.name, "passed": ok,

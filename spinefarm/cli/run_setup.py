@@ -125,6 +125,7 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     robust_settings(args, tuple(given) if given else None)
     units = enqueued(args)
     search_settings(args, given, 60.0 if args.lease is None else args.lease, JudgePolicy(), None, units)
+    check_before_calibrating(args, run_id)
     choice = choose_engine(args)
     rungs = None if args.rungs is None else parse_rungs(args.rungs)
     if rungs:
@@ -141,6 +142,30 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     if lease is None:
         lease = max(60.0, 20.0 * float(config.trial_config.get("duration_s") or 0.0))
     return config, search_settings(args, rungs, lease, judge_policy(args, config), choice, units)
+
+
+def check_before_calibrating(args: argparse.Namespace, run_id: str) -> None:
+    """What the run config will check (objective, controller, step, scene, engine options, duration), checked
+    before `--engine auto` calibrates for minutes; and a stable step for a robot whose default one is not."""
+    from spinefarm.cli.default_step import choose_stable_default
+    from spinefarm.cli.engine_auto import AUTO, wants_auto
+    from spinefarm.cli.sim_commands import trial_overrides
+    from spinefarm.coordinator.objectives import objective_fn
+    from spinefarm.coordinator.problem import build_run_config, is_test_objective
+    from spinefarm.robot.engines import DEFAULT_ENGINE
+    from spinefarm.worker.calibrate import TIERS
+
+    objective_fn(args.objective)
+    overrides = {k: v for k, v in trial_overrides(args).items() if not (k == "engine" and v == AUTO)}
+    config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
+                              controller=args.controller, duration_s=args.duration, trial_overrides=overrides)
+    if args.dt is not None:
+        check_step(config)  # a typed step every trial would refuse
+    if not is_test_objective(args.morphology):
+        from spinefarm.robot.morphology.registry import load_morphology
+
+        engines = TIERS if wants_auto(args) else (overrides.get("engine", DEFAULT_ENGINE),)
+        choose_stable_default(args, load_morphology(args.morphology), engines)
 
 
 def enqueued(args: argparse.Namespace) -> tuple[tuple[float, ...], ...]:

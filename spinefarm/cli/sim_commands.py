@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spinefarm.cli import checks
+from spinefarm.cli.default_step import choose_stable_default
 from spinefarm.cli.profile_argument import add_profile_argument, profile_from
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.protocol.errors import ParameterError
@@ -97,16 +98,9 @@ def trial_overrides(args: argparse.Namespace) -> dict[str, Any]:
     """TrialConfig overrides from the flags `trial`, `search` and `coordinator` share (--dt, --engine,
     --engine-option, --scene, --settle, --motor-model, --profile; those a command lacks are skipped). TrialConfig
     validates the values."""
-    out: dict[str, Any] = {}
-    dt = getattr(args, "dt", None)
-    if dt == "auto":
-        out["auto_dt"] = True
-    elif dt is not None:
-        try:
-            out["dt_s"] = float(dt)
-        except ValueError as exc:
-            raise ParameterError("--dt is not a number", received=dt, expected="seconds (e.g. 0.0005) or 'auto'") \
-                from exc
+    from spinefarm.cli.default_step import step_overrides
+
+    out: dict[str, Any] = step_overrides(getattr(args, "dt", None))
     for flag, field in (("motor_model", "motor_model"), ("engine", "engine"), ("settle", "settle_s")):
         if getattr(args, flag, None) is not None:
             out[field] = getattr(args, flag)
@@ -192,6 +186,9 @@ def cmd_trial(args: argparse.Namespace) -> int:
     if args.trial_id is not None and args.run is None:
         raise ParameterError("--trial-id needs --run", received=args.trial_id, expected="--run RUN.h5 --trial-id N")
     morph, controller, params, seed, base, stored_id = _trial_inputs(args)
+    engine = args.engine or base.get("engine", DEFAULT_ENGINE)
+    choose_stable_default(args, morph, [engine], given=base.get("auto_dt") or (
+        "dt_s" in base and engine == base.get("engine", DEFAULT_ENGINE)))
     cfg = _trial_config(args, base, controller)
     say_if_compiling()
     outcome = simulate(morph, params, cfg, seed)
@@ -331,6 +328,8 @@ def _best_of_run(path: Path, n: int = 1) -> tuple[list[ParamSet], RunMeta]:
 
 
 def cmd_accuracy(args: argparse.Namespace) -> int:
+    from spinefarm.cli.waiting import Waiting
+    from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.accuracy import format_table, plot, run_accuracy
 
     checks.at_least("--seeds", args.seeds, 1, "random parameter sets")
@@ -349,9 +348,12 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     if args.profile is not None:
         base = {**(base or {}), "profile": profile_from(args)}
     seeds = args.seeds if args.seeds is not None else (3 if args.quick else 5)
-    report = run_accuracy(args.morphology, quick=args.quick, seeds=seeds, duration_s=args.duration, jobs=args.jobs,
-                          best=best, controller=controller, base=base,
-                          progress=lambda m: print(m, file=sys.stderr, flush=True))
+    if choose_stable_default(args, load_morphology(args.morphology), [(base or {}).get("engine", DEFAULT_ENGINE)]):
+        base = {**(base or {}), "auto_dt": True}  # the settings that name no step; the steps swept stay as named
+    with Waiting("accuracy", "trials") as wait:
+        report = run_accuracy(args.morphology, quick=args.quick, seeds=seeds, duration_s=args.duration,
+                              jobs=args.jobs, best=best, controller=controller, base=base,
+                              progress=lambda m: print(m, file=sys.stderr, flush=True), counted=wait)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     json_path = args.out.with_suffix(".json")
     png_path = args.out.with_suffix(".png")

@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from statistics import median
 from typing import Any
@@ -23,6 +22,7 @@ import numpy as np
 from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker import scoring
+from spinefarm.worker.pool import Progress, process_pool
 from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
 
 
@@ -94,7 +94,11 @@ class ParamSet:
 
 
 def _config(base: dict[str, Any], overrides: dict[str, Any]) -> TrialConfig:
+    """A setting over the base; a setting that names a step runs at that step (a base's automatic step, for a
+    robot whose default one is unstable, is for the others)."""
     merged = {**base, **overrides}
+    if "dt_s" in overrides:
+        merged["auto_dt"] = False
     if "scene" in base or "scene" in overrides:
         merged["scene"] = {**base.get("scene", {}), **overrides.get("scene", {})}
     if "engine_options" in base or "engine_options" in overrides:
@@ -167,7 +171,8 @@ def pareto(rows: list[dict[str, Any]]) -> list[str]:
 def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float | None, jobs: int,
                  best: ParamSet | list[ParamSet] | None = None, controller: str | None = None,
                  base: dict[str, Any] | None = None,
-                 progress: Callable[[str], None] = lambda s: None) -> dict[str, Any]:
+                 progress: Callable[[str], None] = lambda s: None, counted: Progress | None = None
+                 ) -> dict[str, Any]:
     morph = load_morphology(morphology)
     morph_src = morphology if isinstance(morphology, str) else morph.to_dict()
     duration = duration_s or (5.0 if quick else morph.duration_s)
@@ -177,7 +182,7 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
     if best is not None:
         sets.extend(best if isinstance(best, list) else [best])
     settings = sweep(quick, base.get("engine", "bullet"))
-    refs, runs = _simulate_all(morph_src, controller, sets, settings, base, quick, jobs, progress)
+    refs, runs = _simulate_all(morph_src, controller, sets, settings, base, quick, jobs, progress, counted)
     table = [_table_row(s, runs[i * len(sets):(i + 1) * len(sets)], refs) for i, s in enumerate(settings)]
     chaos = [rel(ref.get("twin_distance_m"), ref.get("distance_m"), DISTANCE_FLOOR_M) for ref in refs]
     floor = median(chaos)
@@ -199,19 +204,28 @@ def run_accuracy(morphology: str, *, quick: bool, seeds: int, duration_s: float 
 
 
 def _simulate_all(morph_src: Any, controller: str | None, sets: list[ParamSet], settings: list[Setting],
-                  base: dict[str, Any], quick: bool, jobs: int, progress: Callable[[str], None]
-                  ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """(a converged reference per parameter set, a run per setting and parameter set, setting-major)."""
+                  base: dict[str, Any], quick: bool, jobs: int, progress: Callable[[str], None],
+                  counted: Progress | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """(a converged reference per parameter set, a run per setting and parameter set, setting-major);
+    `counted(done, total)` after each of them."""
     start_dt, floor_dt, tol = (2.5e-4, 2.5e-4, 1e-3) if quick else (2.5e-4, 3.125e-5, 1e-3)
-    with ProcessPoolExecutor(jobs) as pool:
-        ref_jobs = [(morph_src, controller, ps, base, start_dt, floor_dt, tol)
-                    for ps in sets]
-        run_jobs = [(morph_src, controller, ps, _config(base, s.overrides).to_dict()) for s in settings for ps in sets]
-        refs_f = [pool.submit(_reference, j) for j in ref_jobs]
-        runs_f = [pool.submit(_run, j) for j in run_jobs]
-        refs = [f.result() for f in refs_f]
+    ref_jobs = [(morph_src, controller, ps, base, start_dt, floor_dt, tol) for ps in sets]
+    run_jobs = [(morph_src, controller, ps, _config(base, s.overrides).to_dict()) for s in settings for ps in sets]
+    total, done = len(ref_jobs) + len(run_jobs), [0]
+    if counted:
+        counted(0, total)
+
+    def one_more(_result: Any) -> None:  # in the pool's result thread
+        done[0] += 1
+        if counted:
+            counted(done[0], total)
+
+    with process_pool(max(1, jobs)) as pool:
+        refs_f = [pool.apply_async(_reference, (j,), callback=one_more) for j in ref_jobs]
+        runs_f = [pool.apply_async(_run, (j,), callback=one_more) for j in run_jobs]
+        refs = [f.get() for f in refs_f]
         progress(f"references done for {len(sets)} parameter sets")
-        runs = [f.result() for f in runs_f]
+        runs = [f.get() for f in runs_f]
     return refs, runs
 
 

@@ -22,7 +22,6 @@ import math
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,6 +32,7 @@ from spinefarm.protocol.errors import ConfigError, bounded, check_fields, whole
 from spinefarm.protocol.run import json_hash
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.profile import profile_hash
+from spinefarm.worker.pool import Progress, run_jobs
 
 RHO_MIN = 0.9
 TOP_K = 10
@@ -42,13 +42,15 @@ MOVING_M = 0.01
 STEP_ERROR_GAITS = 4  # gaits per tier re-run at half the step
 SEARCH_SIGMA = 0.1  # the short search's step in the unit cube
 TIERS = ("mujoco", "bullet")
+STEP_FIELDS = ("dt_s", "auto_dt")
 
 
 @dataclass(frozen=True)
 class CalibrationSettings:
     """gaits: seeded random gaits (seeds 1..gaits); search_trials: a short search on MuJoCo (a Gaussian
     hill climb from the best random gait, seeds after those), whose `bests` best join them; trials of
-    duration_s after a settle_s settle; jobs: processes."""
+    duration_s after a settle_s settle; jobs: processes; dt_s / auto_dt: the step of both tiers (None and
+    False: each tier's default step; auto_dt: at most half the robot's stable-step estimate)."""
 
     gaits: int = whole(40, 3, 100_000)
     search_trials: int = whole(40, 0, 100_000)
@@ -58,6 +60,8 @@ class CalibrationSettings:
     controller: str | None = None
     jobs: int = whole(1, 1, 100_000)
     profile: tuple[tuple[str, float], ...] = ()  # (name, value) pairs of a profile (robot.profile), sorted
+    dt_s: float | None = bounded(None, 1e-6, 0.02)
+    auto_dt: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self, "calibration ")
@@ -66,9 +70,11 @@ class CalibrationSettings:
                               expected=f"at most {self.search_trials}")
 
     def key(self) -> str:
-        """What the result depends on besides the robot (not the number of processes): with a profile, its hash
+        """What the result depends on besides the robot (not the number of processes; the step only when one
+        is asked for, so the default's key is what it was before the step could be): with a profile, its hash
         (none without, so that calibrations from before profiles keep their key)."""
-        key = {k: v for k, v in dataclasses.asdict(self).items() if k not in ("jobs", "profile")}
+        d = dataclasses.asdict(self)
+        key = {k: v for k, v in d.items() if k not in ("jobs", "profile") and not (k in STEP_FIELDS and not v)}
         return json_hash({**key, "profile_hash": profile_hash(dict(self.profile))} if self.profile else key)
 
 
@@ -133,6 +139,7 @@ _CACHE = None  # one SetupCache per process
 def _trial(job: tuple) -> tuple[float, float]:
     """(distance m or nan, CPU s per simulated s) of one trial."""
     from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.episode import choose_step
     from spinefarm.worker.setup import SetupCache
     from spinefarm.worker.trial import run_trial
 
@@ -141,34 +148,56 @@ def _trial(job: tuple) -> tuple[float, float]:
     source, unit, seed, engine, dt_scale, settings = job
     morph = load_morphology(source)
     cfg = TrialConfig(duration_s=settings.duration_s, settle_s=settings.settle_s, engine=engine,
-                      profile=dict(settings.profile))
-    if dt_scale != 1.0:
-        cfg = dataclasses.replace(cfg, dt_s=cfg.step_s * dt_scale)
+                      profile=dict(settings.profile), dt_s=settings.dt_s, auto_dt=settings.auto_dt)
+    if dt_scale != 1.0:  # a fraction of the step the trial would take (an automatic one included)
+        cfg = dataclasses.replace(cfg, dt_s=choose_step(morph, cfg) * dt_scale, auto_dt=False)
     t0 = time.process_time()
     r = run_trial(morph, np.asarray(unit), cfg, seed, controller=settings.controller, setup=_CACHE)
     return (r.distance_m if r.ok else math.nan), (time.process_time() - t0) / max(r.sim_time_s, 1e-9)
 
 
-def _run(jobs: list[tuple], processes: int) -> list[tuple[float, float]]:
-    if processes <= 1:
-        return [_trial(j) for j in jobs]
-    with ProcessPoolExecutor(processes) as pool:
-        return list(pool.map(_trial, jobs))
+class _Tally:
+    """The calibration's trials done so far, for one progress line over all its phases."""
+
+    def __init__(self, total: int, progress: Progress | None) -> None:
+        self.total, self.done, self.progress = total, 0, progress
+        if progress:
+            progress(0, total)
+
+    def run(self, jobs: list[tuple], processes: int) -> list[tuple[float, float]]:
+        start = self.done
+
+        def each(done: int, _total: int) -> None:
+            self.done = start + done
+            if self.progress:
+                self.progress(min(self.done, self.total), self.total)
+
+        return run_jobs(_trial, jobs, processes, each)
+
+    def finish(self) -> None:
+        if self.progress:
+            self.progress(self.total, self.total)
 
 
-def _step_error(source: str, gaits: list, distances: np.ndarray, engine: str, settings: CalibrationSettings
-                ) -> float | None:
+def trials_in(s: CalibrationSettings) -> int:
+    """The trials a calibration runs at most: the random gaits and the search on MuJoCo, those judged on
+    Bullet, and the step errors' re-runs."""
+    return s.gaits + s.search_trials + s.gaits + s.bests + 2 * STEP_ERROR_GAITS
+
+
+def _step_error(source: str, gaits: list, distances: np.ndarray, engine: str, settings: CalibrationSettings,
+                tally: _Tally) -> float | None:
     """Median |d(dt) - d(dt/2)| / |d(dt/2)| over the first STEP_ERROR_GAITS gaits that move."""
     moving = [i for i in np.argsort(-np.abs(np.nan_to_num(distances)))
               if np.isfinite(distances[i]) and abs(distances[i]) >= MOVING_M][:STEP_ERROR_GAITS]
     if not moving:
         return None
-    half = _run([(source, gaits[i][0], gaits[i][1], engine, 0.5, settings) for i in moving], settings.jobs)
+    half = tally.run([(source, gaits[i][0], gaits[i][1], engine, 0.5, settings) for i in moving], settings.jobs)
     errs = [abs(distances[i] - h) / abs(h) for i, (h, _) in zip(moving, half, strict=True) if np.isfinite(h) and h]
     return float(np.median(errs)) if errs else None
 
 
-def _short_search(source: str, gaits: list, screen: list, s: CalibrationSettings) -> list:
+def _short_search(source: str, gaits: list, screen: list, s: CalibrationSettings, tally: _Tally) -> list:
     """A Gaussian hill climb on MuJoCo (sigma SEARCH_SIGMA in the unit cube, `jobs` proposals a round) from the
     best random gait: [((unit vector, seed), (distance, cost))] of its search_trials trials."""
     rng = np.random.default_rng(0)
@@ -181,7 +210,7 @@ def _short_search(source: str, gaits: list, screen: list, s: CalibrationSettings
         for _ in range(min(s.jobs, s.search_trials - len(out))):
             seed += 1
             batch.append((tuple(np.clip(best_u + rng.normal(0.0, SEARCH_SIGMA, best_u.shape), 0.0, 1.0)), seed))
-        results = _run([(source, u, k, "mujoco", 1.0, s) for u, k in batch], s.jobs)
+        results = tally.run([(source, u, k, "mujoco", 1.0, s) for u, k in batch], s.jobs)
         for g, r in zip(batch, results, strict=True):
             out.append((g, r))
             if np.isfinite(r[0]) and r[0] > best_d:
@@ -189,23 +218,25 @@ def _short_search(source: str, gaits: list, screen: list, s: CalibrationSettings
     return out
 
 
-def calibrate(source: str, settings: CalibrationSettings) -> dict[str, Any]:
-    """Run the calibration of a robot (built-in name or spec file) and return its figures and decision."""
+def calibrate(source: str, settings: CalibrationSettings, progress: Progress | None = None) -> dict[str, Any]:
+    """Run the calibration of a robot (built-in name or spec file) and return its figures and decision;
+    `progress(done, total)` after each trial."""
     from spinefarm.worker.trial import random_unit_params
 
     t_wall = time.time()
     morph = load_morphology(source)
     s = settings
+    tally = _Tally(trials_in(s), progress)
     gaits = [(tuple(random_unit_params(morph, seed, s.controller)), seed) for seed in range(1, s.gaits + 1)]
-    screen = _run([(source, u, seed, "mujoco", 1.0, s) for u, seed in gaits], s.jobs)
-    searched = _short_search(source, gaits, screen, s)
+    screen = tally.run([(source, u, seed, "mujoco", 1.0, s) for u, seed in gaits], s.jobs)
+    searched = _short_search(source, gaits, screen, s, tally)
     gaits += [g for g, _ in searched]
     screen += [r for _, r in searched]
     found = np.array([d for d, _ in screen[s.gaits:]])
     bests = [s.gaits + int(i) for i in np.argsort(-np.nan_to_num(found, nan=-np.inf), kind="stable")[:s.bests]]
     chosen = list(range(s.gaits)) + bests
     mujoco = np.array([screen[i][0] for i in chosen])
-    judged = _run([(source, gaits[i][0], gaits[i][1], "bullet", 1.0, s) for i in chosen], s.jobs)
+    judged = tally.run([(source, gaits[i][0], gaits[i][1], "bullet", 1.0, s) for i in chosen], s.jobs)
     bullet = np.array([d for d, _ in judged])
     agree = agreement(bullet, mujoco)
     engine, why = decide(agree)
@@ -213,8 +244,9 @@ def calibrate(source: str, settings: CalibrationSettings) -> dict[str, Any]:
             "bullet": float(np.median([c for _, c in judged]))}
     picked = [gaits[i] for i in chosen]
     tiers = {t: {"cpu_s_per_sim_s": cost[t],
-                 "step_error": _step_error(source, picked, d, t, s)} for t, d in (("mujoco", mujoco),
-                                                                                  ("bullet", bullet))}
+                 "step_error": _step_error(source, picked, d, t, s, tally)} for t, d in (("mujoco", mujoco),
+                                                                                         ("bullet", bullet))}
+    tally.finish()
     return {"robot": morph.name, "source": str(source), "spec_hash": morph.spec_hash(),
             "profile_hash": profile_hash(dict(s.profile)),
             "settings": dataclasses.asdict(s), "n_random": s.gaits, "n_bests": len(bests), **agree,
@@ -271,7 +303,8 @@ def cache_path(source: str, settings: CalibrationSettings) -> Path:
                           f"{simulating_code_digest()}.json")
 
 
-def calibration(source: str, settings: CalibrationSettings, refresh: bool = False) -> tuple[dict[str, Any], bool]:
+def calibration(source: str, settings: CalibrationSettings, refresh: bool = False,
+                progress: Progress | None = None) -> tuple[dict[str, Any], bool]:
     """(the calibration of this robot under these settings, whether it came from the cache)."""
     path = cache_path(source, settings)
     if not refresh and path.is_file():
@@ -279,7 +312,7 @@ def calibration(source: str, settings: CalibrationSettings, refresh: bool = Fals
             return json.loads(path.read_text()), True
         except (OSError, ValueError):
             pass  # a damaged entry is computed again
-    result = clean(calibrate(source, settings))
+    result = clean(calibrate(source, settings, progress))
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(".tmp")

@@ -7,6 +7,7 @@ are sane; a passive settle (no CPG output) holds its shape; two runs of a short 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -135,16 +136,22 @@ def check_deterministic(morph: Morphology, engine: str = DEFAULT_ENGINE) -> Chec
     return CheckResult(name, True, f"identical poses; work {a.result.work_j:.3g} J in 0.5 s")
 
 
-def run_contract(morph: Morphology, engine: str = DEFAULT_ENGINE) -> list[CheckResult]:
+def run_contract(morph: Morphology, engine: str = DEFAULT_ENGINE,
+                 progress: Callable[[int, int], None] | None = None) -> list[CheckResult]:
     """Every check, in order; a check that raises fails with the error (later ones still run if the
-    structure built)."""
+    structure built). `progress(done, total)` before the first and after each."""
     out: list[CheckResult] = []
-    for check in (check_builds, check_sane_numbers, check_passive_settle, check_deterministic):
+    checks = (check_builds, check_sane_numbers, check_passive_settle, check_deterministic)
+    if progress:
+        progress(0, len(checks))
+    for check in checks:
         try:
             result = check(morph) if check in (check_builds, check_sane_numbers) else check(morph, engine)
         except SpinefarmError as exc:
             result = CheckResult(check.__name__.removeprefix("check_").replace("_", " "), False, str(exc))
         out.append(result)
+        if progress:
+            progress(len(out), len(checks))
         if check is check_builds and not result.passed:
             break
     return out

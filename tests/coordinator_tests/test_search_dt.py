@@ -1,7 +1,8 @@
-"""--dt on search and coordinator: the hardware Tetraspine (stiff strings) can be searched."""
+"""--dt on search and coordinator: the hardware Tetraspine (stiff strings) is searched at a stable step by default."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -11,22 +12,28 @@ from spinefarm.storage.hdf5_reader import read_run
 from tests.coordinator_tests.procs import ROOT
 
 
-def search(*args: str) -> subprocess.CompletedProcess:
+def search(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "spinefarm", "search", *args], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300)
+                          text=True, timeout=300, env=env)
 
 
-def test_tetraspine_hardware_is_searched_with_dt_auto_and_refused_without(tmp_path):
+def test_tetraspine_hardware_is_searched_with_defaults_at_a_stable_step_and_refused_at_an_unstable_one(tmp_path):
     common = ("tetraspine-hardware", "--trials", "2", "--workers", "1", "--duration", "0.3", "--api-port", "-1",
               "--no-verify", "--quiet")
-    refused = search(*common, "--out", str(tmp_path / "a.h5"))
+    small = ("--calibrate-gaits", "4", "--calibrate-search-trials", "2", "--calibrate-bests", "1",
+             "--calibrate-duration", "0.3", "--calibrate-settle", "0.1")
+    refused = search(*common, "--dt", "0.001", "--out", str(tmp_path / "a.h5"))
     assert refused.returncode == 2 and "dt_s is unstable" in refused.stderr and "--dt auto" in refused.stderr
-    ok = search(*common, "--dt", "auto", "--out", str(tmp_path / "b.h5"))
+    env = {**os.environ, "SPINEFARM_CACHE_DIR": str(tmp_path / "cache")}
+    ok = search(*common, *small, "--out", str(tmp_path / "b.h5"), env=env)
     assert ok.returncode == 0, ok.stderr[-2000:]
+    # the stable-step estimate of its strings is 0.509 ms (docs/stability.md); half of it is taken
+    assert "step: 0.254 ms for tetraspine-hardware (the default step, mujoco's 1 ms, bullet's 1 ms, is above its " \
+           "stable limit of 0.509 ms; --dt sets another)" in ok.stderr
     meta, cols = read_run(tmp_path / "b.h5")
     assert meta.trial_config["auto_dt"] is True
-    # engine auto (search's default) cannot calibrate at the engines' default steps: it falls back to Bullet
-    assert "the calibration could not run" in ok.stderr and meta.settings.engine_choice is None
+    # engine auto (search's default) calibrated at that step too, and chose
+    assert "the calibration could not run" not in ok.stderr and meta.settings.engine_choice is not None
     assert list(cols["status"]) == [b"complete", b"complete"]
     assert "re-simulates" not in ok.stderr  # --no-verify: no judge runs, so none is announced
     assert np.all(cols["dt_s"] < 5.1e-4)  # the automatic step, below the stable limit, stored per trial

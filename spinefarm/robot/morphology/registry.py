@@ -37,7 +37,12 @@ def load_morphology(source: str | Mapping | Morphology) -> Morphology:
         if source in builtin_names():
             return _builtin(source)
         path = Path(source)
-        if path.suffix.lower() in (".yaml", ".yml") and path.exists():
-            return load_spec_file(path)
+        if path.suffix.lower() in (".yaml", ".yml"):
+            if path.exists():
+                return load_spec_file(path)
+            raise UnknownMorphologyError(  # a file name, never a built-in's: say the file is missing
+                "spec file not found", received=source,
+                expected=f"an existing .yaml spec file (there is none at {path.resolve()}), or a built-in name: "
+                         f"{', '.join(builtin_names())} (`spinefarm spec NAME > FILE.yaml` starts a new one)")
     raise UnknownMorphologyError("unknown morphology", received=source,
                                  expected=f"one of {builtin_names()} or a path to a .yaml spec file")

@@ -33,6 +33,9 @@ MOTOR_MODELS = {"physical": sk.MOTOR_PHYSICAL, "ntrt2014": sk.MOTOR_NTRT2014, "n
 STATUS_OK, STATUS_NONFINITE = sk.STATUS_OK, sk.STATUS_NONFINITE
 
 
+MIN_START_LENGTH_CM = 1e-3  # a string shorter at the start has coinciding ends (overlapping segments)
+
+
 @njit(cache=True)
 def law_step_world(cpg, strings, clock, b, poses):
     """One step of world b: poses (nb, 7) COM cm + quaternion x, y, z, w -> strings' force[b], torque[b]
@@ -97,6 +100,12 @@ def string_tables(morph: Morphology, start_length_cm: np.ndarray, node_of_string
         elif mat.drive_offset_cm is not None:
             params[i, sk.P_MODE] = sk.MODE_DRIVEN
             params[i, sk.P_DRIVE] = start_length_cm[i] - mat.drive_offset_cm
+        if start_length_cm[i] < MIN_START_LENGTH_CM:  # the pretension test below would contradict itself
+            raise ConfigError(
+                f"string {i} ({s.tag}, nodes {s.a} -> {s.b}) has no length at the start: its ends coincide, so "
+                "two segments overlap; move them apart in the spec (segments: transforms) and run "
+                "`spinefarm check` on it", received=f"{start_length_cm[i]:.3g} cm",
+                expected=f"a start length of at least {MIN_START_LENGTH_CM:g} cm")
         rest = start_length_cm[i] - mat.pretension_n * NEWTON / k
         if rest <= 0:
             raise ConfigError(f"pretension of string {i} ({s.tag}) exceeds k * start length",
