@@ -38,7 +38,7 @@ test-deploy: $(STAMP)
 	$(PY) -m tests.deploy.main $(DEPLOY_ARGS)
 
 # mutmut over the modules that decide, each against its own few test files (tests/mutation/targets.py); long
-# (an hour or more on two cores), so not in `make test`. MUTATION_ARGS: --modules NAME,... or --retest-lived.
+# (hours on two cores), so not in `make test`. MUTATION_ARGS: --modules NAME,... (a re-run tests only survivors).
 mutation: $(STAMP)
 	$(PY) -m pip install -q --require-hashes --no-deps -r tests/mutation/requirements.txt
 	$(PY) -m tests.mutation.main $(MUTATION_ARGS)

@@ -3,9 +3,9 @@
     python -m tests.mutation.main [--modules robust-scoring,runlock] [--workdir .mutation] [--survivors FILE]
 
 mutmut changes the source in place, so it works on a copy of the tracked files in WORKDIR/tree (an interrupted
-run never leaves a mutant in the checkout). Its cache (WORKDIR/tree/.mutmut-cache) is kept: a second run tests
-only the mutants of changed lines. Mutations of strings (messages) and decorators are left out: they rarely
-decide and would double the count."""
+run never leaves a mutant in the checkout). Its cache (WORKDIR/tree/.mutmut-cache) is kept: a killed mutant
+stays killed, so a second run (after adding tests) tests only the survivors and the mutants of changed lines.
+Mutations of strings (messages) and decorators are left out: they rarely decide and would double the count."""
 
 from __future__ import annotations
 
@@ -36,12 +36,12 @@ def copy_tree(dest: Path) -> None:
             shutil.copy2(src, dest / name)
 
 
-def run_module(tree: Path, module: str, tests: tuple[str, ...], mutant_id: str = "") -> int:
+def run_module(tree: Path, module: str, tests: tuple[str, ...]) -> int:
     runner = f"{sys.executable} -m pytest -x -q -p no:randomly -p no:cacheprovider {' '.join(tests)}"
     env = dict(os.environ, PYTHONPATH=str(tree), SPINEFARM_MUTATION="1")
     cmd = [sys.executable, "-m", "mutmut", "run", "--paths-to-mutate", module, "--runner", runner,
            "--tests-dir", "tests", "--disable-mutation-types", "string,fstring,decorator",
-           "--test-time-base", "20", "--simple-output", "--no-progress", "--CI", *([mutant_id] if mutant_id else [])]
+           "--test-time-base", "20", "--simple-output", "--no-progress", "--CI"]
     return subprocess.run(cmd, cwd=tree, env=env, stdout=sys.stderr).returncode
 
 
@@ -71,8 +71,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workdir", type=Path, default=ROOT / ".mutation")
     ap.add_argument("--survivors", type=Path, help="write each survivor's diff here (default WORKDIR/survivors.txt)")
     ap.add_argument("--report-only", action="store_true", help="read the cache, run nothing")
-    ap.add_argument("--retest-lived", action="store_true",
-                    help="run again only the mutants that lived last time (after adding tests; killed ones stay)")
     args = ap.parse_args(argv)
     names = [n for n in args.modules.split(",") if n]
     unknown = [n for n in names if n not in TARGETS]
@@ -86,10 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     for name in names:
         module, tests = TARGETS[name]
         started = time.monotonic()
-        if args.retest_lived:
-            for mutant_id in counts(tree, module)[1]:
-                run_module(tree, module, tests, str(mutant_id))
-        elif not args.report_only:
+        if not args.report_only:
             run_module(tree, module, tests)
         report[name], ids = counts(tree, module)
         report[name].update(module=module, tests=list(tests), seconds=round(time.monotonic() - started))
