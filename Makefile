@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install run test test-all test-deploy lint bench clean
+.PHONY: install run test test-all test-deploy lint bench clean mutation
 
 # exact versions and hashes from requirements.lock (docs/reproducibility.md says how to refresh it), then the
 # package itself without resolving anything again
@@ -36,6 +36,12 @@ test-all: $(STAMP)
 # The compose and SLURM deployments end to end (root only: apt, dockerd, munge, SLURM); docs/deploy.md.
 test-deploy: $(STAMP)
 	$(PY) -m tests.deploy.main $(DEPLOY_ARGS)
+
+# mutmut over the modules that decide, each against its own few test files (tests/mutation/targets.py); long
+# (hours on two cores), so not in `make test`. MUTATION_ARGS: --modules NAME,... (a re-run tests only survivors).
+mutation: $(STAMP)
+	$(PY) -m pip install -q --require-hashes --no-deps -r tests/mutation/requirements.txt
+	$(PY) -m tests.mutation.main $(MUTATION_ARGS)
 
 bench: $(STAMP)
 	$(PY) bench/trial_speed.py

@@ -188,3 +188,20 @@ def test_just_after_a_start_a_timed_out_trial_waits_for_other_workers_to_reconne
     s.worker_lost("w1")
     clock.advance(10.0)  # grace over, nobody else: back to a worker that failed it
     assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]
+
+
+def test_a_measured_trial_time_staggers_the_leases_of_a_batch():
+    """docs/distributed.md: lease_s for the first trial of a batch, plus the expected trial time, 4x the
+    measured wall time (a running mean) and at most lease_s, for each one after it."""
+    clock = FakeClock(0.0)
+    s, ids = Scheduler(clock, lease_s=60.0), new_ids()
+    s.observe_trial(0.5)  # first measurement: 4 x 0.5 s = 2 s per trial ahead in the batch
+    assert [ls.deadline_s for ls in s.grant("w1", 3, ids)] == [60.0, 62.0, 64.0]
+    s.observe_trial(2.5)  # slower trials: 4 x 2.5 = 10 s, mixed into the mean: between 2 s and 10 s
+    clock.t = 10.0
+    later = [ls.deadline_s - 70.0 for ls in s.grant("w2", 3, ids)]
+    assert later[0] == 0.0 and 2.0 < later[1] < 10.0 and later[2] == pytest.approx(2 * later[1])
+    capped = Scheduler(FakeClock(0.0), lease_s=5.0)
+    capped.observe_trial(30.0)  # 4 x 30 s is capped at lease_s
+    capped.observe_trial(float("nan"))  # not a measurement
+    assert [ls.deadline_s for ls in capped.grant("w1", 3, new_ids())] == [5.0, 10.0, 15.0]

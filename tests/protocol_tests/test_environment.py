@@ -74,3 +74,21 @@ def test_a_run_file_records_it_and_trial_run_and_resume_say_what_differs(tmp_pat
     resumed = _cli("search", "--resume", str(out), "--workers", "1", "--api-port", "-1")
     assert resumed.returncode == 0, resumed.stderr
     assert f"numpy {np.__version__} here, 1.26.0 in the run" in resumed.stderr
+
+
+def test_the_record_keeps_the_variables_that_steer_blas_and_numba(monkeypatch):
+    """docs/reproducibility.md: OPENBLAS_CORETYPE, OPENBLAS_L2_SIZE, NUMBA_CPU_NAME, NUMBA_CPU_FEATURES and
+    NUMBA_OPT are recorded with their values; other variables are not; a changed one is told."""
+    steering = {"OPENBLAS_CORETYPE": "Haswell", "OPENBLAS_L2_SIZE": "262144", "NUMBA_CPU_NAME": "generic",
+                "NUMBA_CPU_FEATURES": "+sse2", "NUMBA_OPT": "2"}
+    for name in steering:
+        monkeypatch.delenv(name, raising=False)
+    assert environment_record()["env"] == {}
+    monkeypatch.setenv("SPINEFARM_UNRELATED", "1")
+    for name, value in steering.items():
+        monkeypatch.setenv(name, value)
+    rec = environment_record()
+    assert rec["env"] == steering
+    monkeypatch.setenv("NUMBA_OPT", "0")
+    told = differences(rec)
+    assert told == [f"environment variables {dict(steering, NUMBA_OPT='0')} here, {steering} in the run"]

@@ -68,3 +68,24 @@ def test_search_resume_through_links_to_a_live_coordinators_file_exits_2(tmp_pat
         assert first.poll() is None
     finally:
         stop(first)
+
+
+def test_after_a_resume_a_hard_link_to_the_new_file_is_refused(tmp_path):
+    """A resume writes a fresh copy and renames it over the run file (a new inode): the identity lock must
+    follow it. A hard link made afterwards has a name (and a name lock) of its own, so only the identity lock
+    can refuse it."""
+    path = tmp_path / "run.h5"
+    _, storage, _ = sphere_core(out=path)
+    old_inode = os.stat(path).st_ino
+    storage.close()
+    _, resumed = resume_run(path)
+    try:
+        assert os.stat(path).st_ino != old_inode  # the resume's fresh copy
+        hard = tmp_path / "hard-after-resume.h5"
+        os.link(path, hard)
+        before = digest(path)
+        with pytest.raises(StorageError, match="another coordinator"):
+            resume_run(hard)
+        assert digest(path) == before and os.stat(hard).st_ino == os.stat(path).st_ino
+    finally:
+        resumed.close()

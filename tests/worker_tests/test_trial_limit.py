@@ -238,3 +238,48 @@ def test_a_judge_at_a_finer_step_in_another_engine_is_not_timed_out_by_the_scree
         assert judge.extras["time_limit_s"] > judge.wall_time_s
     finally:
         box.close()
+
+
+_ORPHAN_PARENT = """
+import sys, threading, time
+from tests.worker_tests.test_trial_limit import at, poisoned
+from spinefarm.worker.sandbox import TrialSandbox
+box = TrialSandbox(poisoned("orphan", 0.05))
+box.start()
+threading.Thread(target=box.run, args=(at(0.05),), daemon=True).start()  # a trial that hangs
+time.sleep(1.0)
+print(box._proc.pid, flush=True)
+time.sleep(600)
+"""
+
+
+def _gone(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] == "Z"  # dead, not yet reaped
+    except FileNotFoundError:
+        return True
+
+
+def test_a_trial_process_dies_with_its_worker_even_mid_trial():
+    """The child asks the kernel for SIGKILL when its parent dies (PR_SET_PDEATHSIG): a worker SIGKILLed while
+    its trial hangs leaves no trial process behind (a hung one would never read its pipe's end)."""
+    import subprocess
+    import sys
+
+    parent = subprocess.Popen([sys.executable, "-c", _ORPHAN_PARENT], stdout=subprocess.PIPE, text=True,
+                              cwd=os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+    try:
+        child_pid = int(parent.stdout.readline())
+        assert not _gone(child_pid)
+        parent.kill()
+        parent.wait(10)
+        deadline = time.monotonic() + 10.0
+        while not _gone(child_pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        alive = not _gone(child_pid)
+        if alive:
+            os.kill(child_pid, signal.SIGKILL)
+        assert not alive, "the trial process outlived its worker"
+    finally:
+        parent.kill()

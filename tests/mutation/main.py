@@ -1,0 +1,101 @@
+"""Run mutmut over the modules that decide and print JSON: killed, survived, timed out, per module.
+
+    python -m tests.mutation.main [--modules robust-scoring,runlock] [--workdir .mutation] [--survivors FILE]
+
+mutmut changes the source in place, so it works on a copy of the tracked files in WORKDIR/tree (an interrupted
+run never leaves a mutant in the checkout). Its cache (WORKDIR/tree/.mutmut-cache) is kept: a killed mutant
+stays killed, so a second run (after adding tests) tests only the survivors and the mutants of changed lines.
+Mutations of strings (messages) and decorators are left out: they rarely decide and would double the count."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from tests.mutation.targets import TARGETS
+
+ROOT = Path(__file__).resolve().parents[2]
+STATUSES = {"ok_killed": "killed", "bad_survived": "survived", "bad_timeout": "timed_out",
+            "ok_suspicious": "suspicious", "skipped": "skipped", "untested": "untested"}
+
+
+def copy_tree(dest: Path) -> None:
+    """The tracked files as they are in the work tree (edits included), over the last copy."""
+    names = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, check=True, capture_output=True).stdout
+    for name in names.decode().split("\0"):
+        src = ROOT / name
+        if name and src.is_file():
+            (dest / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dest / name)
+
+
+def run_module(tree: Path, module: str, tests: tuple[str, ...]) -> int:
+    runner = f"{sys.executable} -m pytest -x -q -p no:randomly -p no:cacheprovider {' '.join(tests)}"
+    env = dict(os.environ, PYTHONPATH=str(tree), SPINEFARM_MUTATION="1")
+    cmd = [sys.executable, "-m", "mutmut", "run", "--paths-to-mutate", module, "--runner", runner,
+           "--tests-dir", "tests", "--disable-mutation-types", "string,fstring,decorator",
+           "--test-time-base", "20", "--simple-output", "--no-progress", "--CI"]
+    return subprocess.run(cmd, cwd=tree, env=env, stdout=sys.stderr).returncode
+
+
+def counts(tree: Path, module: str) -> tuple[dict[str, int], list[int]]:
+    """Mutants of one module by outcome, and the ids of those that lived (survived or timed out)."""
+    db = sqlite3.connect(tree / ".mutmut-cache")
+    rows = db.execute("SELECT m.id, m.status FROM Mutant m JOIN Line l ON m.line = l.id "
+                      "JOIN SourceFile f ON l.sourcefile = f.id WHERE f.filename = ?", (module,)).fetchall()
+    db.close()
+    out = dict.fromkeys(STATUSES.values(), 0)
+    for _, status in rows:
+        out[STATUSES[status]] += 1
+    tested = out["killed"] + out["survived"] + out["timed_out"] + out["suspicious"]
+    out["killed_pct"] = round(100.0 * (out["killed"] + out["suspicious"]) / tested, 1) if tested else None
+    return out, [i for i, s in rows if s in ("bad_survived", "bad_timeout")]
+
+
+def diff(tree: Path, mutant_id: int) -> str:
+    res = subprocess.run([sys.executable, "-m", "mutmut", "show", str(mutant_id)], cwd=tree,
+                         capture_output=True, text=True)
+    return res.stdout
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--modules", default=",".join(TARGETS), help="comma-separated names: " + ", ".join(TARGETS))
+    ap.add_argument("--workdir", type=Path, default=ROOT / ".mutation")
+    ap.add_argument("--survivors", type=Path, help="write each survivor's diff here (default WORKDIR/survivors.txt)")
+    ap.add_argument("--report-only", action="store_true", help="read the cache, run nothing")
+    args = ap.parse_args(argv)
+    names = [n for n in args.modules.split(",") if n]
+    unknown = [n for n in names if n not in TARGETS]
+    if unknown:
+        ap.error(f"--modules: unknown {', '.join(unknown)}; expected some of {', '.join(TARGETS)}")
+    tree = args.workdir / "tree"
+    tree.mkdir(parents=True, exist_ok=True)
+    copy_tree(tree)
+    report: dict[str, dict] = {}
+    lived: list[str] = []
+    for name in names:
+        module, tests = TARGETS[name]
+        started = time.monotonic()
+        if not args.report_only:
+            run_module(tree, module, tests)
+        report[name], ids = counts(tree, module)
+        report[name].update(module=module, tests=list(tests), seconds=round(time.monotonic() - started))
+        lived += [f"## {name} mutant {i}\n{diff(tree, i)}" for i in ids]
+    total = {k: sum(r[k] for r in report.values()) for k in STATUSES.values()}
+    tested = total["killed"] + total["survived"] + total["timed_out"] + total["suspicious"]
+    total["killed_pct"] = round(100.0 * (total["killed"] + total["suspicious"]) / tested, 1) if tested else None
+    (args.survivors or args.workdir / "survivors.txt").write_text("\n".join(lived))
+    print(json.dumps({"tool": "mutmut 2.5.1", "modules": report, "total": total}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
