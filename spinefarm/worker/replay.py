@@ -180,7 +180,8 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     u = unit_params(morph, params, space)
     duration = duration_s or morph.duration_s
     # NTRT's Bullet 2.81 had no friction anchors; its motor caps are per 1 ms step (spec 0a.3)
-    cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model="ntrt2014", controller="ntrt",
+    # and its CPG runs every step, as controlTime 0.001 fixes it (cpg_step_s 0)
+    cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model="ntrt2014", controller="ntrt", cpg_step_s=0.0,
                       engine=engine, engine_options={"friction_anchor": False} if engine == "bullet" else {},
                       pose_jitter_cm=pose_jitter_cm)
     result = simulate(morph, u, cfg, seed).result
