@@ -26,7 +26,10 @@ gaits at each engine's default step, interleaved, with `bullet_cpu_s_per_sim_s`,
 trial run again with them when one could; `mujoco_reruns` lists those), `mujoco_speedup`, and for comparison
 MuJoCo with them modelled by MuJoCo's own search ("scene"), left out ("off") and modelled only for the rod pairs
 the structure lets come within reach ("reach", `mujoco_reach_rod_pairs` counts them), with the pyramidal friction
-cone (`mujoco_pyramidal_cone`, the default before the elliptic one), and every trial's distance:
+cone (`mujoco_pyramidal_cone`, the default before the elliptic one), every trial's distance, and
+`control_share`: the control law and the loop over MuJoCo's whole step (1 - a bare mj_step from the trial's end
+state over the whole step; `mujoco_split_us_per_step`), with `control_law_share` the law alone (CPG and strings
+timed apart on the end pose):
 
     python bench/trial_speed.py --spines all [--tier-seconds 10] [--repeats 3]
 
@@ -206,7 +209,7 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
     caches = {name: SetupCache() for name in configs}
     cpu: dict[str, list[float]] = {name: [] for name in configs}
     distance: dict[str, list[float]] = {name: [] for name in configs}
-    reruns = []
+    reruns, mj_step_us, law_us = [], [], []
     for r in range(repeats + 1):
         u = random_unit_params(morph, 1 + r)
         for name, cfg in configs.items():
@@ -217,12 +220,23 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
                 distance[name].append(round(res.distance_m, 5))
                 if name == "mujoco" and "segment_contacts" in res.extras:
                     reruns.append(res.extras["segment_contacts"])
+                if name == "mujoco":  # the engine's own step and the law's, from where the trial ended
+                    ran = cfg if "segment_contacts" not in res.extras else dataclasses.replace(
+                        cfg, engine_options={**cfg.engine_options, "segment_contacts": "scene"})
+                    setup = caches[name].get(morph, ran, None)
+                    mj_step_us.append(_bare_mj_step_us(setup._scene))
+                    law_us.append(law_step_us(setup, u, cfg))
     med = {name: float(np.median(v)) for name, v in cpu.items()}
+    whole_us = med["mujoco"] * 1e6 * choose_step(morph, configs["mujoco"])
+    split = {"whole": whole_us, "mj_step": float(np.median(mj_step_us)), "control_law": float(np.median(law_us))}
     print(f"{morph_name}: bullet {med['bullet']:.3f}, mujoco {med['mujoco']:.3f} CPU s per simulated s",
           file=sys.stderr)
     return {"dt_s": {name: choose_step(morph, cfg) for name, cfg in configs.items()},
             "bullet_cpu_s_per_sim_s": med["bullet"], "mujoco_cpu_s_per_sim_s": med["mujoco"],
             "mujoco_speedup": med["bullet"] / med["mujoco"],
+            # control law (CPG and strings) and loop over MuJoCo's whole step; the law alone beside it
+            "control_share": (whole_us - split["mj_step"]) / whole_us,
+            "control_law_share": split["control_law"] / whole_us, "mujoco_split_us_per_step": split,
             "mujoco_segment_contacts_scene_cpu_s_per_sim_s": med["mujoco_segment_contacts_scene"],
             "mujoco_segment_contacts_off_cpu_s_per_sim_s": med["mujoco_segment_contacts_off"],
             "mujoco_segment_contacts_reach_cpu_s_per_sim_s": med["mujoco_segment_contacts_reach"],
@@ -230,6 +244,25 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
             "mujoco_reach_rod_pairs": reach_pairs(morph, configs["mujoco_segment_contacts_reach"]),
             "mujoco_reruns": reruns, "cpu_s_per_sim_s_all": {k: [round(x, 4) for x in v] for k, v in cpu.items()},
             "distance_m": distance}
+
+
+def law_step_us(setup, u: np.ndarray, cfg: TrialConfig, steps: int = 2000) -> float:
+    """CPU µs of one step of the control law (CPG at the trial's own CPG step, strings) on a fixed pose,
+    a fresh law of parameter set u on the set-up's robot."""
+    from spinefarm.worker.control.law import ControlLaw
+
+    net = setup.space.network(setup.space.param_space.physical(u))
+    g = setup.geom
+    law = ControlLaw([net], [setup.string_tables(net)], (g.body_a, g.body_b, g.anchor_a_cm, g.anchor_b_cm),
+                     len(setup.bodies), cfg.cpg_max_step_s, cfg.motor_model)
+    every = max(1, round(setup.morph.control.cpg_update_period_s / setup.dt))
+    law.begin_phase(every, setup.dt, cfg.cpg_own_step_s if every == 1 else None)
+    poses, active = setup._scene.read_poses()[:1].copy(), np.ones(1, dtype=bool)
+    law.step(poses, active)  # compiled before timing
+    t0 = time.process_time()
+    for _ in range(steps):
+        law.step(poses, active)
+    return (time.process_time() - t0) / steps * 1e6
 
 
 def reach_pairs(morph, cfg: TrialConfig) -> dict:

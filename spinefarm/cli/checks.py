@@ -82,3 +82,9 @@ def seed(text: str) -> int:
     if value < 0:
         raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0; received {value}")
     return value
+
+
+def add_cpg_step_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--cpg-step", type=float, default=None, metavar="S",
+                   help="the CPG's own step where the robot updates it every physics step (default: the engine's, "
+                        "every step on Bullet, 0.002 on MuJoCo; 0: every step; see docs/performance.md)")

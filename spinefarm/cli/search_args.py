@@ -77,6 +77,7 @@ def _trial_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dt", default=None, metavar="S|auto",
                    help="physics step of every trial in seconds (default 0.001), or 'auto' for half the string "
                         "network's stable-step estimate (needed e.g. by tetraspine-hardware); stored with the run")
+    checks.add_cpg_step_argument(p)
     p.add_argument("--settle", type=float, default=None, metavar="S",
                    help="let the robot settle this long with the CPG at rest, and score locomotion from the "
                         "settled pose (default 0: from the start, as NTRT)")

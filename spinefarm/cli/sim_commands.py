@@ -45,6 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dt", default=None,
                    help="physics step in seconds (default: the engine's, 0.001 for Bullet; see docs/engines.md), "
                         "or 'auto' for half the string network's stable-step estimate")
+    checks.add_cpg_step_argument(p)
     p.add_argument("--controller", default=None, help="controller space (e.g. ntrt, sidewinding)")
     p.add_argument("--motor-model", choices=MOTOR_MODEL_NAMES, default=None)
     p.add_argument("--seed", type=checks.seed, default=None, help="trial seed (default: the random seed or 0)")
@@ -96,12 +97,13 @@ def add_engine_option_argument(p: argparse.ArgumentParser) -> None:
 
 def trial_overrides(args: argparse.Namespace) -> dict[str, Any]:
     """TrialConfig overrides from the flags `trial`, `search` and `coordinator` share (--dt, --engine,
-    --engine-option, --scene, --settle, --motor-model, --profile; those a command lacks are skipped). TrialConfig
-    validates the values."""
+    --engine-option, --scene, --settle, --motor-model, --cpg-step, --profile; those a command lacks are skipped).
+    TrialConfig validates the values."""
     from spinefarm.cli.default_step import step_overrides
 
     out: dict[str, Any] = step_overrides(getattr(args, "dt", None))
-    for flag, field in (("motor_model", "motor_model"), ("engine", "engine"), ("settle", "settle_s")):
+    for flag, field in (("motor_model", "motor_model"), ("engine", "engine"), ("settle", "settle_s"),
+                        ("cpg_step", "cpg_step_s")):
         if getattr(args, flag, None) is not None:
             out[field] = getattr(args, flag)
     if getattr(args, "engine_option", None):

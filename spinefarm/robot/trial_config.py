@@ -33,6 +33,11 @@ class TrialConfig:
     cpg_update_period_s: NTRT's controlTime (CPG output held in between).
     cpg_max_step_s: the CPG's RK4 sub-step cap; None: 1 ms, longer for a network slow enough
     (worker.control.cpg.CpgIntegrator).
+    cpg_step_s: the CPG's own step where the morphology updates it every physics step (controlTime <= dt):
+    one RK4 step per cpg_step_s, one update ahead, the setpoints in between interpolated linearly (exact at
+    the updates); None: the engine's default (robot.engines: the Bullet judge every physics step, MuJoCo's
+    screen at the step measured within the chaos floor, docs/performance.md); 0: every physics step. A
+    controlTime above the physics step (NTRT's 0.1 s) is kept as the spec fixes it.
     settle_s: seconds simulated before locomotion with the CPG held at rest (zero output, the impedance
     reflex holding the posture); distance, speed, work and COT count from the pose at its end,
     NTRT's distance (ntrt_distance_cm) still from the start. 0: scored from the start.
@@ -55,6 +60,7 @@ class TrialConfig:
     controller: str | None = None
     cpg_update_period_s: float | None = bounded(None, 1e-6, 10.0)
     cpg_max_step_s: float | None = bounded(None, 1e-6, 0.1)
+    cpg_step_s: float | None = bounded(None, 0.0, 0.1)
     relocate_anchors: bool = True
     pose_jitter_cm: float = bounded(0.0, 0.0, 10.0)
     ground_friction: float | None = bounded(None, 0.0, 10.0)
@@ -94,14 +100,22 @@ class TrialConfig:
         """The physics step asked for: dt_s, or the engine's default."""
         return self.dt_s if self.dt_s is not None else engine_spec(self.engine).default_dt_s
 
+    @property
+    def cpg_own_step_s(self) -> float | None:
+        """The CPG's own step asked for (None: every physics step): cpg_step_s, or the engine's default."""
+        own = self.cpg_step_s if self.cpg_step_s is not None else engine_spec(self.engine).default_cpg_step_s
+        return own or None
+
     def to_dict(self) -> dict:
         """Every field, and with a profile its hash (robot.profile.profile_hash), kept in run files; no profile
-        keys without a profile (so configs from before profiles keep their hash)."""
+        keys without a profile and no cpg_step_s when unset (so configs from before them keep their hash)."""
         d = {**asdict(self), "scene": self.scene.to_dict()}
         if self.profile:
             d["profile_hash"] = profile_hash(self.profile)
         else:
             del d["profile"]
+        if d["cpg_step_s"] is None:
+            del d["cpg_step_s"]
         return d
 
     @classmethod

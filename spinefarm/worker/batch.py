@@ -54,7 +54,8 @@ class Trajectory:
 @dataclass(frozen=True)
 class Timing:
     """A trial's step counts: n_settle, n_steps (locomotion), cpg_every, check_every, record_every (None:
-    no recording), dt_s."""
+    no recording), dt_s; cpg_own_step_s: the CPG at its own step, up to this long, setpoints interpolated
+    between updates (worker.control.law; None: every cpg_every steps, held)."""
 
     n_settle: int
     n_steps: int
@@ -62,6 +63,7 @@ class Timing:
     check_every: int
     record_every: int | None
     dt_s: float
+    cpg_own_step_s: float | None = None
 
 
 @dataclass
@@ -113,7 +115,7 @@ class Batch:
             self._start_settled(settled)
             phases = phases[1:]
         for phase_steps, every in phases:
-            self.law.begin_phase(every, t.dt_s)
+            self.law.begin_phase(every, t.dt_s, t.cpg_own_step_s)
             start = self.done
             n = 0
             while n < phase_steps and self.active.any():

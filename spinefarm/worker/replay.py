@@ -217,8 +217,9 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     u = unit_params(morph, params, space)
     duration = duration_s or morph.duration_s
     # NTRT's Bullet 2.81 had no friction anchors; its motor caps are per 1 ms step (spec 0a.3)
+    # and its CPG runs every step, as controlTime 0.001 fixes it (cpg_step_s 0)
     motor_model = motor_model or ntrt_motor(morph)
-    cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model=motor_model, controller="ntrt",
+    cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model=motor_model, controller="ntrt", cpg_step_s=0.0,
                       engine=engine, engine_options={"friction_anchor": False} if engine == "bullet" else {},
                       pose_jitter_cm=pose_jitter_cm, profile=dict(profile or {}))
     result = simulate(morph, u, cfg, seed).result

@@ -137,10 +137,13 @@ def _settle_key(setup: TrialSetup, scene_factory: EngineFactory | None, timing: 
 def _timing(morph: Morphology, cfg: TrialConfig, dt: float) -> Timing:
     duration = cfg.duration_s or morph.duration_s
     period = cfg.cpg_update_period_s or morph.control.cpg_update_period_s
+    every = max(1, int(round(period / dt)))
+    # the CPG at its own step only where no update interval above the physics step is fixed (NTRT's 0.1 s)
+    own = cfg.cpg_own_step_s if every == 1 and cfg.cpg_update_period_s is None else None
     return Timing(n_settle=int(round(cfg.settle_s / dt)), n_steps=int(round(duration / dt)),
-                  cpg_every=max(1, int(round(period / dt))), check_every=max(1, int(round(cfg.check_every_s / dt))),
+                  cpg_every=every, check_every=max(1, int(round(cfg.check_every_s / dt))),
                   record_every=None if cfg.record_every_s is None else max(1, int(round(cfg.record_every_s / dt))),
-                  dt_s=dt)
+                  dt_s=dt, cpg_own_step_s=own)
 
 
 def _outcome(morph: Morphology, setup: TrialSetup, cfg: TrialConfig, timing: Timing, w: World, seed: int,

@@ -88,6 +88,7 @@ class CpgIntegrator:
         self.network = network
         self.state = np.zeros((network.n_nodes, 3))
         self.output_cm_s = np.zeros(network.n_nodes)
+        self.explicit_max_step = max_step_s is not None
         self.max_step_s = max_step_s if max_step_s is not None else \
             max(DEFAULT_MAX_STEP_S, SLOW_RATE_STEP / network.fastest_rate_per_s())
         self._wc = network.complex_weights()
@@ -98,13 +99,19 @@ class CpgIntegrator:
         self._work = np.zeros((9, network.n_nodes, 3))
         self._steps: dict[float, tuple[float, int]] = {}
 
-    def plan(self, period_s: float) -> tuple[float, int]:
-        """(sub-step h in s, number of RK4 sub-steps) for one update of period_s."""
-        plan = self._steps.get(period_s)
+    def plan(self, period_s: float, own_step_s: float | None = None) -> tuple[float, int]:
+        """(sub-step h in s, number of RK4 sub-steps) for one update of period_s. own_step_s: the CPG's own
+        step, the sub-step cap unless max_step_s was given explicitly."""
+        cap = self.max_step_s if own_step_s is None or self.explicit_max_step else own_step_s
+        plan = self._steps.get((period_s, cap))
         if plan is None:  # the same period recurs every update: plan its sub-steps once
-            n_steps = max(1, int(np.ceil(period_s / self.max_step_s - 1e-9)))
-            plan = self._steps[period_s] = (period_s / n_steps, n_steps)
+            n_steps = max(1, int(np.ceil(period_s / cap - 1e-9)))
+            plan = self._steps[(period_s, cap)] = (period_s / n_steps, n_steps)
         return plan
+
+    def own_step_s(self) -> float:
+        """The longest step this network's dynamics allow: SLOW_RATE_STEP over its fastest rate."""
+        return SLOW_RATE_STEP / self.network.fastest_rate_per_s()
 
     @property
     def work(self) -> np.ndarray:

@@ -3,18 +3,22 @@ batch of B worlds.
 
 Per world and physics step (`law_step_world`, compiled once and used by every loop in worker.loop): advance
 the CPG by its update period when one is due, then run the string kernel (impedance -> motor -> string law ->
-per-body wrench). The CPG, the string parameters and every buffer carry a leading world axis, so the worlds
-of a batch may hold different parameter sets (and CPG couplings), each with its own state; the string
-geometry is the robot's and shared.
+per-body wrench). The CPG either holds its output between updates (NTRT's controlTime, updated at the end of
+each period) or, at its own step longer than the physics step, runs one update ahead and the setpoints between
+two updates are interpolated linearly (exact at the update instants). The CPG, the string parameters and every
+buffer carry a leading world axis, so the worlds of a batch may hold different parameter sets (and CPG
+couplings), each with its own state and CPG step; the string geometry is the robot's and shared.
 
 Compiled structures are plain tuples of arrays (numba types them once):
   cpg     (state (B, n, 3), omega (B, n), amp (B, n), indptr (B, n+1), source (B, e), wc (B, e) complex,
-           rate (B,), h (B,), n_sub (B,), scratch (B, 9, n, 3), output (B, n) cm/s)
+           rate (B,), h (B,), n_sub (B,), scratch (B, 9, n, 3), output (B, n) cm/s (the setpoints the strings
+           read), ahead and behind (B, n): the outputs at the next and the last update when interpolating)
   strings (body_a (s,), body_b (s,), anchor_a (s, 3), anchor_b (s, 3) cm, params (B, s, N_PARAM),
            state (B, s, N_STATE), force (B, nb, 3), torque (B, nb, 3), tension (B, s), work (B, 1),
            world anchors a, b (B, s, 3), string force (B, s, 3))
-  clock   (steps (B,) int64 taken in this phase, cpg_every (steps per CPG update, 0: CPG held), dt_s, motor mode,
-           quiet (B,) int64: 1 until the world's first step, which then runs without the law (motor ntrt2026))
+  clock   (steps (B,) int64 taken in this phase, cpg_every (B,) (steps per CPG update, 0: CPG held), dt_s,
+           motor mode, quiet (B,) int64: 1 until the world's first step, which then runs without the law (motor
+           ntrt2026), interpolate (B,) (1: setpoints interpolated between updates, 0: held))
 """
 
 from __future__ import annotations
@@ -40,18 +44,27 @@ MIN_START_LENGTH_CM = 1e-3  # a string shorter at the start has coinciding ends 
 def law_step_world(cpg, strings, clock, b, poses):
     """One step of world b: poses (nb, 7) COM cm + quaternion x, y, z, w -> strings' force[b], torque[b]
     (nb, 3). Returns the string kernel's status; the world's step count advances only on success."""
-    state, omega, amp, indptr, source, wc, rate, h, n_sub, scratch, out = cpg
+    state, omega, amp, indptr, source, wc, rate, h, n_sub, scratch, out, ahead, behind = cpg
     body_a, body_b, anc_a, anc_b, params, sstate, force, torque, tension, work, wa, wb, sforce = strings
-    steps, every, dt, motor, quiet = clock
+    steps, every_b, dt, motor, quiet, interpolate = clock
     if quiet[b]:  # NTRT's first world step runs before its first model step: no string forces, no control
         quiet[b] = 0
         force[b][:] = 0.0
         torque[b][:] = 0.0
         return STATUS_OK
     n = steps[b]
-    if every > 0 and (n + 1) % every == 0:
-        rk4_advance(state[b], (omega[b], amp[b], indptr[b], source[b], wc[b], rate[b]), h[b], n_sub[b], scratch[b],
-                    out[b])
+    every = every_b[b]
+    net = (omega[b], amp[b], indptr[b], source[b], wc[b], rate[b])
+    if every > 0 and interpolate[b]:
+        k = n % every
+        if k == 0:  # a new interval: its far end is the next update, computed now
+            behind[b, :] = ahead[b]
+            rk4_advance(state[b], net, h[b], n_sub[b], scratch[b], ahead[b])
+        frac = (k + 1) / every
+        for i in range(out.shape[1]):
+            out[b, i] = behind[b, i] + frac * (ahead[b, i] - behind[b, i])
+    elif every > 0 and (n + 1) % every == 0:
+        rk4_advance(state[b], net, h[b], n_sub[b], scratch[b], out[b])
     status = sk.string_step(poses, (body_a, body_b, anc_a, anc_b), params[b], sstate[b], out[b], dt, motor,
                             (force[b], torque[b], tension[b], work[b], wa[b], wb[b], sforce[b]))
     if status == STATUS_OK:
@@ -148,6 +161,8 @@ class ControlLaw:
                            _stack([n.complex_weights() for n in networks], np.complex128),
                            np.array([float(n.amplitude_rate_per_s) for n in networks]))
         self._scratch = np.zeros((n_worlds, 9, n_nodes, 3))
+        self._ahead = np.zeros((n_worlds, n_nodes))
+        self._behind = np.zeros((n_worlds, n_nodes))
         n_strings = tables[0][0].shape[0]
         self.params = np.ascontiguousarray(np.stack([t[0] for t in tables]), dtype=np.float64)
         self.state = np.ascontiguousarray(np.stack([t[1] for t in tables]), dtype=np.float64)
@@ -167,15 +182,25 @@ class ControlLaw:
         self.quiet = np.full(n_worlds, int(self.motor == sk.MOTOR_NTRT2026), dtype=np.int64)
         self.begin_phase(0, 1.0)
 
-    def begin_phase(self, cpg_every: int, dt_s: float) -> None:
-        """Start a phase: the CPG advances every cpg_every steps by cpg_every * dt_s (0: held at rest, as
-        in a settle phase); step counts start again from 0."""
-        plans = [c.plan(cpg_every * dt_s) if cpg_every > 0 else (0.0, 0) for c in self._cpgs]
+    def begin_phase(self, cpg_every: int, dt_s: float, own_step_s: float | None = None) -> None:
+        """Start a phase: the CPG advances every cpg_every steps by cpg_every * dt_s, its output held until the
+        next update (0: held at rest, as in a settle phase). With own_step_s (and cpg_every 1) each world's CPG
+        runs at its own step instead: the largest multiple of dt_s within own_step_s and its network's
+        SLOW_RATE_STEP / fastest rate, by one RK4 step (sub-steps only under an explicit cpg_max_step_s) one
+        update ahead, the setpoints in between interpolated. Step counts start again from 0."""
+        every = np.full(self.n_worlds, max(0, int(cpg_every)), dtype=np.int64)
+        if own_step_s and cpg_every == 1:
+            every[:] = [max(1, int(min(own_step_s, c.own_step_s()) / dt_s + 1e-9)) for c in self._cpgs]
+        interpolate = (every > 1).astype(np.int64) if own_step_s and cpg_every == 1 else np.zeros_like(every)
+        plans = [(0.0, 0) if e <= 0 else c.plan(e * dt_s, e * dt_s if i else None)
+                 for c, e, i in zip(self._cpgs, every, interpolate, strict=True)]
         h = np.array([p[0] for p in plans], dtype=np.float64)
         n_sub = np.array([p[1] for p in plans], dtype=np.int64)
-        self.cpg = (*self._cpg_const, h, n_sub, self._scratch, self.cpg_output_cm_s)
+        self.cpg_every = every
+        self._ahead[:] = self.cpg_output_cm_s  # the output now: the near end of the first interval
+        self.cpg = (*self._cpg_const, h, n_sub, self._scratch, self.cpg_output_cm_s, self._ahead, self._behind)
         self.steps[:] = 0
-        self.clock = (self.steps, int(cpg_every), float(dt_s), int(self.motor), self.quiet)
+        self.clock = (self.steps, every, float(dt_s), int(self.motor), self.quiet, interpolate)
 
     def step(self, poses: np.ndarray, active: np.ndarray) -> int:
         """One step of every active world: poses (B, nb, 7) -> self.force, self.torque (B, nb, 3). Returns how
