@@ -70,7 +70,7 @@ def windows_bench(args: argparse.Namespace) -> dict:
         floor = window_error_cm(morph, cfg, [p])
         signal = {n: window_error_cm(morph, with_values(cfg, {n: v * 1.05}), [p]) for n, v in true.items()}
         rows[str(window_s)] = {"windows": len(p.windows), "floor_cm": floor, "off_by_5pct_cm": signal,
-                               "min_signal_to_floor": min(signal.values()) / floor}
+                               "signal_to_floor": {n: v / floor for n, v in signal.items()}}
     return {"robot": morph.name, "engine": args.engine, "seed": args.seeds[0], "duration_s": args.duration,
             "window_s": rows, "command": "python bench/fit.py --windows " + " ".join(sys.argv[2:])}
 
