@@ -13,6 +13,8 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.fit.loss import Prepared, fit_loss, report, window_error_cm
 from spinefarm.worker.fit.search import Bound, minimise
 
+AT_BOUND = 0.01  # a fitted value this near its bounds (in the unit cube) may want to lie beyond them
+
 
 def with_values(cfg: TrialConfig, values: Mapping[str, float]) -> TrialConfig:
     return dataclasses.replace(cfg, profile={**cfg.profile, **values})
@@ -32,6 +34,7 @@ def fit_constants(morph: Morphology, cfg: TrialConfig, fitted: Sequence[Prepared
     spread = found.spread()
     return {
         "constants": {b.name: {"start": start[b.name], "fitted": found.values[b.name], "low": b.low, "high": b.high,
+                               "at_bound": not AT_BOUND <= b.unit(found.values[b.name]) <= 1 - AT_BOUND,
                                **spread[b.name]} for b in bounds},
         "window_error_cm": {"before": window_error_cm(morph, cfg, list(fitted)),
                             "after": window_error_cm(morph, after, list(fitted))},
