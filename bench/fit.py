@@ -5,7 +5,20 @@ with five constants changed by +-30 %; the fit (spinefarm.worker.fit) starts fro
 must recover each within 5 %, or say which constants the recordings cannot tell apart and why. Prints one JSON
 object: {"constants": {NAME: {"true", "fitted", "rel_error", "identifiable", "why"?}}, ...}.
 
+--windows: how the window length was chosen. On one such recording, per window length: the window error of the
+true model (the floor: what restarting from a recorded state with finite-difference velocities costs, growing
+with the window as chaos amplifies it) and with each constant 5 % off (the signal); their ratio.
+
     python bench/fit.py --identify [--engine mujoco] [--evaluations 200] [--restarts 3]
+    python bench/fit.py --windows [--engine mujoco]
+
+--ntrt: each built-in spine fitted in each engine to its NTRT recordings (../shared/ntrt-recordings, the random
+draws): leave-one-out window error before and after (worker.fit.loo), then the fit to all of them and NTRT's
+published gait replayed before and after against NTRT's recorded distance. Prints
+{"spines": {SPINE: {ENGINE: {"ratio_before", "ratio_after", "window_error_before", "window_error_after"}}}}.
+A skeleton: its default budget is small (--evaluations, --restarts), the full run takes hours on 2 cores.
+
+    python bench/fit.py --ntrt [--spines tetraspine-ntrt] [--engines mujoco bullet] [--model SPINE=SPEC ...]
 """
 
 from __future__ import annotations
@@ -15,6 +28,8 @@ import json
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -37,9 +52,100 @@ def identify_bench(args: argparse.Namespace) -> dict:
             "command": "python bench/fit.py --identify " + " ".join(sys.argv[2:])}
 
 
+def windows_bench(args: argparse.Namespace) -> dict:
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.profile import current_value
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.fitting import with_values
+    from spinefarm.worker.fit.identify import record
+    from spinefarm.worker.fit.loss import prepare, window_error_cm
+
+    morph = load_morphology(args.robot)
+    true = {n: current_value(morph, n, args.engine, {}) * f for n, f in CHANGED.items()}
+    cfg = with_values(TrialConfig(engine=args.engine), true)
+    rec = record(morph, cfg, args.seeds[0], args.duration)
+    rows = {}
+    for window_s in (0.05, 0.1, 0.2, 0.4, 0.8):
+        p = prepare("r", rec, window_s, window_s)
+        floor = window_error_cm(morph, cfg, [p])
+        signal = {n: window_error_cm(morph, with_values(cfg, {n: v * 1.05}), [p]) for n, v in true.items()}
+        rows[str(window_s)] = {"windows": len(p.windows), "floor_cm": floor, "off_by_5pct_cm": signal,
+                               "signal_to_floor": {n: v / floor for n, v in signal.items()}}
+    return {"robot": morph.name, "engine": args.engine, "seed": args.seeds[0], "duration_s": args.duration,
+            "window_s": rows, "command": "python bench/fit.py --windows " + " ".join(sys.argv[2:])}
+
+
+NTRT_FOLDERS = {"tetraspine-ntrt": "TetraSpine", "tetrahedral-complex": "TetrahedralComplex",
+                "octahedral-complex": "OctahedralComplex", "ribbed": "Ribbed"}
+NTRT_FIT = "ground_friction,string_stiffness_n_per_m,string_damping_n_s_per_m,rod_density_kg_per_cm3"
+
+
+def ntrt_bench(args: argparse.Namespace) -> dict:
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.fitting import fit_constants
+    from spinefarm.worker.fit.loo import leave_one_out
+    from spinefarm.worker.fit.loss import prepare
+    from spinefarm.worker.fit.readers import read_recording
+    from spinefarm.worker.fit.search import parse_fit
+
+    robots = dict(item.split("=", 1) for item in args.robot_spec)  # a spine's model other than its built-in
+    out: dict = {"spines": {}, "command": "python bench/fit.py --ntrt " + " ".join(sys.argv[2:])}
+    for spine in args.spines:
+        morph = load_morphology(robots.get(spine, spine))
+        folder = Path(args.recordings) / NTRT_FOLDERS[spine]
+        recs = [prepare(d.name, read_recording(d), args.window, args.stride, 0.0)
+                for d in sorted(folder.glob("random-*")) if _full(d)]
+        out["spines"][spine] = {}
+        for engine in args.engines:
+            cfg = TrialConfig(engine=engine)
+            bounds = parse_fit(args.fit)
+            loo = leave_one_out(morph, cfg, recs, bounds, args.restarts, args.evaluations)
+            fitted = fit_constants(morph, cfg, recs, [], bounds, args.restarts, args.evaluations)
+            before, after = (_replay_ratio(spine, morph, engine, profile, folder / "published",
+                                           args.replay_duration) for profile in ({}, fitted["profile"]))
+            out["spines"][spine][engine] = {"ratio_before": before, "ratio_after": after,
+                                            "window_error_before": loo["window_error_before"],
+                                            "window_error_after": loo["window_error_after"], "folds": loo["folds"],
+                                            "profile": fitted["profile"], "constants": fitted["constants"]}
+    return out
+
+
+def _replay_ratio(spine: str, morph: object, engine: str, profile: dict, published: Path,
+                  duration_s: float | None) -> float:
+    """NTRT's published gait replayed on our model: its scored segment's distance over NTRT's recorded one in the
+    same time (the published recording's, at duration_s or its end)."""
+    from spinefarm.worker.fit.readers import read_recording
+    from spinefarm.worker.fit.state import planar_distance_cm
+    from spinefarm.worker.replay import parameter_folder, replay
+
+    rec = read_recording(published)
+    seg = json.loads((published / "run-info.json").read_text())["scoring_segment"]
+    end = len(rec.time_s) - 1 if duration_s is None else int(np.searchsorted(rec.time_s, duration_s - 1e-9))
+    ntrt_cm = planar_distance_cm(rec.position_m[0, seg] * 100, rec.position_m[end, seg] * 100)
+    ours = replay(parameter_folder(spine), morph, engine=engine, duration_s=float(rec.time_s[end]), profile=profile)
+    return ours.result.ntrt_distance_cm / ntrt_cm
+
+
+def _full(folder: Path) -> bool:
+    """A draw that ran its whole trial (NTRT aborted some: they have no score, run-info.json says so)."""
+    info = json.loads((folder / "run-info.json").read_text())
+    return not any(r.get("aborted") for r in info.get("runs", {}).values())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--identify", action="store_true", help="recover known constants from our own recordings")
+    ap.add_argument("--windows", action="store_true", help="window error floor and signal per window length")
+    ap.add_argument("--ntrt", action="store_true", help="the built-in spines fitted to NTRT's recordings")
+    ap.add_argument("--spines", nargs="+", default=list(NTRT_FOLDERS))
+    ap.add_argument("--engines", nargs="+", default=["mujoco", "bullet"])
+    ap.add_argument("--model", dest="robot_spec", nargs="*", default=[], metavar="SPINE=SPEC",
+                    help="with --ntrt: fit this model of a spine (e.g. tetraspine-ntrt=tetraspine-ntrt2026)")
+    ap.add_argument("--recordings", default="/work/shared/ntrt-recordings", help="NTRT's recordings folder")
+    ap.add_argument("--fit", default=NTRT_FIT)
+    ap.add_argument("--stride", type=float, default=1.0)
+    ap.add_argument("--replay-duration", type=float, default=None)
     ap.add_argument("--robot", default="tetraspine-ntrt")
     ap.add_argument("--engine", default="mujoco")
     ap.add_argument("--seeds", type=int, nargs="+", default=[3, 5])
@@ -48,9 +154,10 @@ def main() -> None:
     ap.add_argument("--restarts", type=int, default=3)
     ap.add_argument("--evaluations", type=int, default=200)
     args = ap.parse_args()
-    if not args.identify:
-        ap.error("say what to measure: --identify")
-    print(json.dumps(identify_bench(args)))
+    if args.identify + args.windows + args.ntrt != 1:
+        ap.error("say what to measure: --identify, --windows or --ntrt")
+    bench = identify_bench if args.identify else windows_bench if args.windows else ntrt_bench
+    print(json.dumps(bench(args)))
 
 
 if __name__ == "__main__":

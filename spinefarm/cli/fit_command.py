@@ -86,7 +86,9 @@ def cmd_fit(args: argparse.Namespace) -> int:
 def write_profile(path: Path, robot: str, result: dict[str, Any], command: str) -> None:
     import yaml
 
-    doc = {"robot": robot, "description": f"fitted in {result['engine']}: {command}",
+    bound = [n for n, c in result["constants"].items() if c["at_bound"]]
+    warn = f" WARNING: {', '.join(bound)} at the bounds (docs/fitting.md)." if bound else ""
+    doc = {"robot": robot, "description": f"fitted in {result['engine']}: {command}.{warn}",
            "constants": {k: float(f"{v:.6g}") for k, v in result["profile"].items()}}
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
 
@@ -103,7 +105,8 @@ def summary(r: dict[str, Any]) -> str:
                      f"{b['distance_cm']:.2f} -> {a['distance_cm']:.2f} cm (recorded {a['recorded_distance_cm']:.2f})")
     for name, c in r["constants"].items():
         lines.append(f"  {name:32s} {c['start']:.5g} -> {c['fitted']:.5g} (starts gave {c['min']:.5g} .. "
-                     f"{c['max']:.5g}; bounds {c['low']:g} .. {c['high']:g})")
+                     f"{c['max']:.5g}; bounds {c['low']:g} .. {c['high']:g})"
+                     + ("  AT ITS BOUND: a model error the constant may not close" if c["at_bound"] else ""))
     return "\n".join(lines)
 
 

@@ -63,8 +63,22 @@ def test_held_out_recording_never_enters_the_loss(recordings, capsys):
 def test_fit_recovers_constants_on_a_tiny_robot():
     morph = load_morphology("tetraspine-ntrt")
     true = {"ground_friction": 0.65, "string_stiffness_n_per_m": 1300.0}
-    out = identify(morph, "mujoco", true, seeds=(3,), duration_s=0.6, window_s=0.1, restarts=1, evaluations=60)
+    out = identify(morph, "mujoco", true, seeds=(3,), duration_s=0.6, window_s=0.1, restarts=1, evaluations=100)
     for name, c in out["constants"].items():
         assert c["true"] == true[name]
         assert c["rel_error"] <= 0.05 and c["identifiable"], (name, c)
     assert out["window_error_cm"]["after"] < out["window_error_cm"]["before"] / 5
+    assert out["loss"]["after"] < out["loss"]["before"] / 5
+
+
+@pytest.mark.parametrize(("fit", "robot", "message"), [
+    ("friction", "tetraspine-ntrt", "unknown profile constant; received 'friction'"),
+    ("ground_friction=0.05:2", "tetraspine-ntrt",
+     "bounds outside its plausible range; received '0.05:2'; expected LO < HI within [0.1, 1.5]"),
+    ("ground_friction", "tetrahedral-complex", "the recording does not fit tetrahedral-complex; received '3 segments'"),
+])
+def test_fit_refuses_bad_input_in_one_line(recordings, capsys, fit, robot, message):
+    capsys.readouterr()
+    assert main(["fit", robot, str(recordings / "r1.npz"), "--engine", "mujoco", "--fit", fit]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err

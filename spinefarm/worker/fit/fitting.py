@@ -10,8 +10,10 @@ from typing import Any
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.profile import apply_profile, current_value
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.fit.loss import Prepared, report, window_error_cm
+from spinefarm.worker.fit.loss import Prepared, fit_loss, report, window_error_cm
 from spinefarm.worker.fit.search import Bound, minimise
+
+AT_BOUND = 0.01  # a fitted value this near its bounds (in the unit cube) may want to lie beyond them
 
 
 def with_values(cfg: TrialConfig, values: Mapping[str, float]) -> TrialConfig:
@@ -26,17 +28,20 @@ def fit_constants(morph: Morphology, cfg: TrialConfig, fitted: Sequence[Prepared
     start = {b.name: min(max(current_value(apply_profile(morph, cfg.profile), b.name, cfg.engine,
                                            {**cfg.engine_options, **_engine_part(cfg)}), b.low), b.high)
              for b in bounds}
-    found = minimise(lambda v: window_error_cm(morph, with_values(cfg, v), list(fitted)), bounds, start,
+    found = minimise(lambda v: fit_loss(morph, with_values(cfg, v), list(fitted)), bounds, start,
                      restarts, evaluations, seed)
     after = with_values(cfg, found.values)
     spread = found.spread()
     return {
         "constants": {b.name: {"start": start[b.name], "fitted": found.values[b.name], "low": b.low, "high": b.high,
+                               "at_bound": not AT_BOUND <= b.unit(found.values[b.name]) <= 1 - AT_BOUND,
                                **spread[b.name]} for b in bounds},
-        "window_error_cm": {"before": window_error_cm(morph, cfg, list(fitted)), "after": found.loss},
+        "window_error_cm": {"before": window_error_cm(morph, cfg, list(fitted)),
+                            "after": window_error_cm(morph, after, list(fitted))},
+        "loss": {"before": fit_loss(morph, cfg, list(fitted)), "after": found.loss},
         "recordings": {p.name: {"held_out": p in held_out, "before": report(morph, cfg, p),
                                 "after": report(morph, after, p)} for p in (*fitted, *held_out)},
-        "restarts": [{"window_error_cm": loss, "values": v} for loss, v in found.restarts],
+        "restarts": [{"loss": loss, "values": v} for loss, v in found.restarts],
         "evaluations": found.evaluations, "profile": after.profile,
     }
 

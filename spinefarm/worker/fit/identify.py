@@ -3,7 +3,8 @@ the model's own values: each constant recovered within TOLERANCE, or said why no
 
 Two reasons a recording cannot tell a constant: it is seen only in a product with another (the engines combine
 the ground's and a rod's friction as their product, PRODUCTS), or the loss hardly moves with it (a change of
-PROBE around the fitted value moves the window error by less than FLAT of itself).
+PROBE around the fitted value moves the loss by less than FLAT of itself), or it is one of a group whose common
+scale the motion does not show (SCALES).
 """
 
 from __future__ import annotations
@@ -18,13 +19,15 @@ from spinefarm.robot.profile import constant, current_value
 from spinefarm.robot.spaces import param_space
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.fit.fitting import fit_constants, with_values
-from spinefarm.worker.fit.loss import Prepared, prepare, window_error_cm
+from spinefarm.worker.fit.loss import Prepared, fit_loss, prepare
 from spinefarm.worker.fit.readers import from_trajectory
 from spinefarm.worker.fit.recording import Recording
 from spinefarm.worker.fit.search import Bound
 
 TOLERANCE = 0.05
 PRODUCTS = (("ground_friction", "rod_friction"),)  # Bullet multiplies the two; MuJoCo is mapped to the product
+# scaled together they leave every acceleration as it was (rest-length drive, load-proportional contacts)
+SCALES = ("rod_density_kg_per_cm3", "string_stiffness_n_per_m", "string_damping_n_s_per_m")
 PROBE = 0.05
 FLAT = 0.02
 
@@ -59,10 +62,10 @@ def identify(morph: Morphology, engine: str, true: Mapping[str, float], seeds: S
     fitted = {n: c["fitted"] for n, c in result["constants"].items()}
     judged = {n: {"true": true[n], "fitted": fitted[n], "rel_error": abs(fitted[n] - true[n]) / abs(true[n]),
                   "identifiable": abs(fitted[n] - true[n]) <= TOLERANCE * abs(true[n])} for n in true}
-    _why(judged, morph, base, fitted, recordings, result["window_error_cm"]["after"])
+    _why(judged, morph, base, fitted, recordings, result["loss"]["after"])
     return {"robot": morph.name, "engine": engine, "seeds": list(seeds), "duration_s": duration_s,
             "window_s": window_s, "tolerance": TOLERANCE, "constants": judged,
-            "window_error_cm": result["window_error_cm"], "restarts": result["restarts"],
+            "window_error_cm": result["window_error_cm"], "loss": result["loss"], "restarts": result["restarts"],
             "evaluations": result["evaluations"]}
 
 
@@ -76,10 +79,17 @@ def _why(judged: dict[str, dict], morph: Morphology, cfg: TrialConfig, fitted: d
                 for n in (a, b):
                     judged[n]["why"] = (f"only the product {a} x {b} is seen (the engines combine the two "
                                         f"frictions as their product): fitted {got:.4g}, true {true:.4g}")
+    ratios = {n: fitted[n] / judged[n]["true"] for n in SCALES if n in judged}
+    if len(ratios) > 1 and max(ratios.values()) <= (1 + TOLERANCE) * min(ratios.values()) \
+            and not all(judged[n]["identifiable"] for n in ratios):
+        for n in ratios:
+            judged[n]["why"] = (f"only the ratios of {', '.join(ratios)} to each other are seen: all came out "
+                                f"{min(ratios.values()):.3g}-{max(ratios.values()):.3g}x the true ones (a common "
+                                "scale leaves the motion as it was; the strings' tensions tell it)")
     for n, j in judged.items():
         if j["identifiable"] or "why" in j:
             continue
-        moved = [window_error_cm(morph, with_values(cfg, {**fitted, n: fitted[n] * f}), recordings)
+        moved = [fit_loss(morph, with_values(cfg, {**fitted, n: fitted[n] * f}), recordings)
                  for f in (1 - PROBE, 1 + PROBE)]
         change = max(abs(m - loss) for m in moved) / loss if loss > 0 else math.inf
         j["why"] = (f"a {100 * PROBE:g} % change moves the window error by {100 * change:.2g} % "

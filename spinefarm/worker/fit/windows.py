@@ -17,9 +17,11 @@ import numpy as np
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.morphology.structure import NEWTON
 from spinefarm.robot.profile import apply_profile
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.control.law import string_tables
+from spinefarm.worker.engines.base import BasePhysics
 from spinefarm.worker.fit.recording import Recording, RecordingError
 from spinefarm.worker.fit.state import engine_poses, rest_lengths_cm, velocities
 from spinefarm.worker.setup import TrialSetup
@@ -50,9 +52,17 @@ def plan_windows(rec: Recording, window_s: float, stride_s: float, skip_s: float
     return out
 
 
-def run_windows(morph: Morphology, cfg: TrialConfig, rec: Recording, windows: list[Window]) -> list[np.ndarray]:
-    """Per window its simulated poses (len(rows), nb, 7) COM cm + quaternion (x, y, z, w) at its rows' times;
-    a window that diverged holds NaN from there."""
+@dataclass
+class WindowRun:
+    """A simulated window at its checked rows: poses (rows, nb, 7) COM cm + quaternion (x, y, z, w) and the
+    strings' spring tensions tension_n (rows, n_strings) N; NaN from where it diverged."""
+
+    poses: np.ndarray
+    tension_n: np.ndarray
+
+
+def run_windows(morph: Morphology, cfg: TrialConfig, rec: Recording, windows: list[Window]) -> list[WindowRun]:
+    """Every window simulated from its recorded start state under cfg (its profile applied)."""
     if rec.rest_length_m is None:
         raise RecordingError(f"{rec.where}no rest lengths to drive the strings", received="no rest_length_m",
                              expected="a recording with rest lengths (docs/recordings.md)")
@@ -66,57 +76,65 @@ def run_windows(morph: Morphology, cfg: TrialConfig, rec: Recording, windows: li
     retry = [w for w, o in enumerate(out) if o is None]
     if retry:  # the engine asked for other settings (MuJoCo's contact guard): those windows again, in them
         again = dataclasses.replace(cfg, engine_options={**cfg.engine_options, "segment_contacts": "scene"})
-        for w, poses in zip(retry, run_windows(morph, again, rec, [windows[w] for w in retry]), strict=True):
-            out[w] = poses
+        for w, run in zip(retry, run_windows(morph, again, rec, [windows[w] for w in retry]), strict=True):
+            out[w] = run
     return out  # type: ignore[return-value]
 
 
-def _batch(setup: TrialSetup, rec: Recording, windows: list[Window]) -> list[np.ndarray | None]:
-    dt, n_w = setup.dt, len(windows)
-    poses_rec, vel_rec = engine_poses(rec), velocities(rec)
-    t = rec.time_s
-    n_steps = max(int(round((t[w.rows[-1]] - t[w.start]) / dt)) for w in windows)
-    check = [{int(round((t[r] - t[w.start]) / dt)): i for i, r in enumerate(w.rows)} for w in windows]
-    rest = [rest_lengths_cm(rec, t[w.start] + dt * np.arange(n_steps)) for w in windows]
-    params, state = string_tables(setup.morph, setup.geom.start_length_cm, {})
-    params[:, sk.P_MODE] = sk.MODE_FIXED  # the rest lengths are given: no motor, no controller
-    g = setup.geom
-    banks = [sk.StringBank(len(setup.bodies), g.body_a, g.body_b, g.anchor_a_cm, g.anchor_b_cm, params, state.copy())
-             for _ in windows]
-    engine, owned = setup.scene(None, None, n_w)
-    out = [np.full((len(w.rows), len(setup.bodies), 7), np.nan) for w in windows]
-    try:
+class _Shots:
+    """The windows' string banks driven by their rest-length tables, and what is kept at the checked steps."""
+
+    def __init__(self, setup: TrialSetup, rec: Recording, windows: list[Window]) -> None:
+        dt, t = setup.dt, rec.time_s
+        self.dt, self.step = dt, 0
+        self.n_steps = max(int(round((t[w.rows[-1]] - t[w.start]) / dt)) for w in windows)
+        self.check = [{int(round((t[r] - t[w.start]) / dt)): i for i, r in enumerate(w.rows)} for w in windows]
+        self.rest = [rest_lengths_cm(rec, t[w.start] + dt * np.arange(self.n_steps)) for w in windows]
+        params, state = string_tables(setup.morph, setup.geom.start_length_cm, {})
+        params[:, sk.P_MODE] = sk.MODE_FIXED  # the rest lengths are given: no motor, no controller
+        g, nb = setup.geom, len(setup.bodies)
+        self.banks = [sk.StringBank(nb, g.body_a, g.body_b, g.anchor_a_cm, g.anchor_b_cm, params, state.copy())
+                      for _ in windows]
+        self.runs = [WindowRun(np.full((len(w.rows), nb, 7), np.nan), np.full((len(w.rows), len(params)), np.nan))
+                     for w in windows]
+        self.force = np.zeros((len(windows), nb, 3))
+        self.torque = np.zeros_like(self.force)
+        self._cpg = np.zeros(1)
+
+    def start(self, engine: BasePhysics, rec: Recording, windows: list[Window]) -> None:
+        poses, vel = engine_poses(rec), velocities(rec)
         for w, win in enumerate(windows):
-            engine.set_state(w, poses_rec[win.start], vel_rec[win.start])
-            banks[w].state[:, sk.S_LPREV] = _previous_lengths(banks[w], poses_rec, t, win.start, dt)
-        active = np.ones(n_w, dtype=bool)
-        force = np.zeros((n_w, len(setup.bodies), 3))
-        torque = np.zeros_like(force)
-        cpg = np.zeros(1)
-        step = [0]
+            engine.set_state(w, poses[win.start], vel[win.start])
+            self.banks[w].state[:, sk.S_LPREV] = _previous_lengths(self.banks[w], poses, rec.time_s, win.start, self.dt)
 
-        def run(k: int, live: np.ndarray) -> None:
-            for _ in range(k):
-                j = step[0]
-                poses = engine.read_poses()
-                for w in np.flatnonzero(live):
-                    if j in check[w]:
-                        out[w][check[w][j]] = poses[w]
-                    bank = banks[w]
-                    bank.state[:, sk.S_REST] = rest[w][j]
-                    if bank.step(poses[w], cpg, dt, sk.MOTOR_PHYSICAL) != sk.STATUS_OK:
-                        live[w] = False
-                    force[w], torque[w] = bank.force, bank.torque
-                engine.apply_wrenches(force, torque, live)
-                engine.step(live)
-                step[0] += 1
+    def run(self, engine: BasePhysics, k: int, live: np.ndarray) -> None:
+        for _ in range(k):
+            j = self.step
+            poses = engine.read_poses()
+            for w in np.flatnonzero(live):
+                bank = self.banks[w]
+                bank.state[:, sk.S_REST] = self.rest[w][min(j, self.n_steps - 1)]
+                if bank.step(poses[w], self._cpg, self.dt, sk.MOTOR_PHYSICAL) != sk.STATUS_OK:
+                    live[w] = False
+                if j in self.check[w]:
+                    row = self.check[w][j]
+                    self.runs[w].poses[row], self.runs[w].tension_n[row] = poses[w], bank.tension / NEWTON
+                self.force[w], self.torque[w] = bank.force, bank.torque
+            engine.apply_wrenches(self.force, self.torque, live)
+            engine.step(live)
+            self.step += 1
 
-        engine.advance(run, n_steps, active, n_steps)
-        end = engine.read_poses()
-        for w in np.flatnonzero(active):
-            if n_steps in check[w]:
-                out[w][check[w][n_steps]] = end[w]
-        return [None if w in engine.retries else out[w] for w in range(n_w)]
+
+def _batch(setup: TrialSetup, rec: Recording, windows: list[Window]) -> list[WindowRun | None]:
+    shots = _Shots(setup, rec, windows)
+    engine, owned = setup.scene(None, None, len(windows))
+    try:
+        shots.start(engine, rec, windows)
+        active = np.ones(len(windows), dtype=bool)
+        engine.advance(lambda k, live: shots.run(engine, k, live), shots.n_steps, active, shots.n_steps)
+        live = active & np.array([shots.n_steps in c for c in shots.check])
+        shots.run(engine, 1, live)  # the last checked rows: their poses and the tensions those poses make
+        return [None if w in engine.retries else shots.runs[w] for w in range(len(windows))]
     finally:
         if owned:
             engine.close()
