@@ -89,6 +89,9 @@ def cmd_worker(args: argparse.Namespace) -> int:
     return service.run()
 
 
+KEEP_ALIVE_S = 60
+
+
 def cmd_api(args: argparse.Namespace) -> int:
     import uvicorn
 
@@ -117,9 +120,12 @@ def cmd_api(args: argparse.Namespace) -> int:
             if self.started:
                 print(announcement, file=sys.stderr, flush=True)
 
-    # A bounded graceful shutdown: SIGTERM stops the server even while a request is still running.
+    # A bounded graceful shutdown: SIGTERM stops the server even while a request is still running. Idle
+    # connections are kept 60 s (uvicorn's 5 s made a busy server close a connection its client was reusing:
+    # a read error at the client under hundreds of readers, bench/api_load.py).
     AnnouncingServer(uvicorn.Config(create_app(served, args.runs_dir), host=args.host, port=args.port,
-                                    log_level="warning", timeout_graceful_shutdown=5)).run()
+                                    log_level="warning", timeout_graceful_shutdown=5,
+                                    timeout_keep_alive=KEEP_ALIVE_S)).run()
     return 0
 
 
