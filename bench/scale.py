@@ -13,7 +13,7 @@ checked against the verdicts: `lost` (acknowledged as stored, not in the file or
 the results it carries), over every grant of every worker, the killed ones' until their kill.
 `coordinator_rss_mb` is the coordinator's largest resident size, sampled every 0.5 s.
 
-usage: python bench/scale.py --workers 500 [--per-process 10] [--trials N] [--duration 1.0] [--kill 0.1]
+usage: python bench/scale.py --workers 500 [--per-process 10] [--trials N] [--duration 10] [--kill 0.1]
 prints one JSON object.
 """
 
@@ -46,7 +46,7 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def host_workers(endpoint: str, first: int, count: int, out_dir: Path) -> None:
+def host_workers(endpoint: str, first: int, count: int, out_dir: Path, stagger_s: float) -> None:
     """Child process: `count` workers, each in its own thread and Zenoh session, until the run says done."""
     os.environ["SPINEFARM_ACK_LOG"] = str(out_dir / f"acks-{first}.log")
     from spinefarm.protocol import keys
@@ -62,7 +62,7 @@ def host_workers(endpoint: str, first: int, count: int, out_dir: Path) -> None:
             out = super()._query(session, key, payload, cls)
             if key == work_key and out[0]:
                 with lock:
-                    grants.write(f"{time.time():.4f} {1000 * (time.perf_counter() - t0):.3f}\n")
+                    grants.write(f"{time.time():.4f} {1000 * (time.perf_counter() - t0):.3f} {self.worker_id}\n")
             return out
 
     timings = WorkerTimings(coordinator_timeout_s=120.0)
@@ -71,6 +71,7 @@ def host_workers(endpoint: str, first: int, count: int, out_dir: Path) -> None:
     threads = [threading.Thread(target=w.run, daemon=True) for w in workers]
     for t in threads:
         t.start()
+        time.sleep(stagger_s)  # a connection storm of hundreds of handshakes at once stalls the router
     for t in threads:
         t.join()
     os._exit(0)  # Zenoh's threads can outlive the sessions: nothing is left to do
@@ -130,7 +131,8 @@ def _latencies(tmp: Path) -> dict:
     t = np.array([float(r[0]) for r in rows])
     ms = np.array([float(r[1]) for r in rows])
     span = float(t.max() - t.min()) if len(t) > 1 else math.nan
-    return {"grants": len(ms), "grants_per_s": round(len(ms) / span, 1) if span > 0 else None,
+    return {"grants": len(ms), "workers_granted": len({r[2] for r in rows}),
+            "grants_per_s": round(len(ms) / span, 1) if span > 0 else None,
             "grant_latency_ms": {"p50": round(float(np.percentile(ms, 50)), 2),
                                  "p99": round(float(np.percentile(ms, 99)), 2), "max": round(float(ms.max()), 2)}}
 
@@ -145,9 +147,12 @@ def run(args: argparse.Namespace) -> dict:
     tmp = Path(tempfile.mkdtemp(prefix="spinefarm-scale-", dir=args.dir))
     port = free_port()
     endpoint, out = f"tcp/127.0.0.1:{port}", tmp / "run.h5"
-    trials = args.trials or 4 * args.workers
+    trials = args.trials or 6 * args.workers
     procs: list[subprocess.Popen] = []
-    router = _spinefarm("router", "--listen", endpoint, log=tmp / "router.log")
+    # Zenoh's default of 100 handshakes pending at once is below the workers' connection storm
+    (tmp / "router.json5").write_text(json.dumps({"transport": {"unicast": {
+        "accept_pending": 4 * args.workers, "max_sessions": 4 * args.workers + 100, "accept_timeout": 30000}}}))
+    router = _spinefarm("router", "--listen", endpoint, "--config", str(tmp / "router.json5"), log=tmp / "router.log")
     try:
         _wait_listening(port)
         coord = _spinefarm("coordinator", "sphere:4", "--trials", str(trials), "--duration", str(args.duration),
@@ -156,22 +161,33 @@ def run(args: argparse.Namespace) -> dict:
         per = args.per_process
         for first in range(0, args.workers, per):
             procs.append(subprocess.Popen([sys.executable, __file__, "--host", endpoint, "--first", str(first),
-                                           "--count", str(min(per, args.workers - first)), "--dir", str(tmp)],
-                                          cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+                                           "--count", str(min(per, args.workers - first)), "--dir", str(tmp),
+                                           "--stagger", str(args.stagger)], cwd=ROOT, stdout=subprocess.DEVNULL,
+                                          stderr=subprocess.DEVNULL))
+            time.sleep(args.stagger)
         killed, rss, t0 = 0, 0.0, time.monotonic()
         n_kill = math.ceil(args.kill * len(procs))
         while coord.poll() is None:
             if time.monotonic() - t0 > args.timeout_s:
                 raise SystemExit(f"the run did not end within {args.timeout_s} s; files in {tmp}")
             rss = max(rss, _rss_mb(coord.pid))
-            if not killed and _status(out).get("trials_complete", 0) >= trials // 4:
+            st = _status(out)
+            seen = len(st.get("workers", []))
+            # the kill comes once every worker is in (or half the budget is stored, whichever is first)
+            if not killed and st.get("trials_complete", 0) >= trials // 4 and (
+                    seen >= args.workers or st.get("trials_complete", 0) >= trials // 2):
                 for p in procs[-n_kill:] if n_kill else []:
                     p.send_signal(signal.SIGKILL)
                 killed = n_kill
             time.sleep(0.5)
         wall_s = time.monotonic() - t0
-        for p in procs:
-            p.wait(60)
+        late = 0
+        for p in procs:  # a worker that connects after the coordinator left waits out its timeout: not for us
+            try:
+                p.wait(max(1.0, 15.0 - (time.monotonic() - t0 - wall_s)))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                late += 1
         checked = _check(out, tmp)
         result = {"workers": args.workers, "trials": trials, "stored": checked["stored"], "lost": checked["lost"],
                 "duplicated": checked["duplicated"], **_latencies(tmp), "coordinator_rss_mb": round(rss, 1),
@@ -179,6 +195,7 @@ def run(args: argparse.Namespace) -> dict:
                 "acknowledged": checked["acknowledged"], "workers_killed": sum(
                     min(per, args.workers - i * per) for i in range(len(procs) - killed, len(procs))),
                 "worker_processes": len(procs), "per_process": per, "duration_s": args.duration,
+                "processes_left_after_the_run": late,
                 "coordinator_rc": coord.returncode, "wall_s": round(wall_s, 1), "dir": str(tmp)}
         if result["exact_budget"] and not (result["lost"] or result["duplicated"]) and not args.keep:
             shutil.rmtree(tmp)   # a run that holds leaves nothing behind; one that does not keeps its files
@@ -195,18 +212,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=500)
     ap.add_argument("--per-process", type=int, default=10, help="workers per worker process (default 10)")
-    ap.add_argument("--trials", type=int, default=0, help="budget (default 4 per worker)")
-    ap.add_argument("--duration", type=float, default=1.0, help="seconds each trial sleeps (default 1)")
+    ap.add_argument("--trials", type=int, default=0, help="budget (default 6 per worker)")
+    ap.add_argument("--duration", type=float, default=10.0, help="seconds each trial sleeps (default 10: a physics "
+                    "trial's wall time)")
     ap.add_argument("--kill", type=float, default=0.1, help="fraction of the worker processes SIGKILLed")
     ap.add_argument("--timeout-s", type=float, default=1200.0)
     ap.add_argument("--dir", default=None, help="where the run's files go (default: the temp directory)")
+    ap.add_argument("--stagger", type=float, default=0.1, help="seconds between two workers' starts in a process "
+                    "and between two processes' (default 0.1)")
     ap.add_argument("--keep", action="store_true", help="keep the run's files even when it holds")
     ap.add_argument("--host", help=argparse.SUPPRESS)
     ap.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--count", type=int, default=0, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.host:
-        host_workers(args.host, args.first, args.count, Path(args.dir))
+        host_workers(args.host, args.first, args.count, Path(args.dir), args.stagger)
         return
     print(json.dumps(run(args)))
 

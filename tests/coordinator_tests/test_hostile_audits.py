@@ -102,6 +102,13 @@ def test_a_forger_with_two_worker_ids_in_one_session_cannot_audit_itself(tmp_pat
         assert sessions["f1"] == sessions["f2"] != sessions["honest0"]  # one identity, told apart by Zenoh
     finally:
         stop(coord, *honest)
+    from spinefarm.api.app import create_app
+    from tests.http_server import served
+
+    with served(create_app(runs_dir=tmp_path)) as client:
+        run = client.get("/runs/forge").json()
+    assert {w["worker_id"]: w["session"] for w in run["workers"]} == sessions
+    assert run["audit"]["comparisons"]["exact"] > 0 and run["claimed_by"] == {}
 
 
 def test_a_worker_inflating_its_distances_by_4_9_percent_is_caught_by_exact_audits(tmp_path):
