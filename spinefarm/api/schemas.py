@@ -73,6 +73,8 @@ class Worker(BaseModel):
     audits_agree: int = 0
     audits_disagree: int = 0
     quarantined: bool = False
+    session: str | None = Field(None, description="the Zenoh session its identity queryable answered from (its "
+                                "identity for audits); empty: it did not answer")
 
 
 class RunStatus(BaseModel):
@@ -106,8 +108,11 @@ class RunStatus(BaseModel):
     rungs_s: list[float] | None = Field(None, description="a multi-fidelity run's trial lengths, short to full")
     reopen_command: str = Field(description="the command that serves this run file again")
     resume_command: str | None = Field(None, description="the command that continues a stopped run")
-    audit: dict[str, Any] | None = Field(None, description="audits_pending/agrees/disagrees, fraction, tolerance, "
-                                         "and the figures per worker environment")
+    audit: dict[str, Any] | None = Field(None, description="audits_pending/agrees/disagrees/quarantined, fraction, "
+                                         "tolerance, the figures per worker environment, and comparisons: how many "
+                                         "audits demanded the same bits (exact) or the tolerance")
+    claimed_by: dict[str, str] = Field(default_factory=dict, description="other coordinators that claimed this "
+                                       "run while it ran (their session: what was done)")
     fidelity_raised: str | None = Field(None, description="why the judge raised the screen's fidelity")
     unservable_workers: dict[str, str] = Field(default_factory=dict, description="workers left out of this run "
                                                "(worker id: why it cannot serve it); the others go on with it")

@@ -71,7 +71,8 @@ class TaskDispatch:
         for key in list(self.tasks.pending):
             kind, tid = split_key(key)
             overtaken = kind == "judge" and (not best or best[0] != tid)
-            if overtaken or not any(self._eligible(key, w) for w in alive):
+            # a live worker whose identity is still being asked may be the one that can run it
+            if overtaken or not any(self._eligible(key, w) or self.peers.identity(w) is None for w in alive):
                 if not overtaken:
                     log.warning("no worker can run the %s task of trial %d: dropped", kind, tid)
                 self.scheduler.withdraw(key)

@@ -50,8 +50,12 @@ class PeerBook:
         return None if p is None else p.identity
 
     def identified(self, worker_id: str, sessions: set[str]) -> list[str]:
-        """The Zenoh sessions that answered for `worker_id`; the ids it makes quarantined (its session is)."""
+        """The Zenoh sessions that answered for `worker_id` (none: it did not answer, so it checks nobody); the
+        ids it makes quarantined (its session is)."""
         p = self.peer(worker_id)
+        if not sessions:
+            p.identity = ""
+            return []
         p.identity = next(iter(sessions)) if len(sessions) == 1 else SEVERAL + ",".join(sorted(sessions))
         if p.identity in self.quarantined_identities and not p.quarantined:
             p.quarantined = True
@@ -59,20 +63,21 @@ class PeerBook:
         return []
 
     def unidentified(self) -> list[str]:
-        """Workers heard whose identity is still to be asked."""
-        return [w for w, p in self.peers.items() if p.identity is None] if self.verify_identity else []
+        """Workers heard whose identity is still to be asked (or asked again: one that did not answer)."""
+        return [w for w, p in self.peers.items() if not p.identity] if self.verify_identity else []
 
     def may_check(self, worker_id: str, checked: set[str]) -> bool:
         """May `worker_id` audit (or referee) results of the workers `checked`: its identity is known, single
         and none of theirs."""
         mine = self.identity(worker_id)
-        if mine is None or mine.startswith(SEVERAL):
+        if not mine or mine.startswith(SEVERAL):
             return False
         return mine not in {self.identity(w) for w in checked}
 
     def same_identity(self, worker_id: str) -> list[str]:
         mine = self.identity(worker_id)
-        return [w for w in self.peers if w == worker_id or (mine is not None and self.identity(w) == mine)]
+        verified = bool(mine) and not mine.startswith(SEVERAL)
+        return [w for w in self.peers if w == worker_id or (verified and self.identity(w) == mine)]
 
     def same_environment(self, a: str, b: str) -> bool:
         """Both workers said what they run on and it is the same (then the same code gives the same bits)."""
@@ -106,7 +111,7 @@ class PeerBook:
     def quarantine_identity(self, worker_id: str) -> list[str]:
         """Quarantine `worker_id` and every id answering from its session; the ids newly quarantined."""
         ident = self.identity(worker_id)
-        if ident is not None and not ident.startswith(SEVERAL):
+        if ident and not ident.startswith(SEVERAL):
             self.quarantined_identities.add(ident)
         newly = [w for w in self.same_identity(worker_id) if not self.peer(w).quarantined]
         for w in newly:

@@ -150,8 +150,7 @@ class CoordinatorService:
                     sessions = {str(r.replier_id.zid) for r in session.get(
                         keys.worker_identity(wid), timeout=PROBE_TIMEOUT_S, consolidation=zenoh.ConsolidationMode.NONE)
                         if r.ok is not None and r.replier_id is not None}
-                    if sessions:
-                        self.core.identified(wid, sessions)
+                    self.core.identified(wid, sessions)
                 except Exception:
                     log.exception("identity probe of worker %s failed", wid)
                 asked[wid] = time.monotonic() + PROBE_AGAIN_S

@@ -1,0 +1,235 @@
+"""Hundreds of workers against one coordinator, simulated: does it hold, and how fast does it grant?
+
+A Zenoh router (`spinefarm router`), one `spinefarm coordinator` connected to it (test objective `sphere:4`
+whose trials sleep --duration seconds instead of simulating, so the machine's cores go to the coordinator and
+the transport), and --workers workers, --per-process of them in each worker process, each worker its own
+Zenoh session, worker id and identity (a real WorkerService in a thread). Once a quarter of the budget is
+stored, --kill of the workers are SIGKILLed (whole worker processes, so their sessions die as a machine's
+would). The run must still end with its exact budget.
+
+Every worker logs each verdict it receives (SPINEFARM_ACK_LOG) and each grant's round trip; the run file is
+checked against the verdicts: `lost` (acknowledged as stored, not in the file or with another distance),
+`duplicated` (acknowledged as stored twice). Latency is the worker's wait for its grant (a work query with
+the results it carries), over every grant of every worker, the killed ones' until their kill.
+`coordinator_rss_mb` is the coordinator's largest resident size, sampled every 0.5 s.
+
+usage: python bench/scale.py --workers 500 [--per-process 10] [--trials N] [--duration 10] [--kill 0.1]
+prints one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+RUN_ID = "scale"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def host_workers(endpoint: str, first: int, count: int, out_dir: Path, stagger_s: float) -> None:
+    """Child process: `count` workers, each in its own thread and Zenoh session, until the run says done."""
+    os.environ["SPINEFARM_ACK_LOG"] = str(out_dir / f"acks-{first}.log")
+    from spinefarm.protocol import keys
+    from spinefarm.worker.service import WorkerService, WorkerTimings, ZenohAccess
+
+    grants = open(out_dir / f"grants-{first}.log", "a", buffering=1)  # noqa: SIM115 (lives with the process)
+    lock = threading.Lock()
+    work_key = keys.work(RUN_ID)
+
+    class TimedWorker(WorkerService):
+        def _query(self, session, key, payload, cls):  # type: ignore[no-untyped-def]
+            t0 = time.perf_counter()
+            out = super()._query(session, key, payload, cls)
+            if key == work_key and out[0]:
+                with lock:
+                    grants.write(f"{time.time():.4f} {1000 * (time.perf_counter() - t0):.3f} {self.worker_id}\n")
+            return out
+
+    timings = WorkerTimings(coordinator_timeout_s=120.0)
+    workers = [TimedWorker(ZenohAccess(connect=[endpoint]), run_id=RUN_ID, worker_id=f"sim-{first + i}", batch=1,
+                           exit_when_done=True, isolate=False, timings=timings) for i in range(count)]
+    threads = [threading.Thread(target=w.run, daemon=True) for w in workers]
+    for t in threads:
+        t.start()
+        time.sleep(stagger_s)  # a connection storm of hundreds of handshakes at once stalls the router
+    for t in threads:
+        t.join()
+    os._exit(0)  # Zenoh's threads can outlive the sessions: nothing is left to do
+
+
+def _rss_mb(pid: int) -> float:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
+def _wait_listening(port: int, timeout_s: float = 30.0) -> None:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.1)
+    raise SystemExit(f"nothing listens on port {port} after {timeout_s} s")
+
+
+def _status(out: Path) -> dict:
+    from spinefarm.storage.status import read_status
+
+    return read_status(out) or {}
+
+
+def _check(out: Path, tmp: Path) -> dict:
+    """Stored rows against what the workers were told was stored."""
+    from spinefarm.storage.hdf5 import Hdf5Storage
+
+    with Hdf5Storage.open_read(out) as s:
+        cols = s.columns()
+    acked: dict[int, int] = {}
+    lost = 0
+    for path in tmp.glob("acks-*.log"):
+        for line in path.read_text().splitlines():
+            parts = line.split()
+            if len(parts) != 5 or parts[2] != "stored":
+                continue
+            tid = int(parts[1])
+            acked[tid] = acked.get(tid, 0) + 1
+            same = tid < len(cols["status"]) and cols["status"][tid] == parts[3].encode() and (
+                parts[3] != "complete" or repr(float(cols["distance_m"][tid])) == parts[4])
+            lost += not same
+    stored = int(np.count_nonzero(cols["status"] != b"waiting"))
+    return {"rows": len(cols["status"]), "stored": stored, "acknowledged": len(acked), "lost": lost,
+            "duplicated": sum(n - 1 for n in acked.values())}
+
+
+def _latencies(tmp: Path) -> dict:
+    rows = [line.split() for p in tmp.glob("grants-*.log") for line in p.read_text().splitlines()]
+    t = np.array([float(r[0]) for r in rows])
+    ms = np.array([float(r[1]) for r in rows])
+    span = float(t.max() - t.min()) if len(t) > 1 else math.nan
+    return {"grants": len(ms), "workers_granted": len({r[2] for r in rows}),
+            "grants_per_s": round(len(ms) / span, 1) if span > 0 else None,
+            "grant_latency_ms": {"p50": round(float(np.percentile(ms, 50)), 2),
+                                 "p99": round(float(np.percentile(ms, 99)), 2), "max": round(float(ms.max()), 2)}}
+
+
+def _spinefarm(*args: str, log: Path) -> subprocess.Popen:
+    with open(log, "w") as fh:
+        return subprocess.Popen([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
+                                stderr=fh)
+
+
+def run(args: argparse.Namespace) -> dict:
+    tmp = Path(tempfile.mkdtemp(prefix="spinefarm-scale-", dir=args.dir))
+    port = free_port()
+    endpoint, out = f"tcp/127.0.0.1:{port}", tmp / "run.h5"
+    trials = args.trials or 6 * args.workers
+    procs: list[subprocess.Popen] = []
+    # Zenoh's default of 100 handshakes pending at once is below the workers' connection storm
+    (tmp / "router.json5").write_text(json.dumps({"transport": {"unicast": {
+        "accept_pending": 4 * args.workers, "max_sessions": 4 * args.workers + 100, "accept_timeout": 30000}}}))
+    router = _spinefarm("router", "--listen", endpoint, "--config", str(tmp / "router.json5"), log=tmp / "router.log")
+    try:
+        _wait_listening(port)
+        coord = _spinefarm("coordinator", "sphere:4", "--trials", str(trials), "--duration", str(args.duration),
+                           "--run-id", RUN_ID, "--out", str(out), "--connect", endpoint, "--api-port", "-1",
+                           "--quiet", "--sampler", "random", log=tmp / "coordinator.log")
+        per = args.per_process
+        for first in range(0, args.workers, per):
+            procs.append(subprocess.Popen([sys.executable, __file__, "--host", endpoint, "--first", str(first),
+                                           "--count", str(min(per, args.workers - first)), "--dir", str(tmp),
+                                           "--stagger", str(args.stagger)], cwd=ROOT, stdout=subprocess.DEVNULL,
+                                          stderr=subprocess.DEVNULL))
+            time.sleep(args.stagger)
+        killed, rss, t0 = 0, 0.0, time.monotonic()
+        n_kill = math.ceil(args.kill * len(procs))
+        while coord.poll() is None:
+            if time.monotonic() - t0 > args.timeout_s:
+                raise SystemExit(f"the run did not end within {args.timeout_s} s; files in {tmp}")
+            rss = max(rss, _rss_mb(coord.pid))
+            st = _status(out)
+            seen = len(st.get("workers", []))
+            # the kill comes once every worker is in (or half the budget is stored, whichever is first)
+            if not killed and st.get("trials_complete", 0) >= trials // 4 and (
+                    seen >= args.workers or st.get("trials_complete", 0) >= trials // 2):
+                for p in procs[-n_kill:] if n_kill else []:
+                    p.send_signal(signal.SIGKILL)
+                killed = n_kill
+            time.sleep(0.5)
+        wall_s = time.monotonic() - t0
+        late = 0
+        for p in procs:  # a worker that connects after the coordinator left waits out its timeout: not for us
+            try:
+                p.wait(max(1.0, 15.0 - (time.monotonic() - t0 - wall_s)))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                late += 1
+        checked = _check(out, tmp)
+        result = {"workers": args.workers, "trials": trials, "stored": checked["stored"], "lost": checked["lost"],
+                "duplicated": checked["duplicated"], **_latencies(tmp), "coordinator_rss_mb": round(rss, 1),
+                "exact_budget": checked["rows"] == trials and checked["stored"] == trials,
+                "acknowledged": checked["acknowledged"], "workers_killed": sum(
+                    min(per, args.workers - i * per) for i in range(len(procs) - killed, len(procs))),
+                "worker_processes": len(procs), "per_process": per, "duration_s": args.duration,
+                "processes_left_after_the_run": late,
+                "coordinator_rc": coord.returncode, "wall_s": round(wall_s, 1), "dir": str(tmp)}
+        if result["exact_budget"] and not (result["lost"] or result["duplicated"]) and not args.keep:
+            shutil.rmtree(tmp)   # a run that holds leaves nothing behind; one that does not keeps its files
+            result["dir"] = None
+        return result
+    finally:
+        for p in [*procs, router]:
+            if p.poll() is None:
+                p.kill()
+                p.wait(10)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, default=500)
+    ap.add_argument("--per-process", type=int, default=10, help="workers per worker process (default 10)")
+    ap.add_argument("--trials", type=int, default=0, help="budget (default 6 per worker)")
+    ap.add_argument("--duration", type=float, default=10.0, help="seconds each trial sleeps (default 10: a physics "
+                    "trial's wall time)")
+    ap.add_argument("--kill", type=float, default=0.1, help="fraction of the worker processes SIGKILLed")
+    ap.add_argument("--timeout-s", type=float, default=1200.0)
+    ap.add_argument("--dir", default=None, help="where the run's files go (default: the temp directory)")
+    ap.add_argument("--stagger", type=float, default=0.1, help="seconds between two workers' starts in a process "
+                    "and between two processes' (default 0.1)")
+    ap.add_argument("--keep", action="store_true", help="keep the run's files even when it holds")
+    ap.add_argument("--host", help=argparse.SUPPRESS)
+    ap.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)
+    ap.add_argument("--count", type=int, default=0, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.host:
+        host_workers(args.host, args.first, args.count, Path(args.dir), args.stagger)
+        return
+    print(json.dumps(run(args)))
+
+
+if __name__ == "__main__":
+    main()
