@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install run test test-all test-deploy lint bench clean
+.PHONY: install run test test-all test-deploy lint bench clean wheel
 
 # exact versions and hashes from requirements.lock (docs/reproducibility.md says how to refresh it), then the
 # package itself without resolving anything again
@@ -37,8 +37,12 @@ test-all: $(STAMP)
 test-deploy: $(STAMP)
 	$(PY) -m tests.deploy.main $(DEPLOY_ARGS)
 
+# the wheel a machine without a clone installs: pip install 'dist/spinefarm-<version>-py3-none-any.whl[all]'
+wheel:
+	$(PYTHON) -m pip wheel --no-deps -q -w dist .
+
 bench: $(STAMP)
 	$(PY) bench/trial_speed.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) build dist *.egg-info .pytest_cache .ruff_cache
