@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install run test test-all test-deploy lint bench clean mutation
+.PHONY: install run test test-all test-deploy lint bench clean mutation wheel
 
 # exact versions and hashes from requirements.lock (docs/reproducibility.md says how to refresh it), then the
 # package itself without resolving anything again
@@ -43,8 +43,12 @@ mutation: $(STAMP)
 	$(PY) -m pip install -q --require-hashes --no-deps -r tests/mutation/requirements.txt
 	$(PY) -m tests.mutation.main $(MUTATION_ARGS)
 
+# the wheel a machine without a clone installs: pip install 'dist/spinefarm-<version>-py3-none-any.whl[all]'
+wheel:
+	$(PYTHON) -m pip wheel --no-deps -q -w dist .
+
 bench: $(STAMP)
 	$(PY) bench/trial_speed.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) build dist *.egg-info .pytest_cache .ruff_cache

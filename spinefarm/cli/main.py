@@ -12,7 +12,7 @@ from spinefarm.protocol.errors import SpinefarmError
 # Each module exposes register(subparsers); a sub-command sets `func(args) -> int`.
 COMMAND_MODULES = tuple(f"spinefarm.cli.{name}" for name in (
     "sim_commands", "morph_commands", "robot_commands", "service_commands", "router_command", "calibrate_command",
-    "docs_command", "fit_command"))
+    "docs_command", "fit_command", "examples_command"))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -146,3 +146,68 @@ def _answers(url: str, proc: subprocess.Popen) -> bool:
             return True
     except OSError:
         return False
+
+
+@pytest.fixture(scope="module")
+def fresh_venv(wheel_tree, tmp_path_factory):
+    """The wheel installed by pip into a new venv (the README's wheel route); its dependencies are the ones of
+    this interpreter, seen through a .pth file (no index needed: the test installs nothing else)."""
+    import numpy
+
+    tree, _ = wheel_tree
+    wheel = next(tree.parent.glob("spinefarm-*.whl"))
+    venv = tmp_path_factory.mktemp("fresh") / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    r = subprocess.run([sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"), "install", "-q",
+                        "--no-deps", "--no-index", "--disable-pip-version-check", str(wheel)],
+                       capture_output=True, text=True, timeout=300, cwd=venv.parent,
+                       env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})  # this checkout is no install
+    assert r.returncode == 0, r.stderr
+    site = next((venv / "lib").glob("python3*/site-packages"))
+    (site / "zz-dependencies.pth").write_text(str(Path(numpy.__file__).resolve().parents[1]) + "\n")
+    return venv
+
+
+def installed(venv: Path, *args: str, cwd: Path, program: str = "spinefarm") -> subprocess.CompletedProcess:
+    """A program of the venv (its console script by default), without this checkout on the path."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    return subprocess.run([str(venv / "bin" / program), *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=600)
+
+
+def test_the_wheel_installed_in_a_fresh_venv_writes_the_readmes_examples(fresh_venv, tmp_path):
+    where = installed(fresh_venv, "-c", "import spinefarm; print(spinefarm.__file__)", cwd=tmp_path, program="python")
+    assert where.stdout.startswith(str(fresh_venv)), where.stdout + where.stderr  # the installed copy runs
+    help_text = installed(fresh_venv, "--help", cwd=tmp_path)
+    assert help_text.returncode == 0 and "examples" in help_text.stdout and "docs" in help_text.stdout
+    r = installed(fresh_venv, "examples", "examples", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    shipped = sorted(p.relative_to(ROOT / "examples") for p in (ROOT / "examples").rglob("*.json"))
+    written = sorted(p.relative_to(tmp_path / "examples") for p in (tmp_path / "examples").rglob("*.json"))
+    assert written == shipped and len(shipped) >= 10
+    for rel in shipped:
+        assert (tmp_path / "examples" / rel).read_bytes() == (ROOT / "examples" / rel).read_bytes(), rel
+    assert "name: my-spine" in (tmp_path / "examples" / "my_spine.yaml").read_text()
+    # as the README uses them: a gait file by its path, the spec to start a robot from
+    trial = installed(fresh_venv, "trial", "tetraspine", "--params", "examples/gaits/tetraspine.json",
+                      "--duration", "0.2", cwd=tmp_path)
+    assert trial.returncode == 0, trial.stderr[-2000:]
+    assert installed(fresh_venv, "check", "examples/my_spine.yaml", cwd=tmp_path).returncode == 0
+    again = installed(fresh_venv, "examples", "examples", cwd=tmp_path)  # nothing written is replaced
+    assert again.returncode == 2 and "already exist in examples" in again.stderr and "--overwrite" in again.stderr
+
+
+def test_the_wheel_says_which_pythons_it_installs_on_and_leaves_pybullet_out_where_it_has_no_wheel(wheel_tree):
+    from packaging.requirements import Requirement
+    from packaging.specifiers import SpecifierSet
+
+    tree, _ = wheel_tree
+    meta = next(tree.glob("spinefarm-*.dist-info")) / "METADATA"
+    lines = meta.read_text().splitlines()
+    python = SpecifierSet(next(ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("Requires-Python:")))
+    assert [v in python for v in ("3.10", "3.11.7", "3.12.1", "3.13.0", "3.14.0")] == [False, True, True, True, False]
+    bullet = next(Requirement(ln.split(":", 1)[1]) for ln in lines if ln.startswith("Requires-Dist: pybullet"))
+    # pybullet 3.2.7 publishes wheels for CPython up to 3.11: elsewhere pip must not try to compile it
+    assert [bullet.marker.evaluate({"python_version": v, "extra": "worker"}) for v in ("3.11", "3.12", "3.13")] == [
+        True, False, False]
+

@@ -41,6 +41,7 @@ dataclass, built from TrialConfig.engine_options by `settings_from_options`, nev
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
@@ -149,6 +150,11 @@ def engine_class(name: str) -> type[BasePhysics]:
     try:
         return getattr(importlib.import_module(spec.module), spec.class_name)
     except ImportError as exc:
+        if spec.package == "pybullet" and sys.version_info >= (3, 12):  # the worker extra leaves it out there
+            raise ConfigError(
+                f"engine {name!r} needs pybullet, which publishes wheels up to Python 3.11 only (this is "
+                f"{sys.version_info.major}.{sys.version_info.minor})", received=str(exc),
+                expected="--engine mujoco here, or a Python 3.11 environment for Bullet") from exc
         raise ConfigError(f"engine {name!r} is not installed", received=str(exc),
                           expected=f"the package {name} needs (pip install 'spinefarm[worker]')") from exc
 
