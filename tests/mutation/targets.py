@@ -23,6 +23,6 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     "robust-scoring": ("spinefarm/protocol/robust.py",
                        (f"{P}/test_robust.py", f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
     "robust-worlds": ("spinefarm/worker/robust.py", (f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
-    "engine-auto": ("spinefarm/cli/engine_auto.py", (f"{W}/test_calibrate.py",)),
+    "engine-auto": ("spinefarm/cli/engine_auto.py", ("tests/cli_tests/test_engine_auto.py", f"{W}/test_calibrate.py")),
     "sandbox": ("spinefarm/worker/sandbox.py", (f"{W}/test_trial_limit.py",)),
 }
