@@ -24,6 +24,7 @@ test: $(STAMP)
 	sh .ci/ensure-chromium
 	sh .ci/ensure-netns-tools
 	sh .ci/ensure-qemu-user
+	sh .ci/ensure-system-tools
 	$(PY) -m ruff check .
 	$(PY) -m pytest -q -ra --durations=25 -n 2 --dist loadfile
 
@@ -31,6 +32,7 @@ test-all: $(STAMP)
 	sh .ci/ensure-chromium
 	sh .ci/ensure-netns-tools
 	sh .ci/ensure-qemu-user
+	sh .ci/ensure-system-tools
 	$(PY) -m pytest -q -ra -m ''
 
 # The compose and SLURM deployments end to end (root only: apt, dockerd, munge, SLURM); docs/deploy.md.

@@ -118,6 +118,9 @@ def test_sampler_settings_round_trip_and_validate():
     assert again.describe() == s.describe()
     with pytest.raises(ConfigError, match="sigma"):
         GaussianHillClimbSampler(3, seed=0, sigma=0.0)
+    GaussianHillClimbSampler(3, seed=0, sigma=1.0)  # a step the size of the unit cube is the most
+    with pytest.raises(ConfigError, match="sigma"):
+        GaussianHillClimbSampler(3, seed=0, sigma=1.5)
     with pytest.raises(ConfigError, match="unknown sampler"):
         sampler_from_dict({"kind": "Nope"}, 3)
 

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from spinefarm.protocol.robust import EpisodeDraw, RobustSpec, statistic
+from spinefarm.protocol.robust import EpisodeDraw, RobustSpec, parse_randomize, statistic
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.robust import combine, run_episodes
@@ -69,3 +69,47 @@ def test_a_drawn_friction_changes_what_the_episodes_measure():
     assert [e.seed for e in plain.episodes] == [e.seed for e in drawn.episodes]
     for a, b in zip(plain.episodes, drawn.episodes, strict=True):
         assert abs(a.distance_m - b.distance_m) > 1e-4, (a.distance_m, b.distance_m)
+
+
+@pytest.mark.parametrize("text", ["friction=0", "friction=0.9", "mass=0.0", "mass=0.9", "start_jitter_cm=0",
+                                  "start_jitter_cm=10"])
+def test_randomize_takes_its_documented_ranges_inclusive(text):
+    # docs/results.md, `--randomize`: friction and mass in [0, 0.9], start_jitter_cm in [0, 10]
+    key, value = text.split("=")
+    assert parse_randomize(text) == {key: float(value)}
+
+
+@pytest.mark.parametrize("text", ["friction=-0.01", "friction=0.91", "mass=0.95", "start_jitter_cm=10.5",
+                                  "friction=nan", "friction=inf"])
+def test_randomize_outside_its_ranges_is_refused(text):
+    with pytest.raises(ValueError, match="out of range"):
+        parse_randomize(text)
+
+
+def test_episodes_from_1_to_256_and_what_is_robust():
+    assert RobustSpec().episodes == 1 and not RobustSpec().active  # one plain episode: not a robust run
+    assert RobustSpec(2).active and RobustSpec(1, {"friction": 0.1}).active
+    assert RobustSpec(256).episodes == 256 and RobustSpec(1).episodes == 1
+    for bad in (0, 257, True, 2.0):
+        with pytest.raises(ValueError, match="--episodes out of range"):
+            RobustSpec(bad)
+    with pytest.raises(ValueError, match="--episodes out of range"):
+        RobustSpec(2, rung_episodes=(0, 2), rung_durations_s=(1.0, 5.0))
+    spec = RobustSpec(4, rung_episodes=(1, 2, 4), rung_durations_s=(1.0, 3.0, 9.0))
+    assert [spec.episodes_for(d) for d in (1.0, 3.0, 9.0, 7.0, None)] == [1, 2, 4, 4, 4]
+    for rungs, durations in (((1, 4), (1.0, 3.0, 9.0)), ((4, 1, 2), (1.0, 3.0, 9.0)), ((2, 4), (1.0,))):
+        with pytest.raises(ValueError, match="per rung"):
+            RobustSpec(4, rung_episodes=rungs, rung_durations_s=durations)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.episodes = 3  # a run's settings are not changed in place
+
+
+def test_robust_settings_round_trip_and_refuse_unknown_fields():
+    spec = RobustSpec(3, {"friction": 0.2}, "q25")
+    assert RobustSpec.from_dict(spec.to_dict()) == spec and RobustSpec.from_dict({}) == RobustSpec()
+    with pytest.raises(ValueError, match="malformed"):
+        RobustSpec.from_dict({"episodes": 3, "bogus": 1})
+    with pytest.raises(ValueError, match="malformed"):
+        RobustSpec.from_dict([("episodes", 3)])
+    draw = EpisodeDraw(0, 5)
+    assert (draw.friction_scale, draw.mass_scale, draw.start_jitter_cm, draw.rough_seed) == (1.0, 1.0, 0.0, -1)

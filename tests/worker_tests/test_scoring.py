@@ -48,6 +48,9 @@ def test_rms_path_error_by_hand():
     assert scoring.rms_path_error_cm(path, t, np.zeros((3, 3)), np.array([0.0, 1.0, 2.0])) == pytest.approx(
         math.sqrt(12.5), rel=1e-12)
     assert math.isnan(scoring.rms_path_error_cm(path[:1], t[:1], ref, t))
+    # against a reference that is not at the origin: differences (2, 0, 0) and (0, 0, 3)
+    off = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    assert scoring.rms_path_error_cm(path, t, off, t) == pytest.approx(math.sqrt(6.5), rel=1e-12)
 
 
 def test_cot_with_a_settle_phase_counts_only_locomotion():
