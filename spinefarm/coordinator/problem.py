@@ -82,6 +82,7 @@ def run_config_for(run_id: str, morphology: Morphology | dict[str, Any], *, obje
                    trial_overrides: dict[str, Any] | None = None) -> RunConfig:
     """The run object of a morphology, or of its to_dict() (e.g. the spec stored in a run file)."""
     from spinefarm.robot.morphology.model import Morphology
+    from spinefarm.robot.profile import apply_profile
     from spinefarm.robot.trial_config import TrialConfig
 
     morph = morphology if isinstance(morphology, Morphology) else Morphology.from_dict(morphology)
@@ -91,6 +92,7 @@ def run_config_for(run_id: str, morphology: Morphology | dict[str, Any], *, obje
     if duration_s is not None:
         tc_dict["duration_s"] = duration_s
     trial_config = TrialConfig.from_dict(tc_dict)  # validates the overrides, the engine and its options
+    apply_profile(morph, trial_config.profile)  # a profile naming a tag the robot lacks fails here, not in workers
     return RunConfig(run_id, morph.name, morph.to_dict(), controller, tuple(space.describe()),
                      trial_config.to_dict(), objective, seed, spec_hash=morph.spec_hash(),
                      space_hash=space.space_hash(), trial_config_hash=trial_config.config_hash())

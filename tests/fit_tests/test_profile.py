@@ -119,3 +119,14 @@ def test_replay_takes_the_profile(tmp_path, capsys):
         assert main(["replay", "tetraspine-ntrt", "--duration", "0.3", "--json", *extra]) == 0
         out.append(json.loads(capsys.readouterr().out)["ntrt_distance_cm"])
     assert out[0] != out[1]
+
+
+def test_search_refuses_a_profile_of_another_robot_before_writing(tmp_path):
+    (tmp_path / "p.yaml").write_text("constants: {string_stiffness_n_per_m.tendon: 900}\n")
+    run = tmp_path / "run.h5"
+    r = subprocess.run([sys.executable, "-m", "spinefarm", "search", "tetraspine-ntrt", "--engine", "mujoco",
+                        "--trials", "2", "--workers", "1", "--duration", "0.2", "--out", str(run), "--api-port", "-1",
+                        "--quiet", "--profile", str(tmp_path / "p.yaml")], cwd=ROOT, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2 and not run.exists()
+    assert "names a tag the robot lacks; received 'tendon'; expected one of ['inner', 'outer']" in r.stderr

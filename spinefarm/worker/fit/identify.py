@@ -92,6 +92,6 @@ def _why(judged: dict[str, dict], morph: Morphology, cfg: TrialConfig, fitted: d
         moved = [fit_loss(morph, with_values(cfg, {**fitted, n: fitted[n] * f}), recordings)
                  for f in (1 - PROBE, 1 + PROBE)]
         change = max(abs(m - loss) for m in moved) / loss if loss > 0 else math.inf
-        j["why"] = (f"a {100 * PROBE:g} % change moves the window error by {100 * change:.2g} % "
+        j["why"] = (f"a {100 * PROBE:g} % change moves the loss by {100 * change:.2g} % "
                     + ("(flat: the recordings barely see it)" if change < FLAT else
                        "(the fit stopped short or another constant makes up for it)"))
