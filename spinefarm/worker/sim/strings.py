@@ -191,7 +191,8 @@ def string_step(poses, geometry, params, state, cpg_out, dt, motor_mode, outputs
                 v0 = cpg_out[node] if node >= 0 else 0.0
                 tension = max(0.0, k * (length - rest))
                 # a kinematic motor reports its spool's speed as the string's velocity (NTRT [H])
-                v_act = v_old if params[i, P_RHO] == 0.0 else params[i, P_RHO] * state[i, S_U]
+                kinematic = motor_mode == MOTOR_NTRT2026 and params[i, P_RHO] > 0.0
+                v_act = params[i, P_RHO] * state[i, S_U] if kinematic else v_old
                 target_t = params[i, P_T0] + params[i, P_KI] * (length - params[i, P_LC]) \
                     + params[i, P_BI] * (v_act - v0)
                 target_t = max(0.0, target_t)
@@ -199,7 +200,8 @@ def string_step(poses, geometry, params, state, cpg_out, dt, motor_mode, outputs
             else:
                 target = params[i, P_DRIVE]
                 tension = target_t = 0.0
-            if motor_mode == MOTOR_NTRT2026 and params[i, P_RHO] > 0.0 and mode == MODE_IMPEDANCE:
+                kinematic = False
+            if kinematic:
                 err = target_t - tension  # NTRT's tension PID, gains negated: more tension wanted -> reel in
                 tau_cmd = -(params[i, P_KP] * err + params[i, P_KD] * (err - state[i, S_ERR]) / dt)
                 state[i, S_ERR] = err
