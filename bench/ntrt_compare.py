@@ -8,7 +8,8 @@ segment's horizontal displacement, ours and NTRT's. The reader here is a minimal
 timing from the recordings' README: cm, y up, rows at k * 10 ms written after the model step).
 
     python bench/ntrt_compare.py TetraSpine random-00 [--morphology tetraspine-ntrt] [--motor-model ntrt2014]
-        [--duration 1] [--times 0,0.01,0.1,0.5,1] [--engine bullet] [--strings]
+        [--duration 1] [--times 0,0.01,0.1,0.5,1] [--engine bullet] [--engine-option KEY=VALUE]
+        [--ground-friction MU] [--strings]
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def read_recording(folder: Path) -> dict:
 
 
 def simulate_ours(folder: Path, morphology: str, motor_model: str, duration_s: float, engine: str,
-                  options: dict) -> dict:
+                  options: dict, ground_friction: float | None = None) -> dict:
     """Our trial of the recording's parameters, recorded every 10 ms, in the recording's layout."""
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.robot.trial_config import TrialConfig
@@ -62,7 +63,7 @@ def simulate_ours(folder: Path, morphology: str, motor_model: str, duration_s: f
     u = unit_params(morph, read_parameter_set(folder / "params"))
     cfg = TrialConfig(duration_s=duration_s, dt_s=0.001, motor_model=motor_model, controller="ntrt", engine=engine,
                       engine_options={**({"friction_anchor": False} if engine == "bullet" else {}), **options},
-                      record_every_s=ROW_S)
+                      record_every_s=ROW_S, ground_friction=ground_friction)
     out = simulate(morph, u, cfg, 0)
     a = out.trajectory.arrays()
     poses = a["poses"][:, :morph.structure.n_segments]
@@ -100,11 +101,12 @@ def checkpoint(ours: dict, ntrt: dict, i: int, j: int, with_strings: bool) -> di
 
 
 def compare(spine: str, config: str, morphology: str, motor_model: str, duration_s: float, times: list[float],
-            engine: str = "bullet", with_strings: bool = False, options: dict | None = None) -> dict:
+            engine: str = "bullet", with_strings: bool = False, options: dict | None = None,
+            ground_friction: float | None = None) -> dict:
     folder = RECORDINGS / spine / config
     ntrt = read_recording(folder)
     t0 = time.time()
-    ours = simulate_ours(folder, morphology, motor_model, duration_s, engine, options or {})
+    ours = simulate_ours(folder, morphology, motor_model, duration_s, engine, options or {}, ground_friction)
     n_ntrt = ntrt["len_cm"].shape[1]  # NTRT records its CPG strings, created after the passive ones (spec 0a.8)
     for col in ("len_cm", "rest_cm", "tension"):
         ours[col] = ours[col][:, -n_ntrt:]
@@ -115,7 +117,8 @@ def compare(spine: str, config: str, morphology: str, motor_model: str, duration
         if i < len(ours["time_s"]) and j < len(ntrt["time_s"]):
             rows.append(checkpoint(ours, ntrt, i, j, with_strings))
     return {"benchmark": "ntrt_compare", "spine": spine, "config": config, "morphology": morphology,
-            "motor_model": motor_model, "engine": engine, "engine_options": options or {}, "duration_s": duration_s,
+            "motor_model": motor_model, "engine": engine, "engine_options": options or {},
+            "ground_friction": ground_friction, "duration_s": duration_s,
             "start_length_diff_cm_max": float(np.abs(ours["len_cm"][0] - ntrt["start_length_cm"]).max()),
             "ntrt_dist_moved_cm": ntrt["dist_moved_cm"], "our_distance_cm": ours["distance_cm"],
             "status": ours["status"], "checkpoints": rows, "wall_s": round(time.time() - t0, 1)}
@@ -132,12 +135,13 @@ def main() -> None:
     ap.add_argument("--times", default="0,0.01,0.1,0.5,1")
     ap.add_argument("--engine-option", action="append", default=[], metavar="KEY=VALUE",
                     help="an engine option (JSON value), e.g. solver_iterations=100")
+    ap.add_argument("--ground-friction", type=float, default=None, help="the ground's Bullet friction (default 0.5)")
     ap.add_argument("--strings", action="store_true", help="print every string's values, not only the largest gap")
     args = ap.parse_args()
     times = [float(t) for t in args.times.split(",")]
     options = {k: json.loads(v) for k, v in (o.split("=", 1) for o in args.engine_option)}
     print(json.dumps(compare(args.spine, args.config, args.morphology, args.motor_model, args.duration, times,
-                             args.engine, args.strings, options)))
+                             args.engine, args.strings, options, args.ground_friction)))
 
 
 if __name__ == "__main__":

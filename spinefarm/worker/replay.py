@@ -32,7 +32,8 @@ ROBOT_FOLDERS = {
 # NTRT's recorded runs (ntrt-recordings: a run-info.json beside params/) were made with NTRT's current code;
 # a robot whose model of that code exists runs on it
 RECORDED_RUN_MORPHOLOGY = {"tetraspine-ntrt": "tetraspine-ntrt2026", "ribbed": "ribbed-ntrt2026",
-                           "octahedral-complex": "octahedral-complex-ntrt2026"}
+                           "octahedral-complex": "octahedral-complex-ntrt2026",
+                           "tetrahedral-complex": "tetrahedral-complex-ntrt2026"}
 
 
 def ntrt_motor(morph: Morphology) -> str:

@@ -42,7 +42,10 @@ class StringMaterial:
 
     pretension_n shortens the initial rest length by pretension/k. drive_offset_cm, when set,
     makes a passive string's motor pull its rest length toward (start length - offset) every
-    step (NTRT's octahedral ligaments).
+    step (NTRT's octahedral ligaments). motor_radius_cm, when set, makes an impedance-controlled string's
+    motor NTRT's current kinematic motor (spec 3.3, 4.3 [H]; motor model ntrt2026 only): a spool of that
+    radius with inertia, viscous friction and a torque-speed limit, its torque from a PD on tension
+    (gains in cm and cm s per unit of tension error), not back-drivable (tension never lets it out).
     """
 
     stiffness_n_per_m: float = bounded(1000.0, 0.0, low_inclusive=False)
@@ -54,9 +57,27 @@ class StringMaterial:
     min_rest_length_cm: float = bounded(0.1, 0.0)
     min_actuated_length_cm: float = bounded(0.1, 0.0)
     drive_offset_cm: float | None = bounded(None)
+    motor_radius_cm: float | None = bounded(None, 0.0, low_inclusive=False)
+    motor_inertia_kg_cm2: float = bounded(1.0, 0.0, low_inclusive=False)
+    motor_friction_kg_cm2_s: float = bounded(10.0, 0.0)
+    tension_pd_p_cm: float = bounded(5000.0, 0.0)
+    tension_pd_d_cm_s: float = bounded(10.0, 0.0)
 
     def __post_init__(self) -> None:
         check_fields(self)
+
+    def to_dict(self) -> dict:
+        """Its fields; without a kinematic motor the motor's own fields are left out (the hashes of specs
+        written before it existed stay as they were)."""
+        d = asdict(self)
+        if self.motor_radius_cm is None:
+            for key in KINEMATIC_MOTOR_FIELDS:
+                del d[key]
+        return d
+
+
+KINEMATIC_MOTOR_FIELDS = ("motor_radius_cm", "motor_inertia_kg_cm2", "motor_friction_kg_cm2_s", "tension_pd_p_cm",
+                          "tension_pd_d_cm_s")
 
 
 @dataclass(frozen=True)
@@ -168,7 +189,7 @@ class StructureSpec:
             "rods": [[r.a, r.b, r.tag] for r in self.rods],
             "strings": [[s.a, s.b, s.tag] for s in self.strings],
             "rod_materials": {t: asdict(m) for t, m in self.rod_materials},
-            "string_materials": {t: asdict(m) for t, m in self.string_materials},
+            "string_materials": {t: m.to_dict() for t, m in self.string_materials},
         }
 
     @classmethod

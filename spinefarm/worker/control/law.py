@@ -102,6 +102,12 @@ def string_tables(morph: Morphology, start_length_cm: np.ndarray, node_of_string
         params[i, sk.P_LMIN] = mat.min_rest_length_cm
         params[i, sk.P_LACT] = mat.min_actuated_length_cm
         params[i, sk.P_NODE] = node_of_string.get(i, -1)
+        if mat.motor_radius_cm is not None:
+            params[i, sk.P_RHO] = mat.motor_radius_cm
+            params[i, sk.P_J] = mat.motor_inertia_kg_cm2
+            params[i, sk.P_C] = mat.motor_friction_kg_cm2_s
+            params[i, sk.P_KP] = mat.tension_pd_p_cm
+            params[i, sk.P_KD] = mat.tension_pd_d_cm_s
         gains = morph.control.gains(s.tag)
         if gains is not None:
             params[i, sk.P_MODE] = sk.MODE_IMPEDANCE

@@ -11,10 +11,13 @@ from numba import njit
 
 # params (n_strings, N_PARAM)
 P_K, P_B, P_TMAX, P_V, P_A, P_LMIN, P_LACT, P_T0, P_KI, P_BI, P_LC, P_MODE, P_NODE, P_DRIVE = range(14)
-N_PARAM = 14
-# state (n_strings, N_STATE): rest length, length at the previous evaluation, its rate, motor speed
-S_REST, S_LPREV, S_V, S_U = range(4)
-N_STATE = 4
+# NTRT's kinematic motor (radius 0: none): spool radius, inertia, viscous friction, PD gains on tension
+P_RHO, P_J, P_C, P_KP, P_KD = range(14, 19)
+N_PARAM = 19
+# state (n_strings, N_STATE): rest length, length at the previous evaluation, its rate, motor speed (the
+# kinematic motor's spool rate, rad/s), the tension error at the previous step (kinematic motor's PD)
+S_REST, S_LPREV, S_V, S_U, S_ERR = range(5)
+N_STATE = 5
 
 MODE_FIXED, MODE_IMPEDANCE, MODE_DRIVEN = 0, 1, 2
 MOTOR_PHYSICAL, MOTOR_NTRT2014, MOTOR_NTRT2026 = 0, 1, 2
@@ -99,6 +102,23 @@ def motor_ntrt2026(rest, target, length, k, tmax, vmax, lmin, lact, dt):
 
 
 @njit(cache=True)
+def motor_kinematic(rest, tension, tau_cmd, omega, rho, inertia, friction, tmax, vmax, lmin, dt):
+    """NTRT's current kinematic motor (spec 3.3 [H]), not back-drivable: the commanded spool torque within
+    a torque-speed limit, the string's tension and viscous friction accelerate the spool; while the net
+    acceleration opposes the torque the spool may not turn outward. Returns (rest length, spool rate)."""
+    tau_max = tmax * rho * max(0.0, 1.0 - rho * abs(omega) / vmax)
+    tau = min(max(tau_cmd, -tau_max), tau_max)
+    acc = (tau - friction * omega + tension * rho) / inertia
+    omega = omega + acc * dt
+    if acc * tau <= 0.0 and omega > 0.0:
+        omega = 0.0
+    rest = rest + rho * omega * dt
+    if rest < lmin:
+        rest = lmin
+    return rest, omega
+
+
+@njit(cache=True)
 def _quat_to_matrix(q):
     x, y, z, w = q[0], q[1], q[2], q[3]
     r = np.empty((3, 3))
@@ -170,13 +190,25 @@ def string_step(poses, geometry, params, state, cpg_out, dt, motor_mode, outputs
                 node = int(params[i, P_NODE])
                 v0 = cpg_out[node] if node >= 0 else 0.0
                 tension = max(0.0, k * (length - rest))
+                # a kinematic motor reports its spool's speed as the string's velocity (NTRT [H])
+                kinematic = motor_mode == MOTOR_NTRT2026 and params[i, P_RHO] > 0.0
+                v_act = params[i, P_RHO] * state[i, S_U] if kinematic else v_old
                 target_t = params[i, P_T0] + params[i, P_KI] * (length - params[i, P_LC]) \
-                    + params[i, P_BI] * (v_old - v0)
+                    + params[i, P_BI] * (v_act - v0)
                 target_t = max(0.0, target_t)
                 target = max(rest - (target_t - tension) / k, params[i, P_LMIN])
             else:
                 target = params[i, P_DRIVE]
-            if motor_mode == MOTOR_PHYSICAL:
+                tension = target_t = 0.0
+                kinematic = False
+            if kinematic:
+                err = target_t - tension  # NTRT's tension PID, gains negated: more tension wanted -> reel in
+                tau_cmd = -(params[i, P_KP] * err + params[i, P_KD] * (err - state[i, S_ERR]) / dt)
+                state[i, S_ERR] = err
+                new_rest, state[i, S_U] = motor_kinematic(
+                    rest, tension, tau_cmd, state[i, S_U], params[i, P_RHO], params[i, P_J], params[i, P_C],
+                    params[i, P_TMAX], params[i, P_V], params[i, P_LMIN], dt)
+            elif motor_mode == MOTOR_PHYSICAL:
                 new_rest, state[i, S_U] = motor_physical(
                     rest, target, length, k, params[i, P_TMAX], params[i, P_V], params[i, P_A],
                     params[i, P_LMIN], params[i, P_LACT], state[i, S_U], dt)
