@@ -45,6 +45,8 @@ def runs(tmp_path: Path) -> Path:
         f.attrs["sampler"] = "[1, 2]"  # valid JSON, and a valid file, but no sampler description
     status_path(d / "sidecar.h5").write_text(json.dumps(
         {"state": "running", "updated_at_unix_s": 1.0, "workers": [{"worker_id": 7, "alive": "maybe"}]}))
+    with_names(tmp_path / "src.h5", d / "state.h5", ["x0", "x1", "x2", "x3"], "state")
+    status_path(d / "state.h5").write_text(json.dumps({"state": "hacked", "updated_at_unix_s": 1.0}))
     return d
 
 
@@ -84,7 +86,8 @@ def test_runs_answers_for_the_others_and_names_what_it_set_aside(runs: Path):
         listed = client.get("/runs")
         assert listed.status_code == 200, listed.text
         by_id = {r["run_id"]: r for r in listed.json()}
-        assert sorted(by_id) == ["good", "sidecar"]
+        assert sorted(by_id) == ["good", "sidecar", "state"]
+        assert by_id["state"]["state"] == "stopped" and "state: Input should be" in by_id["state"]["status_file_error"]
         assert by_id["good"]["status_file_error"] is None and by_id["good"]["trials_complete"] == 12
         why = by_id["sidecar"]["status_file_error"]
         assert "malformed" in why and "workers.0" in why and str(status_path(runs / "sidecar.h5")) in why
