@@ -22,7 +22,8 @@ files_router = APIRouter(tags=["runs"])
 log = logging.getLogger("spinefarm.api")
 
 
-@files_router.get("/damaged-files", summary="Run files the API leaves out (damaged, or not run files), and why")
+@files_router.get("/damaged-files", summary="Run files the API leaves out (damaged, not run files, or not read yet "
+                  "on a busy machine) or cannot show now, and why")
 def damaged_files(reg: Annotated[RunRegistry, Depends(registry)]) -> list[dict[str, str]]:
     reg.runs()  # probe what is new since the last call
     return [{"file": str(path), "reason": why} for path, why in reg.damaged()]
