@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ValidationError
@@ -27,7 +27,7 @@ RATE_TRIALS = 50
 class LiveStatus(BaseModel):
     """What run_view takes from the status sidecar, with the types it serves them as (other keys pass)."""
 
-    state: str = "running"
+    state: Literal["running", "done", "failed", "stopped"] = "running"  # what a coordinator writes
     updated_at_unix_s: float = 0.0
     trials_leased: int | None = None
     trials_queued: int | None = None

@@ -187,3 +187,28 @@ def test_workers_left_out_and_a_raised_fidelity_are_shown(browser, tmp_path):
         pg.close()
     finally:
         server.stop()
+
+
+def test_a_status_file_set_aside_is_said_on_the_run_page(browser, tmp_path):
+    """A malformed status file (a worker entry of another shape) is set aside by the API; the run page says so."""
+    from spinefarm.storage.status import read_status, write_status
+    from tests.api_tests.test_dashboard_browser import Server, free_port, spinefarm
+
+    out = tmp_path / "odd.h5"
+    spinefarm("search", "sphere:3", "--trials", "6", "--workers", "1", "--out", str(out), "--run-id", "odd-status",
+              "--api-port", "-1", "--quiet")
+    write_status(out, {**read_status(out), "workers": [{"worker_id": 7}]})
+    port = free_port()
+    server = Server(["api", str(out), "--port", str(port)], port)
+    try:
+        pg = browser.new_page()
+        errors: list[str] = []
+        pg.on("pageerror", lambda e: errors.append(str(e)))
+        pg.goto(server.url + "/#/run/odd-status")
+        pg.wait_for_selector("#cards .card")
+        assert not errors, errors
+        text = pg.wait_for_selector("#status-file-error").inner_text()
+        assert "is malformed and left out: workers.0" in text and "from the run file alone" in text
+        pg.close()
+    finally:
+        server.stop()

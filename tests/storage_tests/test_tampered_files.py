@@ -40,8 +40,13 @@ def runs(tmp_path: Path) -> Path:
     with_names(tmp_path / "src.h5", d / "fewer.h5", ["x0", "x1", "x2"], "fewer")        # 3 names, 4 columns
     with_names(tmp_path / "src.h5", d / "more.h5", ["a", "b", "c", "d", "e"], "more")   # 5 names, 4 columns
     with_names(tmp_path / "src.h5", d / "sidecar.h5", ["x0", "x1", "x2", "x3"], "sidecar")
+    with_names(tmp_path / "src.h5", d / "sampler.h5", ["x0", "x1", "x2", "x3"], "sampler")
+    with h5py.File(d / "sampler.h5", "r+") as f:
+        f.attrs["sampler"] = "[1, 2]"  # valid JSON, and a valid file, but no sampler description
     status_path(d / "sidecar.h5").write_text(json.dumps(
         {"state": "running", "updated_at_unix_s": 1.0, "workers": [{"worker_id": 7, "alive": "maybe"}]}))
+    with_names(tmp_path / "src.h5", d / "state.h5", ["x0", "x1", "x2", "x3"], "state")
+    status_path(d / "state.h5").write_text(json.dumps({"state": "hacked", "updated_at_unix_s": 1.0}))
     return d
 
 
@@ -81,7 +86,8 @@ def test_runs_answers_for_the_others_and_names_what_it_set_aside(runs: Path):
         listed = client.get("/runs")
         assert listed.status_code == 200, listed.text
         by_id = {r["run_id"]: r for r in listed.json()}
-        assert sorted(by_id) == ["good", "sidecar"]
+        assert sorted(by_id) == ["good", "sidecar", "state"]
+        assert by_id["state"]["state"] == "stopped" and "state: Input should be" in by_id["state"]["status_file_error"]
         assert by_id["good"]["status_file_error"] is None and by_id["good"]["trials_complete"] == 12
         why = by_id["sidecar"]["status_file_error"]
         assert "malformed" in why and "workers.0" in why and str(status_path(runs / "sidecar.h5")) in why
@@ -89,5 +95,9 @@ def test_runs_answers_for_the_others_and_names_what_it_set_aside(runs: Path):
         assert by_id["sidecar"]["workers"] == []
         assert client.get("/runs/sidecar").status_code == 200
         damaged = {Path(d["file"]).name: d["reason"] for d in client.get("/damaged-files").json()}
-        assert sorted(damaged) == ["fewer.h5", "more.h5"] and all(MISFIT in v for v in damaged.values())
+        assert sorted(damaged) == ["fewer.h5", "more.h5", "sampler.h5"]
+        assert MISFIT in damaged["fewer.h5"] and MISFIT in damaged["more.h5"]
+        assert "its status cannot be read now" in damaged["sampler.h5"]
+        one = client.get("/runs/sampler")
+        assert one.status_code == 409 and "cannot show run file" in one.json()["detail"]["message"]
         assert client.get("/runs/fewer").status_code == 404

@@ -7,7 +7,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Query
-from pydantic import ValidationError
 
 from spinefarm.api.analysis import analysis_view, columns_view
 from spinefarm.api.contour import CONTOUR_VALUES, contour_view
@@ -15,7 +14,7 @@ from spinefarm.api.deps import registry, run_path, run_storage
 from spinefarm.api.registry import RunRegistry
 from spinefarm.api.schemas import RunStatus
 from spinefarm.api.views import run_view
-from spinefarm.protocol.errors import StorageError
+from spinefarm.protocol.errors import SpinefarmError, StorageError
 from spinefarm.storage.hdf5_reader import Hdf5Reader
 
 router = APIRouter(prefix="/runs", tags=["runs"])
@@ -23,7 +22,8 @@ files_router = APIRouter(tags=["runs"])
 log = logging.getLogger("spinefarm.api")
 
 
-@files_router.get("/damaged-files", summary="Run files the API leaves out (damaged, or not run files), and why")
+@files_router.get("/damaged-files", summary="Run files the API leaves out (damaged, not run files, or not read yet "
+                  "on a busy machine) or cannot show now, and why")
 def damaged_files(reg: Annotated[RunRegistry, Depends(registry)]) -> list[dict[str, str]]:
     reg.runs()  # probe what is new since the last call
     return [{"file": str(path), "reason": why} for path, why in reg.damaged()]
@@ -31,8 +31,14 @@ def damaged_files(reg: Annotated[RunRegistry, Depends(registry)]) -> list[dict[s
 
 def _status(path: Path) -> dict[str, Any]:
     """A run's status entry, checked as /runs serves it: a file that cannot give one fails here, alone."""
-    with Hdf5Reader(path) as reader:
-        return RunStatus.model_validate(run_view(reader, path)).model_dump()
+    try:
+        with Hdf5Reader(path) as reader:
+            return RunStatus.model_validate(run_view(reader, path)).model_dump()
+    except SpinefarmError:
+        raise
+    except Exception as exc:  # a file its read found whole, holding what no run file holds: a 409, not a 500
+        raise StorageError(f"cannot show run file {path}: {type(exc).__name__}: {str(exc).splitlines()[0][:200]}",
+                           expected="a run file as spinefarm writes it") from exc
 
 
 @router.get("", response_model=list[RunStatus], summary="Every run and its status")
@@ -41,9 +47,9 @@ def list_runs(reg: Annotated[RunRegistry, Depends(registry)]) -> list[dict[str, 
     for path in reg.runs().values():
         try:
             out.append(reg.view(path, lambda path=path: _status(path)))
-        except (StorageError, ValidationError, ValueError, KeyError, TypeError, OSError) as exc:
-            # one run that cannot be shown (a file being replaced, or tampered with) never takes down the list:
-            # it is named in /damaged-files until it can be shown again
+        except Exception as exc:
+            # one run that cannot be shown (a file being replaced, or tampered with in a way its read did not
+            # catch) never takes down the list: it is named in /damaged-files until it can be shown again
             log.warning("cannot show %s now: %s", path, str(exc).splitlines()[0][:300])
     return out
 

@@ -79,12 +79,16 @@ function card(k, v) { return `<div class="card"><div class="v">${v}</div><div cl
 function stateBadge(s) { return `<span class="state ${esc(s)}">${esc(s)}</span>`; }
 
 // ---------------------------------------------------------------- one run
-// what went on beside the trials: the judge's raised fidelity, workers left out of the run
+// what went on beside the trials: the judge's raised fidelity, a status file set aside, workers left out of the run
 function runWarnings(status) {
   const out = [];
   if (status.fidelity_raised) {
     out.push(`<div class="notice warn" id="fidelity-raised">The judge raised the screen's fidelity for the rest of
       the run: ${esc(status.fidelity_raised)}.</div>`);
+  }
+  if (status.status_file_error) {
+    out.push(`<div class="notice warn" id="status-file-error">${esc(status.status_file_error)}; the state shown
+      comes from the run file alone.</div>`);
   }
   const left = Object.entries(status.unservable_workers || {});
   if (left.length) {

@@ -43,7 +43,7 @@ function runCell(key, r) {
 function damagedList(bad) {
   if (!bad.length) return "";
   return `<div class="notice warn" id="damaged"><b>${bad.length} file${bad.length > 1 ? "s" : ""} left out</b>
-    (damaged or not a run file): <ul>${bad.map((b) => `<li><code>${esc(b.file)}</code>: ${esc(b.reason)}</li>`).join("")}</ul></div>`;
+    (damaged, not a run file, or still being read): <ul>${bad.map((b) => `<li><code>${esc(b.file)}</code>: ${esc(b.reason)}</li>`).join("")}</ul></div>`;
 }
 
 async function showRuns(gen) {
