@@ -1,11 +1,14 @@
 """Hundreds of workers against one coordinator, simulated: does it hold, and how fast does it grant?
 
-A Zenoh router (`spinefarm router`), one `spinefarm coordinator` connected to it (test objective `sphere:4`
-whose trials sleep --duration seconds instead of simulating, so the machine's cores go to the coordinator and
-the transport), and --workers workers, --per-process of them in each worker process, each worker its own
-Zenoh session, worker id and identity (a real WorkerService in a thread). Once a quarter of the budget is
-stored, --kill of the workers are SIGKILLed (whole worker processes, so their sessions die as a machine's
-would). The run must still end with its exact budget.
+Zenoh routers (`spinefarm router`, one per --sessions-per-router workers, meshed: a router here refuses its
+352nd client session), one `spinefarm coordinator` connected to the first (test objective `sphere:4`
+whose trials sleep --duration seconds, plus a random part of it up to --jitter, instead of simulating, so the
+machine's cores go to the coordinator and the transport), and --workers workers, --per-process of them in
+each worker process, each worker its own Zenoh session, worker id and identity (a real WorkerService in a
+thread). Once a quarter of the budget is
+stored and every worker is in (or half of it), --kill of the worker processes are SIGKILLed (whole processes,
+so their sessions die as a machine's would). The run must still end with its exact budget. Workers start
+--stagger seconds apart (hundreds of handshakes at once stall the router).
 
 Every worker logs each verdict it receives (SPINEFARM_ACK_LOG) and each grant's round trip; the run file is
 checked against the verdicts: `lost` (acknowledged as stored, not in the file or with another distance),
@@ -13,7 +16,8 @@ checked against the verdicts: `lost` (acknowledged as stored, not in the file or
 the results it carries), over every grant of every worker, the killed ones' until their kill.
 `coordinator_rss_mb` is the coordinator's largest resident size, sampled every 0.5 s.
 
-usage: python bench/scale.py --workers 500 [--per-process 10] [--trials N] [--duration 10] [--kill 0.1]
+usage: python bench/scale.py --workers 500 [--per-process 10] [--trials N] [--duration 10] [--jitter 0.5]
+       [--kill 0.1] [--stagger 0.1] [--keep]
 prints one JSON object.
 """
 
@@ -23,6 +27,7 @@ import argparse
 import json
 import math
 import os
+import random
 import shutil
 import signal
 import socket
@@ -46,9 +51,13 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def host_workers(endpoint: str, first: int, count: int, out_dir: Path, stagger_s: float) -> None:
+def host_workers(endpoint: str, first: int, count: int, out_dir: Path, stagger_s: float, duration_s: float,
+                 jitter: float) -> None:
     """Child process: `count` workers, each in its own thread and Zenoh session, until the run says done."""
     os.environ["SPINEFARM_ACK_LOG"] = str(out_dir / f"acks-{first}.log")
+    import logging
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(threadName)s %(levelname)s %(message)s")
     from spinefarm.protocol import keys
     from spinefarm.worker.service import WorkerService, WorkerTimings, ZenohAccess
 
@@ -64,6 +73,12 @@ def host_workers(endpoint: str, first: int, count: int, out_dir: Path, stagger_s
                 with lock:
                     grants.write(f"{time.time():.4f} {1000 * (time.perf_counter() - t0):.3f} {self.worker_id}\n")
             return out
+
+        def _run_one(self, evaluate, a):  # type: ignore[no-untyped-def]
+            # trials of one length would keep every worker in step, asking at the same moment: real trial
+            # times vary, so each takes a random extra part of its length
+            time.sleep(random.uniform(0.0, jitter) * duration_s)
+            return super()._run_one(evaluate, a)
 
     timings = WorkerTimings(coordinator_timeout_s=120.0)
     workers = [TimedWorker(ZenohAccess(connect=[endpoint]), run_id=RUN_ID, worker_id=f"sim-{first + i}", batch=1,
@@ -143,27 +158,42 @@ def _spinefarm(*args: str, log: Path) -> subprocess.Popen:
                                 stderr=fh)
 
 
+def _routers(tmp: Path, workers: int, per_router: int) -> tuple[list[subprocess.Popen], list[str]]:
+    """Enough meshed routers for the workers: the first one listens, the others connect to it. One Zenoh 1.10
+    router here refuses the 352nd client session (accept_pending and max_sessions raised or not)."""
+    procs, endpoints = [], []
+    for i in range(max(1, math.ceil(workers / per_router))):
+        port = free_port()
+        endpoints.append(f"tcp/127.0.0.1:{port}")
+        conf = {"transport": {"unicast": {"accept_pending": 4 * per_router, "accept_timeout": 30000}}}
+        if i:
+            conf["connect"] = {"endpoints": endpoints[:1]}
+        (tmp / f"router-{i}.json5").write_text(json.dumps(conf))
+        procs.append(_spinefarm("router", "--listen", endpoints[-1], "--config", str(tmp / f"router-{i}.json5"),
+                                log=tmp / f"router-{i}.log"))
+        _wait_listening(port)
+    return procs, endpoints
+
+
 def run(args: argparse.Namespace) -> dict:
     tmp = Path(tempfile.mkdtemp(prefix="spinefarm-scale-", dir=args.dir))
-    port = free_port()
-    endpoint, out = f"tcp/127.0.0.1:{port}", tmp / "run.h5"
+    out = tmp / "run.h5"
     trials = args.trials or 6 * args.workers
     procs: list[subprocess.Popen] = []
-    # Zenoh's default of 100 handshakes pending at once is below the workers' connection storm
-    (tmp / "router.json5").write_text(json.dumps({"transport": {"unicast": {
-        "accept_pending": 4 * args.workers, "max_sessions": 4 * args.workers + 100, "accept_timeout": 30000}}}))
-    router = _spinefarm("router", "--listen", endpoint, "--config", str(tmp / "router.json5"), log=tmp / "router.log")
+    routers: list[subprocess.Popen] = []
     try:
-        _wait_listening(port)
+        routers, endpoints = _routers(tmp, args.workers, args.sessions_per_router)
         coord = _spinefarm("coordinator", "sphere:4", "--trials", str(trials), "--duration", str(args.duration),
-                           "--run-id", RUN_ID, "--out", str(out), "--connect", endpoint, "--api-port", "-1",
+                           "--run-id", RUN_ID, "--out", str(out), "--connect", endpoints[0], "--api-port", "-1",
                            "--quiet", "--sampler", "random", log=tmp / "coordinator.log")
         per = args.per_process
         for first in range(0, args.workers, per):
+            endpoint = endpoints[(first // per) % len(endpoints)]
             procs.append(subprocess.Popen([sys.executable, __file__, "--host", endpoint, "--first", str(first),
                                            "--count", str(min(per, args.workers - first)), "--dir", str(tmp),
-                                           "--stagger", str(args.stagger)], cwd=ROOT, stdout=subprocess.DEVNULL,
-                                          stderr=subprocess.DEVNULL))
+                                           "--stagger", str(args.stagger), "--duration", str(args.duration),
+                                           "--jitter", str(args.jitter)], cwd=ROOT, stdout=subprocess.DEVNULL,
+                                          stderr=open(tmp / f"host-{first}.log", "w")))  # noqa: SIM115
             time.sleep(args.stagger)
         killed, rss, t0 = 0, 0.0, time.monotonic()
         n_kill = math.ceil(args.kill * len(procs))
@@ -195,14 +225,14 @@ def run(args: argparse.Namespace) -> dict:
                 "acknowledged": checked["acknowledged"], "workers_killed": sum(
                     min(per, args.workers - i * per) for i in range(len(procs) - killed, len(procs))),
                 "worker_processes": len(procs), "per_process": per, "duration_s": args.duration,
-                "processes_left_after_the_run": late,
+                "processes_left_after_the_run": late, "routers": len(routers), "jitter": args.jitter,
                 "coordinator_rc": coord.returncode, "wall_s": round(wall_s, 1), "dir": str(tmp)}
         if result["exact_budget"] and not (result["lost"] or result["duplicated"]) and not args.keep:
             shutil.rmtree(tmp)   # a run that holds leaves nothing behind; one that does not keeps its files
             result["dir"] = None
         return result
     finally:
-        for p in [*procs, router]:
+        for p in [*procs, *routers]:
             if p.poll() is None:
                 p.kill()
                 p.wait(10)
@@ -215,6 +245,10 @@ def main() -> None:
     ap.add_argument("--trials", type=int, default=0, help="budget (default 6 per worker)")
     ap.add_argument("--duration", type=float, default=10.0, help="seconds each trial sleeps (default 10: a physics "
                     "trial's wall time)")
+    ap.add_argument("--jitter", type=float, default=0.5, help="each trial also sleeps a uniform random part of "
+                    "[0, jitter] of --duration (default 0.5)")
+    ap.add_argument("--sessions-per-router", type=int, default=300, help="workers per Zenoh router (default 300: "
+                    "a router here refuses its 352nd session); several routers are meshed")
     ap.add_argument("--kill", type=float, default=0.1, help="fraction of the worker processes SIGKILLed")
     ap.add_argument("--timeout-s", type=float, default=1200.0)
     ap.add_argument("--dir", default=None, help="where the run's files go (default: the temp directory)")
@@ -226,7 +260,7 @@ def main() -> None:
     ap.add_argument("--count", type=int, default=0, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.host:
-        host_workers(args.host, args.first, args.count, Path(args.dir), args.stagger)
+        host_workers(args.host, args.first, args.count, Path(args.dir), args.stagger, args.duration, args.jitter)
         return
     print(json.dumps(run(args)))
 
