@@ -90,9 +90,9 @@ def test_the_3d_view_plays_from_local_assets_and_shows_the_recorded_frame(page, 
     page.wait_for_selector("#motion-area[data-ready]", timeout=MOTION_TIMEOUT_MS)
     assert page.locator("#motion-0 canvas").count() == 1
     assert page.evaluate("() => !!document.querySelector('#motion-0 canvas').getContext('webgl2')")
-    # it plays: time and frame move on by themselves, then stop on pause
+    # it plays when opened: time and frame move on by themselves, then stop on pause
+    assert page.locator("#motion-bar").get_attribute("data-playing") == "1"
     page.select_option("#motion-speed", "0.25")  # a 1 s trial plays in 4 s
-    page.click("#motion-play")
     wait_for(lambda: page.evaluate("() => document.getElementById('motion-0').motionView.frame") >= 6,
              timeout_s=20, poll_s=0.05, what="the motion to play")
     page.click("#motion-play")
@@ -127,7 +127,7 @@ def test_two_trials_side_by_side_in_step(page, server):
     page.goto(server.url + "/#/run/tetra-motion/watch/0,1")
     page.wait_for_selector("#motion-area[data-ready]", timeout=MOTION_TIMEOUT_MS)
     assert page.locator(".motion canvas").count() == 2
-    page.evaluate("window.spinefarmPlayer.seek(0.7)")
+    page.evaluate("window.spinefarmPlayer.pause(); window.spinefarmPlayer.seek(0.7)")  # it plays when opened
     times = [float(page.locator(f"#motion-{k}").get_attribute("data-time")) for k in (0, 1)]
     assert times[0] == times[1] == pytest.approx(0.7, abs=1 / 30)
     a, b = drawn(page, 0), drawn(page, 1)

@@ -53,7 +53,7 @@ async function watchServer(fn) {
 
 const fmtDuration = (s) => (s === null || s === undefined) ? "–" : s < 90 ? `${Math.round(s)} s`
   : s < 5400 ? `${Math.round(s / 60)} min` : `${(s / 3600).toFixed(1)} h`;
-const fmtDate = (t) => t ? new Date(t * 1000).toLocaleString(undefined, {dateStyle: "medium", timeStyle: "short"}) : "–";
+const fmtDate = (t) => t ? new Date(t * 1000).toLocaleString(undefined, {dateStyle: "short", timeStyle: "short"}) : "–";
 
 /** A live page whose server went away (the search ended): keep what it shows, say how to reopen it. */
 function serverGone(e, gen, reopen) {
@@ -318,6 +318,8 @@ async function showMotion(area, runId, trialIds, gen) {
     <button id="compare-go" type="button">watch both</button></p>`;
   motionViews = trialIds.map((_, k) => new MotionView(document.getElementById(`motion-${k}`), motions[k]));
   window.spinefarmPlayer = new Player(motionViews, document.getElementById("motion-bar"));
+  // the gait moves when opened, unless the reader asked their system for less motion
+  if (!window.matchMedia("(prefers-reduced-motion: reduce)").matches) window.spinefarmPlayer.play();
   document.getElementById("compare-go").onclick = () => {
     const other = document.getElementById("compare-id").value;
     if (other !== "") location.hash = `#/run/${r}/watch/${trialIds[0]},${Number(other)}`;
