@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install run test test-all test-deploy lint bench clean mutation
+.PHONY: install run test test-all test-deploy lint bench clean mutation docs-check
 
 # exact versions and hashes from requirements.lock (docs/reproducibility.md says how to refresh it), then the
 # package itself without resolving anything again
@@ -44,6 +44,10 @@ test-deploy: $(STAMP)
 mutation: $(STAMP)
 	$(PY) -m pip install -q --require-hashes --no-deps -r tests/mutation/requirements.txt
 	$(PY) -m tests.mutation.main $(MUTATION_ARGS)
+
+# the cheap commands the docs quote, run again and compared with the docs' figures (tests/docs_check.py)
+docs-check: $(STAMP)
+	$(PY) -m tests.docs_check
 
 bench: $(STAMP)
 	$(PY) bench/trial_speed.py
