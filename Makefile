@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install run test test-all test-deploy lint bench clean mutation wheel
+.PHONY: install run test test-all test-deploy lint bench clean mutation wheel docs-check
 
 # exact versions and hashes from requirements.lock (docs/reproducibility.md says how to refresh it), then the
 # package itself without resolving anything again
@@ -48,6 +48,10 @@ mutation: $(STAMP)
 # the wheel a machine without a clone installs: pip install 'dist/spinefarm-<version>-py3-none-any.whl[all]'
 wheel:
 	$(PYTHON) -m pip wheel --no-deps -q -w dist .
+
+# the cheap commands the docs quote, run again and compared with the docs' figures (tests/docs_check.py)
+docs-check: $(STAMP)
+	$(PY) -m tests.docs_check
 
 bench: $(STAMP)
 	$(PY) bench/trial_speed.py

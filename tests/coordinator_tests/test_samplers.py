@@ -293,9 +293,9 @@ def test_the_samplers_defaults_are_the_documented_ones(storage):
     """docs/samplers.md: the paper's sampler steps with sigma = 0.005 (the paper's figure) after Monte Carlo
     over half the budget; CMA-ES starts at sigma0 = 0.3; TPE has 10 random start-up trials; the default sampler
     is CMA-ES. Read from what the samplers draw, not from their attributes."""
-    paper = make_sampler("paper", 3, 5, budget=8, objective="distance")
+    paper = make_sampler("paper", 3, 5, budget=9, objective="distance")
     phases = [record(storage, paper, score=float(i + 1)).phase for i in range(4)]
-    assert phases == ["monte_carlo"] * 4  # half of 8
+    assert phases == ["monte_carlo"] * 4  # half of 9, rounded down
     centre = np.array(storage.trial(3).params_unit)  # the best of the four
     steps = np.array([record(storage, paper).params_unit - centre for _ in range(400)])
     assert record(storage, paper).phase == "gaussian"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import pytest
@@ -200,8 +201,27 @@ def test_a_measured_trial_time_staggers_the_leases_of_a_batch():
     s.observe_trial(2.5)  # slower trials: 4 x 2.5 = 10 s, mixed into the mean: between 2 s and 10 s
     clock.t = 10.0
     later = [ls.deadline_s - 70.0 for ls in s.grant("w2", 3, ids)]
-    assert later[0] == 0.0 and 2.0 < later[1] < 10.0 and later[2] == pytest.approx(2 * later[1])
+    assert later[0] == 0.0 and later[1] == pytest.approx(0.8 * 2.0 + 0.2 * 10.0) and later[2] == pytest.approx(7.2)
+    for not_a_time in (0.0, -1.0, float("nan")):  # not a measurement: the stagger stays
+        s.observe_trial(not_a_time)
+    assert s.expected_trial_s == pytest.approx(3.6)
     capped = Scheduler(FakeClock(0.0), lease_s=5.0)
     capped.observe_trial(30.0)  # 4 x 30 s is capped at lease_s
     capped.observe_trial(float("nan"))  # not a measurement
     assert [ls.deadline_s for ls in capped.grant("w1", 3, new_ids())] == [5.0, 10.0, 15.0]
+
+
+def test_the_documented_bounds_of_a_grant():
+    """docs/distributed.md: at most 64 trials per request and per worker at a time; leases of 60 s unless
+    told; a scheduler may grant one trial at a time and give a trial up after one lost lease."""
+    clock = FakeClock(0.0)
+    s, ids = Scheduler(clock), new_ids()
+    first = s.grant("w1", 1000, ids)
+    assert len(first) == 64 and first[0].deadline_s == 60.0
+    assert s.grant("w1", 1000, ids) == []  # it holds 64 already
+    s.release(first[0].trial_id)
+    assert len(s.grant("w1", 1000, ids)) == 1
+    one = Scheduler(clock, lease_s=5.0, max_grant=1, max_attempts=1)
+    assert len(one.grant("w2", 10, new_ids())) == 1
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        first[0].deadline_s = 1e9  # a lease is not stretched in place
