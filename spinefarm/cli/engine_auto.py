@@ -26,8 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def default_rungs(duration_s: float) -> str:
-    """Successive halving over a third of the trial and the whole of it."""
-    return f"{duration_s / 3:g},{duration_s:g}"
+    """Successive halving over a sixth of the trial, a third and the whole of it (5,10,30 for 30 s: the ladder
+    bench/ladder.py chose, docs/performance.md)."""
+    return f"{duration_s / 6:g},{duration_s / 3:g},{duration_s:g}"
 
 
 def wants_auto(args: argparse.Namespace) -> bool:

@@ -9,6 +9,7 @@ from spinefarm.cli import checks, engine_auto
 from spinefarm.cli.profile_argument import add_profile_argument
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.robust_args import add_robust_args
+from spinefarm.protocol.settings import DEFAULT_ETA
 
 
 def zenoh_args(p: argparse.ArgumentParser, listen_default: str | None) -> None:
@@ -132,7 +133,8 @@ def _ladder_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rungs", metavar="S,S,...", default=None,
                    help="screen every parameter set with a short trial and promote the best 1/eta to each longer "
                         "one (successive halving), e.g. 10,30; the last is the full trial length")
-    g.add_argument("--eta", type=int, default=3, help="keep the best 1/eta of each rung (default 3)")
+    g.add_argument("--eta", type=int, default=DEFAULT_ETA,
+                   help=f"keep the best 1/eta of each rung (default {DEFAULT_ETA}, measured: docs/performance.md)")
     g.add_argument("--verify-engine", default=None,
                    help="re-simulate every new best in this engine before it counts, and report its distance "
                         "(default: bullet whenever the search's --engine is not bullet)")

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.settings import PROMOTED, Rung, RunSettings
+from spinefarm.protocol.settings import DEFAULT_ETA, PROMOTED, Rung, RunSettings
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.base import BaseStorage
 
@@ -99,7 +99,7 @@ class HalvingTrialScheduler(BaseTrialScheduler):
     name = "halving"
 
     @classmethod
-    def from_durations(cls, durations_s: tuple[float, ...], eta: int = 3) -> HalvingTrialScheduler:
+    def from_durations(cls, durations_s: tuple[float, ...], eta: int = DEFAULT_ETA) -> HalvingTrialScheduler:
         ladder = tuple(Rung(duration_s=d) for d in durations_s)
         return cls(RunSettings(scheduler="halving", ladder=ladder, eta=eta))
 

@@ -19,7 +19,7 @@ from spinefarm.protocol.engine_choice import EngineChoice
 from spinefarm.protocol.environment import environment_record
 from spinefarm.protocol.errors import ConfigError, check_range
 from spinefarm.protocol.run import RunConfig
-from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung, RunSettings
+from spinefarm.protocol.settings import DEFAULT_ETA, AuditPolicy, JudgePolicy, Rung, RunSettings
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.schema import RunMeta
@@ -54,7 +54,7 @@ class SearchSettings:
     judge: JudgePolicy = field(default_factory=JudgePolicy)
     audit: AuditPolicy = field(default_factory=AuditPolicy)
     rungs: tuple[float, ...] | None = None   # multi-fidelity screening (successive halving over durations)
-    eta: int = 3
+    eta: int = DEFAULT_ETA
     engine_choice: EngineChoice | None = None   # how --engine auto chose the tier (None: the engine was given)
     enqueued: tuple[tuple[float, ...], ...] = ()   # unit-cube parameter sets evaluated first (--enqueue)
 

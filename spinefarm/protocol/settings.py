@@ -109,6 +109,10 @@ class AuditPolicy(_JsonRecord):
         return self.fraction > 0
 
 
+# keep the best 1/eta of each rung: bench/ladder.py's choice (docs/performance.md, "A ladder chosen by measurement")
+DEFAULT_ETA = 4
+
+
 @dataclass(frozen=True)
 class RunSettings:
     """scheduler: plain (every parameter set at the last rung) or halving (successive halving over the
@@ -119,7 +123,7 @@ class RunSettings:
 
     scheduler: str = "plain"
     ladder: tuple[Rung, ...] = (Rung(),)
-    eta: int = 3
+    eta: int = DEFAULT_ETA
     judge: JudgePolicy = field(default_factory=JudgePolicy)
     audit: AuditPolicy = field(default_factory=AuditPolicy)
     lease_s: float = 60.0

@@ -77,7 +77,8 @@ def _check_fidelity(out, budget: int, rungs: HalvingTrialScheduler) -> None:
 def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(tmp_path):
     ep, out = free_endpoint(), tmp_path / "run.h5"
     rungs = HalvingTrialScheduler.from_durations((0.01, 0.02, 0.04), 3)
-    coord = coordinator(ep, out, "sphere:3", "--trials", "27", "--rungs", "0.01,0.02,0.04", "--run-id", "mf")
+    coord = coordinator(ep, out, "sphere:3", "--trials", "27", "--rungs", "0.01,0.02,0.04", "--eta", "3",
+                        "--run-id", "mf")
     workers = [worker(ep, "mf", f"w{i}", batch=2) for i in range(2)]
     try:
         assert coord.wait(90) == 0
@@ -98,7 +99,7 @@ def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(
 def test_a_multi_fidelity_search_killed_mid_rung_resumes_to_its_exact_budget(tmp_path):
     ep, out = free_endpoint(), tmp_path / "run.h5"
     rungs = HalvingTrialScheduler.from_durations((0.05, 0.1), 3)
-    coord = coordinator(ep, out, "sphere:3", "--trials", "60", "--rungs", "0.05,0.1", "--run-id", "mfk")
+    coord = coordinator(ep, out, "sphere:3", "--trials", "60", "--rungs", "0.05,0.1", "--eta", "3", "--run-id", "mfk")
     workers = [worker(ep, "mfk", f"w{i}", batch=1) for i in range(2)]
     resumed = None
     try:
