@@ -33,14 +33,17 @@ def write_final_status(run_path: str | Path, status: dict[str, Any]) -> str | No
     """The coordinator's last status: None once written, else what went wrong. The old file would go on
     saying "running", so when the new one cannot be written (a full disk) the old one is removed and the write
     tried once more in the space it freed; failing that there is none, and readers take the state from the run
-    file (api.run_state)."""
+    file (api.run_state). Never raises OSError: every result is stored before this is written."""
     try:
         write_status(run_path, status)
         return None
     except OSError as exc:
         why = exc.strerror or str(exc)
     path = status_path(run_path)
-    path.unlink(missing_ok=True)
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:  # a disk that died: nothing can be changed on it
+        return f"cannot write the status file {path} ({why}); the old one stays"
     try:
         write_status(run_path, status)
     except OSError:
