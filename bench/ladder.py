@@ -12,7 +12,9 @@ length L). Per rung length:
 
 Per ladder (rung lengths ending at the full length, each keeping the best 1/eta of the one before, as
 synchronous successive halving): `best_survives` (seeds), `sim_s_per_gait` (simulated seconds a gait costs on
-average: L1 + L2 / eta + ... ) and its saving against every gait at the full length. `chosen` is the cheapest
+average: L1 + L2 / eta + ... ), its saving against every gait at the full length, and
+`sim_s_per_gait_continued`: the same were a promoted set continued from the end of its last rung
+(L1 + (L2 - L1) / eta + ...). `chosen` is the cheapest
 ladder whose best survives in every seed, among those whose first rung ranks with median rho >= --min-rho.
 
     python bench/ladder.py --spines tetraspine --controller sidewinding --engine mujoco --dt 0.002 \
@@ -90,8 +92,11 @@ def ladders(dist: np.ndarray, lengths: list[float], etas: list[int]) -> list[dic
                         alive = keep
                     survived += best in alive
                 cost = sum(lengths[j] / eta ** n for n, j in enumerate(rungs))
+                # were a promoted set continued from its last rung's end instead of simulated again
+                went_on = sum((lengths[j] - (lengths[rungs[n - 1]] if n else 0.0)) / eta ** n
+                              for n, j in enumerate(rungs))
                 out.append({"rungs": [lengths[j] for j in rungs], "eta": eta, "best_survives": survived,
-                            "sim_s_per_gait": cost, "saving": full / cost})
+                            "sim_s_per_gait": cost, "saving": full / cost, "sim_s_per_gait_continued": went_on})
     return out
 
 

@@ -29,7 +29,8 @@ the structure lets come within reach ("reach", `mujoco_reach_rod_pairs` counts t
 cone (`mujoco_pyramidal_cone`, the default before the elliptic one), every trial's distance, and
 `control_share`: the control law and the loop over MuJoCo's whole step (1 - a bare mj_step from the trial's end
 state over the whole step; `mujoco_split_us_per_step`), with `control_law_share` the law alone (CPG and strings
-timed apart on the end pose):
+timed apart on the end pose), and `guard_check_us`: one guard check of one world on the end pose, exact and
+compiled (worker.guard):
 
     python bench/trial_speed.py --spines all [--tier-seconds 10] [--repeats 3]
 
@@ -209,7 +210,7 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
     caches = {name: SetupCache() for name in configs}
     cpu: dict[str, list[float]] = {name: [] for name in configs}
     distance: dict[str, list[float]] = {name: [] for name in configs}
-    reruns, mj_step_us, law_us = [], [], []
+    reruns, mj_step_us, law_us, guard_us = [], [], [], []
     for r in range(repeats + 1):
         u = random_unit_params(morph, 1 + r)
         for name, cfg in configs.items():
@@ -226,6 +227,7 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
                     setup = caches[name].get(morph, ran, None)
                     mj_step_us.append(_bare_mj_step_us(setup._scene))
                     law_us.append(law_step_us(setup, u, cfg))
+                    guard_us.append(guard_check_us(setup, u, cfg))
     med = {name: float(np.median(v)) for name, v in cpu.items()}
     whole_us = med["mujoco"] * 1e6 * choose_step(morph, configs["mujoco"])
     split = {"whole": whole_us, "mj_step": float(np.median(mj_step_us)), "control_law": float(np.median(law_us))}
@@ -237,6 +239,8 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
             # control law (CPG and strings) and loop over MuJoCo's whole step; the law alone beside it
             "control_share": (whole_us - split["mj_step"]) / whole_us,
             "control_law_share": split["control_law"] / whole_us, "mujoco_split_us_per_step": split,
+            # one guard check of one world (every check_every_s), the exact numpy check and its compiled fast path
+            "guard_check_us": {k: float(np.median([g[k] for g in guard_us])) for k in ("exact", "compiled")},
             "mujoco_segment_contacts_scene_cpu_s_per_sim_s": med["mujoco_segment_contacts_scene"],
             "mujoco_segment_contacts_off_cpu_s_per_sim_s": med["mujoco_segment_contacts_off"],
             "mujoco_segment_contacts_reach_cpu_s_per_sim_s": med["mujoco_segment_contacts_reach"],
@@ -263,6 +267,27 @@ def law_step_us(setup, u: np.ndarray, cfg: TrialConfig, steps: int = 2000) -> fl
     for _ in range(steps):
         law.step(poses, active)
     return (time.process_time() - t0) / steps * 1e6
+
+
+def guard_check_us(setup, u: np.ndarray, cfg: TrialConfig, repeats: int = 500) -> dict:
+    """CPU µs of one guard check on the trial's end pose: the exact check and the compiled fast path."""
+    from spinefarm.worker import guard
+    from spinefarm.worker.episode import STRETCH_BASE_MIN_CM, check_state
+
+    net = setup.space.network(setup.space.param_space.physical(u))
+    _, sstate = setup.string_tables(net)
+    poses = setup._scene.read_poses()[0].copy()
+    start = setup.geom.start_length_cm
+    boxes, limits, base = guard.level_boxes(setup.terrain), guard.limits(cfg), np.maximum(start, STRETCH_BASE_MIN_CM)
+    lprev = sstate[:, sk.S_LPREV].copy()
+    guard.clearly_sane(poses, poses[:, :3], setup.masses, lprev, base, 0.01, boxes, limits)  # compiled first
+    t0 = time.process_time()
+    for _ in range(repeats):
+        check_state(poses, poses[:, :3], setup.masses, sstate, start, 0.01, cfg, setup.terrain)
+    t1 = time.process_time()
+    for _ in range(repeats):
+        guard.clearly_sane(poses, poses[:, :3], setup.masses, lprev, base, 0.01, boxes, limits)
+    return {"exact": (t1 - t0) / repeats * 1e6, "compiled": (time.process_time() - t1) / repeats * 1e6}
 
 
 def reach_pairs(morph, cfg: TrialConfig) -> dict:

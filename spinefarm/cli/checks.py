@@ -86,5 +86,6 @@ def seed(text: str) -> int:
 
 def add_cpg_step_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cpg-step", type=float, default=None, metavar="S",
-                   help="the CPG's own step where the robot updates it every physics step (default: the engine's, "
-                        "every step on Bullet, 0.002 on MuJoCo; 0: every step; see docs/performance.md)")
+                   help="the longest own step of the CPG where the robot updates it every physics step, each "
+                        "network within it and 0.25 / its fastest rate (default: the engine's, every step on "
+                        "Bullet, 0.004 on MuJoCo; 0: every step; see docs/performance.md)")

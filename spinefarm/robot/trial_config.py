@@ -33,11 +33,12 @@ class TrialConfig:
     cpg_update_period_s: NTRT's controlTime (CPG output held in between).
     cpg_max_step_s: the CPG's RK4 sub-step cap; None: 1 ms, longer for a network slow enough
     (worker.control.cpg.CpgIntegrator).
-    cpg_step_s: the CPG's own step where the morphology updates it every physics step (controlTime <= dt):
-    one RK4 step per cpg_step_s, one update ahead, the setpoints in between interpolated linearly (exact at
-    the updates); None: the engine's default (robot.engines: the Bullet judge every physics step, MuJoCo's
-    screen at the step measured within the chaos floor, docs/performance.md); 0: every physics step. A
-    controlTime above the physics step (NTRT's 0.1 s) is kept as the spec fixes it.
+    cpg_step_s: the longest own step of the CPG where the morphology updates it every physics step
+    (controlTime <= dt): each network updates at the largest multiple of the physics step within this and 0.25
+    over its fastest rate, by one RK4 step one update ahead, the setpoints in between interpolated linearly
+    (exact at the updates; worker.control.law); None: the engine's default (robot.engines: every physics step on
+    the Bullet judge, at most 4 ms on MuJoCo, docs/performance.md); 0: every physics step. A controlTime above
+    the physics step (NTRT's 0.1 s) or given here is kept as it is.
     settle_s: seconds simulated before locomotion with the CPG held at rest (zero output, the impedance
     reflex holding the posture); distance, speed, work and COT count from the pose at its end,
     NTRT's distance (ntrt_distance_cm) still from the start. 0: scored from the start.

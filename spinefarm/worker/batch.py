@@ -15,10 +15,10 @@ import numpy as np
 from spinefarm.robot.morphology.structure import NEWTON
 from spinefarm.robot.scene import Terrain
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker import scoring
+from spinefarm.worker import guard, scoring
 from spinefarm.worker.control.law import ControlLaw
 from spinefarm.worker.engines.base import BasePhysics
-from spinefarm.worker.episode import check_state
+from spinefarm.worker.episode import STRETCH_BASE_MIN_CM, check_state
 from spinefarm.worker.loop import advance, stepper
 from spinefarm.worker.settled import Settled
 from spinefarm.worker.sim import strings as sk
@@ -103,6 +103,10 @@ class Batch:
         self.done = 0  # steps since the start, settle included, of every world still running
         self._recorded = self.done  # the index of the step the recorder sees next
         self.run_steps = stepper(engine, law, self._record if timing.record_every else None)
+        # the compiled fast path of the guard check (worker.guard); None: the exact check every time
+        self._boxes = guard.level_boxes(terrain)
+        self._limits = guard.limits(cfg)
+        self._base_len = np.maximum(start_length_cm, STRETCH_BASE_MIN_CM).astype(np.float64)
 
     def run(self, settled: Settled | None = None, keep_settled: bool = False) -> list[World]:
         """Both phases, or with `settled` (every world's start pose and string tables those of its key,
@@ -169,8 +173,11 @@ class Batch:
         dt_check = self.timing.check_every * self.timing.dt_s
         for b in np.flatnonzero(self.active):
             w = self.worlds[b]
-            reason = check_state(poses[b], w.last_check, self.masses, self.law.state[b], self.start_length_cm,
-                                 dt_check, self.cfg, self.terrain)
+            clear = self._boxes is not None and guard.clearly_sane(
+                poses[b], w.last_check, self.masses, self.law.state[b, :, sk.S_LPREV], self._base_len, dt_check,
+                self._boxes, self._limits)
+            reason = "" if clear else check_state(poses[b], w.last_check, self.masses, self.law.state[b],
+                                                  self.start_length_cm, dt_check, self.cfg, self.terrain)
             w.last_check = poses[b, :, :3].copy()
             if reason:
                 w.reason = f"{reason} at t={self.done * self.timing.dt_s:.3f} s"

@@ -31,6 +31,7 @@ def test_rank_and_survival_on_hand_made_distances():
     assert ladders[((2.0, 30.0), 2)]["best_survives"] == 1 and ladders[((1.0, 30.0), 2)]["best_survives"] == 0
     # cost per gait: 1 s for all, 2 s for the best half, 30 s for the best quarter
     assert ladders[((1.0, 2.0, 30.0), 2)]["sim_s_per_gait"] == 1.0 + 2.0 / 2 + 30.0 / 4
+    assert ladders[((1.0, 2.0, 30.0), 2)]["sim_s_per_gait_continued"] == 1.0 + 1.0 / 2 + 28.0 / 4
     assert ladders[((1.0, 2.0, 30.0), 2)]["best_survives"] == 0
 
 

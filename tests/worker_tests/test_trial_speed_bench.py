@@ -23,6 +23,7 @@ def test_spines_with_a_robot_that_needs_the_automatic_step():
         assert row["bullet_cpu_s_per_sim_s"] > 0 and row["mujoco_speedup"] > 0
         split = row["mujoco_split_us_per_step"]  # parts of one step: each less than the whole
         assert 0 < split["mj_step"] < split["whole"] and 0 < split["control_law"] < split["whole"]
+        assert row["guard_check_us"]["exact"] > 0 and row["guard_check_us"]["compiled"] > 0
         assert abs(row["control_share"] - (1 - split["mj_step"] / split["whole"])) < 1e-12
         pairs = row["mujoco_reach_rod_pairs"]
         assert 0 < pairs["modelled"] <= pairs["of"]
