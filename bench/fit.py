@@ -9,7 +9,7 @@ object: {"constants": {NAME: {"true", "fitted", "rel_error", "identifiable", "wh
 true model (the floor: what restarting from a recorded state with finite-difference velocities costs, growing
 with the window as chaos amplifies it) and with each constant 5 % off (the signal); their ratio.
 
-    python bench/fit.py --identify [--engine mujoco] [--evaluations 200] [--restarts 3]
+    python bench/fit.py --identify [--engine mujoco] [--evaluations 400] [--restarts 3]
     python bench/fit.py --windows [--engine mujoco]
 
 --ntrt: each built-in spine fitted in each engine to its NTRT recordings (../shared/ntrt-recordings, the random
@@ -152,7 +152,7 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=2.0)
     ap.add_argument("--window", type=float, default=0.2)
     ap.add_argument("--restarts", type=int, default=3)
-    ap.add_argument("--evaluations", type=int, default=200)
+    ap.add_argument("--evaluations", type=int, default=400)
     args = ap.parse_args()
     if args.identify + args.windows + args.ntrt != 1:
         ap.error("say what to measure: --identify, --windows or --ntrt")

@@ -82,3 +82,28 @@ def test_fit_refuses_bad_input_in_one_line(recordings, capsys, fit, robot, messa
     assert main(["fit", robot, str(recordings / "r1.npz"), "--engine", "mujoco", "--fit", fit]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and "\n" not in err
+
+
+def test_a_pose_csv_fits_as_the_trial_record_does(recordings, capsys):
+    """A user's motion-capture file is as good as our own recording: the same motion written as a pose CSV (metres,
+    full precision, the rest lengths as columns) gives the same fit, bit for bit."""
+    from spinefarm.worker.fit.readers import read_recording
+
+    rec = read_recording(recordings / "r1.npz")
+    nb, ns = rec.n_segments, rec.n_strings
+    head = ["time_s"] + [f"seg{b}_{f}" for b in range(nb) for f in ("x_m", "y_m", "z_m", "qw", "qx", "qy", "qz")] \
+        + [f"str{i}_rest_m" for i in range(ns)]
+    cols = [rec.time_s[:, None]] + [np.concatenate([rec.position_m[:, b], rec.quat_wxyz[:, b]], axis=1)
+                                    for b in range(nb)] + [rec.rest_length_m]
+    csv_path = recordings / "mocap.csv"
+    np.savetxt(csv_path, np.concatenate(cols, axis=1), delimiter=",", header=",".join(head), comments="", fmt="%.17g")
+    out = []
+    for path in (recordings / "r1.npz", csv_path):
+        capsys.readouterr()
+        assert main(["fit", "tetraspine-ntrt", str(path), "--engine", "mujoco", "--fit", "ground_friction=0.3:1.3",
+                     "--window", "0.1", "--restarts", "1", "--evaluations", "6", "--json"]) == 0
+        out.append(json.loads(capsys.readouterr().out))
+    # the CSV holds no tensions: the loss is the pose error alone there, so compare what both fit on
+    assert out[0]["window_error_cm"]["before"] == out[1]["window_error_cm"]["before"]
+    assert out[0]["constants"]["ground_friction"]["fitted"] == pytest.approx(
+        out[1]["constants"]["ground_friction"]["fitted"], rel=0.05)
