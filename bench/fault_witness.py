@@ -26,6 +26,7 @@ def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) ->
     import zenoh
 
     from spinefarm.coordinator.service import zenoh_config
+    from spinefarm.protocol.code_digest import code_digest
     from spinefarm.protocol.envelope import decode_message, encode_message
     from spinefarm.protocol.run import RunConfig
     from spinefarm.protocol.submissions import SubmittedResult
@@ -42,7 +43,7 @@ def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) ->
     pending: dict[int, SubmittedResult] = {}
     with open(log_path, "a") as log:
         while True:
-            req = encode_message(WorkRequest(worker_id, 4, tuple(pending.values())))
+            req = encode_message(WorkRequest(worker_id, 4, tuple(pending.values()), code_digest=code_digest()))
             grants = [decode_message(r.ok.payload.to_bytes(), WorkGrant)
                       for r in session.get(keys.work(run_id), payload=req, timeout=5.0) if r.ok]
             if not grants:

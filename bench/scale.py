@@ -141,15 +141,23 @@ def _check(out: Path, tmp: Path) -> dict:
             "duplicated": sum(n - 1 for n in acked.values())}
 
 
+def _percentiles(ms: np.ndarray) -> dict:
+    return {"p50": round(float(np.percentile(ms, 50)), 2), "p99": round(float(np.percentile(ms, 99)), 2),
+            "max": round(float(ms.max()), 2)} if len(ms) else {}
+
+
 def _latencies(tmp: Path) -> dict:
-    rows = [line.split() for p in tmp.glob("grants-*.log") for line in p.read_text().splitlines()]
+    """Every grant's wait; apart, each worker's first (its session and routes just made) and the others."""
+    rows = sorted(line.split() for p in tmp.glob("grants-*.log") for line in p.read_text().splitlines())
     t = np.array([float(r[0]) for r in rows])
     ms = np.array([float(r[1]) for r in rows])
+    first = np.zeros(len(rows), bool)
+    first[list({r[2]: i for i, r in reversed(list(enumerate(rows)))}.values())] = True
     span = float(t.max() - t.min()) if len(t) > 1 else math.nan
-    return {"grants": len(ms), "workers_granted": len({r[2] for r in rows}),
+    return {"grants": len(ms), "workers_granted": int(first.sum()),
             "grants_per_s": round(len(ms) / span, 1) if span > 0 else None,
-            "grant_latency_ms": {"p50": round(float(np.percentile(ms, 50)), 2),
-                                 "p99": round(float(np.percentile(ms, 99)), 2), "max": round(float(ms.max()), 2)}}
+            "grant_latency_ms": _percentiles(ms), "first_grant_ms": _percentiles(ms[first]),
+            "later_grants_ms": _percentiles(ms[~first])}
 
 
 def _spinefarm(*args: str, log: Path) -> subprocess.Popen:

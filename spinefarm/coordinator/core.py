@@ -40,6 +40,9 @@ RETRIED_REASONS = ("timeout:", "crashed:")   # failures on a worker that another
 
 log = logging.getLogger("spinefarm.coordinator")
 _RATE_WINDOW_S = 30.0
+# Idle workers together ask about this often: 450 idle workers asking every 0.5 s (900 requests a second) held
+# every grant back by about a second at the end of bench/scale.py's 500-worker run
+IDLE_ASKS_PER_S = 100.0
 
 
 class CoordinatorCore(TaskDispatch):
@@ -133,17 +136,22 @@ class CoordinatorCore(TaskDispatch):
                 self._drop_unservable_tasks()
             if self.done:
                 self.told_done.add(req.worker_id)
-                return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, True,
+                return encode_message(WorkGrant(self.run_id, self.config_hash, (), self._idle_retry(), True,
                                                 verdicts, self.holder))
             if self.peers.is_quarantined(req.worker_id) or req.worker_id in self.unservable_workers:
-                return encode_message(WorkGrant(self.run_id, self.config_hash, (), self.idle_retry_s, False,
+                return encode_message(WorkGrant(self.run_id, self.config_hash, (), self._idle_retry(), False,
                                                 verdicts, self.holder))
             leases = self.scheduler.grant(req.worker_id, req.capacity, self._ask, self._eligible)
             self._store_given_up()
             assignments = tuple(self._assignment(ls) for ls in leases)
-        retry = 0.0 if assignments else self.idle_retry_s
+            retry = 0.0 if assignments else self._idle_retry()
         return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False, verdicts,
                                         self.holder))
+
+    def _idle_retry(self) -> float:
+        """How long a worker given nothing waits before it asks again: longer with more live workers (lock held)."""
+        alive = sum(1 for w in self.scheduler.workers.values() if w.alive)
+        return max(self.idle_retry_s, alive / IDLE_ASKS_PER_S)
 
     def _check_code(self, worker_id: str, digest: str | None) -> None:
         """A worker whose simulating code is not the run's is left out: its distances would differ, unmarked

@@ -66,13 +66,16 @@ class TaskDispatch:
         """Once the search is over: judges of overtaken bests are stopped (a worker still running one
         finds its result stale), and tasks no live worker may run are dropped, so the run can end
         (lock held)."""
+        # just (re)started: the workers that may run a task are still reconnecting
+        reconnecting = self.clock() < self.scheduler.grace_until_s
         best = self.study.storage.best_ids(1)
         alive = [w.worker_id for w in self.scheduler.workers.values() if w.alive]
         for key in list(self.tasks.pending):
             kind, tid = split_key(key)
             overtaken = kind == "judge" and (not best or best[0] != tid)
             # a live worker whose identity is still being asked may be the one that can run it
-            if overtaken or not any(self._eligible(key, w) or self.peers.identity(w) is None for w in alive):
+            if overtaken or not (reconnecting or any(self._eligible(key, w) or self.peers.identity(w) is None
+                                                     for w in alive)):
                 if not overtaken:
                     log.warning("no worker can run the %s task of trial %d: dropped", kind, tid)
                 self.scheduler.withdraw(key)
@@ -94,7 +97,9 @@ class TaskDispatch:
             return
         for w in worker_ids:
             self.scheduler.take_back(w)
-        reruns = self.tasks.mark_quarantined(worker_ids)
+        reruns, settled = self.tasks.mark_quarantined(worker_ids)
+        for key in settled:
+            self.scheduler.withdraw(key)
         for key in reruns:
             self.scheduler.push_front(key)
         log.warning("worker(s) %s quarantined (%s); %d of their results marked and re-run elsewhere",

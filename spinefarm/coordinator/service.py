@@ -32,7 +32,7 @@ from spinefarm.storage.status import write_final_status, write_status
 
 log = logging.getLogger("spinefarm.coordinator")
 DEFAULT_LISTEN = ("tcp/127.0.0.1:7447",)
-PROBE_TIMEOUT_S = 2.0   # a worker's identity queryable answers in milliseconds; a gone worker is asked again later
+PROBE_TIMEOUT_S = 5.0   # an identity queryable answers in milliseconds, on a loaded machine in seconds
 PROBE_AGAIN_S = 5.0
 
 

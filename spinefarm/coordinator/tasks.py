@@ -220,21 +220,27 @@ class TaskBook:
         if verdict == Verification.NOT_REPRODUCED:
             log.warning("best trial %d not reproduced: %s", tid, reason)
 
-    def mark_quarantined(self, worker_ids: list[str]) -> list[int]:
-        """Every complete row of quarantined workers is marked and re-run by another identity (an audit);
-        the audit task keys to issue (rows already being audited or refereed keep their task)."""
+    def mark_quarantined(self, worker_ids: list[str]) -> tuple[list[int], list[int]]:
+        """Every complete row of quarantined workers is marked and re-run by another identity (an audit); a row
+        another identity's audit disputes is settled against them (that audit was its re-run). (audit task keys
+        to issue, referee keys no longer wanted); rows already being audited keep their task."""
         cols = self.storage.columns()
-        mine = np.isin(cols["worker_id"], [w.encode("utf-8", "replace")[:64] for w in worker_ids])
-        rows = mine & (cols["status"] == b"complete") & ~np.isin(
-            cols["audit"], (AuditState.DISAGREES.stored, AuditState.DISPUTED.stored))
-        keys = []
-        for tid in np.flatnonzero(rows).tolist():
+        mine = np.isin(cols["worker_id"], [w.encode("utf-8", "replace")[:64] for w in worker_ids]) & (
+            cols["status"] == b"complete")
+        reruns, settled = [], []
+        for tid in np.flatnonzero(mine & (cols["audit"] == AuditState.DISPUTED.stored)).tolist():
+            row = self.storage.trial(tid)
+            self.storage.set_audit(tid, AuditState.DISAGREES, row.audit_distance_m, row.audit_worker_id)
+            if task_key(REFEREE, tid) in self.pending:
+                self.pending.discard(task_key(REFEREE, tid))
+                settled.append(task_key(REFEREE, tid))
+        for tid in np.flatnonzero(mine & (cols["audit"] != AuditState.DISAGREES.stored)).tolist():
             self.storage.set_audit(tid, AuditState.QUARANTINED)
             key = task_key(AUDIT, tid)
             if key not in self.pending:
                 self.pending.add(key)
-                keys.append(key)
-        return keys
+                reruns.append(key)
+        return reruns, settled
 
     def settle_audit(self, tid: int, r: TrialResult, worker_id: str, exact: bool) -> list[tuple[str, bool]]:
         """Store an audit; (worker, agreed) for each worker it judged. exact: both ran the same code in the same

@@ -54,8 +54,10 @@ class InMemoryStorage(BaseStorage):
     def _rebuild_ranking(self) -> None:
         """Rank a table loaded in one go (resume, read-only open) with the scanning helper."""
         cols = self.table.columns()
-        self._ranking = [(-int(cols["rung"][i]), -float(cols["objective"][i]), i)
-                         for i in BaseStorage.best_ids(self, self.table.n)]
+        # every complete ranked row: a row an audit disputes or a quarantine marks may be cleared later (best_ids
+        # filters by the verdicts at each call)
+        done = np.flatnonzero((cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(cols["objective"]))
+        self._ranking = sorted((-int(cols["rung"][i]), -float(cols["objective"][i]), int(i)) for i in done)
 
     def best_ids(self, k: int) -> list[int]:
         if k <= 0:

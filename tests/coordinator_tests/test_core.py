@@ -284,3 +284,13 @@ def test_a_worker_that_cannot_serve_a_run_others_serve_is_left_out_and_the_run_g
     again = ask(core, "w2", 2).assignments  # what it held goes to the others first
     assert [x.trial_id for x in again] == [x.trial_id for x in held]
     assert [x.params_unit for x in again] == [x.params_unit for x in held]
+
+
+@pytest.mark.parametrize(("alive", "retry_s"), [(10, 0.5), (200, 2.0), (500, 5.0)])
+def test_idle_workers_are_told_to_wait_longer_the_more_of_them_there_are(alive, retry_s):
+    """An idle worker waits max(0.5 s, live workers / 100 per s): together they ask about 100 times a second."""
+    core, _, _ = sphere_core(trials=1)
+    for i in range(alive):
+        core.worker_seen(f"w{i}")
+    assert len(ask(core, "w0").assignments) == 1  # the whole budget is leased: nothing left for the others
+    assert ask(core, "w1").retry_after_s == pytest.approx(retry_s)

@@ -239,3 +239,18 @@ def test_unreadable_zenoh_config_is_a_clear_error(tmp_path):
         WorkerService(ZenohAccess(config_file=bad))
     with pytest.raises(ConfigError, match="cannot read Zenoh config"):
         WorkerService(ZenohAccess(config_file=tmp_path / "missing.json5"))
+
+
+def test_a_worker_follows_the_coordinator_it_served_when_two_answer_for_its_run():
+    """Two coordinators answering for one run (a copy started while the original was cut off): the worker keeps
+    the holder it served, whichever answers first; with only one answering it goes with that one (a restart)."""
+    from spinefarm.protocol.work import WorkGrant
+
+    w = WorkerService(ZenohAccess(), run_id="r1", worker_id="w1")
+    original, copy = (WorkGrant("r1", "ab12cd34", (), 0.5, run_done, coordinator=c)
+                      for run_done, c in ((False, "100-aaa"), (True, "200-bbb")))
+    assert w._holder_grant("r1", [original]) is original
+    assert w._holder_grant("r1", [copy, original]) is original  # the copy's "done" is not followed
+    restarted = WorkGrant("r1", "ab12cd34", (), 0.5, False, coordinator="300-ccc")
+    assert w._holder_grant("r1", [restarted]) is restarted
+    assert w._holder_grant("r1", [original, restarted]) is restarted
