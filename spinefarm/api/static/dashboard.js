@@ -137,6 +137,10 @@ function runSkeleton(runId) {
         <p class="muted small" id="contour-note"></p></div>
       <div class="panel"><h2>One parameter against the objective <select id="param-select"></select></h2>
         <div class="plot" id="plot-param"></div></div>
+      <div class="panel"><h2>Objective distribution <span class="muted">(EDF: share of trials at most x)</span></h2>
+        <div class="plot" id="plot-edf"></div></div>
+      <div class="panel"><h2>Rank plot <span class="muted">(colour: the objective's rank)</span></h2>
+        <div class="filters" id="rank-controls"></div><div class="plot" id="plot-rank"></div></div>
       <div class="panel"><h2>Parameter importance <span class="muted" id="importance-note"></span></h2>
         <div class="notice warn" id="importance-warning" hidden></div><div id="plot-importance"></div></div>
       <div class="panel"><h2>Trials per worker over time</h2><div class="plot" id="plot-timeline"></div></div>
