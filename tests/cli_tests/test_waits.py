@@ -99,10 +99,15 @@ def test_a_bad_objective_is_refused_before_the_calibration_and_a_search_shows_th
     assert "calibrat" not in bad.stderr and not (tmp_path / "cache").exists() and not (tmp_path / "bad.h5").exists()
     scene = spinefarm(*common, "--scene", "moon", "--out", str(tmp_path / "bad.h5"), cwd=tmp_path, env=env)
     assert scene.returncode == 2 and "calibrat" not in scene.stderr and not (tmp_path / "cache").exists()
-    ok = spinefarm(*common, "--out", str(tmp_path / "ok.h5"), cwd=tmp_path, env=env)
+    loud = [a for a in common if a != "--quiet"]
+    ok = spinefarm(*loud, "--out", str(tmp_path / "ok.h5"), cwd=tmp_path, env=env)
     assert ok.returncode == 0, ok.stderr[-2000:]
     n = 4 + 2 + 4 + 1 + 8  # as SMALL_CALIBRATION_TRIALS, from the search's --calibrate-* flags
     assert f"calibration: 0/{n} trials (0 %)" in ok.stderr and f"calibration: {n}/{n} trials (100 %)" in ok.stderr
+    # --quiet: no progress line, the calibration's neither
+    quiet = spinefarm(*common, "--out", str(tmp_path / "quiet.h5"), "--calibrate-gaits", "5", cwd=tmp_path, env=env)
+    assert quiet.returncode == 0, quiet.stderr[-2000:]
+    assert "engine auto: calibrating" in quiet.stderr and "calibration: " not in quiet.stderr
 
 
 @pytest.mark.integration
