@@ -55,7 +55,7 @@ def choose_engine(args: argparse.Namespace) -> Any:
     print(f"engine auto: calibrating the tiers on {args.morphology} (cached after the first time) ...",
           file=sys.stderr)
     try:
-        result, cached = calibrate_in_child(args.morphology, settings)
+        result, cached = calibrate_in_child(args.morphology, settings, quiet=bool(getattr(args, "quiet", False)))
     except SpinefarmError as exc:  # e.g. a robot no default step can simulate: the run's own checks say it
         print(f"engine auto: the calibration could not run ({exc}); bullet", file=sys.stderr)
         args.engine = None
@@ -71,13 +71,13 @@ def choose_engine(args: argparse.Namespace) -> Any:
     return choice
 
 
-def calibrate_in_child(morphology: str, settings: Any) -> tuple[dict[str, Any], bool]:
+def calibrate_in_child(morphology: str, settings: Any, quiet: bool = False) -> tuple[dict[str, Any], bool]:
     """`spinefarm calibrate --json` in its own process: calibrating runs both simulators, and the search's own
     process (the coordinator) never loads one. Its progress lines pass through to this standard error (drawn
-    for a terminal when this is one). Ended with the search: terminated on any exception (Ctrl-C's
+    for a terminal when this is one; none with `quiet`). Ended with the search: terminated on any exception (Ctrl-C's
     KeyboardInterrupt included), killed by the kernel if the search dies first; its pool ends with it
     (worker.pool). (the calibration, whether it came from the cache)"""
-    from spinefarm.cli.waiting import FORCE_TTY_ENV
+    from spinefarm.cli.waiting import PROGRESS_ENV
     from spinefarm.protocol.errors import ConfigError
 
     cmd = [sys.executable, "-P", "-m", "spinefarm", "calibrate", morphology, "--json",
@@ -88,7 +88,7 @@ def calibrate_in_child(morphology: str, settings: Any) -> tuple[dict[str, Any], 
         cmd += ["--controller", settings.controller]
     if settings.auto_dt or settings.dt_s is not None:
         cmd += ["--dt", "auto" if settings.auto_dt else repr(settings.dt_s)]
-    env = {**os.environ, FORCE_TTY_ENV: "1" if sys.stderr.isatty() else "0"}
+    env = {**os.environ, PROGRESS_ENV: "off" if quiet else "tty" if sys.stderr.isatty() else "lines"}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env,
                             preexec_fn=die_with_parent)
     tail = bytearray()

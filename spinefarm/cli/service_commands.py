@@ -49,7 +49,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     zenoh_args(p, None)
     p.set_defaults(func=cmd_worker)
 
-    p = sub.add_parser("api", help="serve run files over HTTP: the dashboard at /, the JSON API (read-only)")
+    p = sub.add_parser("api", help="serve run files over HTTP: the dashboard at /, the JSON API (run files "
+                                   "read-only, notes kept beside them)")
     p.add_argument("files", nargs="*", metavar="RUN.h5")
     p.add_argument("--runs-dir", metavar="DIR", help="serve every *.h5 in DIR (rescanned)")
     p.add_argument("--host", default="127.0.0.1")

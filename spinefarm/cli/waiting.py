@@ -3,8 +3,8 @@ one line redrawn in place on a terminal, a plain line every few seconds otherwis
 
 A command makes one `Waiting(what, unit)` and passes it wherever `progress(done, total)` is taken (worker.pool's
 Progress). A wait shorter than SHOW_AFTER_S shows nothing on a terminal; a log always gets its first and last line.
-A parent process that runs the command in a child and forwards its standard error to a terminal sets
-FORCE_TTY_ENV so the child draws for that terminal.
+A parent process that runs the command in a child and forwards its standard error sets PROGRESS_ENV: "tty"
+(the child draws for the parent's terminal), "lines" (plain lines) or "off" (the parent's --quiet).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import TextIO
 LOG_EVERY_S = 5.0  # a plain line at most this often
 DRAW_EVERY_S = 0.2  # a terminal's line at most this often
 SHOW_AFTER_S = 2.0  # a terminal's line appears only for a wait this long
-FORCE_TTY_ENV = "SPINEFARM_PROGRESS_TTY"
+PROGRESS_ENV = "SPINEFARM_PROGRESS"
 
 
 def duration_text(seconds: float) -> str:
@@ -47,10 +47,11 @@ class Waiting:
 
     def __init__(self, what: str, unit: str, *, stream: TextIO | None = None, tty: bool | None = None,
                  quiet: bool = False) -> None:
-        self.what, self.unit, self.quiet = what, unit, quiet
+        mode = os.environ.get(PROGRESS_ENV)
+        self.what, self.unit, self.quiet = what, unit, quiet or mode == "off"
         self.stream = stream or sys.stderr
         if tty is None:
-            tty = os.environ.get(FORCE_TTY_ENV) == "1" or self.stream.isatty()
+            tty = mode == "tty" or (mode != "lines" and self.stream.isatty())
         self.tty = tty
         self.start = time.monotonic()
         self._shown = 0.0 if tty else -LOG_EVERY_S  # a log gets its first line at once

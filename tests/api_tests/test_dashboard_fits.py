@@ -89,3 +89,31 @@ def test_the_gait_plays_when_opened_and_stays_still_for_reduced_motion(browser, 
         assert page.locator("#motion-bar").get_attribute("data-time") == "0"
     finally:
         ctx.close()
+
+
+def test_the_run_page_draws_the_objectives_edf_and_a_rank_plot(browser, server):
+    import json
+    import urllib.request
+
+    with urllib.request.urlopen(f"{server.url}/runs/{RUNS[0]}/columns", timeout=60) as r:
+        cols = json.load(r)
+    c = cols["columns"]
+    ok = [i for i in range(cols["n_trials"]) if c["status"][i] == "complete" and c["objective"][i] is not None]
+    objective = [c["objective"][i] for i in ok]
+    assert len(ok) == 3 and len(set(objective)) == 3  # distinct values: every rank shows
+    ctx, page = open_page(browser, f"{server.url}/#/run/{RUNS[0]}", "#plot-rank .main-svg")
+    try:
+        edf = page.evaluate("() => { const d = document.getElementById('plot-edf').data[0]; return [d.x, d.y]; }")
+        assert edf == [sorted(objective), [1 / 3, 2 / 3, 1.0]]  # the share of trials at most each value
+        rank = page.evaluate("""() => { const d = document.getElementById('plot-rank').data[0];
+            return {ids: d.customdata, colour: d.marker.color}; }""")
+        # colour: 0 for the lowest objective, 0.5 the middle, 1 the highest (the best: objectives are maximised)
+        expected = {c["trial_id"][i]: sorted(objective).index(c["objective"][i]) / 2 for i in ok}
+        assert dict(zip(rank["ids"], rank["colour"], strict=True)) == expected
+        names = cols["param_names"]
+        assert page.locator("#rank-x").input_value() in names and page.locator("#rank-y").input_value() in names
+        page.select_option("#rank-y", "objective")
+        ys = page.evaluate("() => document.getElementById('plot-rank').data[0].y")
+        assert sorted(ys) == sorted(objective)
+    finally:
+        ctx.close()

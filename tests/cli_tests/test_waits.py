@@ -14,9 +14,9 @@ import pytest
 from spinefarm.cli.waiting import SHOW_AFTER_S, Waiting, duration_text, progress_text
 from tests.coordinator_tests.procs import ROOT
 
-SMALL_CALIBRATION = ("--gaits", "4", "--search-trials", "2", "--bests", "1", "--duration", "0.5", "--settle", "0.2")
-# 4 random gaits + 2 searched on MuJoCo, 4 + 1 judged on Bullet, up to 2 x 4 re-run at half the step
-SMALL_CALIBRATION_TRIALS = 4 + 2 + 4 + 1 + 8
+SMALL_CALIBRATION = ("--gaits", "4", "--search-trials", "0", "--bests", "0", "--duration", "0.5", "--settle", "0.2")
+# 4 random gaits on MuJoCo, the same 4 judged on Bullet, up to 2 x 4 re-run at half the step
+SMALL_CALIBRATION_TRIALS = 4 + 0 + 4 + 0 + 8
 
 
 def spinefarm(*args: str, cwd, env: dict | None = None, **kw) -> subprocess.CompletedProcess:
@@ -61,19 +61,23 @@ def test_a_terminal_gets_one_line_redrawn_only_for_a_wait_longer_than_two_second
 
 
 @pytest.mark.integration
-def test_calibrate_shows_its_progress_in_a_log_and_on_a_terminal(tmp_path):
-    env = {"SPINEFARM_CACHE_DIR": str(tmp_path / "cache")}
+def test_calibrate_shows_its_progress_in_a_log(tmp_path):
     n = SMALL_CALIBRATION_TRIALS
-    r = spinefarm("calibrate", "tetraspine-ntrt", *SMALL_CALIBRATION, cwd=tmp_path, env=env)
+    r = spinefarm("calibrate", "tetraspine-ntrt", *SMALL_CALIBRATION, cwd=tmp_path,
+                  env={"SPINEFARM_CACHE_DIR": str(tmp_path / "cache")})
     assert r.returncode == 0, r.stderr[-2000:]
     assert f"calibrating the tiers on tetraspine-ntrt: up to {n} trials on 2 processes" in r.stderr
     assert f"calibration: 0/{n} trials (0 %)" in r.stderr and "estimating the time left" in r.stderr
     assert f"calibration: {n}/{n} trials (100 %)" in r.stderr and r.stderr.rstrip().endswith("done")
-    # on a terminal: the line redrawn in place (the calibration takes longer than SHOW_AFTER_S)
+
+
+@pytest.mark.integration
+def test_calibrate_draws_one_line_on_a_terminal(tmp_path):
+    n = SMALL_CALIBRATION_TRIALS
     main, sub = pty.openpty()
     t = subprocess.Popen([sys.executable, "-m", "spinefarm", "calibrate", "tetraspine-ntrt", *SMALL_CALIBRATION,
-                          "--refresh", "--json"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=sub,
-                         env={**os.environ, "PYTHONPATH": str(ROOT), **env})
+                          "--json"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=sub,
+                         env={**os.environ, "PYTHONPATH": str(ROOT), "SPINEFARM_CACHE_DIR": str(tmp_path / "cache")})
     os.close(sub)
     seen = b""
     try:
@@ -85,24 +89,38 @@ def test_calibrate_shows_its_progress_in_a_log_and_on_a_terminal(tmp_path):
         os.close(main)
         t.wait(timeout=600)
     assert t.returncode == 0
+    # redrawn in place (the calibration takes longer than SHOW_AFTER_S), no plain line of its start
     assert f"\r\x1b[Kcalibration: {n}/{n} trials (100 %)".encode() in seen, seen[-500:]
+    assert f"calibration: 0/{n} trials (0 %)".encode() not in seen
+
+
+SEARCH = ("search", "tetraspine-ntrt", "--trials", "2", "--workers", "1", "--duration", "0.3", "--api-port", "-1",
+          "--no-verify", "--calibrate-gaits", "4", "--calibrate-search-trials", "0", "--calibrate-bests", "0",
+          "--calibrate-duration", "0.3", "--calibrate-settle", "0.1")
 
 
 @pytest.mark.integration
-def test_a_bad_objective_is_refused_before_the_calibration_and_a_search_shows_the_calibrations_progress(tmp_path):
+def test_a_bad_objective_or_scene_is_refused_before_the_calibration(tmp_path):
     env = {"SPINEFARM_CACHE_DIR": str(tmp_path / "cache")}
-    common = ("search", "tetraspine-ntrt", "--trials", "2", "--workers", "1", "--duration", "0.5", "--api-port", "-1",
-              "--no-verify", "--quiet", "--calibrate-gaits", "4", "--calibrate-search-trials", "2",
-              "--calibrate-bests", "1", "--calibrate-duration", "0.5", "--calibrate-settle", "0.2")
-    bad = spinefarm(*common, "--objective", "fastest", "--out", str(tmp_path / "bad.h5"), cwd=tmp_path, env=env)
+    bad = spinefarm(*SEARCH, "--objective", "fastest", "--out", str(tmp_path / "bad.h5"), cwd=tmp_path, env=env)
     assert bad.returncode == 2 and "unknown objective; received 'fastest'" in bad.stderr
     assert "calibrat" not in bad.stderr and not (tmp_path / "cache").exists() and not (tmp_path / "bad.h5").exists()
-    scene = spinefarm(*common, "--scene", "moon", "--out", str(tmp_path / "bad.h5"), cwd=tmp_path, env=env)
+    scene = spinefarm(*SEARCH, "--scene", "moon", "--out", str(tmp_path / "bad.h5"), cwd=tmp_path, env=env)
     assert scene.returncode == 2 and "calibrat" not in scene.stderr and not (tmp_path / "cache").exists()
-    ok = spinefarm(*common, "--out", str(tmp_path / "ok.h5"), cwd=tmp_path, env=env)
-    assert ok.returncode == 0, ok.stderr[-2000:]
-    n = 4 + 2 + 4 + 1 + 8  # as SMALL_CALIBRATION_TRIALS, from the search's --calibrate-* flags
-    assert f"calibration: 0/{n} trials (0 %)" in ok.stderr and f"calibration: {n}/{n} trials (100 %)" in ok.stderr
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("quiet", [False, True])
+def test_a_search_shows_its_calibrations_progress_unless_quiet(tmp_path, quiet):
+    env = {"SPINEFARM_CACHE_DIR": str(tmp_path / "cache")}
+    r = spinefarm(*SEARCH, *(["--quiet"] if quiet else []), "--out", str(tmp_path / "ok.h5"), cwd=tmp_path, env=env)
+    assert r.returncode == 0, r.stderr[-2000:]
+    n = 4 + 0 + 4 + 0 + 8  # from the search's --calibrate-* flags, as SMALL_CALIBRATION_TRIALS
+    assert "engine auto: calibrating" in r.stderr
+    if quiet:  # no progress line, the calibration's neither
+        assert "calibration: " not in r.stderr
+    else:
+        assert f"calibration: 0/{n} trials (0 %)" in r.stderr and f"calibration: {n}/{n} trials (100 %)" in r.stderr
 
 
 @pytest.mark.integration

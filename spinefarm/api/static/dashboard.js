@@ -127,6 +127,7 @@ function runSkeleton(runId) {
     <div class="notice" id="empty" hidden></div><div id="run-body">
     <div class="buttons"><a class="button" id="dl-file" href="/runs/${r}/file">download run file (.h5)</a>
     <a class="button" id="dl-csv" href="/runs/${r}/trials.csv">download CSV</a></div>
+    <div class="panel notes" id="notes-panel"></div>
     <div class="grid">
       <div class="panel"><h2>Best so far against trials</h2><div class="plot" id="plot-progress"></div></div>
       <div class="panel"><h2>Best so far against time</h2><div class="plot" id="plot-time"></div></div>
@@ -141,6 +142,10 @@ function runSkeleton(runId) {
         <p class="muted small" id="contour-note"></p></div>
       <div class="panel"><h2>One parameter against the objective <select id="param-select"></select></h2>
         <div class="plot" id="plot-param"></div></div>
+      <div class="panel"><h2>Objective distribution <span class="muted">(EDF: share of trials at most x)</span></h2>
+        <div class="plot" id="plot-edf"></div></div>
+      <div class="panel"><h2>Rank plot <span class="muted">(colour: the objective's rank)</span></h2>
+        <div class="filters" id="rank-controls"></div><div class="plot" id="plot-rank"></div></div>
       <div class="panel"><h2>Parameter importance <span class="muted" id="importance-note"></span></h2>
         <div class="notice warn" id="importance-warning" hidden></div><div id="plot-importance"></div></div>
       <div class="panel"><h2>Trials per worker over time</h2><div class="plot" id="plot-timeline"></div></div>
@@ -157,7 +162,10 @@ async function showRun(runId, gen, first) {
   const [status, cols, analysis, meta] = await Promise.all([api(`/runs/${r}`), api(`/runs/${r}/columns`),
     api(`/runs/${r}/analysis`), api(`/runs/${r}/meta`)]);
   if (gen !== generation) return;
-  if (first) runSkeleton(runId);
+  if (first) {
+    runSkeleton(runId);
+    notesPanel(document.getElementById("notes-panel"), runId, null);
+  }
   document.getElementById("run-title").innerHTML = `${esc(runId)} ${stateBadge(status.state)}`;
   const best = status.best;
   const alive = status.workers.filter((w) => w.alive).length;
@@ -231,6 +239,7 @@ async function showTrial(runId, trialId, gen) {
     ${t.reason ? `<p class="error">${esc(t.reason)}</p>` : ""}
     <div class="buttons"><a class="button" id="dl-params" href="/runs/${r}/trials/${t.trial_id}/params.json"
       download>download --params file</a></div>
+    <div class="panel notes" id="notes-panel"></div>
     <div class="grid">
       <div class="panel"><h2>Verification</h2><table id="verification"><tbody>
         <tr><td class="l">verdict</td><td class="l verdict ${esc(v.verdict)}" id="verdict-label">${esc(v.label || v.verdict)}</td></tr>
@@ -247,6 +256,7 @@ async function showTrial(runId, trialId, gen) {
     <div id="episodes"></div>
     <div class="panel" style="margin-top:1em"><h2>The gait, moving</h2><div id="motion-area"></div></div>
     <div class="panel picture" style="margin-top:1em"><h2>The gait in six frames</h2><div id="picture"></div></div>`;
+  notesPanel(document.getElementById("notes-panel"), runId, t.trial_id);
   if (meta.robust && meta.robust.episodes) showEpisodes(r, t.trial_id, gen);
   const pic = document.getElementById("picture");
   const area = document.getElementById("motion-area");

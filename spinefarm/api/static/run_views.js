@@ -12,7 +12,7 @@ function resetRunState(runId) {
   Object.assign(runState, {page: 0, filters: {}});
   if (runState.runId === runId) return;
   Object.assign(runState, {runId, paramCols: [], pc: {axes: null, brushes: {}}, brushed: null, onlyBrushed: false,
-    contour: null});
+    contour: null, rank: null});
 }
 
 function runningMax(xs, ys) {
@@ -125,6 +125,8 @@ function drawParamPlots(runId, cols, analysis, ok) {
     Plotly.relayout(impEl, {shapes: [{type: "line", x0: analysis.importance_noise, x1: analysis.importance_noise,
       yref: "paper", y0: 0, y1: 1, line: {dash: "dash", color: "#c27b12", width: 1.5}}]});
   }
+  drawEdf(cols, ok, cols.objective);
+  drawRank(runId, cols, ok, order);
   runState.redrawTable = () => drawTable(runId, cols);
   drawParallel(runId, cols, analysis, ok, runState.redrawTable);
   drawContour(runId, cols, analysis);
