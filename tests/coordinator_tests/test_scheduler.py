@@ -225,3 +225,11 @@ def test_the_documented_bounds_of_a_grant():
     assert len(one.grant("w2", 10, new_ids())) == 1
     with pytest.raises(dataclasses.FrozenInstanceError):
         first[0].deadline_s = 1e9  # a lease is not stretched in place
+
+
+def test_a_new_trial_a_worker_may_not_run_is_queued_for_another():
+    s, ids = Scheduler(FakeClock(0.0), lease_s=5.0), new_ids()
+    not_one = lambda key, worker: not (key == 1 and worker == "w1")  # noqa: E731  e.g. an engine w1 lacks
+    assert [ls.trial_id for ls in s.grant("w1", 3, ids, not_one)] == [0]  # the batch ends at trial 1
+    assert s.queued(1) and [ls.trial_id for ls in s.grant("w2", 1, ids, not_one)] == [1]
+    assert [ls.trial_id for ls in s.grant("w1", 2, ids, not_one)] == [2, 3]
