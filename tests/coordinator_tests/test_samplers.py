@@ -305,3 +305,11 @@ def test_the_samplers_defaults_are_the_documented_ones(storage):
     assert cma.describe()["sigma0"] == 0.3
     tpe = make_sampler("tpe", 3, 5, budget=100, objective="distance")
     assert tpe.describe()["startup_trials"] == 10
+
+
+def test_a_stored_sampler_is_found_by_its_name_or_by_an_older_files_kind():
+    named = {"name": "paper", "seed": 1, "sigma": 0.01, "top_k": 1, "startup_trials": 0}  # no kind
+    again = sampler_from_dict(named, 3)
+    assert isinstance(again, GaussianHillClimbSampler) and again.sigma == 0.01
+    older = {"kind": "RandomSampler", "seed": 4}  # written before samplers had names
+    assert isinstance(sampler_from_dict(older, 3), RandomSampler)

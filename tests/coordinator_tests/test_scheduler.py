@@ -225,3 +225,34 @@ def test_the_documented_bounds_of_a_grant():
     assert len(one.grant("w2", 10, new_ids())) == 1
     with pytest.raises(dataclasses.FrozenInstanceError):
         first[0].deadline_s = 1e9  # a lease is not stretched in place
+
+
+def test_a_new_trial_a_worker_may_not_run_is_queued_for_another():
+    s, ids = Scheduler(FakeClock(0.0), lease_s=5.0), new_ids()
+    not_one = lambda key, worker: not (key == 1 and worker == "w1")  # noqa: E731  e.g. an engine w1 lacks
+    assert [ls.trial_id for ls in s.grant("w1", 3, ids, not_one)] == [0]  # the batch ends at trial 1
+    assert s.queued(1) and [ls.trial_id for ls in s.grant("w2", 1, ids, not_one)] == [1]
+    assert [ls.trial_id for ls in s.grant("w1", 2, ids, not_one)] == [2, 3]
+
+
+def test_tasks_go_first_withdrawn_keys_are_forgotten_and_a_late_result_is_known_from_a_forged_one():
+    clock = FakeClock(0.0)
+    s, ids = Scheduler(clock, lease_s=5.0), new_ids()
+    held = s.grant("w1", 3, ids)
+    s.enqueue([10, 11])
+    s.push_front(-4)  # a judge task: before anything queued
+    s.push_front(-4)  # once
+    s.push_front(held[0].trial_id)  # leased already: not queued again
+    assert s.queued_keys() == [-4, 10, 11]
+    s.withdraw(10)
+    s.withdraw(held[1].trial_id)  # leased: dropped, its worker no longer holds it
+    assert s.queued_keys() == [-4, 11] and s.lease_of(held[1].trial_id) is None
+    assert s.workers["w1"].leases == {held[0].trial_id, held[2].trial_id}
+    # the issue is remembered: a late result of that lease is stale, one quoting a lease never given is forged
+    assert s.was_issued(held[1].trial_id, held[1].lease_id, "w1")
+    assert not s.was_issued(held[1].trial_id, held[1].lease_id, "w2")
+    assert not s.was_issued(held[1].trial_id, held[1].lease_id + 1, "w1")
+    # a worker's keys taken back go first, in key order, and it holds nothing
+    assert s.take_back("w1") == [held[0].trial_id, held[2].trial_id]
+    assert s.queued_keys() == [held[0].trial_id, held[2].trial_id, -4, 11] and s.workers["w1"].leases == set()
+    assert s.take_back("nobody") == []

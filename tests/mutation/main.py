@@ -38,9 +38,9 @@ def copy_tree(dest: Path) -> None:
 
 def run_module(tree: Path, module: str, tests: tuple[str, ...]) -> int:
     # mutmut 2 counts only exit code 1 as killed: a mutant that breaks an import (pytest's exit code 2, a
-    # collection error) would count as survived, so every failure is made 1
-    pytest = f"{sys.executable} -m pytest -x -q -p no:randomly -p no:cacheprovider {' '.join(tests)}"
-    runner = f"sh -c '{pytest} || exit 1'"
+    # collection error) would count as survived, so pytest_exit makes every failure 1
+    runner = " ".join([sys.executable, "-m", "tests.mutation.pytest_exit", "-x", "-q", "-p", "no:randomly", "-p",
+                       "no:cacheprovider", *tests])
     env = dict(os.environ, PYTHONPATH=str(tree), SPINEFARM_MUTATION="1")
     cmd = [sys.executable, "-m", "mutmut", "run", "--paths-to-mutate", module, "--runner", runner,
            "--tests-dir", "tests", "--disable-mutation-types", "string,fstring,decorator",

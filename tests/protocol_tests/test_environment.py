@@ -92,3 +92,25 @@ def test_the_record_keeps_the_variables_that_steer_blas_and_numba(monkeypatch):
     monkeypatch.setenv("NUMBA_OPT", "0")
     told = differences(rec)
     assert told == [f"environment variables {dict(steering, NUMBA_OPT='0')} here, {steering} in the run"]
+
+
+def test_without_a_checkout_of_its_own_the_commit_is_spinefarm_commit(tmp_path, monkeypatch):
+    """A package copied into some other git repository (an image's source tree, a vendored copy) is not that
+    repository's commit: SPINEFARM_COMMIT says what it is."""
+    import importlib.util
+    import shutil
+
+    outer = tmp_path / "someone-elses-repo"
+    copy = outer / "vendored" / "spinefarm" / "protocol" / "environment.py"
+    copy.parent.mkdir(parents=True)
+    shutil.copy(ROOT / "spinefarm" / "protocol" / "environment.py", copy)
+    for args in (["init", "-q"], ["-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "--allow-empty",
+                                  "-m", "x"]):
+        subprocess.run(["git", "-C", str(outer), *args], check=True, capture_output=True)
+    spec = importlib.util.spec_from_file_location("vendored_environment", copy)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    monkeypatch.setenv("SPINEFARM_COMMIT", "0123abc")
+    assert module._commit() == "0123abc"
+    monkeypatch.delenv("SPINEFARM_COMMIT")
+    assert module._commit() is None
