@@ -20,6 +20,7 @@ import tempfile
 import time
 
 from spinefarm.robot.morphology.registry import builtin_names
+from spinefarm.worker.calibrate import simulating_code_digest
 from spinefarm.worker.shipped_calibration import shipped_path
 
 FIGURES = ("spearman", "top_overlap", "top_k", "median_distance_ratio", "n_moving", "decision", "reason")
@@ -37,6 +38,7 @@ def ship(name: str, jobs: int) -> dict:
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     for transient in ("cached", "shipped"):
         result.pop(transient, None)
+    result["code"] = simulating_code_digest()  # what it was made with, for the record (not part of its key)
     path = shipped_path(name)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result, indent=1) + "\n")
