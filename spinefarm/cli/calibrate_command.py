@@ -16,10 +16,11 @@ if TYPE_CHECKING:
     from spinefarm.worker.calibrate import CalibrationSettings
 
 # what `spinefarm calibrate --help` says first
-DESCRIPTION = ("Run seeded random gaits plus the bests of a short search on both tiers and say whether a search "
-               "may screen on MuJoCo (Spearman rho >= 0.9, top-10 overlap >= 8, median distance ratio in "
-               "[0.9, 1.1]). Cached by the spec's hash (see --cache-dir; --refresh recomputes, --clear-cache "
-               "empties it).")
+DESCRIPTION = ("Run seeded random gaits plus the bests of a short search on MuJoCo and on the judge (Bullet at "
+               "the judge's 0.25 ms step) and say whether a search may screen on MuJoCo (Spearman rho >= 0.9, "
+               "top-10 overlap >= 8, median distance ratio in [0.9, 1.1]). The built-ins' results ship with "
+               "the package; others are cached by the spec's hash (see --cache-dir; --refresh recomputes, "
+               "--clear-cache empties it).")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -48,9 +49,10 @@ def add_calibration_arguments(p: argparse.ArgumentParser, prefix: str = "") -> N
         p.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
         add_profile_argument(p)
         p.add_argument("--dt", default=None, metavar="S|auto",
-                       help="physics step of both tiers in seconds, or 'auto' (half the string network's "
-                            "stable-step estimate, at most each tier's default); default: each tier's default "
-                            "step, or 'auto' for a robot that default is unstable for")
+                       help="physics step of the screen (MuJoCo) in seconds, or 'auto' (half the string "
+                            "network's stable-step estimate, at most its default); default: MuJoCo's default "
+                            "step, or 'auto' for a robot a default is unstable for. The judge runs at its own "
+                            "step (0.25 ms, or the automatic one where that is unstable)")
 
 
 def settings_from(args: argparse.Namespace, prefix: str = "", controller: str | None = None, jobs: int = 1
@@ -72,7 +74,8 @@ def summary(result: dict, cached: bool) -> str:
     """The calibration as a few lines of text."""
     rho = result["spearman"]
     ratio = result["median_distance_ratio"]
-    lines = [f"calibration of {result['robot']} (spec {result['spec_hash']}){' [cached]' if cached else ''}: "
+    came = " [shipped]" if result.get("shipped") else " [cached]" if cached else ""
+    lines = [f"calibration of {result['robot']} (spec {result['spec_hash']}){came}: "
              f"{result['n_random']} random gaits + {result['n_bests']} bests of a short search, "
              f"{result['settings']['duration_s']:g} s after a {result['settings']['settle_s']:g} s settle",
              f"  Spearman rho {'-' if rho is None else f'{rho:.3f}'}, top-{result['top_k']} overlap "
@@ -80,7 +83,8 @@ def summary(result: dict, cached: bool) -> str:
              f"{'-' if ratio is None else f'{ratio:.3f}'} over {result['n_moving']} gaits that move"]
     for tier, t in result["tiers"].items():
         err = "-" if t["step_error"] is None else f"{100 * t['step_error']:.2f} %"
-        lines.append(f"  {tier:7s} {t['cpu_s_per_sim_s']:.3f} CPU s per simulated s, step error {err}")
+        step = f" at {1e3 * t['dt_s']:g} ms" if t.get("dt_s") else ""
+        lines.append(f"  {tier:7s}{step} {t['cpu_s_per_sim_s']:.3f} CPU s per simulated s, step error {err}")
     lines.append(f"  decision: {result['decision']} ({result['reason']})")
     return "\n".join(lines)
 
@@ -90,6 +94,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from spinefarm.protocol.errors import ParameterError
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.calibrate import TIERS, cache_dir, cache_path, calibration, clean, trials_in
+    from spinefarm.worker.shipped_calibration import shipped
 
     if args.cache_dir:
         print(cache_dir())
@@ -111,7 +116,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
         choose_step(morph, TrialConfig(dt_s=settings.dt_s))
     with Waiting("calibration", "trials") as wait:
-        if not args.json and (args.refresh or not cache_path(args.morphology, settings).is_file()):
+        if not args.json and (args.refresh or not (shipped(args.morphology, settings)
+                                                   or cache_path(args.morphology, settings).is_file())):
             print(f"calibrating the tiers on {args.morphology}: up to {trials_in(settings)} trials on "
                   f"{settings.jobs} process{'es' if settings.jobs > 1 else ''} (cached after the first time)",
                   file=sys.stderr, flush=True)

@@ -1,7 +1,8 @@
-"""`search --engine auto` (search's default): calibrate the tiers on the robot (or use the cached calibration,
-worker.calibrate), then screen on MuJoCo with rungs when it ranks the robot's gaits as Bullet does, else run
-on Bullet. `auto` is no engine: it is resolved here, before the run's trial config is made, and the choice
-with its figures is stored in the run's settings (protocol.engine_choice.EngineChoice)."""
+"""`search --engine auto` (search's default): calibrate the tiers on the robot against the judge (or use the
+shipped or cached calibration, worker.shipped_calibration and worker.calibrate), then screen on MuJoCo with
+rungs when it ranks the robot's gaits as Bullet does, else run on Bullet. `auto` is no engine: it is resolved
+here, before the run's trial config is made, and the choice with its figures is stored in the run's settings
+(protocol.engine_choice.EngineChoice)."""
 
 from __future__ import annotations
 
@@ -52,14 +53,19 @@ def choose_engine(args: argparse.Namespace) -> Any:
     # checked here, so a bad --calibrate-* value is an error, not a fall back to Bullet
     settings = settings_from(args, "calibrate-", controller=args.controller,
                              jobs=max(1, min(2, getattr(args, "workers", 1) or 1)))
-    print(f"engine auto: calibrating the tiers on {args.morphology} (cached after the first time) ...",
-          file=sys.stderr)
-    try:
-        result, cached = calibrate_in_child(args.morphology, settings, quiet=bool(getattr(args, "quiet", False)))
-    except SpinefarmError as exc:  # e.g. a robot no default step can simulate: the run's own checks say it
-        print(f"engine auto: the calibration could not run ({exc}); bullet", file=sys.stderr)
-        args.engine = None
-        return None
+    from spinefarm.worker.shipped_calibration import shipped
+
+    result, cached = shipped(args.morphology, settings), True  # a built-in's, made for this model: no child
+    if result is None:
+        print(f"engine auto: calibrating the tiers on {args.morphology} against the judge (cached after the "
+              "first time) ...", file=sys.stderr)
+        try:
+            result, cached = calibrate_in_child(args.morphology, settings,
+                                                quiet=bool(getattr(args, "quiet", False)))
+        except SpinefarmError as exc:  # e.g. a robot no default step can simulate: the run's own checks say it
+            print(f"engine auto: the calibration could not run ({exc}); bullet", file=sys.stderr)
+            args.engine = None
+            return None
     args.engine = result["decision"]
     rungs = None
     if args.engine == "mujoco" and args.rungs is None:

@@ -9,7 +9,7 @@ from spinefarm.cli import checks, engine_auto
 from spinefarm.cli.profile_argument import add_profile_argument
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.robust_args import add_robust_args
-from spinefarm.protocol.settings import DEFAULT_ETA
+from spinefarm.protocol.settings import DEFAULT_ETA, JUDGE_DT_S
 
 
 def zenoh_args(p: argparse.ArgumentParser, listen_default: str | None) -> None:
@@ -138,5 +138,5 @@ def _ladder_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--verify-engine", default=None,
                    help="re-simulate every new best in this engine before it counts, and report its distance "
                         "(default: bullet whenever the search's --engine is not bullet)")
-    g.add_argument("--verify-dt", type=float, default=2.5e-4, metavar="S",
-                   help="step of that re-simulation (default 0.00025 s, Bullet's converged step)")
+    g.add_argument("--verify-dt", type=float, default=JUDGE_DT_S, metavar="S",
+                   help=f"step of that re-simulation (default {JUDGE_DT_S:g} s, Bullet's converged step)")

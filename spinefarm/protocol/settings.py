@@ -112,6 +112,11 @@ class AuditPolicy(_JsonRecord):
 # keep the best 1/eta of each rung: bench/ladder.py's choice (docs/performance.md, "A ladder chosen by measurement")
 DEFAULT_ETA = 4
 
+# The judge behind another screen engine: Bullet at its converged step (within ~1.5 % of a finer one,
+# docs/accuracy.md); `search --verify-dt` defaults to it and the calibration takes it as its reference.
+JUDGE_ENGINE = "bullet"
+JUDGE_DT_S = 2.5e-4
+
 
 @dataclass(frozen=True)
 class RunSettings:

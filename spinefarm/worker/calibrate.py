@@ -1,7 +1,10 @@
 """Do the two tiers rank this robot's gaits alike? (`spinefarm calibrate`, `search --engine auto`)
 
 Seeded random gaits plus the bests of a short search on the fast tier (a hill climb from the best random
-gait) run on both tiers (MuJoCo and Bullet, each at its default step and options, after a settle phase).
+gait) run on both tiers after a settle phase: MuJoCo at its default step (or the one asked for), and the judge
+a search would use, Bullet at the judge's step (protocol.settings.JUDGE_DT_S, 0.25 ms; the automatic step
+where that one is unstable for the robot), not at Bullet's default 1 ms, whose own distance error is larger
+than the tiers' difference.
 From their distances: the Spearman rank correlation, how many of MuJoCo's top 10 are among Bullet's top 10,
 and the median distance ratio (MuJoCo / Bullet) over the gaits that move at least 1 cm in Bullet; and for
 each tier its cost (CPU s per simulated s) and its step error (median relative change of the distance at
@@ -9,7 +12,9 @@ half the step, over a few gaits that move). The fast tier passes when rho >= 0.9
 and the ratio is within [0.9, 1.1]; a search then screens on MuJoCo, otherwise it runs on Bullet.
 
 Results are cached as JSON by the spec's hash, the calibration's settings and a digest of the simulating
-code and engine versions (cache_dir()): a change of either engine's model calibrates again.
+code and engine versions (cache_dir()): a change of either engine's model calibrates again. The built-ins'
+results ship with the package (worker.shipped_calibration), used when the spec's hash and the settings' key
+match.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ import numpy as np
 
 from spinefarm.protocol.errors import ConfigError, bounded, check_fields, whole
 from spinefarm.protocol.run import json_hash
+from spinefarm.protocol.settings import JUDGE_DT_S, JUDGE_ENGINE
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.profile import profile_hash
 from spinefarm.worker.pool import Progress, run_jobs
@@ -41,7 +47,7 @@ RATIO_RANGE = (0.9, 1.1)
 MOVING_M = 0.01
 STEP_ERROR_GAITS = 4  # gaits per tier re-run at half the step
 SEARCH_SIGMA = 0.1  # the short search's step in the unit cube
-TIERS = ("mujoco", "bullet")
+TIERS = ("mujoco", JUDGE_ENGINE)  # the screen, and the reference: the judge's engine
 STEP_FIELDS = ("dt_s", "auto_dt")
 
 
@@ -49,8 +55,9 @@ STEP_FIELDS = ("dt_s", "auto_dt")
 class CalibrationSettings:
     """gaits: seeded random gaits (seeds 1..gaits); search_trials: a short search on MuJoCo (a Gaussian
     hill climb from the best random gait, seeds after those), whose `bests` best join them; trials of
-    duration_s after a settle_s settle; jobs: processes; dt_s / auto_dt: the step of both tiers (None and
-    False: each tier's default step; auto_dt: at most half the robot's stable-step estimate)."""
+    duration_s after a settle_s settle; jobs: processes; dt_s / auto_dt: the screen's step (None and False:
+    MuJoCo's default step; auto_dt: at most half the robot's stable-step estimate). The reference runs at
+    the judge's step whatever these say (reference_step)."""
 
     gaits: int = whole(40, 3, 100_000)
     search_trials: int = whole(40, 0, 100_000)
@@ -75,6 +82,7 @@ class CalibrationSettings:
         (none without, so that calibrations from before profiles keep their key)."""
         d = dataclasses.asdict(self)
         key = {k: v for k, v in d.items() if k not in ("jobs", "profile") and not (k in STEP_FIELDS and not v)}
+        key["reference"] = [JUDGE_ENGINE, JUDGE_DT_S]  # results against Bullet's default step are not reused
         return json_hash({**key, "profile_hash": profile_hash(dict(self.profile))} if self.profile else key)
 
 
@@ -134,6 +142,19 @@ def decide(agree: dict[str, Any]) -> tuple[str, str]:
 
 
 _CACHE = None  # one SetupCache per process
+
+
+def reference_step(source: str) -> tuple[float, bool]:
+    """(the reference's step in s, whether it is the automatic one): the judge's step, or the automatic
+    step for a robot whose string network is unstable at it (where a search's judge would refuse it)."""
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.episode import choose_step
+
+    morph = load_morphology(source)
+    try:
+        return choose_step(morph, TrialConfig(engine=JUDGE_ENGINE, dt_s=JUDGE_DT_S)), False
+    except ConfigError:
+        return choose_step(morph, TrialConfig(engine=JUDGE_ENGINE, dt_s=JUDGE_DT_S, auto_dt=True)), True
 
 
 def _trial(job: tuple) -> tuple[float, float]:
@@ -226,6 +247,8 @@ def calibrate(source: str, settings: CalibrationSettings, progress: Progress | N
     t_wall = time.time()
     morph = load_morphology(source)
     s = settings
+    ref_dt_s, ref_auto = reference_step(source)
+    ref = dataclasses.replace(s, dt_s=ref_dt_s, auto_dt=False)  # the reference's trials: the judge's step
     tally = _Tally(trials_in(s), progress)
     gaits = [(tuple(random_unit_params(morph, seed, s.controller)), seed) for seed in range(1, s.gaits + 1)]
     screen = tally.run([(source, u, seed, "mujoco", 1.0, s) for u, seed in gaits], s.jobs)
@@ -236,25 +259,33 @@ def calibrate(source: str, settings: CalibrationSettings, progress: Progress | N
     bests = [s.gaits + int(i) for i in np.argsort(-np.nan_to_num(found, nan=-np.inf), kind="stable")[:s.bests]]
     chosen = list(range(s.gaits)) + bests
     mujoco = np.array([screen[i][0] for i in chosen])
-    judged = tally.run([(source, gaits[i][0], gaits[i][1], "bullet", 1.0, s) for i in chosen], s.jobs)
+    judged = tally.run([(source, gaits[i][0], gaits[i][1], JUDGE_ENGINE, 1.0, ref) for i in chosen], s.jobs)
     bullet = np.array([d for d, _ in judged])
     agree = agreement(bullet, mujoco)
     engine, why = decide(agree)
     cost = {"mujoco": float(np.median([screen[i][1] for i in chosen])),
             "bullet": float(np.median([c for _, c in judged]))}
     picked = [gaits[i] for i in chosen]
-    tiers = {t: {"cpu_s_per_sim_s": cost[t],
-                 "step_error": _step_error(source, picked, d, t, s, tally)} for t, d in (("mujoco", mujoco),
-                                                                                         ("bullet", bullet))}
+    tiers = {t: {"cpu_s_per_sim_s": cost[t], "dt_s": _step_of(morph, t, ts),
+                 "step_error": _step_error(source, picked, d, t, ts, tally)}
+             for t, d, ts in (("mujoco", mujoco, s), (JUDGE_ENGINE, bullet, ref))}
     tally.finish()
     return {"robot": morph.name, "source": str(source), "spec_hash": morph.spec_hash(),
-            "profile_hash": profile_hash(dict(s.profile)),
+            "profile_hash": profile_hash(dict(s.profile)), "key": s.key(),
+            "reference": {"engine": JUDGE_ENGINE, "dt_s": ref_dt_s, "judge_dt_s": JUDGE_DT_S, "auto_dt": ref_auto},
             "settings": dataclasses.asdict(s), "n_random": s.gaits, "n_bests": len(bests), **agree,
             "tiers": tiers, "thresholds": {"spearman": RHO_MIN, "top_overlap": f"{OVERLAP_MIN} of {TOP_K}",
                                            "median_distance_ratio": list(RATIO_RANGE)},
             "decision": engine, "reason": why,
             "distance_m": {"mujoco": _finite_list(mujoco), "bullet": _finite_list(bullet)},
             "wall_s": time.time() - t_wall}
+
+
+def _step_of(morph: Any, engine: str, s: CalibrationSettings) -> float:
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.episode import choose_step
+
+    return choose_step(morph, TrialConfig(engine=engine, dt_s=s.dt_s, auto_dt=s.auto_dt))
 
 
 def _finite_list(x: np.ndarray) -> list[float | None]:
@@ -305,7 +336,12 @@ def cache_path(source: str, settings: CalibrationSettings) -> Path:
 
 def calibration(source: str, settings: CalibrationSettings, refresh: bool = False,
                 progress: Progress | None = None) -> tuple[dict[str, Any], bool]:
-    """(the calibration of this robot under these settings, whether it came from the cache)."""
+    """(the calibration of this robot under these settings, whether it came from the cache or the shipped
+    calibrations; then its "shipped" is True for the latter)."""
+    from spinefarm.worker.shipped_calibration import shipped
+
+    if not refresh and (hit := shipped(source, settings)) is not None:
+        return {**hit, "shipped": True}, True
     path = cache_path(source, settings)
     if not refresh and path.is_file():
         try:
