@@ -13,6 +13,7 @@ import argparse
 import json
 import os
 import shutil
+import signal
 import sqlite3
 import subprocess
 import sys
@@ -46,6 +47,20 @@ def run_module(tree: Path, module: str, tests: tuple[str, ...]) -> int:
            "--tests-dir", "tests", "--disable-mutation-types", "string,fstring,decorator",
            "--test-time-base", "20", "--simple-output", "--no-progress", "--CI"]
     return subprocess.run(cmd, cwd=tree, env=env, stdout=sys.stderr).returncode
+
+
+def end_leftovers(tree: Path) -> int:
+    """Processes still working in the copy (a timed-out mutant's searches and workers: mutmut kills only the
+    pytest it started): ended, as only this run starts processes there. How many."""
+    ended = 0
+    for proc in Path("/proc").iterdir():
+        try:
+            if proc.name.isdigit() and Path(os.readlink(proc / "cwd")).is_relative_to(tree.resolve()):
+                os.kill(int(proc.name), signal.SIGKILL)
+                ended += 1
+        except OSError:
+            continue
+    return ended
 
 
 def counts(tree: Path, module: str) -> tuple[dict[str, int], list[int]]:
@@ -89,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         started = time.monotonic()
         if not args.report_only:
             run_module(tree, module, tests)
+            end_leftovers(tree)
         report[name], ids = counts(tree, module)
         report[name].update(module=module, tests=list(tests), seconds=round(time.monotonic() - started))
         lived += [f"## {name} mutant {i}\n{diff(tree, i)}" for i in ids]
