@@ -1,5 +1,6 @@
-"""`--engine auto`'s pieces that need no calibration (docs/engines.md): the rungs it screens with, a third of
-the trial and the whole of it, and when it is asked for (search's default) or not."""
+"""`--engine auto`'s pieces that need no calibration (docs/engines.md): the rungs it screens with, a sixth of
+the trial, a third and the whole of it (docs/performance.md's ladder table), and when it is asked for (search's
+default) or not."""
 
 from __future__ import annotations
 
@@ -8,9 +9,9 @@ import argparse
 from spinefarm.cli.engine_auto import choose_engine, default_rungs, wants_auto
 
 
-def test_the_default_rungs_are_a_third_of_the_trial_and_the_whole():
-    assert default_rungs(30.0) == "10,30"
-    assert default_rungs(5.0) == "1.66667,5"
+def test_the_default_rungs_are_a_sixth_a_third_of_the_trial_and_the_whole():
+    assert default_rungs(30.0) == "5,10,30"
+    assert default_rungs(5.0) == "0.833333,1.66667,5"
 
 
 def _args(**kw) -> argparse.Namespace:
