@@ -140,13 +140,14 @@ class HalvingTrialScheduler(BaseTrialScheduler):
         for r in range(self.top - 1, -1, -1):
             done = np.flatnonzero(complete & (rung == r) & np.isfinite(obj))
             keep = len(done) // self.eta
-            if keep == 0:
+            if len(done) == 0 or (keep == 0 and not sampling_done):
                 continue
             order = done[np.lexsort((done, -obj[done]))]  # best first; ties: the lower id
-            if int(np.count_nonzero(promoted & (rung == r + 1))) >= keep:
+            if keep == 0 or int(np.count_nonzero(promoted & (rung == r + 1))) >= keep:
                 if not sampling_done:
                     continue
-                order = order[:1]  # quota used: at the end only the rung's best still goes on
+                # quota used, or a rung of fewer than eta rows: at the end only the rung's best still goes on
+                order, keep = order[:1], 1
             for tid in order[:keep].tolist():
                 if tid not in promoted_from:
                     return int(tid)

@@ -166,6 +166,20 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
     assert "no such trial" in capsys.readouterr().err
 
 
+def test_at_the_end_the_best_goes_on_through_rungs_holding_fewer_rows_than_eta():
+    """Six sets on three rungs at eta 4: the first rung's quota is one set (6 // 4), the second rung then holds
+    one row, of which 1 // 4 = 0 would go on; once sampling is done, its best still reaches the full length."""
+    rungs = HalvingTrialScheduler.from_durations((0.5, 1.0, 3.0), 4)
+    st = _storage_with([0.1, 0.9, 0.5, 0.7, 0.2, 0.8])
+    assert rungs.promotion(st) == 1  # the quota of the first rung: its best
+    st.add_trial(6, np.full(3, 0.5), np.zeros(3), "promoted", 1, 0, 1, 1.0)
+    st.finish_trial(6, _result(6, 0.95), 0.95)
+    assert rungs.promotion(st) is None  # while sampling goes on, one row of rung 1 promotes nothing
+    assert rungs.promotion(st, sampling_done=True) == 6  # at the end the best goes on to the full length
+    st.add_trial(7, np.full(3, 0.5), np.zeros(3), "promoted", 6, 0, 2, 3.0)
+    assert rungs.promotion(st, sampling_done=True) is None  # and once: nothing more to promote
+
+
 def test_a_search_that_keeps_improving_promotes_about_a_third_and_always_its_best():
     """Hill climbing makes each new trial better than the last: every one enters the top third when it
     finishes, but only a third (plus late bests) may go on."""
