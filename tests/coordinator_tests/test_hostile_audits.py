@@ -75,10 +75,13 @@ def _open(endpoint: str) -> zenoh.Session | None:
 def _check_quarantined_rows(out, bad: set[bytes]) -> None:
     with Hdf5Storage.open_read(out) as s:
         cols = s.columns()
-        best = s.best(1)[0]
-    assert best.worker_id.encode() not in bad and best.distance_m <= 3.0
+        bests = s.best(1)
     theirs = np.isin(cols["worker_id"], list(bad)) & (cols["status"] == b"complete")
     assert theirs.any()
+    honest = (cols["status"] == b"complete") & ~theirs
+    # on a busy machine the forger may take every trial: then no row may be best at all (each is disputed)
+    assert len(bests) == int(honest.any())
+    assert all(b.worker_id.encode() not in bad and b.distance_m <= 3.0 for b in bests)
     # every complete row of the quarantined session is marked and was re-run by another identity, which
     # measured what the result's parameters give
     assert set(cols["audit"][theirs].tolist()) == {b"disagrees"}
