@@ -117,3 +117,21 @@ def test_the_run_page_draws_the_objectives_edf_and_a_rank_plot(browser, server):
         assert sorted(ys) == sorted(objective)
     finally:
         ctx.close()
+
+
+def test_the_compare_view_draws_each_runs_edf(browser, server):
+    import json
+    import urllib.request
+
+    want = []
+    for run_id in RUNS:
+        with urllib.request.urlopen(f"{server.url}/runs/{run_id}/columns?params=false", timeout=60) as r:
+            c = json.load(r)["columns"]
+        want.append(sorted(v for s, v in zip(c["status"], c["objective"], strict=True) if s == "complete"))
+    ctx, page = open_page(browser, f"{server.url}/#/compare/{RUNS[0]},{RUNS[1]}", "#compare-edf .main-svg")
+    try:
+        drawn = page.evaluate("() => document.getElementById('compare-edf').data.map((d) => [d.x, d.y])")
+        assert drawn == [[xs, [(k + 1) / len(xs) for k in range(len(xs))]] for xs in want]
+    finally:
+        ctx.close()
+

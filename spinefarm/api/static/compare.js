@@ -54,6 +54,8 @@ async function showCompare(ids, gen, first = true) {
       <div class="grid">
         <div class="panel"><h2>Best so far against trials</h2><div class="plot" id="compare-trials"></div></div>
         <div class="panel"><h2>Best so far against time</h2><div class="plot" id="compare-time"></div></div>
+        <div class="panel"><h2>Distribution <span class="muted">(EDF: share of each run's trials at most x)</span></h2>
+          <div class="plot" id="compare-edf"></div></div>
       </div>
       <h2 style="margin-top:1em">The runs</h2><div class="tablewrap"><table id="compare-table"></table></div>`;
     document.getElementById("compare-metric").onchange = (ev) => {
@@ -80,6 +82,12 @@ function drawCompare(ids, data) {
     curves.reduce((s, cv) => s + cv.byTrial.x.length, 0));
   plot("compare-time", traces("byTime"), {xaxis: {title: {text: "time since the run's first result (s)"}},
     yaxis: {title: {text: yTitle}}, legend: {orientation: "h", y: -0.3}}, curves.reduce((s, cv) => s + cv.byTime.x.length, 0));
+  // the EDF of the score over each run's trials that count
+  const edf = curves.map((cv, k) => cv.rows.map((i) => data[k][1].columns[key][i]).sort((a, b) => a - b));
+  plot("compare-edf", edf.map((xs, k) => ({x: xs, y: xs.map((_, j) => (j + 1) / xs.length), mode: "lines",
+    type: "scatter", name: name(k), line: {color: COMPARE_COLOURS[k % COMPARE_COLOURS.length], shape: "hv"}})),
+  {xaxis: {title: {text: yTitle}}, yaxis: {title: {text: "share of trials ≤ x"}, range: [0, 1.02]},
+    legend: {orientation: "h", y: -0.3}}, edf.reduce((s, xs) => s + xs.length, 0));
   const rows = data.map(([st, cols], k) => {
     const b = st.best;
     const counted = curves[k].rows;
