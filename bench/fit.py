@@ -12,13 +12,17 @@ with the window as chaos amplifies it) and with each constant 5 % off (the signa
     python bench/fit.py --identify [--engine mujoco] [--evaluations 400] [--restarts 3]
     python bench/fit.py --windows [--engine mujoco]
 
---ntrt: each built-in spine fitted in each engine to its NTRT recordings (../shared/ntrt-recordings, the random
-draws): leave-one-out window error before and after (worker.fit.loo), then the fit to all of them and NTRT's
-published gait replayed before and after against NTRT's recorded distance. Prints
-{"spines": {SPINE: {ENGINE: {"ratio_before", "ratio_after", "window_error_before", "window_error_after"}}}}.
-A skeleton: its default budget is small (--evaluations, --restarts), the full run takes hours on 2 cores.
+--ntrt: each spine's model of NTRT's current code (the *-ntrt2026 built-ins, which made the recordings) fitted in
+each engine to its NTRT recordings (../shared/ntrt-recordings: the published run and the random draws NTRT ran
+to the end, each cut to its first --span seconds): leave-one-out window error of the held-out recording before
+and after (worker.fit.loo, the median over the folds), then the fit to all of them and NTRT's published gait
+replayed before and after against NTRT's recorded distance in the same time. Only constants with a documented
+plausible range are fitted (NTRT_FIT, per engine). Prints
+{"spines": {SPINE: {ENGINE: {"ratio_before", "ratio_after", "window_error_before", "window_error_after",
+"held_out_improves", "inside_ranges", "folds", "constants", "profile", ...}}}}.
 
-    python bench/fit.py --ntrt [--spines tetraspine-ntrt] [--engines mujoco bullet] [--model SPINE=SPEC ...]
+    python bench/fit.py --ntrt [--spines tetraspine-ntrt2026 ...] [--engines mujoco bullet] [--fit NAME,...]
+                        [--evaluations N] [--restarts N] [--span 10] [--stride 1] [--replay-duration S]
 """
 
 from __future__ import annotations
@@ -75,9 +79,13 @@ def windows_bench(args: argparse.Namespace) -> dict:
             "window_s": rows, "command": "python bench/fit.py --windows " + " ".join(sys.argv[2:])}
 
 
-NTRT_FOLDERS = {"tetraspine-ntrt": "TetraSpine", "tetrahedral-complex": "TetrahedralComplex",
-                "octahedral-complex": "OctahedralComplex", "ribbed": "Ribbed"}
-NTRT_FIT = "ground_friction,string_stiffness_n_per_m,string_damping_n_s_per_m,rod_density_kg_per_cm3"
+NTRT_FOLDERS = {"tetraspine-ntrt2026": "TetraSpine", "tetrahedral-complex-ntrt2026": "TetrahedralComplex",
+                "octahedral-complex-ntrt2026": "OctahedralComplex", "ribbed-ntrt2026": "Ribbed"}
+# only constants with a documented plausible range (docs/fitting.md) that NTRT's recordings do not pin already:
+# the ground's friction, the engine's contact and the strings' damping (masses, stiffness and the motors are
+# NTRT's own numbers in the *-ntrt2026 models, read from its recordings' model-meta.txt)
+NTRT_FIT = {"mujoco": "ground_friction,string_damping_n_s_per_m,mujoco.solref_time_s,mujoco.solref_damping_ratio",
+            "bullet": "ground_friction,string_damping_n_s_per_m,bullet.erp"}
 
 
 def ntrt_bench(args: argparse.Namespace) -> dict:
@@ -85,45 +93,64 @@ def ntrt_bench(args: argparse.Namespace) -> dict:
     from spinefarm.robot.trial_config import TrialConfig
     from spinefarm.worker.fit.fitting import fit_constants
     from spinefarm.worker.fit.loo import leave_one_out
-    from spinefarm.worker.fit.loss import prepare
-    from spinefarm.worker.fit.readers import read_recording
     from spinefarm.worker.fit.search import parse_fit
 
-    robots = dict(item.split("=", 1) for item in args.robot_spec)  # a spine's model other than its built-in
     out: dict = {"spines": {}, "command": "python bench/fit.py --ntrt " + " ".join(sys.argv[2:])}
     for spine in args.spines:
-        morph = load_morphology(robots.get(spine, spine))
+        morph = load_morphology(spine)
         folder = Path(args.recordings) / NTRT_FOLDERS[spine]
-        recs = [prepare(d.name, read_recording(d), args.window, args.stride, 0.0)
-                for d in sorted(folder.glob("random-*")) if _full(d)]
+        recs = ntrt_recordings(folder, args.window, args.stride, args.span)
         out["spines"][spine] = {}
         for engine in args.engines:
-            cfg = TrialConfig(engine=engine)
-            bounds = parse_fit(args.fit)
+            t0 = time.time()
+            cfg, bounds = TrialConfig(engine=engine), parse_fit(args.fit or NTRT_FIT[engine])
             loo = leave_one_out(morph, cfg, recs, bounds, args.restarts, args.evaluations)
             fitted = fit_constants(morph, cfg, recs, [], bounds, args.restarts, args.evaluations)
-            before, after = (_replay_ratio(spine, morph, engine, profile, folder / "published",
-                                           args.replay_duration) for profile in ({}, fitted["profile"]))
-            out["spines"][spine][engine] = {"ratio_before": before, "ratio_after": after,
-                                            "window_error_before": loo["window_error_before"],
-                                            "window_error_after": loo["window_error_after"], "folds": loo["folds"],
-                                            "profile": fitted["profile"], "constants": fitted["constants"]}
+            before, after = (_replay_ratio(morph, engine, profile, folder / "published", args.replay_duration)
+                             for profile in ({}, fitted["profile"]))
+            inside = not any(c["at_bound"] for c in fitted["constants"].values())
+            out["spines"][spine][engine] = {
+                "ratio_before": before, "ratio_after": after,
+                "window_error_before": loo["window_error_before"], "window_error_after": loo["window_error_after"],
+                "folds": loo["folds"], "recordings": [p.name for p in recs],
+                "held_out_improves": loo["window_error_after"] < loo["window_error_before"],
+                "inside_ranges": inside, "profile": fitted["profile"], "constants": fitted["constants"],
+                "wall_s": time.time() - t0}
     return out
 
 
-def _replay_ratio(spine: str, morph: object, engine: str, profile: dict, published: Path,
-                  duration_s: float | None) -> float:
+def ntrt_recordings(folder: Path, window_s: float, stride_s: float, span_s: float) -> list:
+    """The published run and the random draws NTRT ran to the end, each cut to its first span_s seconds (the
+    published run is 30-60 s, the draws 10 s: cut, no recording outweighs the others in the loss)."""
+    from spinefarm.worker.fit.loss import prepare
+    from spinefarm.worker.fit.readers import read_recording
+
+    draws = [folder / "published", *sorted(folder.glob("random-*"))]
+    return [prepare(d.name, _first(read_recording(d), span_s), window_s, stride_s, 0.0) for d in draws if _full(d)]
+
+
+def _first(rec: object, span_s: float) -> object:
+    """The recording's rows up to span_s after its start."""
+    import dataclasses
+
+    n = int(np.searchsorted(rec.time_s, rec.time_s[0] + span_s + 1e-9))
+    cut = {f: getattr(rec, f)[:n] for f in ("time_s", "position_m", "quat_wxyz", "string_length_m",
+                                            "rest_length_m", "tension_n") if getattr(rec, f) is not None}
+    return dataclasses.replace(rec, **cut)
+
+
+def _replay_ratio(morph: object, engine: str, profile: dict, published: Path, duration_s: float | None) -> float:
     """NTRT's published gait replayed on our model: its scored segment's distance over NTRT's recorded one in the
     same time (the published recording's, at duration_s or its end)."""
     from spinefarm.worker.fit.readers import read_recording
     from spinefarm.worker.fit.state import planar_distance_cm
-    from spinefarm.worker.replay import parameter_folder, replay
+    from spinefarm.worker.replay import replay
 
     rec = read_recording(published)
     seg = json.loads((published / "run-info.json").read_text())["scoring_segment"]
     end = len(rec.time_s) - 1 if duration_s is None else int(np.searchsorted(rec.time_s, duration_s - 1e-9))
     ntrt_cm = planar_distance_cm(rec.position_m[0, seg] * 100, rec.position_m[end, seg] * 100)
-    ours = replay(parameter_folder(spine), morph, engine=engine, duration_s=float(rec.time_s[end]), profile=profile)
+    ours = replay(published, morph, engine=engine, duration_s=float(rec.time_s[end]), profile=profile)
     return ours.result.ntrt_distance_cm / ntrt_cm
 
 
@@ -140,10 +167,9 @@ def main() -> None:
     ap.add_argument("--ntrt", action="store_true", help="the built-in spines fitted to NTRT's recordings")
     ap.add_argument("--spines", nargs="+", default=list(NTRT_FOLDERS))
     ap.add_argument("--engines", nargs="+", default=["mujoco", "bullet"])
-    ap.add_argument("--model", dest="robot_spec", nargs="*", default=[], metavar="SPINE=SPEC",
-                    help="with --ntrt: fit this model of a spine (e.g. tetraspine-ntrt=tetraspine-ntrt2026)")
     ap.add_argument("--recordings", default="/work/shared/ntrt-recordings", help="NTRT's recordings folder")
-    ap.add_argument("--fit", default=NTRT_FIT)
+    ap.add_argument("--fit", default=None, help="with --ntrt: NAME[=LO:HI],... (default per engine: NTRT_FIT)")
+    ap.add_argument("--span", type=float, default=10.0, help="with --ntrt: seconds of each recording fitted")
     ap.add_argument("--stride", type=float, default=1.0)
     ap.add_argument("--replay-duration", type=float, default=None)
     ap.add_argument("--robot", default="tetraspine-ntrt")

@@ -1,0 +1,52 @@
+"""bench/fit.py --ntrt: which of NTRT's recordings it fits (the published run and the draws NTRT ran to the end,
+as their run-info.json says) and how far into each (--span), and that it fits only constants with a plausible
+range."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+
+from spinefarm.worker.fit.search import parse_fit
+from tests.coordinator_tests.procs import ROOT
+
+NTRT = Path("/work/shared/ntrt-recordings")
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("fit_bench", ROOT / "bench" / "fit.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_aborted_draws_left_out():
+    bench = _bench()
+    aborted = {d.name for d in (NTRT / "Ribbed").iterdir() if d.is_dir() and any(
+        r.get("aborted") for r in json.loads((d / "run-info.json").read_text())["runs"].values())}
+    assert aborted == {"random-00", "random-02"}  # NTRT's own run-info, read here without the bench
+    kept = [d.name for d in sorted((NTRT / "Ribbed").iterdir()) if d.is_dir() and bench._full(d)]
+    assert kept == ["published", "random-01", "random-03", "random-08", "random-09"]
+
+
+def test_published_and_draws_cut_to_the_span():
+    recs = _bench().ntrt_recordings(NTRT / "TetraSpine", 0.2, 0.5, 1.0)
+    assert [p.name for p in recs] == ["published", "random-00", "random-01", "random-02", "random-03"]
+    for p in recs:
+        # NTRT samples every 10 ms from t = 0: 1 s is 101 rows; windows of 0.2 s start at 0 and 0.5 s
+        assert len(p.rec.time_s) == 101 and np.isclose(p.rec.time_s[-1] - p.rec.time_s[0], 1.0)
+        assert p.rec.tension_n.shape[0] == p.rec.rest_length_m.shape[0] == p.poses.shape[0] == 101
+        assert [w.start for w in p.windows] == [0, 50] and [len(w.rows) for w in p.windows] == [20, 20]
+
+
+def test_fitted_constants_have_plausible_ranges():
+    bench = _bench()
+    assert set(bench.NTRT_FOLDERS) == {"tetraspine-ntrt2026", "tetrahedral-complex-ntrt2026",
+                                       "octahedral-complex-ntrt2026", "ribbed-ntrt2026"}
+    for engine, names in bench.NTRT_FIT.items():
+        bounds = parse_fit(names)  # refuses a name without a documented range
+        assert {b.name for b in bounds} >= {"ground_friction", "string_damping_n_s_per_m"}
+        assert all(not b.name.startswith(("mujoco.", "bullet.")) or b.name.startswith(engine) for b in bounds)
