@@ -60,6 +60,24 @@ def test_held_out_recording_never_enters_the_loss(recordings, capsys):
     assert a["recordings"] != b["recordings"]
 
 
+def test_constants_the_step_cannot_simulate_score_as_diverged_not_an_error(recordings):
+    """The 3-segment Tetraspine's strings diverge above a 15.9 ms step (its stability estimate): a candidate at
+    20 ms is scored DIVERGED_CM (100 cm), where the loss itself refuses it, and one at 1 ms as the loss does."""
+    from spinefarm.protocol.errors import ConfigError
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.loss import candidate_loss, fit_loss, prepare
+    from spinefarm.worker.fit.readers import read_recording
+
+    morph = load_morphology("tetraspine-ntrt")
+    rec = [prepare("r1", read_recording(recordings / "r1.npz"), 0.1, 0.1)]
+    unstable = TrialConfig(engine="mujoco", dt_s=0.02)
+    with pytest.raises(ConfigError):
+        fit_loss(morph, unstable, rec)
+    assert candidate_loss(morph, unstable, rec) == 100.0
+    stable = TrialConfig(engine="mujoco")
+    assert candidate_loss(morph, stable, rec) == fit_loss(morph, stable, rec) < 100.0
+
+
 def test_fit_recovers_constants_on_a_tiny_robot():
     morph = load_morphology("tetraspine-ntrt")
     true = {"ground_friction": 0.65, "string_stiffness_n_per_m": 1300.0}

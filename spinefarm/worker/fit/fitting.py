@@ -10,7 +10,7 @@ from typing import Any
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.profile import apply_profile, current_value
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.fit.loss import Prepared, fit_loss, report, window_error_cm
+from spinefarm.worker.fit.loss import Prepared, candidate_loss, fit_loss, report, window_error_cm
 from spinefarm.worker.fit.search import Bound, minimise
 
 AT_BOUND = 0.01  # a fitted value this near its bounds (in the unit cube) may want to lie beyond them
@@ -28,7 +28,7 @@ def fit_constants(morph: Morphology, cfg: TrialConfig, fitted: Sequence[Prepared
     start = {b.name: min(max(current_value(apply_profile(morph, cfg.profile), b.name, cfg.engine,
                                            {**cfg.engine_options, **_engine_part(cfg)}), b.low), b.high)
              for b in bounds}
-    found = minimise(lambda v: fit_loss(morph, with_values(cfg, v), list(fitted)), bounds, start,
+    found = minimise(lambda v: candidate_loss(morph, with_values(cfg, v), list(fitted)), bounds, start,
                      restarts, evaluations, seed)
     after = with_values(cfg, found.values)
     spread = found.spread()

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.fit.recording import Recording
@@ -72,6 +73,19 @@ def window_error_cm(morph: Morphology, cfg: TrialConfig, recordings: list[Prepar
 def fit_loss(morph: Morphology, cfg: TrialConfig, recordings: list[Prepared]) -> float:
     """What the fit minimises: the RMS of the pose errors and the weighed tension errors (cm)."""
     return float(np.sqrt(np.concatenate([squared_errors(morph, cfg, p, True) for p in recordings]).mean()))
+
+
+def candidate_loss(morph: Morphology, cfg: TrialConfig, recordings: list[Prepared]) -> float:
+    """fit_loss, or DIVERGED_CM for constants the physics step cannot simulate (strings made too stiff or too
+    damped for it): the search scores them as a diverged window and moves away, instead of stopping."""
+    from spinefarm.robot.profile import apply_profile
+    from spinefarm.worker.episode import choose_step
+
+    try:
+        choose_step(apply_profile(morph, cfg.profile), cfg)
+    except ConfigError:
+        return DIVERGED_CM
+    return fit_loss(morph, cfg, recordings)
 
 
 def distances_cm(morph: Morphology, cfg: TrialConfig, p: Prepared) -> tuple[float, float]:
