@@ -72,7 +72,10 @@ def cmd_fit(args: argparse.Namespace) -> int:
         return out
 
     fitted, held = prepared(args.recordings), prepared(args.hold_out)
-    result = fit_constants(morph, cfg, fitted, held, bounds, args.restarts, args.evaluations, args.seed)
+    from spinefarm.cli.waiting import Waiting
+
+    with Waiting("fit", "losses") as wait:
+        result = fit_constants(morph, cfg, fitted, held, bounds, args.restarts, args.evaluations, args.seed, wait)
     result = {"robot": morph.name, "engine": cfg.engine, "window_s": args.window, "stride_s": stride, **result}
     if args.out is not None:
         write_profile(args.out, morph.name, result, " ".join(["spinefarm", *sys.argv[1:]]))

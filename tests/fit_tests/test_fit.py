@@ -50,6 +50,15 @@ def _fit(folder, hold_out, capsys) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
+def test_a_fit_shows_its_progress_as_plain_lines_off_a_terminal(recordings, capsys):
+    capsys.readouterr()
+    assert main(["fit", "tetraspine-ntrt", str(recordings / "r1.npz"), "--engine", "mujoco", "--fit",
+                 "ground_friction=0.3:1.3", "--window", "0.1", "--restarts", "2", "--evaluations", "12"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("fit: 0/24 losses (0 %)") or err[0].startswith("fit: 1/24 losses")
+    assert err[-1].startswith("fit: 24/24 losses (100 %)") and err[-1].endswith("done")
+
+
 def test_held_out_recording_never_enters_the_loss(recordings, capsys):
     a = _fit(recordings, "r2.npz", capsys)
     b = _fit(recordings, "r3.npz", capsys)

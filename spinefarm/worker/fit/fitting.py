@@ -4,7 +4,7 @@ figures out. Hold-out recordings are only reported: the loss sees the fitted rec
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from spinefarm.robot.morphology.model import Morphology
@@ -21,15 +21,15 @@ def with_values(cfg: TrialConfig, values: Mapping[str, float]) -> TrialConfig:
 
 
 def fit_constants(morph: Morphology, cfg: TrialConfig, fitted: Sequence[Prepared], held_out: Sequence[Prepared],
-                  bounds: Sequence[Bound], restarts: int = 3, evaluations: int = 120, seed: int = 0
-                  ) -> dict[str, Any]:
+                  bounds: Sequence[Bound], restarts: int = 3, evaluations: int = 120, seed: int = 0,
+                  progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
     """Fit `bounds`' constants to the `fitted` recordings, starting from the model's values under cfg's profile;
     the figures per recording (fitted and held out) before and after."""
     start = {b.name: min(max(current_value(apply_profile(morph, cfg.profile), b.name, cfg.engine,
                                            {**cfg.engine_options, **_engine_part(cfg)}), b.low), b.high)
              for b in bounds}
     found = minimise(lambda v: candidate_loss(morph, with_values(cfg, v), list(fitted)), bounds, start,
-                     restarts, evaluations, seed)
+                     restarts, evaluations, seed, progress)
     after = with_values(cfg, found.values)
     spread = found.spread()
     return {

@@ -85,8 +85,10 @@ class SearchResult:
 
 
 def minimise(loss: Callable[[Mapping[str, float]], float], bounds: Sequence[Bound], start: Mapping[str, float],
-             restarts: int = 3, evaluations: int = 120, seed: int = 0) -> SearchResult:
-    """CMA-ES restarts of `evaluations` losses each: the first from `start`, the others from seeded random points."""
+             restarts: int = 3, evaluations: int = 120, seed: int = 0,
+             progress: Callable[[int, int], None] | None = None) -> SearchResult:
+    """CMA-ES restarts of `evaluations` losses each: the first from `start`, the others from seeded random points;
+    `progress(done, total)` after each loss."""
     from cmaes import CMA
 
     rng = np.random.default_rng(seed)
@@ -102,6 +104,8 @@ def minimise(loss: Callable[[Mapping[str, float]], float], bounds: Sequence[Boun
                 x = opt.ask()
                 value = loss({b.name: b.value(u) for b, u in zip(bounds, x, strict=True)})
                 count += 1
+                if progress is not None:
+                    progress(min(count, evaluations * restarts), evaluations * restarts)
                 told.append((x, value if math.isfinite(value) else 1e9))
                 if value < best[0]:
                     best = (value, x)
