@@ -86,10 +86,11 @@ def test_calibration_key_holds_the_profile_hash():
     fitted = CalibrationSettings(profile=(("ground_friction", 0.7),))
     other = CalibrationSettings(profile=(("ground_friction", 0.8),))
     assert len({plain.key(), fitted.key(), other.key()}) == 3
-    # without a profile the key is what it was before profiles existed
+    # without a profile the key names no profile: the settings and the judge it was made against (Bullet at
+    # 0.25 ms), as before profiles existed
     from spinefarm.protocol.run import json_hash
     assert plain.key() == json_hash({"gaits": 40, "search_trials": 40, "bests": 10, "duration_s": 5.0,
-                                     "settle_s": 1.0, "controller": None})
+                                     "settle_s": 1.0, "controller": None, "reference": ["bullet", 0.00025]})
 
 
 def test_search_carries_the_profile_to_its_workers(tmp_path):
