@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -13,7 +12,12 @@ from typing import Any
 from spinefarm.cli import checks
 from spinefarm.cli.profile_argument import add_profile_argument, profile_from
 from spinefarm.cli.robot_argument import add_robot_argument
-from spinefarm.cli.sim_commands import add_engine_argument, add_engine_option_argument, parse_engine_options
+from spinefarm.cli.sim_commands import (
+    add_engine_argument,
+    add_engine_option_argument,
+    json_finite,
+    parse_engine_options,
+)
 
 WINDOW_S = 0.2  # docs/fitting.md: why this length
 
@@ -80,7 +84,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     if args.out is not None:
         write_profile(args.out, morph.name, result, " ".join(["spinefarm", *sys.argv[1:]]))
     if args.json:
-        print(json.dumps(_finite(result)))
+        print(json.dumps(json_finite(result)))
     else:
         print(summary(result))
     return 0
@@ -112,12 +116,3 @@ def summary(r: dict[str, Any]) -> str:
                      + ("  AT ITS BOUND: a model error the constant may not close" if c["at_bound"] else ""))
     return "\n".join(lines)
 
-
-def _finite(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_finite(v) for v in x]
-    return x

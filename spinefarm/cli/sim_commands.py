@@ -360,21 +360,22 @@ def cmd_accuracy(args: argparse.Namespace) -> int:
     json_path = args.out.with_suffix(".json")
     png_path = args.out.with_suffix(".png")
     slim = {**report, "table": [{k: v for k, v in r.items()} for r in report["table"]]}
-    json_path.write_text(json.dumps(_finite(slim), indent=1))
+    json_path.write_text(json.dumps(json_finite(slim), indent=1))
     plot(report, str(png_path))
     words = sys.stderr if args.json else sys.stdout  # with --json, standard output is the one JSON object
     print(format_table(report), file=words)
     print(f"wrote {json_path} and {png_path}", file=words)
     if args.json:
-        print(json.dumps(_finite(report)))
+        print(json.dumps(json_finite(report)))
     return 0
 
 
-def _finite(x: Any) -> Any:
+def json_finite(x: Any) -> Any:
+    """x with every non-finite float as None, so json.dumps writes standard JSON."""
     if isinstance(x, float) and not math.isfinite(x):
         return None
     if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
+        return {k: json_finite(v) for k, v in x.items()}
     if isinstance(x, list | tuple):
-        return [_finite(v) for v in x]
+        return [json_finite(v) for v in x]
     return x
