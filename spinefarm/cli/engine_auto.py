@@ -55,7 +55,8 @@ def choose_engine(args: argparse.Namespace) -> Any:
                              jobs=max(1, min(2, getattr(args, "workers", 1) or 1)))
     from spinefarm.worker.shipped_calibration import shipped
 
-    result, cached = shipped(args.morphology, settings), True  # a built-in's, made for this model: no child
+    hit = shipped(args.morphology, settings)  # a built-in's, made for this model: no child
+    result, cached = (None, False) if hit is None else ({**hit, "shipped": True}, True)
     if result is None:
         print(f"engine auto: calibrating the tiers on {args.morphology} against the judge (cached after the "
               "first time) ...", file=sys.stderr)

@@ -108,6 +108,10 @@ def test_the_choice_is_typed_settings_that_round_trip_and_refuse_bad_fields():
     assert RunSettings.from_dict({k: v for k, v in settings.to_dict().items() if k != "engine_choice"}) \
         == RunSettings()  # a run stored before the choice existed reads back without one
     assert "engine auto chose bullet" in choice.describe() and "[calibration cached]" in choice.describe()
+    assert "shipped" not in choice.describe()  # a cached calibration is not called the package's
+    shipped = EngineChoice.from_calibration({**result, "shipped": True}, cached=True, rungs_added=None)
+    assert shipped.shipped and "[shipped calibration]" in shipped.describe()
+    assert "[calibration cached]" not in shipped.describe()
     with pytest.raises(ConfigError, match="unknown fields"):
         EngineChoice.from_dict({**choice.to_dict(), "colour": "red"})
     with pytest.raises(ConfigError, match="unknown tier"):
