@@ -116,14 +116,21 @@ class Recording:
                                  received=f"norm {norms[row, seg]:.4g} at row {row}, segment {seg}",
                                  expected="norm 1 within 1e-3")
 
-    def check_robot(self, n_segments: int, n_strings: int, robot: str) -> None:
-        """Refuse a recording of another robot: its segment (and string) counts against the robot's."""
+    def check_robot(self, n_segments: int, n_strings: int, robot: str,
+                    driven: np.ndarray | None = None) -> np.ndarray:
+        """The robot's strings the recording's string columns are, in order: all of them, or, when the recording
+        lists only the controller-driven strings (NTRT records its muscles, not the passive ligaments or
+        intercostals), `driven`. A recording of another robot (segment or string counts) is refused."""
         if self.n_segments != n_segments:
             raise RecordingError(f"{self.where}the recording does not fit {robot}",
                                  received=f"{self.n_segments} segments", expected=f"{n_segments} segments")
-        if self.n_strings is not None and self.n_strings != n_strings:
-            raise RecordingError(f"{self.where}the recording does not fit {robot}",
-                                 received=f"{self.n_strings} strings", expected=f"{n_strings} strings")
+        if self.n_strings is None or self.n_strings == n_strings:
+            return np.arange(n_strings)
+        if driven is not None and self.n_strings == len(driven):
+            return np.asarray(driven, dtype=int)
+        also = "" if driven is None or len(driven) == n_strings else f" (or {len(driven)}, the driven ones)"
+        raise RecordingError(f"{self.where}the recording does not fit {robot}",
+                             received=f"{self.n_strings} strings", expected=f"{n_strings} strings{also}")
 
     def save(self, path: Path) -> None:
         """Write the spinefarm recording format (.npz; docs/recordings.md)."""

@@ -71,8 +71,9 @@ def run_windows(morph: Morphology, cfg: TrialConfig, rec: Recording, windows: li
                           expected="an engine with the set_state ability")
     morph = apply_profile(morph, cfg.profile)
     setup = TrialSetup(morph, cfg, None)
-    rec.check_robot(len(setup.bodies), len(morph.structure.strings), morph.name)
-    out = _batch(setup, rec, windows)
+    driven = [i for i, s in enumerate(morph.structure.strings) if morph.control.gains(s.tag) is not None]
+    recorded = rec.check_robot(len(setup.bodies), len(morph.structure.strings), morph.name, np.array(driven))
+    out = _batch(setup, rec, windows, recorded)
     retry = [w for w, o in enumerate(out) if o is None]
     if retry:  # the engine asked for other settings (MuJoCo's contact guard): those windows again, in them
         again = dataclasses.replace(cfg, engine_options={**cfg.engine_options, "segment_contacts": "scene"})
@@ -82,10 +83,13 @@ def run_windows(morph: Morphology, cfg: TrialConfig, rec: Recording, windows: li
 
 
 class _Shots:
-    """The windows' string banks driven by their rest-length tables, and what is kept at the checked steps."""
+    """The windows' string banks driven by their rest-length tables, and what is kept at the checked steps.
+    recorded: the robot's strings the recording's columns are; the others (passive strings a recording may leave
+    out) keep the model's own rest length."""
 
-    def __init__(self, setup: TrialSetup, rec: Recording, windows: list[Window]) -> None:
+    def __init__(self, setup: TrialSetup, rec: Recording, windows: list[Window], recorded: np.ndarray) -> None:
         dt, t = setup.dt, rec.time_s
+        self.recorded = recorded
         self.dt, self.step = dt, 0
         self.n_steps = max(int(round((t[w.rows[-1]] - t[w.start]) / dt)) for w in windows)
         self.check = [{int(round((t[r] - t[w.start]) / dt)): i for i, r in enumerate(w.rows)} for w in windows]
@@ -95,7 +99,7 @@ class _Shots:
         g, nb = setup.geom, len(setup.bodies)
         self.banks = [sk.StringBank(nb, g.body_a, g.body_b, g.anchor_a_cm, g.anchor_b_cm, params, state.copy())
                       for _ in windows]
-        self.runs = [WindowRun(np.full((len(w.rows), nb, 7), np.nan), np.full((len(w.rows), len(params)), np.nan))
+        self.runs = [WindowRun(np.full((len(w.rows), nb, 7), np.nan), np.full((len(w.rows), len(recorded)), np.nan))
                      for w in windows]
         self.force = np.zeros((len(windows), nb, 3))
         self.torque = np.zeros_like(self.force)
@@ -113,20 +117,21 @@ class _Shots:
             poses = engine.read_poses()
             for w in np.flatnonzero(live):
                 bank = self.banks[w]
-                bank.state[:, sk.S_REST] = self.rest[w][min(j, self.n_steps - 1)]
+                bank.state[self.recorded, sk.S_REST] = self.rest[w][min(j, self.n_steps - 1)]
                 if bank.step(poses[w], self._cpg, self.dt, sk.MOTOR_PHYSICAL) != sk.STATUS_OK:
                     live[w] = False
                 if j in self.check[w]:
                     row = self.check[w][j]
-                    self.runs[w].poses[row], self.runs[w].tension_n[row] = poses[w], bank.tension / NEWTON
+                    self.runs[w].poses[row] = poses[w]
+                    self.runs[w].tension_n[row] = bank.tension[self.recorded] / NEWTON
                 self.force[w], self.torque[w] = bank.force, bank.torque
             engine.apply_wrenches(self.force, self.torque, live)
             engine.step(live)
             self.step += 1
 
 
-def _batch(setup: TrialSetup, rec: Recording, windows: list[Window]) -> list[WindowRun | None]:
-    shots = _Shots(setup, rec, windows)
+def _batch(setup: TrialSetup, rec: Recording, windows: list[Window], recorded: np.ndarray) -> list[WindowRun | None]:
+    shots = _Shots(setup, rec, windows, recorded)
     engine, owned = setup.scene(None, None, len(windows))
     try:
         shots.start(engine, rec, windows)
