@@ -1,0 +1,180 @@
+"""Where a MuJoCo trial's step goes, measured inside the production trial: per physics step, the engine's
+`mj_step` as the trial runs it, the control law (CPG and string kernel) as the trial runs it, the copies of the
+state and wrench between them, and the Python around the compiled calls (the guard's checks, the contact guard's
+looks, the COM path, the set-up and result), per built-in.
+
+    python bench/control_split.py [--spines all] [--seconds 3] [--repeats 3] [--controller NAME]
+
+The trial runs through worker.trial.simulate with the loop's compiled run (worker.loop.run_compiled) swapped for
+a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
+unchanged: `same_distance` checks it); the counter runs in wall time, so its shares split the CPU time of the
+compiled calls (process_time around each). The CPG alone is timed
+apart in a compiled loop on a copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
+`law - cpg` is the string kernel's. Shares are of the whole step (CPU time of the whole trial over its steps):
+`control_share` = 1 - in-trial mj_step / whole (bench/trial_speed.py's figure uses a bare mj_step from the end
+state instead, which costs less than the in-trial one).
+
+Prints one JSON object (last line): {"spines": {SPINE: {"us_per_step": {"whole", "mj_step", "law", "cpg",
+"strings", "copies", "python"}, "control_share", "law_share", "python_share", ...}}}, medians over --repeats
+seeded random gaits after a warm-up trial.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from spinefarm.robot.morphology.registry import builtin_names, load_morphology  # noqa: E402
+from spinefarm.worker import loop  # noqa: E402
+from spinefarm.worker.control.cpg import rk4_advance  # noqa: E402
+from spinefarm.worker.control.law import STATUS_OK, law_step_world  # noqa: E402
+from spinefarm.worker.setup import SetupCache  # noqa: E402
+from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate  # noqa: E402
+
+
+@intrinsic
+def _ticks(typingctx):
+    """The CPU's time-stamp counter (llvm.readcyclecounter)."""
+    def codegen(context, builder, signature, args):
+        fn = builder.module.declare_intrinsic("llvm.readcyclecounter", fnty=ir.FunctionType(ir.IntType(64), []))
+        return builder.call(fn, [])
+    return types.int64(), codegen
+
+
+@njit
+def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks):
+    """worker.loop.run_compiled with ticks[0..3] += copy-in + copy-out, law, mj_step, calls."""
+    step, m_addr, d_addr, state, columns, wrench = world
+    force = strings[6][b]
+    torque = strings[7][b]
+    nb = poses.shape[0]
+    ticks[3] += 1
+    for n in range(n_steps):
+        t0 = _ticks()
+        for i in range(nb):
+            for c in range(7):
+                poses[i, c] = state[i, columns[c]]
+        t1 = _ticks()
+        status = law_step_world(cpg, strings, clock, b, poses)
+        t2 = _ticks()
+        if status != STATUS_OK:
+            return status, n
+        for i in range(nb):
+            for c in range(3):
+                wrench[i, c] = force[i, c]
+                wrench[i, 3 + c] = torque[i, c]
+        t3 = _ticks()
+        loop._call_step(step, m_addr, d_addr)
+        t4 = _ticks()
+        ticks[0] += (t1 - t0) + (t3 - t2)
+        ticks[1] += t2 - t1
+        ticks[2] += t4 - t3
+    return STATUS_OK, n_steps
+
+
+@njit
+def _cpg_loop(state, net, h, n_sub, work, out, n):
+    for _ in range(n):
+        rk4_advance(state, net, h, n_sub, work, out)
+
+
+def cpg_us_per_step(law, repeats: int = 3000) -> float:
+    """CPU µs of the CPG per physics step at the law's plan (world 0): one update's RK4 over its steps."""
+    state, omega, amp, indptr, source, wc, rate, h, n_sub, scratch, out, _, _ = law.cpg
+    every = int(law.clock[1][0])
+    if every <= 0:
+        return 0.0
+    net = (omega[0], amp[0], indptr[0], source[0], wc[0], rate[0])
+    s, w, o = state[0].copy(), scratch[0].copy(), out[0].copy()
+    _cpg_loop(s, net, h[0], n_sub[0], w, o, 1)
+    t0 = time.process_time()
+    _cpg_loop(s, net, h[0], n_sub[0], w, o, repeats)
+    return (time.process_time() - t0) / repeats * 1e6 / every
+
+
+def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controller: str | None) -> dict:
+    ticks = np.zeros(4, dtype=np.int64)
+    compiled_s = [0.0]
+    plain = loop.run_compiled
+
+    def timed(world, cpg, strings, clock, b, n_steps, poses):
+        t = time.process_time()
+        out = _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks)
+        compiled_s[0] += time.process_time() - t
+        return out
+    loop.run_compiled = timed
+    try:
+        t0 = time.process_time()
+        res = simulate(morph, u, cfg, seed, controller=controller, setup=cache).result
+        whole_s = time.process_time() - t0
+    finally:
+        loop.run_compiled = plain
+    reference = simulate(morph, u, cfg, seed, controller=controller, setup=cache).result  # the plain loop
+    steps = res.sim_time_s / res.extras["dt_s"] + round(cfg.settle_s / res.extras["dt_s"])
+    # the counter runs in wall time (another process's slices included): it splits the calls' CPU time
+    copies, law_us, mj = (ticks[:3] / ticks[:3].sum() * compiled_s[0] * 1e6 / steps).tolist()
+    whole = whole_s * 1e6 / steps
+    return {"whole": whole, "mj_step": mj, "law": law_us, "copies": copies,
+            "python": whole - mj - law_us - copies, "compiled_calls_per_step": ticks[3] / steps,
+            "same_distance": res.distance_m == reference.distance_m, "distance_m": res.distance_m,
+            "segment_contacts": res.extras.get("segment_contacts", "left out")}
+
+
+def spine_split(name: str, seconds: float, repeats: int, controller: str | None) -> dict:
+    from spinefarm.worker.control.law import ControlLaw
+
+    morph = load_morphology(name)
+    cfg = TrialConfig(duration_s=seconds, engine="mujoco")
+    cache = SetupCache()
+    rows = []
+    for r in range(repeats + 1):  # the first warms caches and compiled code
+        u = random_unit_params(morph, 1 + r, controller)
+        row = one_trial(morph, u, cfg, 1 + r, cache, controller)
+        setup = cache.get(morph, cfg, controller)
+        net = setup.space.network(setup.space.param_space.physical(u))
+        g = setup.geom
+        law = ControlLaw([net], [setup.string_tables(net)], (g.body_a, g.body_b, g.anchor_a_cm, g.anchor_b_cm),
+                         len(setup.bodies), cfg.cpg_max_step_s, cfg.motor_model)
+        every = max(1, round(morph.control.cpg_update_period_s / setup.dt))
+        law.begin_phase(every, setup.dt, cfg.cpg_own_step_s if every == 1 else None)
+        row["cpg"] = cpg_us_per_step(law)
+        row["strings"] = row["law"] - row["cpg"]
+        if r:
+            rows.append(row)
+    parts = ("whole", "mj_step", "law", "cpg", "strings", "copies", "python")
+    med = {k: float(np.median([row[k] for row in rows])) for k in parts}
+    print(f"{name}: " + ", ".join(f"{k} {v:.1f}" for k, v in med.items()) + " µs per step", file=sys.stderr)
+    return {"us_per_step": med, "control_share": 1.0 - med["mj_step"] / med["whole"],
+            "law_share": med["law"] / med["whole"], "python_share": med["python"] / med["whole"],
+            "same_distance": all(row["same_distance"] for row in rows),
+            "distance_m": [row["distance_m"] for row in rows],
+            "segment_contacts": [row["segment_contacts"] for row in rows],
+            "compiled_calls_per_step": float(np.median([row["compiled_calls_per_step"] for row in rows]))}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--spines", default="all", help="all built-ins, or names separated by commas")
+    ap.add_argument("--seconds", type=float, default=3.0, help="simulated seconds per trial (default 3)")
+    ap.add_argument("--repeats", type=int, default=3, help="random gaits per spine after a warm-up (default 3)")
+    ap.add_argument("--controller", default=None, help="controller space (default: each spine's own)")
+    args = ap.parse_args()
+    names = builtin_names() if args.spines == "all" else args.spines.split(",")
+    spines = {n: spine_split(n, args.seconds, args.repeats, args.controller) for n in names}
+    print(json.dumps({"spines": spines, "seconds": args.seconds, "repeats": args.repeats,
+                      "controller": args.controller}))
+
+
+if __name__ == "__main__":
+    main()
