@@ -25,6 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--name", dest="new_name", default=None, metavar="NEW_NAME",
                    help="the new robot's name in the printed file (default my-<built-in>): runs, their ids and "
                         "the dashboard know it by this name, apart from the built-in's")
+    p.add_argument("--search", action="store_true",
+                   help="end the file with an example `search:` block (rod lengths, string stiffness and rod "
+                        "density within +-30 %%) for a search over body and gait")
     p.set_defaults(func=cmd_spec)
 
     p = sub.add_parser("check", help="run the morphology contract on a spec file",
@@ -77,8 +80,34 @@ def cmd_spec(args: argparse.Namespace) -> int:
     from spinefarm.robot.morphology.registry import builtin_path
 
     text = builtin_path(args.name).read_text()
-    sys.stdout.write(derived_spec(args.name, text, args.new_name or f"my-{args.name}"))
+    out = derived_spec(args.name, text, args.new_name or f"my-{args.name}")
+    if args.search:
+        out = out.rstrip("\n") + "\n\n" + example_search_block(args.name)
+    sys.stdout.write(out)
     return 0
+
+
+def example_search_block(builtin: str) -> str:
+    """A `search:` block freeing rod lengths, each string tag's stiffness and each rod tag's density (so the
+    segment mass) within +-30 % of the built-in's values."""
+    from spinefarm.robot.morphology.registry import load_morphology
+
+    s = load_morphology(builtin).structure
+    lines = ["search:                       # body constants a search may change: [low, high] "
+             "(docs/morphology-format.md)",
+             "  segments.rod_length_scale: [0.7, 1.3]"]
+    lines += [f"  string_materials.{t}.stiffness_n_per_m: [{0.7 * m.stiffness_n_per_m:.6g}, "
+              f"{1.3 * m.stiffness_n_per_m:.6g}]" for t, m in s.string_materials]
+    lines += [f"  rod_materials.{t}.density_kg_per_cm3: [{0.7 * m.density_kg_per_cm3:.6g}, "
+              f"{1.3 * m.density_kg_per_cm3:.6g}]" for t, m in s.rod_materials]
+    return "\n".join(lines) + "\n"
+
+
+def _search_fields(source: str) -> tuple:
+    """The search block of a spec file (checked as the robot loaded); built-ins have none."""
+    from spinefarm.robot.morphology.specfile import load_search
+
+    return load_search(source) if source.lower().endswith((".yaml", ".yml")) else ()
 
 
 def cmd_check(args: argparse.Namespace) -> int:
@@ -87,14 +116,19 @@ def cmd_check(args: argparse.Namespace) -> int:
     from spinefarm.worker.contract import run_contract
 
     morph = load_morphology(args.morphology)
+    body_fields = _search_fields(args.morphology)
     with Waiting(f"checking {morph.name}", "checks") as wait:
         results = run_contract(morph, args.engine, progress=wait)
     ok = all(r.passed for r in results)
     if args.json:
         print(json.dumps({"morphology": morph.name, "passed": ok,
-                          "checks": [{"name": r.name, "passed": r.passed, "detail": r.detail} for r in results]},
-                         indent=2))
+                          "checks": [{"name": r.name, "passed": r.passed, "detail": r.detail} for r in results],
+                          "search": [{"field": f.path, "low": f.low, "high": f.high, "unit": f.unit}
+                                     for f in body_fields]}, indent=2))
     else:
+        for f in body_fields:
+            unit = "x the geometry as written" if f.unit == "1" else f.unit
+            print(f"search {f.path}: {f.low:g} to {f.high:g} {unit}")
         for r in results:
             print(f"{'ok  ' if r.passed else 'FAIL'} {r.name}: {r.detail}")
         print(f"{morph.name}: {'every check passed' if ok else 'FAILED'}")

@@ -11,8 +11,12 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from spinefarm.protocol.errors import ConfigError, MorphologySpecError
+from spinefarm.robot.morphology.bodycheck import static_problem
 from spinefarm.robot.morphology.model import ControlSpec, ImpedanceGains, Morphology
+from spinefarm.robot.morphology.specsearch import BodyField, parse_search, with_body
 from spinefarm.robot.morphology.specstructure import build_structure
 from spinefarm.robot.morphology.specyaml import (
     LineDict,
@@ -30,7 +34,9 @@ from spinefarm.robot.morphology.structure import (
 
 SPEC_DIR = Path(__file__).parent / "specs"
 TOP_KEYS = ("base", "name", "description", "segments", "placement", "joints", "rod_materials", "string_materials",
-            "control", "scored_segment", "duration_s", "ground_friction", "controllers", "extra")
+            "control", "scored_segment", "duration_s", "ground_friction", "controllers", "extra", "search")
+BODY_PROBES = 5  # values tried along each searched range before it is said to admit no valid body
+SEGMENT_KEYS = ("count", "nodes", "rods", "transforms", "rod_length_scale", "spacing_scale")
 
 
 # -- materials and control -----------------------------------------------------------------------
@@ -138,15 +144,57 @@ def _with_base(spec: SpecSource, doc: LineDict, seen: set[str]) -> LineDict:
 
 
 # -- entry points --------------------------------------------------------------------------------
-def parse_spec(text: str, source: str = "<string>", *, segments: int | None = None,
-               name: str | None = None) -> Morphology:
-    """Morphology from spec-file text. `segments` and `name` override the file's values."""
+def spec_document(text: str, source: str = "<string>") -> tuple[SpecSource, LineDict]:
+    """A spec file's document with its `base:` resolved, each value remembering its line."""
     spec = SpecSource(source)
     doc = _with_base(spec, mapping(spec, compose(text, spec), "(document)", 1, allowed=TOP_KEYS), set())
+    return spec, doc
+
+
+def parse_spec(text: str, source: str = "<string>", *, segments: int | None = None,
+               name: str | None = None) -> Morphology:
+    """Morphology from spec-file text. `segments` and `name` override the file's values. A `search:` block is
+    checked (robot.morphology.specsearch) and is no part of the robot."""
+    spec, doc = spec_document(text, source)
+    morph = from_document(spec, doc, segments=segments, name=name)
+    if "search" in doc:
+        check_search(spec, doc, morph, segments=segments, name=name)
+    return morph
+
+
+def search_fields(spec: SpecSource, doc: LineDict, morph: Morphology) -> tuple[BodyField, ...]:
+    s = morph.structure
+    return parse_search(spec, doc["search"], line_of(doc, "search"), dict(s.rod_materials), dict(s.string_materials))
+
+
+def check_search(spec: SpecSource, doc: LineDict, morph: Morphology, **overrides: Any) -> tuple[BodyField, ...]:
+    """The search block's fields, each range holding at least one body that builds and passes the static
+    checks (five values from low to high, the other constants as the file has them)."""
+    found = search_fields(spec, doc, morph)
+    for f in found:
+        why = ""
+        for value in np.linspace(f.low, f.high, BODY_PROBES):
+            try:
+                body = from_document(spec, with_body(doc, {f.path: float(value)}), **overrides)
+                why = static_problem(body.structure) or ""
+            except (ConfigError, MorphologySpecError) as exc:
+                why = str(exc)
+            if not why:
+                break
+            why = f"at {value:g}: {why}"
+        if why:
+            raise spec.fail(f.line, f"search.{f.path}", "the range admits no valid body", received=[f.low, f.high],
+                            expected=f"a range holding a body that builds ({why})")
+    return found
+
+
+def from_document(spec: SpecSource, doc: LineDict, *, segments: int | None = None,
+                  name: str | None = None) -> Morphology:
+    """The robot a resolved spec document describes."""
     doc = mapping(spec, doc, "(document)", 1, allowed=TOP_KEYS,
                    required=("name", "segments", "joints", "rod_materials", "string_materials", "control"))
     seg = mapping(spec, doc["segments"], "segments", line_of(doc, "segments"),
-                   allowed=("count", "nodes", "rods", "transforms"), required=("count", "nodes", "rods"))
+                   allowed=SEGMENT_KEYS, required=("count", "nodes", "rods"))
     count = segments if segments is not None else seg["count"]
     if not isinstance(count, int) or isinstance(count, bool) or count < 2:
         raise spec.fail(line_of(seg, "count"), "segments.count", "not an integer >= 2", received=count,
@@ -198,6 +246,15 @@ def load_spec_file(path: str | Path, *, segments: int | None = None, name: str |
     if p.suffix.lower() not in (".yaml", ".yml"):
         raise MorphologySpecError("unsupported spec file type", received=p.suffix, expected=".yaml or .yml")
     return parse_spec(text, str(p), segments=segments, name=name)
+
+
+def load_search(path: str | Path) -> tuple[BodyField, ...]:
+    """The checked `search:` block of a spec file (docs/morphology-format.md), or () when it has none."""
+    p = Path(path)
+    spec, doc = spec_document(p.read_text(encoding="utf-8"), str(p))
+    if "search" not in doc:
+        return ()
+    return check_search(spec, doc, from_document(spec, doc))
 
 
 def builtin_spec(stem: str, *, segments: int | None = None, name: str | None = None) -> Morphology:

@@ -198,19 +198,33 @@ def _joint_strings(spec: SpecSource, joints: Any, names: list[str], n_segments: 
     return out
 
 
+def _scale(spec: SpecSource, seg: LineDict, key: str) -> float:
+    """segments.rod_length_scale or segments.spacing_scale: a factor > 0, default 1 (the file as written)."""
+    if key not in seg:
+        return 1.0
+    value = number(spec, seg[key], f"segments.{key}", line_of(seg, key))
+    if not 0.0 < value <= 100.0:
+        raise spec.fail(line_of(seg, key), f"segments.{key}", "scale out of range", received=value,
+                        expected="a factor in (0, 100] (1 keeps the file's geometry)")
+    return value
+
+
 def build_structure(spec: SpecSource, doc: LineDict, seg: LineDict, count: int, morph_name: str,
                rod_tags: dict[str, RodMaterial], string_tags: dict[str, StringMaterial],
                control: ControlSpec) -> StructureSpec:
     """The template segment repeated `count` times, placed, and joined by the joints' strings."""
     names, points = _template_nodes(spec, seg["nodes"], line_of(seg, "nodes"))
     template_rods = _template_rods(spec, seg["rods"], names, points, rod_tags, line_of(seg, "rods"))
-    template = np.array(points)
+    length_scale, spacing_scale = (_scale(spec, seg, key) for key in ("rod_length_scale", "spacing_scale"))
+    # the segment frame's origin rides along as the last row: spacing scales its offset from segment 0's
+    template = np.vstack([np.array(points) * length_scale, np.zeros((1, 3))])
     per = len(names)
     nodes: list[np.ndarray] = []
     for i in range(count):
         pts = _transform(spec, seg.get("transforms"), "segments.transforms", line_of(seg, "transforms"), i,
                          {"i": i, "n": count}, template)
         nodes.append(pts)
+    nodes = [pts[:-1] + (spacing_scale - 1.0) * (pts[-1] - nodes[0][-1]) for pts in nodes]
     all_pts = _transform(spec, doc.get("placement"), "placement", line_of(doc, "placement"), None,
                          {"n": count}, np.vstack(nodes))
     rods = [Rod(i * per + a, i * per + b, t) for i in range(count) for a, b, t in template_rods]
