@@ -56,7 +56,8 @@ def check_run_args(args: argparse.Namespace) -> None:
     checks.endpoints("--listen", args.listen)
     checks.endpoints("--connect", args.connect)
     checks.port("--api-port", args.api_port, allow_off=True)
-    check_range("--verify-tolerance", args.verify_tolerance, 0.0, 10.0, low_inclusive=False)
+    if args.verify_tolerance is not None:
+        check_range("--verify-tolerance", args.verify_tolerance, 0.0, 10.0, low_inclusive=False)
     check_range("--judge-drift", args.judge_drift, 0.0, 10.0, low_inclusive=False)
     check_range("--judge-share", args.judge_share, 0.0, 1.0, low_inclusive=False)
     if args.duration is not None:  # before an `--engine auto` calibration, as the trial config will

@@ -106,8 +106,10 @@ def _service_args(p: argparse.ArgumentParser, local: bool) -> None:
 def _judge_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-verify", action="store_true",
                    help="do not re-simulate new bests at a finer step before they count")
-    p.add_argument("--verify-tolerance", type=float, default=0.05,
-                   help="relative distance change a re-simulated best may show (default 0.05)")
+    p.add_argument("--verify-tolerance", type=float, default=None,
+                   help="relative distance change at the finer step up to which a best \"holds\" (default: the "
+                        "robot's chaos floor, at least 0.01; 0.05 for a robot without a measured one); beyond it "
+                        "the best \"moved\" and ranks by its judged distance")
     p.add_argument("--judge-drift", type=float, default=0.2, metavar="REL",
                    help="the judge raises the screen's fidelity for the rest of the run once three judged bests "
                         "(moving 10 cm or more) have a median screen-to-judge distance ratio outside "

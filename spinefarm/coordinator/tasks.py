@@ -1,10 +1,9 @@
 """Tasks beside the search's own trials, run by workers like any trial: the judge and the audit.
 
 - The judge re-simulates every new full-length best at the judge's rung before it counts (a finer
-  step in the same engine, or another engine). Same engine: "holds" when the distance changes by at
-  most the tolerance, else "not_reproduced" (then it never counts as best and the next best is judged).
-  Another engine: "judged", the judge's distance is the one reported and the screen-to-judge ratio is
-  stored; it fails only when the judge's run fails.
+  step in the same engine, or another engine); its verdicts are coordinator.verdicts' ("holds" within
+  the robot's chaos floor, "moved X % at the finer step", "judged", "diverged"). A judged set ranks by
+  its judged distance (storage.ranking); a diverged one never counts as best and the next best is judged.
 - The audit re-simulates a fraction of the results (and every new best) on another worker at the same
   fidelity; a disagreement marks the result (it never counts as best), and its worker (PeerBook).
 - The judge takes at most its share of the workers' time while the search runs (JudgePolicy.share): a new
@@ -21,11 +20,13 @@ coordinator issues pending tasks again. In the lease scheduler a task is a negat
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 
 import numpy as np
 
+from spinefarm.coordinator.verdicts import holds_tolerance, judge_verdict, relative_change
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings, TaskFidelity
 from spinefarm.protocol.states import AuditState, Verification
@@ -52,28 +53,6 @@ def split_key(key: int) -> tuple[str, int]:
     return _KINDS[-key % _KEY_STRIDE], -key // _KEY_STRIDE
 
 
-def relative_change(a: float, b: float) -> float:
-    return abs(a - b) / max(abs(b), 1e-9)
-
-
-def judge_verdict(distance_m: float, cross_engine: bool, engine: str, r: TrialResult,
-                  tolerance: float) -> tuple[Verification, str]:
-    """The judge's verdict on a stored distance from its re-simulation `r` (and its perturbed run)."""
-    if not r.ok:
-        return Verification.NOT_REPRODUCED, f"{engine or 'judge'} run {r.status}: {r.reason}"
-    if cross_engine:
-        return Verification.JUDGED, ""
-    reasons = []
-    runs = [("finer step", r.distance_m)]
-    if "perturbed_distance_m" in r.extras:
-        runs.append(("perturbed", float(r.extras["perturbed_distance_m"])))
-    for name, d in runs:
-        change = relative_change(d, distance_m) if math.isfinite(d) else math.inf
-        if change > tolerance:
-            reasons.append(f"{name} run moved {d:.4g} m against {distance_m:.4g} m ({change:.1%} > {tolerance:.0%})")
-    return (Verification.NOT_REPRODUCED, "; ".join(reasons)) if reasons else (Verification.HOLDS, "")
-
-
 class TaskBook:
     """Issues judge and audit tasks through the lease scheduler and stores what they find (lock held)."""
 
@@ -86,6 +65,12 @@ class TaskBook:
         self.judged = judged   # the run has a judge (test objectives only when one is named)
         self.pending: set[int] = set()   # task keys issued and not yet settled
         self.judge_wall_s = 0.0   # the judge's runs settled since this coordinator started (pacing only)
+
+    @functools.cached_property
+    def holds(self) -> tuple[float, str]:
+        """(the tolerance a same-engine judgement "holds" within, where it comes from): the robot's chaos floor."""
+        meta = self.storage.run_meta()
+        return holds_tolerance(meta.morphology, meta.morphology_spec, self.settings.judge.tolerance)
 
     # --- fidelity -----------------------------------------------------------------------------------
     @property
@@ -214,11 +199,13 @@ class TaskBook:
         row = self.storage.trial(tid)
         engine = str(r.extras.get("engine", "")) or (self.judge_engine or "")
         cross = self.judge_engine is not None and self.judge_engine != (row.engine or self.run_engine)
-        verdict, reason = judge_verdict(row.distance_m, cross, engine, r, self.settings.judge.tolerance)
+        verdict, reason = judge_verdict(row.distance_m, cross, engine, r, self.holds[0])
         ratio = row.distance_m / r.distance_m if r.ok and r.distance_m != 0 else math.nan
         self.storage.set_verification(tid, verdict, r.distance_m, reason, ratio)
-        if verdict == Verification.NOT_REPRODUCED:
-            log.warning("best trial %d not reproduced: %s", tid, reason)
+        if verdict == Verification.DIVERGED:
+            log.warning("best trial %d diverged in the judge's run (never best): %s", tid, reason)
+        elif verdict == Verification.MOVED:
+            log.info("best trial %d %s (%s); it ranks by its judged distance", tid, reason, self.holds[1])
 
     def mark_quarantined(self, worker_ids: list[str]) -> tuple[list[int], list[int]]:
         """Every complete row of quarantined workers is marked and re-run by another identity (an audit); a row

@@ -67,7 +67,8 @@ class JudgePolicy(_JsonRecord):
     """The judge: re-simulate every new full-length best at `rung` before it counts.
 
     Same engine as the screen: the result holds when the distance changes by at most `tolerance`
-    (relative). Another engine (two models, whose distances differ by more than any step error): the
+    (relative; None: the robot's chaos floor, coordinator.verdicts), else it "moved" and ranks by the
+    judge's distance. Another engine (two models, whose distances differ by more than any step error): the
     judge's distance is the one reported, the screen-to-judge ratio is stored, and the result fails
     only if the judge's run fails. perturb: also re-simulate with a jittered start pose and 10 % more
     friction. drift: a run whose judged ratios leave [1 - drift, 1 + drift] raises its fidelity. share: the
@@ -78,7 +79,7 @@ class JudgePolicy(_JsonRecord):
 
     enabled: bool = True
     rung: Rung = field(default_factory=Rung)
-    tolerance: float = bounded(0.05, 0.0, 10.0, low_inclusive=False)
+    tolerance: float | None = bounded(None, 0.0, 10.0, low_inclusive=False)
     perturb: bool = False
     drift: float = bounded(0.2, 0.0, 10.0, low_inclusive=False)
     share: float = bounded(0.25, 0.0, 1.0, low_inclusive=False)

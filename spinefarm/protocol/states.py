@@ -23,14 +23,16 @@ STORED_STATUSES = (TrialStatus.WAITING, TrialStatus.COMPLETE, TrialStatus.FAILED
 
 
 class Verification(StrEnum):
-    """Re-simulation of a trial that became best, at a finer step. A not-reproduced trial never
-    counts as best."""
+    """Re-simulation of a trial that became best, at a finer step (or in another engine). The judged
+    distance is the one that counts; a set whose judge run diverged never counts as best."""
 
     NOT_CHECKED = ""
     PENDING = "pending"
-    HOLDS = "holds"              # same engine, within tolerance
+    HOLDS = "holds"              # same engine, within the robot's chaos floor
+    MOVED = "moved"              # same engine, moved more than that: kept, ranked by the judged distance
     JUDGED = "judged"            # in another engine: the judge's distance counts
-    NOT_REPRODUCED = "not_reproduced"
+    DIVERGED = "diverged"        # the judge's run failed or gave no finite distance: never best
+    NOT_REPRODUCED = "not_reproduced"   # older run files (a fixed 5 % tolerance): never best
 
     @property
     def stored(self) -> bytes:
@@ -52,3 +54,8 @@ class AuditState(StrEnum):
     def stored(self) -> bytes:
         return self.value.encode()
 
+
+# verdicts after which the judged distance is the set's figure (it ranks by it)
+JUDGED_VERDICTS = (Verification.HOLDS.stored, Verification.MOVED.stored, Verification.JUDGED.stored)
+# verdicts that keep a set from ever being best
+REFUTED_VERDICTS = (Verification.DIVERGED.stored, Verification.NOT_REPRODUCED.stored)

@@ -11,8 +11,9 @@ import numpy as np
 from spinefarm.protocol.columns import RECORDED_EXTRAS, SCORE_NAMES
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
-from spinefarm.protocol.states import STORED_STATUSES, AuditState, TrialStatus, Verification
+from spinefarm.protocol.states import REFUTED_VERDICTS, STORED_STATUSES, AuditState, TrialStatus, Verification
 from spinefarm.storage import pareto
+from spinefarm.storage.ranking import ranked_values
 from spinefarm.storage.schema import RunMeta, TrialRecord
 
 # A result whose audit found it wrong, or is still refereeing it, or whose worker was quarantined (until
@@ -124,7 +125,7 @@ class BaseStorage:
 
     def set_verification(self, trial_id: int, verdict: Verification | str, distance_m: float = math.nan,
                          reason: str = "", ratio: float = math.nan) -> None:
-        """Record the judge's verdict of a trial (pending, holds, judged, not_reproduced; not_checked when a
+        """Record the judge's verdict of a trial (pending, holds, moved, judged, diverged; not_checked when a
         queued check is dropped) with the judge's distance and the screen-to-judge ratio."""
         self._writable()
         self._check_id(trial_id)
@@ -166,18 +167,20 @@ class BaseStorage:
                 if a != AuditState.NOT_AUDITED}
 
     def best_ids(self, k: int) -> list[int]:
-        """Ids of the k complete trials with the highest objective, best first (ties: lower id). In a
-        multi-fidelity run a trial of a higher rung (a longer trial) ranks before any of a lower one."""
+        """Ids of the k complete trials with the highest ranked value (storage.ranking: the judged figure of
+        a judged set), best first (ties: lower id). In a multi-fidelity run a trial of a higher rung (a longer
+        trial) ranks before any of a lower one."""
         cols = self.columns()
         obj = cols["objective"]
-        # a result a finer re-simulation did not reproduce never counts as best
+        # a set whose judge run diverged never counts as best
         valid = (cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(obj) & \
-            (cols["verification"] != Verification.NOT_REPRODUCED.stored) & \
+            ~np.isin(cols["verification"], REFUTED_VERDICTS) & \
             ~np.isin(cols["audit"], DISQUALIFYING_AUDITS)  # nor one other workers did not reproduce (or dispute)
         ids = np.flatnonzero(valid)
         if k <= 0 or ids.size == 0:
             return []
-        order = np.lexsort((ids, -obj[ids], -cols["rung"][ids]))
+        value = ranked_values(cols, self.run_meta().objective)
+        order = np.lexsort((ids, -value[ids], -cols["rung"][ids]))
         return [int(i) for i in ids[order[:k]]]
 
     def best(self, k: int) -> list[TrialRecord]:

@@ -9,9 +9,10 @@ from typing import Any
 import numpy as np
 
 from spinefarm.protocol.errors import StorageError
-from spinefarm.protocol.states import TrialStatus, Verification
+from spinefarm.protocol.states import REFUTED_VERDICTS, TrialStatus
 from spinefarm.storage.base import DISQUALIFYING_AUDITS, BaseStorage
 from spinefarm.storage.episodes import EpisodeTable, rows_of
+from spinefarm.storage.ranking import ranked_value
 from spinefarm.storage.schema import RunMeta
 from spinefarm.storage.table import TrialTable
 
@@ -20,9 +21,10 @@ class InMemoryStorage(BaseStorage):
     def __init__(self) -> None:
         self._meta: RunMeta | None = None
         self._table: TrialTable | None = None
-        # Complete trials as (-rung, -objective, id), kept sorted as results arrive: best_ids is O(k),
-        # not a scan of the table per proposal (a longer multi-fidelity rung ranks first).
+        # Complete trials as (-rung, -ranked value, id), kept sorted as results and judgements arrive:
+        # best_ids is O(k), not a scan of the table per proposal (a longer multi-fidelity rung ranks first).
         self._ranking: list[tuple[int, float, int]] = []
+        self._keys: dict[int, tuple[int, float, int]] = {}   # each ranked trial's entry in _ranking
         self._episodes = EpisodeTable()
 
     def create_run(self, meta: RunMeta) -> None:
@@ -47,9 +49,22 @@ class InMemoryStorage(BaseStorage):
 
     def _update(self, trial_id: int, values: dict[str, Any]) -> None:
         self.table.set_row(trial_id, values)
-        if values.get("status") == TrialStatus.COMPLETE.stored and math.isfinite(values.get("objective", math.nan)):
-            rung = int(self.table.columns()["rung"][trial_id])
-            bisect.insort(self._ranking, (-rung, -float(values["objective"]), trial_id))
+        if "verification" in values or values.get("status") == TrialStatus.COMPLETE.stored:
+            self._rerank(trial_id)   # a result, or a judged figure it now ranks by
+
+    def _rank_key(self, cols: dict[str, np.ndarray], i: int) -> tuple[int, float, int]:
+        value = ranked_value(self.run_meta().objective, float(cols["objective"][i]), float(cols["distance_m"][i]),
+                             cols["verification"][i], float(cols["verify_distance_m"][i]))
+        return -int(cols["rung"][i]), -value, i
+
+    def _rerank(self, trial_id: int) -> None:
+        old = self._keys.pop(trial_id, None)
+        if old is not None:
+            del self._ranking[bisect.bisect_left(self._ranking, old)]
+        cols = self.table.columns()
+        if cols["status"][trial_id] == TrialStatus.COMPLETE.stored and math.isfinite(cols["objective"][trial_id]):
+            self._keys[trial_id] = key = self._rank_key(cols, trial_id)
+            bisect.insort(self._ranking, key)
 
     def _rebuild_ranking(self) -> None:
         """Rank a table loaded in one go (resume, read-only open) with the scanning helper."""
@@ -57,7 +72,8 @@ class InMemoryStorage(BaseStorage):
         # every complete ranked row: a row an audit disputes or a quarantine marks may be cleared later (best_ids
         # filters by the verdicts at each call)
         done = np.flatnonzero((cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(cols["objective"]))
-        self._ranking = sorted((-int(cols["rung"][i]), -float(cols["objective"][i]), int(i)) for i in done)
+        self._keys = {int(i): self._rank_key(cols, int(i)) for i in done}
+        self._ranking = sorted(self._keys.values())
 
     def best_ids(self, k: int) -> list[int]:
         if k <= 0:
@@ -66,7 +82,7 @@ class InMemoryStorage(BaseStorage):
         verification, audit = cols["verification"], cols["audit"]
         out = []
         for *_, i in self._ranking:  # as BaseStorage.best_ids: not refuted by the judge or an audit
-            if verification[i] != Verification.NOT_REPRODUCED.stored and audit[i] not in DISQUALIFYING_AUDITS:
+            if verification[i] not in REFUTED_VERDICTS and audit[i] not in DISQUALIFYING_AUDITS:
                 out.append(i)
                 if len(out) == k:
                     break

@@ -1,6 +1,6 @@
 """The judge, the audit and the drift rule as the docs state them (docs/stability.md, docs/accuracy.md,
 coordinator.tasks' contract), with distinct figures where a wrong rule would show: the judge's labels and its
-5 % tolerance, a disputed or disagreeing audit never best, three judged ratios in a row whose *median* leaves
+tolerance, a disputed or disagreeing audit never best, three judged ratios in a row whose *median* leaves
 [0.8, 1.2], the raised fidelity, and pending tasks issued again by a restarted coordinator (a real run file
 reopened)."""
 
@@ -12,7 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from spinefarm.coordinator.tasks import TaskBook, judge_verdict, split_key
+from spinefarm.coordinator.tasks import TaskBook, split_key
+from spinefarm.coordinator.verdicts import judge_verdict
 from spinefarm.protocol.settings import JudgePolicy, Rung, RunSettings, TaskFidelity
 from spinefarm.protocol.states import AuditState, TrialStatus, Verification
 from spinefarm.storage.hdf5 import Hdf5Storage
@@ -31,19 +32,19 @@ def _ok(distance_m, **extras):
     return dataclasses.replace(result(0, distance_m), extras=extras)
 
 
-def test_the_judges_labels_and_its_5_percent_tolerance():
-    assert JudgePolicy().tolerance == 0.05 and JudgePolicy().drift == 0.2
+def test_the_judges_labels_and_its_tolerance():
+    assert JudgePolicy().tolerance is None and JudgePolicy().drift == 0.2   # None: the robot's chaos floor
     same = (1.0, False, "bullet")
-    assert judge_verdict(*same, _ok(1.04), 0.05) == (Verification.HOLDS, "")          # 3.8 % off the re-run
-    assert judge_verdict(*same, _ok(1.06), 0.05)[0] == Verification.NOT_REPRODUCED    # 5.7 %
+    assert judge_verdict(*same, _ok(1.04), 0.05) == (Verification.HOLDS, "")          # 4 % off the screen
+    assert judge_verdict(*same, _ok(1.06), 0.05)[0] == Verification.MOVED             # 6 %
     assert judge_verdict(*same, _ok(0.96), 0.05)[0] == Verification.HOLDS
-    assert judge_verdict(*same, _ok(1.0, perturbed_distance_m=1.2), 0.05)[0] == Verification.NOT_REPRODUCED
-    assert judge_verdict(*same, _ok(math.nan), 0.05)[0] == Verification.NOT_REPRODUCED
+    assert judge_verdict(*same, _ok(1.0, perturbed_distance_m=1.2), 0.05)[0] == Verification.MOVED
+    assert judge_verdict(*same, _ok(math.nan), 0.05)[0] == Verification.DIVERGED
     # another engine: its distance is reported whatever it is; only a failed run fails
     assert judge_verdict(1.0, True, "mujoco", _ok(2.5), 0.05) == (Verification.JUDGED, "")
     failed = dataclasses.replace(_ok(1.0), status=TrialStatus.FAILED, reason="diverged: nan")
     verdict, why = judge_verdict(1.0, True, "mujoco", failed, 0.05)
-    assert verdict == Verification.NOT_REPRODUCED and "diverged: nan" in why
+    assert verdict == Verification.DIVERGED and "diverged: nan" in why
 
 
 @pytest.mark.parametrize("state", [AuditState.DISPUTED, AuditState.DISAGREES, AuditState.PENDING,
@@ -56,7 +57,7 @@ def test_a_disputed_or_disagreeing_audit_is_never_best(storage_kind, tmp_path, s
     storage.set_audit(0, state, 3.5, "w-2")
     barred = state in (AuditState.DISPUTED, AuditState.DISAGREES)
     assert storage.best_ids(2) == ([1, 2] if barred else [0, 1])
-    storage.set_verification(1, Verification.NOT_REPRODUCED, 1.0, "finer step run moved", 2.0)
+    storage.set_verification(1, Verification.DIVERGED, math.nan, "judge run failed: diverged")
     assert storage.best_ids(1) == ([2] if barred else [0])
     storage.close()
     if storage_kind == "hdf5":  # the API's reader of the file ranks as the writer does

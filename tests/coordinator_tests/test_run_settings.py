@@ -232,13 +232,13 @@ def _r(distance: float, ok: bool = True) -> TrialResult:
 
 
 def test_a_verdict_says_holds_only_within_tolerance_at_the_same_engine():
-    from spinefarm.coordinator.tasks import judge_verdict
+    from spinefarm.coordinator.verdicts import judge_verdict
 
     assert judge_verdict(1.0, False, "bullet", _r(1.04), 0.05)[0] == "holds"
     verdict, reason = judge_verdict(1.0, False, "bullet", _r(0.5), 0.05)
-    assert verdict == "not_reproduced" and "finer step run moved 0.5 m against 1 m" in reason
+    assert verdict == "moved" and reason.startswith("moved 50.0% at the finer step (1 m -> 0.5 m")
     assert judge_verdict(0.0229, True, "bullet", _r(0.0411), 0.05)[0] == "judged"  # never "holds" across engines
-    assert judge_verdict(1.0, True, "bullet", _r(1.0, ok=False), 0.05)[0] == "not_reproduced"
+    assert judge_verdict(1.0, True, "bullet", _r(1.0, ok=False), 0.05)[0] == "diverged"
 
 
 def test_a_cross_engine_judgement_is_reported_as_judged_in_bullet_with_both_distances_and_their_ratio():

@@ -1,0 +1,70 @@
+"""What a parameter set ranks by: its highest-fidelity evaluation.
+
+A set the judge re-simulated (holds, moved, judged) ranks by the judged distance: for objectives that are a
+distance, a speed or either over (1 + COT), the screen's objective times judged / screen distance (the same
+simulated time and, for the COT ones, the screen's COT, which the judge does not record); `cot:S` keeps the
+screen's value. Any other set ranks by its screen objective. A diverged (or, in older files,
+not-reproduced) judgement and a disputed or failed audit keep a set from being best (base.best_ids).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from spinefarm.protocol.states import JUDGED_VERDICTS, REFUTED_VERDICTS, AuditState, TrialStatus
+
+SCALED_OBJECTIVES = ("distance", "speed", "cot_distance", "pareto")  # proportional to the distance
+_TINY_M = 1e-12
+
+
+def ranked_value(objective_name: str, objective: float, distance_m: float, verification: bytes,
+                 verify_distance_m: float) -> float:
+    """The value a complete set ranks by (see the module's doc)."""
+    if verification not in JUDGED_VERDICTS or not math.isfinite(verify_distance_m):
+        return objective
+    if objective_name == "distance":
+        return verify_distance_m
+    if objective_name in SCALED_OBJECTIVES and abs(distance_m) > _TINY_M:
+        return objective * verify_distance_m / distance_m
+    return objective
+
+
+def ranked_values(cols: Mapping[str, np.ndarray], objective_name: str) -> np.ndarray:
+    """ranked_value of every row at once."""
+    obj = np.asarray(cols["objective"], dtype=float)
+    judged = np.isin(cols["verification"], JUDGED_VERDICTS) & np.isfinite(cols["verify_distance_m"])
+    if objective_name == "distance":
+        return np.where(judged, cols["verify_distance_m"], obj)
+    if objective_name not in SCALED_OBJECTIVES:
+        return obj
+    d = np.asarray(cols["distance_m"], dtype=float)
+    judged &= np.abs(d) > _TINY_M
+    ratio = np.divide(cols["verify_distance_m"], d, out=np.ones_like(obj), where=judged)
+    return np.where(judged, obj * ratio, obj)
+
+
+def counted_distance_m(verification: str | bytes, distance_m: float, verify_distance_m: float) -> float:
+    """The distance that counts for a set: the judge's when it judged the set, else the screen's."""
+    v = verification.encode() if isinstance(verification, str) else verification
+    return verify_distance_m if v in JUDGED_VERDICTS and math.isfinite(verify_distance_m) else distance_m
+
+
+def evaluation_counts(cols: Mapping[str, np.ndarray]) -> dict[str, int]:
+    """parameter_sets_done: sets whose first rung finished; evaluations_done: every finished simulation of any
+    set (screen rungs, judge runs, audits and referees; a judge's perturbed twin runs inside its task)."""
+    finished = np.isin(cols["status"], (TrialStatus.COMPLETE.stored, TrialStatus.FAILED.stored))
+    judged = np.isin(cols["verification"], (*JUDGED_VERDICTS, *REFUTED_VERDICTS))
+    audited = np.isin(cols["audit"], _AUDITED)
+    refereed = np.isin(cols["audit"], _REFEREED)
+    return {"parameter_sets_done": int(np.count_nonzero(finished & (cols["rung"] == 0))),
+            "evaluations_done": int(np.count_nonzero(finished) + np.count_nonzero(judged)
+                                    + np.count_nonzero(audited) + np.count_nonzero(refereed))}
+
+
+_AUDITED = tuple(a.stored for a in (AuditState.AGREES, AuditState.DISPUTED, AuditState.DISAGREES,
+                                    AuditState.OVERRULED))
+# a referee ran (a quarantined worker's disagreeing re-run has none; stored alike, it counts one)
+_REFEREED = (AuditState.DISAGREES.stored, AuditState.OVERRULED.stored)
