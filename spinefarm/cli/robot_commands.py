@@ -84,7 +84,7 @@ def cmd_spec(args: argparse.Namespace) -> int:
 def cmd_check(args: argparse.Namespace) -> int:
     from spinefarm.cli.waiting import Waiting
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.contract import run_contract
+    from spinefarm.worker.tools.contract import run_contract
 
     morph = load_morphology(args.morphology)
     with Waiting(f"checking {morph.name}", "checks") as wait:

@@ -19,8 +19,8 @@ from spinefarm.robot.bodies import BodyModel, Quaternion, quaternion_matrix
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.scene import GROUND_TOP_CM, SceneConfig, Terrain, surface_height_cm
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker import scoring
 from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.trial import scoring
 
 if TYPE_CHECKING:
     from spinefarm.worker.sim.stability import StabilityEstimate
