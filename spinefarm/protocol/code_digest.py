@@ -20,7 +20,7 @@ _PACKAGE = Path(__file__).resolve().parent.parent
 SIMULATING_DIRS = ("robot", "worker/engines", "worker/control", "worker/sim")
 SIMULATING_MODULES = ("worker/trial/run.py", "worker/trial/loop.py", "worker/trial/batch.py",
                       "worker/trial/scoring.py", "worker/trial/episode.py", "worker/trial/setup.py",
-                      "worker/trial/settled.py", "worker/trial/robust.py", "worker/service/tasks.py",
+                      "worker/trial/settled.py", "worker/trial/robust.py", "worker/service/assignment.py",
                       "worker/service/evaluators.py", "protocol/run.py", "protocol/params.py")
 _DIGEST = re.compile(r"^[0-9a-f]{64}$")
 

@@ -101,7 +101,7 @@ def test_the_judge_runs_and_counts_its_perturbed_half():
     from spinefarm.protocol.settings import TaskFidelity
     from spinefarm.protocol.states import Verification
     from spinefarm.protocol.work import TrialAssignment
-    from spinefarm.worker.service.tasks import physics_evaluator
+    from spinefarm.worker.service.assignment import physics_evaluator
 
     morph = load_morphology("tetraspine-ntrt")
     u = random_unit_params(morph, 4)

@@ -17,7 +17,7 @@ from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.protocol.work import TrialAssignment
 from spinefarm.robot.spaces import param_space
-from spinefarm.worker.service.tasks import physics_evaluator, with_fault
+from spinefarm.worker.service.assignment import physics_evaluator, with_fault
 
 Evaluator = Callable[[TrialAssignment], TrialResult | None]  # None: abandoned (the worker is stopping)
 

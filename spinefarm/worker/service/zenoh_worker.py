@@ -29,11 +29,11 @@ from spinefarm.protocol.results import TrialResult, fit_for_protocol
 from spinefarm.protocol.run import RunConfig, WorkerProblem
 from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult
 from spinefarm.protocol.work import RunInfo, TrialAssignment, WorkGrant, WorkRequest
+from spinefarm.worker.service.assignment import available_engines, environment
 from spinefarm.worker.service.connect import Connector
 from spinefarm.worker.service.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
 from spinefarm.worker.service.pacing import Backoff, BatchSizer, default_worker_id, mark_ready
 from spinefarm.worker.service.sandbox import MIN_LIMIT_S, SandboxStopped, TrialLimit, TrialSandbox
-from spinefarm.worker.service.tasks import available_engines, environment
 
 __all__ = ["Backoff", "BatchSizer", "WorkerService", "WorkerTimings", "ZenohAccess", "build_evaluator",
            "default_worker_id", "sphere_result"]
