@@ -30,7 +30,7 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.control.law import ControlLaw, string_tables
 from spinefarm.worker.engines.base import EngineFactory
 from spinefarm.worker.trial.batch import Batch, Timing, Trajectory, World
-from spinefarm.worker.trial.episode import Measured, choose_step, score
+from spinefarm.worker.trial.episode import EpisodeEnd, choose_step, score
 from spinefarm.worker.trial.settled import settle_key
 from spinefarm.worker.trial.setup import SetupCache, TrialSetup, setup_key
 
@@ -152,7 +152,7 @@ def _outcome(morph: Morphology, setup: TrialSetup, cfg: TrialConfig, timing: Tim
     loco_steps = max(0, w.steps_done - n_settle) if w.settle_poses is not None else 0 if n_settle else w.steps_done
     extras = {"dt_s": dt, "engine": cfg.engine, "settle_s": n_settle * dt}
     # the start pose without jitter (or the pose after the settle): distances count from it
-    measured = Measured(w.end_poses, loco_steps, dt, w.end_work - w.settle_work, w.reason, w.settle_poses)
+    measured = EpisodeEnd(w.end_poses, loco_steps, dt, w.end_work - w.settle_work, w.reason, w.settle_poses)
     result = score(morph, setup.masses, setup.build, measured, seed, wall_s, extras)
     path = np.array(w.com_path)
     return TrialOutcome(result, w.trajectory, path, np.arange(len(path)) * timing.check_every * dt)
