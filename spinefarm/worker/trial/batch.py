@@ -67,7 +67,7 @@ class Timing:
 
 
 @dataclass
-class World:
+class WorldLog:
     """One world's measurements: the last sane check (pose, step, work) a diverged trial is scored from, the
     COM path, the pose and work at the end of the settle phase, and why it stopped."""
 
@@ -95,7 +95,7 @@ class Batch:
         self.engine, self.law, self.timing, self.cfg = engine, law, timing, cfg
         self.masses, self.start_length_cm, self.terrain = masses, start_length_cm, terrain
         poses = engine.read_poses()
-        self.worlds = [World(p[:, :3].copy(), p.copy(), [scoring.robot_com_cm(p, masses)]) for p in poses]
+        self.worlds = [WorldLog(p[:, :3].copy(), p.copy(), [scoring.robot_com_cm(p, masses)]) for p in poses]
         if timing.record_every:
             for w in self.worlds:
                 w.trajectory = Trajectory()
@@ -108,7 +108,7 @@ class Batch:
         self._limits = guard.limits(cfg)
         self._base_len = np.maximum(start_length_cm, STRETCH_BASE_MIN_CM).astype(np.float64)
 
-    def run(self, settled: Settled | None = None, keep_settled: bool = False) -> list[World]:
+    def run(self, settled: Settled | None = None, keep_settled: bool = False) -> list[WorldLog]:
         """Both phases, or with `settled` (every world's start pose and string tables those of its key,
         worker.trial.settled) locomotion only, every world starting from that settle's end. keep_settled: keep world
         0's settle end in self.settled (if it settled and its engine can snapshot it)."""

@@ -29,7 +29,7 @@ from spinefarm.robot.spaces import param_space
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.control.law import ControlLaw, string_tables
 from spinefarm.worker.engines.base import EngineFactory
-from spinefarm.worker.trial.batch import Batch, Timing, Trajectory, World
+from spinefarm.worker.trial.batch import Batch, Timing, Trajectory, WorldLog
 from spinefarm.worker.trial.episode import EpisodeEnd, choose_step, score
 from spinefarm.worker.trial.settled import settle_key
 from spinefarm.worker.trial.setup import SetupCache, TrialSetup, setup_key
@@ -146,7 +146,7 @@ def _timing(morph: Morphology, cfg: TrialConfig, dt: float) -> Timing:
                   dt_s=dt, cpg_own_step_s=own)
 
 
-def _outcome(morph: Morphology, setup: TrialSetup, cfg: TrialConfig, timing: Timing, w: World, seed: int,
+def _outcome(morph: Morphology, setup: TrialSetup, cfg: TrialConfig, timing: Timing, w: WorldLog, seed: int,
              wall_s: float) -> TrialOutcome:
     n_settle, dt = timing.n_settle, timing.dt_s
     loco_steps = max(0, w.steps_done - n_settle) if w.settle_poses is not None else 0 if n_settle else w.steps_done

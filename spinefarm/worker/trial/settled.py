@@ -21,7 +21,7 @@ from spinefarm.worker.sim import strings as sk
 @dataclass
 class Settled:
     """One world at the end of its settle phase: the engine's snapshot of it, its string state (s, N_STATE), its
-    reel-in work (internal units), its measurements so far (a worker.trial.batch.World) and the steps taken."""
+    reel-in work (internal units), its measurements so far (a worker.trial.batch.WorldLog) and the steps taken."""
 
     engine_state: Any
     string_state: np.ndarray
