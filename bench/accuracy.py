@@ -17,8 +17,8 @@ from concurrent.futures import ProcessPoolExecutor
 from statistics import median
 
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.accuracy import rel
-from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.tools.accuracy import rel
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
 
 STEPS_S = (2e-3, 1e-3, 5e-4, 2.5e-4)
 REFERENCE_S = 1.25e-4

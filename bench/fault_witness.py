@@ -31,7 +31,7 @@ def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) ->
     from spinefarm.protocol.run import RunConfig
     from spinefarm.protocol.submissions import SubmittedResult
     from spinefarm.protocol.work import WorkGrant, WorkRequest
-    from spinefarm.worker.service import build_evaluator
+    from spinefarm.worker.service.zenoh_worker import build_evaluator
 
     session = None
     while session is None:

@@ -144,7 +144,7 @@ def _replay_ratio(morph: object, engine: str, profile: dict, published: Path, du
     same time (the published recording's, at duration_s or its end)."""
     from spinefarm.worker.fit.readers import read_recording
     from spinefarm.worker.fit.state import planar_distance_cm
-    from spinefarm.worker.replay import replay
+    from spinefarm.worker.tools.replay import replay
 
     rec = read_recording(published)
     seg = json.loads((published / "run-info.json").read_text())["scoring_segment"]

@@ -36,9 +36,9 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
-from spinefarm.worker import scoring
-from spinefarm.worker.setup import SetupCache
-from spinefarm.worker.trial import TrialConfig, simulate
+from spinefarm.worker.trial import scoring
+from spinefarm.worker.trial.run import TrialConfig, simulate
+from spinefarm.worker.trial.setup import SetupCache
 
 _CACHE = SetupCache()
 

@@ -56,8 +56,8 @@ def simulate_ours(folder: Path, morphology: str, motor_model: str, duration_s: f
     """Our trial of the recording's parameters, recorded every 10 ms, in the recording's layout."""
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.replay import read_parameter_set, unit_params
-    from spinefarm.worker.trial import simulate
+    from spinefarm.worker.tools.replay import read_parameter_set, unit_params
+    from spinefarm.worker.trial.run import simulate
 
     morph = load_morphology(morphology)
     u = unit_params(morph, read_parameter_set(folder / "params"))

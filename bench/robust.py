@@ -64,8 +64,8 @@ def measure_one(morphology: str, controller: str, params: dict, randomize: str, 
     """Episode k of the fresh measurement (runs in a pool process)."""
     from spinefarm.protocol.robust import RobustSpec, draw_episode, parse_randomize
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.robust import episode_world, run_worlds
-    from spinefarm.worker.trial import TrialConfig
+    from spinefarm.worker.trial.robust import episode_world, run_worlds
+    from spinefarm.worker.trial.run import TrialConfig
 
     morph = load_morphology(morphology)
     spec = RobustSpec(episodes=k + 1, randomize=parse_randomize(randomize))

@@ -50,7 +50,7 @@ PAPER_SPEED_CM_S = {"tetraspine": 9.46, "tetrahedral-complex": 6.13, "octahedral
 
 
 def _trial(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int):
-    from spinefarm.worker.trial import TrialConfig, run_trial
+    from spinefarm.worker.trial.run import TrialConfig, run_trial
 
     return run_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
                      controller=controller)
@@ -58,8 +58,8 @@ def _trial(morphology: str, controller: str | None, trial_config: dict, params_u
 
 def _verify(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int,
             distance_m: float) -> dict:
-    from spinefarm.worker.trial import TrialConfig
-    from spinefarm.worker.verify import VerifySettings, verify_trial
+    from spinefarm.worker.tools.verify import VerifySettings, verify_trial
+    from spinefarm.worker.trial.run import TrialConfig
 
     return verify_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
                         distance_m, VerifySettings(), controller=controller).to_dict()
@@ -68,7 +68,7 @@ def _verify(morphology: str, controller: str | None, trial_config: dict, params_
 def _judge(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int,
            judge_dt_s: float) -> dict:
     """The Bullet judge's run of a screened trial at its converged step."""
-    from spinefarm.worker.trial import TrialConfig, run_trial
+    from spinefarm.worker.trial.run import TrialConfig, run_trial
 
     cfg = TrialConfig.from_dict({**trial_config, "engine": "bullet", "engine_options": {}, "dt_s": judge_dt_s,
                                  "auto_dt": False})

@@ -59,7 +59,7 @@ def host_workers(endpoint: str, first: int, count: int, out_dir: Path, stagger_s
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(threadName)s %(levelname)s %(message)s")
     from spinefarm.protocol import keys
-    from spinefarm.worker.service import WorkerService, WorkerTimings, ZenohAccess
+    from spinefarm.worker.service.zenoh_worker import WorkerService, WorkerTimings, ZenohAccess
 
     grants = open(out_dir / f"grants-{first}.log", "a", buffering=1)  # noqa: SIM115 (lives with the process)
     lock = threading.Lock()

@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--morphology", default="tetraspine")
     args = ap.parse_args()
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.trial import run_trial
+    from spinefarm.worker.trial.run import run_trial
 
     params = at_rest(args.morphology)
     t0 = time.time()

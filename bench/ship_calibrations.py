@@ -20,8 +20,8 @@ import tempfile
 import time
 
 from spinefarm.robot.morphology.registry import builtin_names
-from spinefarm.worker.calibrate import simulating_code_digest
-from spinefarm.worker.shipped_calibration import shipped_path
+from spinefarm.worker.tools.calibrate import simulating_code_digest
+from spinefarm.worker.tools.shipped_calibration import shipped_path
 
 FIGURES = ("spearman", "top_overlap", "top_k", "median_distance_ratio", "n_moving", "decision", "reason")
 

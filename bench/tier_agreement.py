@@ -26,8 +26,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from spinefarm.worker.calibrate import spearman  # the one rank correlation, shared with calibrate
-from spinefarm.worker.replay import PUBLISHED_DIR
+from spinefarm.worker.tools.calibrate import spearman  # the one rank correlation, shared with calibrate
+from spinefarm.worker.tools.replay import PUBLISHED_DIR
 
 SPINES = ("tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed")
 # converged steps: Bullet is within ~1.5 % at 0.25 ms (docs/accuracy.md), MuJoCo well within 1 % at 0.5 ms
@@ -43,8 +43,8 @@ _CACHE = None  # one SetupCache per pool process: set-up reused as a worker does
 
 def _trial(args: tuple) -> dict:
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import TrialConfig, run_trial
+    from spinefarm.worker.trial.run import TrialConfig, run_trial
+    from spinefarm.worker.trial.setup import SetupCache
 
     global _CACHE
     _CACHE = _CACHE or SetupCache(8)
@@ -56,7 +56,7 @@ def _trial(args: tuple) -> dict:
         cfg["dt_s"] = dt
     try:
         choose = TrialConfig(**cfg)
-        from spinefarm.worker.episode import choose_step
+        from spinefarm.worker.trial.episode import choose_step
 
         choose_step(morph, choose)
     except Exception:  # a step the string network cannot take: the automatic one
@@ -68,7 +68,7 @@ def _trial(args: tuple) -> dict:
 
 
 def _replay(args: tuple) -> dict:
-    from spinefarm.worker.replay import replay
+    from spinefarm.worker.tools.replay import replay
 
     spine, folder, engine = args
     rep = replay(NTRT / folder, spine, engine=engine)
@@ -156,7 +156,7 @@ def _jobs(args: argparse.Namespace, tiers: dict, extra: dict, sets: int, duratio
           best_of: dict) -> list[tuple]:
     """One job per spine, tier, engine and parameter set: (spine, tier, engine, index, _trial's arguments)."""
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial import random_unit_params
+    from spinefarm.worker.trial.run import random_unit_params
 
     jobs: list[tuple] = []
     for spine in args.spines.split(","):

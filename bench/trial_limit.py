@@ -1,4 +1,4 @@
-"""What the per-trial wall-clock limit costs: a trial run in the worker's trial process (worker.sandbox)
+"""What the per-trial wall-clock limit costs: a trial run in the worker's trial process (worker.service.sandbox)
 against the same trial called in-process, and how long a hung trial holds a worker.
 
 Prints one JSON object: per-trial overhead of the pipe round trip on the test objective (microseconds,
@@ -22,8 +22,8 @@ sys.path.insert(0, str(ROOT))
 
 from spinefarm.coordinator.problem import build_run_config  # noqa: E402
 from spinefarm.protocol.work import TrialAssignment  # noqa: E402
-from spinefarm.worker.evaluators import build_evaluator  # noqa: E402
-from spinefarm.worker.sandbox import TrialLimit, TrialSandbox  # noqa: E402
+from spinefarm.worker.service.evaluators import build_evaluator  # noqa: E402
+from spinefarm.worker.service.sandbox import TrialLimit, TrialSandbox  # noqa: E402
 
 
 def assignments(n_params: int, n: int) -> list[TrialAssignment]:

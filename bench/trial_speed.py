@@ -30,12 +30,12 @@ cone (`mujoco_pyramidal_cone`, the default before the elliptic one), every trial
 `control_share`: the control law and the loop over MuJoCo's whole step (1 - a bare mj_step from the trial's end
 state over the whole step; `mujoco_split_us_per_step`), with `control_law_share` the law alone (CPG and strings
 timed apart on the end pose), and `guard_check_us`: one guard check of one world on the end pose, exact and
-compiled (worker.guard):
+compiled (worker.trial.guard):
 
     python bench/trial_speed.py --spines all [--tier-seconds 10] [--repeats 3]
 
 With --settled SETTLE_S, MuJoCo trials of --tier-seconds after a settle phase of SETTLE_S, each starting from the
-settle end kept by the set-up (worker.settled) against each settling again, interleaved (CPU s per trial):
+settle end kept by the set-up (worker.trial.settled) against each settling again, interleaved (CPU s per trial):
 
     python bench/trial_speed.py --settled 1 --tier-seconds 3 [--morphology tetraspine] [--repeats 5]
 """
@@ -57,7 +57,7 @@ from spinefarm.robot.spaces import controller_space
 from spinefarm.worker.control.cpg import CpgIntegrator
 from spinefarm.worker.engines.bullet import BulletPhysics
 from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial import TrialConfig, random_unit_params, string_tables
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, string_tables
 
 
 def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
@@ -140,8 +140,8 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
     segment-segment contacts) and Bullet at 0.25 ms (about MuJoCo's default-step accuracy, docs/accuracy.md).
     gaits: unit parameter vectors (of `controller`'s space) to run, one per round after a warm-up round;
     default: seeded random ones."""
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import simulate
+    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.setup import SetupCache
 
     morph = load_morphology(morph_name)
     configs = _tier_configs(seconds, mujoco_options)
@@ -196,9 +196,9 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
     """CPU s per simulated s of whole trials (set-up reused, a first round to warm up) at each engine's
     default step: Bullet, MuJoCo as it runs by default, and MuJoCo's segment-segment contacts both ways."""
     from spinefarm.protocol.errors import ConfigError
-    from spinefarm.worker.episode import choose_step
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import simulate
+    from spinefarm.worker.trial.episode import choose_step
+    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.setup import SetupCache
 
     morph = load_morphology(morph_name)
     configs = {name: TrialConfig(duration_s=seconds, engine=engine, engine_options=options)
@@ -271,8 +271,8 @@ def law_step_us(setup, u: np.ndarray, cfg: TrialConfig, steps: int = 2000) -> fl
 
 def guard_check_us(setup, u: np.ndarray, cfg: TrialConfig, repeats: int = 500) -> dict:
     """CPU µs of one guard check on the trial's end pose: the exact check and the compiled fast path."""
-    from spinefarm.worker import guard
-    from spinefarm.worker.episode import STRETCH_BASE_MIN_CM, check_state
+    from spinefarm.worker.trial import guard
+    from spinefarm.worker.trial.episode import STRETCH_BASE_MIN_CM, check_state
 
     net = setup.space.network(setup.space.param_space.physical(u))
     _, sstate = setup.string_tables(net)
@@ -292,7 +292,7 @@ def guard_check_us(setup, u: np.ndarray, cfg: TrialConfig, repeats: int = 500) -
 
 def reach_pairs(morph, cfg: TrialConfig) -> dict:
     """How many rod pairs of different segments "reach" (cfg's segment_contacts) models, of all of them."""
-    from spinefarm.worker.setup import TrialSetup
+    from spinefarm.worker.trial.setup import TrialSetup
 
     setup = TrialSetup(morph, cfg, None)
     sizes = [len(b.rods) for b in setup.bodies]
@@ -302,9 +302,9 @@ def reach_pairs(morph, cfg: TrialConfig) -> dict:
 
 def settled_cost(morph_name: str, seconds: float, settle_s: float, repeats: int) -> dict:
     """CPU s per MuJoCo trial (settle_s then seconds of locomotion, set-up reused, seeded random gaits),
-    interleaved: every trial starting from the kept settle end (worker.settled) against every trial settling."""
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import simulate
+    interleaved: every trial starting from the kept settle end (worker.trial.settled) against every trial settling."""
+    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.setup import SetupCache
 
     morph = load_morphology(morph_name)
     cfg = TrialConfig(duration_s=seconds, settle_s=settle_s, engine="mujoco")
@@ -374,8 +374,8 @@ def best_gaits(path: str, count: int, apart: float = 0.1) -> tuple[list[np.ndarr
 
 def setup_cost(morph_name: str, repeats: int) -> dict:
     """Set-up of one trial (a 1-step trial's wall time): built fresh against reused, per engine."""
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import simulate
+    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.setup import SetupCache
 
     morph = load_morphology(morph_name)
     out = {}

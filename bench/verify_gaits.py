@@ -18,8 +18,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from spinefarm.worker.trial import TrialConfig, run_trial  # noqa: E402
-from spinefarm.worker.verify import VerifySettings, verify_trial  # noqa: E402
+from spinefarm.worker.tools.verify import VerifySettings, verify_trial  # noqa: E402
+from spinefarm.worker.trial.run import TrialConfig, run_trial  # noqa: E402
 
 
 def check(gait_file: Path) -> dict:

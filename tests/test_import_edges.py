@@ -16,10 +16,10 @@ ALLOWED = {
     "spinefarm.protocol.work": set(),
     "spinefarm.protocol.errors": set(),
     "spinefarm.robot.morphology.registry": set(),
-    "spinefarm.worker.trial": {"numba"},
+    "spinefarm.worker.trial.run": {"numba"},
     "spinefarm.worker.engines.bullet": {"pybullet", "numba"},
     "spinefarm.worker.engines.mujoco": {"mujoco"},
-    "spinefarm.worker.setup": {"numba"},
+    "spinefarm.worker.trial.setup": {"numba"},
     "spinefarm.storage.hdf5": {"h5py"},
 }
 

@@ -1,7 +1,7 @@
 """Gait pictures and motions of stored trials, re-simulated on demand in a subprocess and cached on disk.
 
-The API process never imports the simulator: `python -m spinefarm.worker.picture` re-simulates the trial and
-draws the `render` strip, `python -m spinefarm.worker.motion` records its motion for the 3D view. Each is
+The API process never imports the simulator: `python -m spinefarm.worker.tools.picture` re-simulates the trial and
+draws the `render` strip, `python -m spinefarm.worker.tools.motion` records its motion for the 3D view. Each is
 keyed by what determines it (run config, parameters, seed, the trial's length, engine and step), so it is
 made once; requests for one being made wait for it instead of starting another.
 """
@@ -31,7 +31,7 @@ RENDER_TIMEOUT_S = 900.0
 # The Python module each engine needs; a server without it says so instead of failing later.
 ENGINE_MODULES = {"bullet": "pybullet", "mujoco": "mujoco"}
 # what each kind of drawing runs (python -m MODULE JOB OUT) and the file it writes
-KINDS = {"picture": ("spinefarm.worker.picture", ".png"), "motion": ("spinefarm.worker.motion", ".json")}
+KINDS = {"picture": ("spinefarm.worker.tools.picture", ".png"), "motion": ("spinefarm.worker.tools.motion", ".json")}
 
 
 def default_cache_dir() -> Path:
@@ -40,7 +40,7 @@ def default_cache_dir() -> Path:
 
 def simulator_missing(engine: str) -> str | None:
     """Why this process cannot draw a trial of `engine`, or None when it can."""
-    for module in ("spinefarm.worker.trial", ENGINE_MODULES.get(engine, engine)):
+    for module in ("spinefarm.worker.trial.run", ENGINE_MODULES.get(engine, engine)):
         try:
             found = importlib.util.find_spec(module) is not None
         except (ImportError, ValueError):
@@ -102,7 +102,7 @@ class PictureCache:
         return self._cached(meta, rec, "picture", {"motion_file": str(motion)})
 
     def motion(self, meta: RunMeta, rec: TrialRecord) -> Path:
-        """The trial's recorded motion (JSON, worker/motion.py's format) for the 3D view."""
+        """The trial's recorded motion (JSON, worker/tools/motion.py's format) for the 3D view."""
         return self._cached(meta, rec, "motion")
 
     def _cached(self, meta: RunMeta, rec: TrialRecord, kind: str, inputs: dict[str, Any] | None = None) -> Path:

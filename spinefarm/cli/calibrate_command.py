@@ -1,4 +1,4 @@
-"""`spinefarm calibrate ROBOT|FILE`: do the tiers rank this robot's gaits alike? (worker.calibrate)"""
+"""`spinefarm calibrate ROBOT|FILE`: do the tiers rank this robot's gaits alike? (worker.tools.calibrate)"""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from spinefarm.cli.profile_argument import add_profile_argument, profile_from
 from spinefarm.cli.robot_argument import add_robot_argument
 
 if TYPE_CHECKING:
-    from spinefarm.worker.calibrate import CalibrationSettings
+    from spinefarm.worker.tools.calibrate import CalibrationSettings
 
 # what `spinefarm calibrate --help` says first
 DESCRIPTION = ("Run seeded random gaits plus the bests of a short search on MuJoCo and on the judge (Bullet at "
@@ -57,7 +57,7 @@ def add_calibration_arguments(p: argparse.ArgumentParser, prefix: str = "") -> N
 
 def settings_from(args: argparse.Namespace, prefix: str = "", controller: str | None = None, jobs: int = 1
                   ) -> CalibrationSettings:
-    from spinefarm.worker.calibrate import CalibrationSettings
+    from spinefarm.worker.tools.calibrate import CalibrationSettings
 
     get = vars(args)
     key = prefix.replace("-", "_")
@@ -93,8 +93,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from spinefarm.cli.waiting import Waiting
     from spinefarm.protocol.errors import ParameterError
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.calibrate import TIERS, cache_dir, cache_path, calibration, clean, trials_in
-    from spinefarm.worker.shipped_calibration import shipped
+    from spinefarm.worker.tools.calibrate import TIERS, cache_dir, cache_path, calibration, clean, trials_in
+    from spinefarm.worker.tools.shipped_calibration import shipped
 
     if args.cache_dir:
         print(cache_dir())
@@ -112,7 +112,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         settings = settings_from(args)
     elif settings.dt_s is not None:  # a step every trial would refuse, refused before the first
         from spinefarm.robot.trial_config import TrialConfig
-        from spinefarm.worker.episode import choose_step
+        from spinefarm.worker.trial.episode import choose_step
 
         choose_step(morph, TrialConfig(dt_s=settings.dt_s))
     with Waiting("calibration", "trials") as wait:

@@ -1,5 +1,5 @@
 """`search --engine auto` (search's default): calibrate the tiers on the robot against the judge (or use the
-shipped or cached calibration, worker.shipped_calibration and worker.calibrate), then screen on MuJoCo with
+shipped or cached calibration, worker.tools.shipped_calibration and worker.tools.calibrate), then screen on MuJoCo with
 rungs when it ranks the robot's gaits as Bullet does, else run on Bullet. `auto` is no engine: it is resolved
 here, before the run's trial config is made, and the choice with its figures is stored in the run's settings
 (protocol.engine_choice.EngineChoice)."""
@@ -53,7 +53,7 @@ def choose_engine(args: argparse.Namespace) -> Any:
     # checked here, so a bad --calibrate-* value is an error, not a fall back to Bullet
     settings = settings_from(args, "calibrate-", controller=args.controller,
                              jobs=max(1, min(2, getattr(args, "workers", 1) or 1)))
-    from spinefarm.worker.shipped_calibration import shipped
+    from spinefarm.worker.tools.shipped_calibration import shipped
 
     hit = shipped(args.morphology, settings)  # a built-in's, made for this model: no child
     result, cached = (None, False) if hit is None else ({**hit, "shipped": True}, True)
@@ -83,7 +83,7 @@ def calibrate_in_child(morphology: str, settings: Any, quiet: bool = False) -> t
     process (the coordinator) never loads one. Its progress lines pass through to this standard error (drawn
     for a terminal when this is one; none with `quiet`). Ended with the search: terminated on any exception (Ctrl-C's
     KeyboardInterrupt included), killed by the kernel if the search dies first; its pool ends with it
-    (worker.pool). (the calibration, whether it came from the cache)"""
+    (worker.tools.pool). (the calibration, whether it came from the cache)"""
     from spinefarm.cli.waiting import PROGRESS_ENV
     from spinefarm.protocol.errors import ConfigError
 

@@ -31,8 +31,8 @@ from spinefarm.cli.stop_signals import die_with_parent
 MAX_FAILURES = 3            # start failures in a row before the search stops
 DEATH_WINDOW_S = 60.0
 DEATH_BUDGET = 10           # restarts after deaths per window and worker slot; more wait for room
-EXIT_UNSERVABLE = 3  # worker.service: the run cannot be built on this worker
-READY_ENV = "SPINEFARM_READY_FILE"   # worker.service writes this file once it has started
+EXIT_UNSERVABLE = 3  # worker.service.zenoh_worker: the run cannot be built on this worker
+READY_ENV = "SPINEFARM_READY_FILE"   # worker.service.zenoh_worker writes this file once it has started
 
 
 def worker_command(endpoint: str, run_id: str, batch: int | None, zenoh_config: str | None,

@@ -109,7 +109,7 @@ def replay_summary(report: Any) -> dict[str, Any]:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from spinefarm.worker.replay import JITTER_CM, gait_file, parameter_folder, replay, replay_spread
+    from spinefarm.worker.tools.replay import JITTER_CM, gait_file, parameter_folder, replay, replay_spread
 
     if not 0 <= args.seeds <= 100:
         raise ConfigError("--seeds out of range", received=args.seeds, expected="0 to 100 jittered replays")
@@ -172,7 +172,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def cmd_render(args: argparse.Namespace) -> int:
     from spinefarm.robot.bodies import build_bodies
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.render import frames_from_record, initial_frame, render
+    from spinefarm.worker.tools.render import frames_from_record, initial_frame, render
 
     if render_motion.wants_motion(args):
         return render_motion.cmd_render_motion(args)

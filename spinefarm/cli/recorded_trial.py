@@ -28,14 +28,14 @@ def load_record(path: Path, morph_name: str) -> dict[str, np.ndarray]:
 
 
 def _params(morph: Any, path: Path | None, seed: int) -> tuple[Any, str | None]:
-    from spinefarm.worker.trial import random_unit_params
+    from spinefarm.worker.trial.run import random_unit_params
 
     if path is None:
         return random_unit_params(morph, seed), None
-    from spinefarm.worker.replay import PUBLISHED, parameter_folder
+    from spinefarm.worker.tools.replay import PUBLISHED, parameter_folder
 
     if path.is_dir() or str(path) in PUBLISHED:
-        from spinefarm.worker.replay import read_parameter_set, unit_params
+        from spinefarm.worker.tools.replay import read_parameter_set, unit_params
 
         return unit_params(morph, read_parameter_set(parameter_folder(path))), "ntrt"
     from spinefarm.cli.sim_commands import load_params_file
@@ -48,7 +48,7 @@ def simulate_recorded(args: argparse.Namespace, morph: Any, every_s: Callable[[f
     """(outcome, recorded arrays) of the short trial `render` draws: --params (else random parameters from
     --random-seed), --duration (else at most 5 s), --engine, --motor-model, recorded every every_s(duration)
     seconds; saved to --record when given."""
-    from spinefarm.worker.trial import TrialConfig, simulate
+    from spinefarm.worker.trial.run import TrialConfig, simulate
 
     params, controller = _params(morph, args.params, args.random_seed)
     duration = args.duration or min(morph.duration_s, 5.0)

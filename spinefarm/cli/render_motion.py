@@ -28,7 +28,7 @@ def wants_motion(args: argparse.Namespace) -> bool:
 def _stored_motion(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
     from spinefarm.cli.sim_commands import _stored_trial
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.motion import simulate_motion
+    from spinefarm.worker.tools.motion import simulate_motion
 
     if args.morphology:
         raise ConfigError("--run names its own robot", received=args.morphology, expected="no morphology with --run")
@@ -40,7 +40,7 @@ def _stored_motion(args: argparse.Namespace) -> tuple[dict[str, Any], Any]:
 
 def _fresh_motion(args: argparse.Namespace, morph: Any) -> dict[str, Any]:
     from spinefarm.cli.recorded_trial import load_record, simulate_recorded
-    from spinefarm.worker.motion import motion_document, record_every_s
+    from spinefarm.worker.tools.motion import motion_document, record_every_s
 
     if args.duration is None and args.params is None and args.record is not None:
         return motion_document(morph, load_record(args.record, morph.name), None, f"{morph.name}: {args.record}")
@@ -50,9 +50,9 @@ def _fresh_motion(args: argparse.Namespace, morph: Any) -> dict[str, Any]:
 
 def cmd_render_motion(args: argparse.Namespace) -> int:
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.motion import motion_record
-    from spinefarm.worker.render import frames_from_record, render
-    from spinefarm.worker.video import check_video_path, write_video
+    from spinefarm.worker.tools.motion import motion_record
+    from spinefarm.worker.tools.render import frames_from_record, render
+    from spinefarm.worker.tools.video import check_video_path, write_video
 
     if args.out is None and args.video is None:
         raise ConfigError("nothing to write", expected="--out STRIP.png and/or --video GAIT.mp4|GAIT.gif")

@@ -113,7 +113,7 @@ def _search_fields(source: str) -> tuple:
 def cmd_check(args: argparse.Namespace) -> int:
     from spinefarm.cli.waiting import Waiting
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.contract import run_contract
+    from spinefarm.worker.tools.contract import run_contract
 
     morph = load_morphology(args.morphology)
     body_fields = _search_fields(args.morphology)

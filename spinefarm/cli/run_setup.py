@@ -154,7 +154,7 @@ def check_before_calibrating(args: argparse.Namespace, run_id: str) -> None:
     from spinefarm.coordinator.objectives import objective_fn
     from spinefarm.coordinator.problem import build_run_config, is_test_objective
     from spinefarm.robot.engines import DEFAULT_ENGINE
-    from spinefarm.worker.calibrate import TIERS
+    from spinefarm.worker.tools.calibrate import TIERS
 
     objective_fn(args.objective)
     overrides = {k: v for k, v in trial_overrides(args).items() if not (k == "engine" and v == AUTO)}

@@ -74,8 +74,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 # --- worker, api, export ---------------------------------------------------------------------------
 def cmd_worker(args: argparse.Namespace) -> int:
-    from spinefarm.worker.service import WorkerService, WorkerTimings, ZenohAccess
-    from spinefarm.worker.tasks import parse_engines
+    from spinefarm.worker.service.assignment import parse_engines
+    from spinefarm.worker.service.zenoh_worker import WorkerService, WorkerTimings, ZenohAccess
 
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     checks.endpoints("--connect", args.connect)

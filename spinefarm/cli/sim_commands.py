@@ -23,7 +23,7 @@ from spinefarm.robot.trial_config import MOTOR_MODEL_NAMES
 if TYPE_CHECKING:
     from spinefarm.robot.morphology.model import Morphology
     from spinefarm.storage.schema import RunMeta
-    from spinefarm.worker.accuracy import ParamSet
+    from spinefarm.worker.tools.accuracy import ParamSet
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -138,7 +138,7 @@ def parse_engine_options(items: list[str] | None) -> dict[str, Any]:
 
 def say_if_compiling() -> None:
     """The first simulation after an install compiles the kernels (numba) for a while: say so."""
-    from spinefarm.worker.warmup import kernels_cached
+    from spinefarm.worker.tools.warmup import kernels_cached
 
     if not kernels_cached():
         print("compiling the simulation kernels (first run after installing; about a minute, then cached) ...",
@@ -181,7 +181,7 @@ def result_summary(result: Any, morph_name: str, controller: str | None) -> dict
 
 def cmd_trial(args: argparse.Namespace) -> int:
     from spinefarm.protocol.environment import environment_record
-    from spinefarm.worker.trial import simulate
+    from spinefarm.worker.trial.run import simulate
 
     if args.record is not None:
         checks.output_path("--record", args.record, (".npz",))
@@ -216,7 +216,7 @@ def _trial_inputs(args: argparse.Namespace) -> tuple[Any, str | None, np.ndarray
     `trial` runs: a stored trial of --run, or a robot with --params or random parameters."""
     from spinefarm.cli.environment_notes import note_environment, recorded_environment
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial import random_unit_params
+    from spinefarm.worker.trial.run import random_unit_params
 
     if args.run is not None:
         morphology, controller, params, seed, base, stored_id = _stored_trial(args.run, args.trial_id)
@@ -244,7 +244,7 @@ def _trial_inputs(args: argparse.Namespace) -> tuple[Any, str | None, np.ndarray
 
 def _trial_config(args: argparse.Namespace, base: dict[str, Any], controller: str | None) -> Any:
     """The TrialConfig: a stored trial's config (`base`, else the defaults) with the flags on top."""
-    from spinefarm.worker.trial import TrialConfig
+    from spinefarm.worker.trial.run import TrialConfig
 
     overrides = trial_overrides(args)
     if "engine" in overrides and overrides["engine"] != base.get("engine", DEFAULT_ENGINE):
@@ -315,7 +315,7 @@ def _physical(morph: Morphology, params: np.ndarray | dict, controller: str | No
 
 def _best_of_run(path: Path, n: int = 1) -> tuple[list[ParamSet], RunMeta]:
     from spinefarm.storage.hdf5 import Hdf5Storage
-    from spinefarm.worker.accuracy import ParamSet
+    from spinefarm.worker.tools.accuracy import ParamSet
 
     store = Hdf5Storage.open_read(path)
     try:
@@ -332,7 +332,7 @@ def _best_of_run(path: Path, n: int = 1) -> tuple[list[ParamSet], RunMeta]:
 def cmd_accuracy(args: argparse.Namespace) -> int:
     from spinefarm.cli.waiting import Waiting
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.accuracy import format_table, plot, run_accuracy
+    from spinefarm.worker.tools.accuracy import format_table, plot, run_accuracy
 
     checks.at_least("--seeds", args.seeds, 1, "random parameter sets")
     checks.at_least("--jobs", args.jobs, 1, "worker processes")

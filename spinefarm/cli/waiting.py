@@ -1,7 +1,7 @@
 """Progress with an ETA for a command's long wait (a calibration, an accuracy sweep, a structure check, a fit):
 one line redrawn in place on a terminal, a plain line every few seconds otherwise (a log, a pipe, a script).
 
-A command makes one `Waiting(what, unit)` and passes it wherever `progress(done, total)` is taken (worker.pool's
+A command makes one `Waiting(what, unit)` and passes it wherever `progress(done, total)` is taken (worker.tools.pool's
 Progress). A wait shorter than SHOW_AFTER_S shows nothing on a terminal; a log always gets its first and last line.
 A parent process that runs the command in a child and forwards its standard error sets PROGRESS_ENV: "tty"
 (the child draws for the parent's terminal), "lines" (plain lines) or "off" (the parent's --quiet).

@@ -1,6 +1,6 @@
 """How `search --engine auto` chose a run's tier, typed and stored with the run's settings.
 
-The calibration (worker.calibrate) runs the robot's gaits on both tiers; its figures and decision are
+The calibration (worker.tools.calibrate) runs the robot's gaits on both tiers; its figures and decision are
 kept here so a resumed run keeps its tier and the report, the API and the dashboard can show why.
 """
 
@@ -70,7 +70,7 @@ class EngineChoice:
 
     @classmethod
     def from_calibration(cls, result: dict[str, Any], cached: bool, rungs_added: str | None) -> EngineChoice:
-        """The choice a calibration result (worker.calibrate.calibration) makes."""
+        """The choice a calibration result (worker.tools.calibrate.calibration) makes."""
         tiers = {t: {k: v.get(k) for k in ("cpu_s_per_sim_s", "step_error")}
                  for t, v in (result.get("tiers") or {}).items()}
         return cls(engine=result["decision"], cached=cached, shipped=bool(result.get("shipped")),

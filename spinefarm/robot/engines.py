@@ -10,9 +10,9 @@ Abilities (what the trial loop may use beyond BasePhysics' required methods):
   reset          back to the start pose at rest, bit-identical to a fresh world (a worker keeps one world per run)
   velocities     velocities() / set_velocity(), for checks and tests
   compiled_step  compiled_worlds(): each world's state and wrench arrays and a C step function, so the loop
-                 can run many steps in one compiled call (worker.loop)
+                 can run many steps in one compiled call (worker.trial.loop)
   snapshot       snapshot(world) / restore(world, state): a world's whole state, put back into any world of the
-                 same model so that it goes on in the same bits (a settled start, worker.settled)
+                 same model so that it goes on in the same bits (a settled start, worker.trial.settled)
   set_state      set_state(world, poses, velocities): every body's pose and velocity written at once, e.g. a
                  recorded state a fit's window starts from (worker.fit)
 """

@@ -12,7 +12,7 @@ import pytest
 from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.storage.hdf5_reader import read_run
-from spinefarm.worker.render import rod_segments, string_segments
+from spinefarm.worker.tools.render import rod_segments, string_segments
 from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, free_port, spinefarm
 from tests.coordinator_tests.helpers import wait_for
 

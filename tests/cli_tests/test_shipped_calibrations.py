@@ -11,7 +11,7 @@ import sys
 
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
 from spinefarm.storage.hdf5_reader import read_run
-from spinefarm.worker.shipped_calibration import SHIPPED_DIR
+from spinefarm.worker.tools.shipped_calibration import SHIPPED_DIR
 from tests.coordinator_tests.procs import ROOT
 
 SHIPPED_FIRST = {"tetrahedral-complex", "tetraspine"}  # the two docs/engines.md quotes

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from spinefarm.cli.main import main
-from spinefarm.worker.replay import PUBLISHED
+from spinefarm.worker.tools.replay import PUBLISHED
 from tests.coordinator_tests.procs import ROOT
 
 ROBOT = "my-spine"

@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[2]
 OWN = [*(f"spinefarm/{p}" for p in (
     "protocol/keys.py", "protocol/envelope.py", "protocol/work.py", "protocol/submissions.py", "coordinator", "storage",
     "api", "cli/service_commands.py", "cli/search_loop.py", "cli/run_setup.py", "cli/search_args.py", "cli/report.py",
-    "cli/export_command.py", "worker/service.py")), "bench/coordinator_throughput.py"]
+    "cli/export_command.py", "worker/service/zenoh_worker.py")), "bench/coordinator_throughput.py"]
 
 
 def loaded_after(statement: str) -> set[str]:

@@ -16,7 +16,7 @@ from spinefarm.protocol.envelope import decode, decode_message, encode_message
 from spinefarm.protocol.submissions import ResultAck
 from spinefarm.protocol.work import RunInfo, WorkGrant, WorkRequest
 from spinefarm.storage.status import read_status
-from spinefarm.worker.service import WorkerService, ZenohAccess
+from spinefarm.worker.service.zenoh_worker import WorkerService, ZenohAccess
 from tests.coordinator_tests.helpers import free_endpoint, sphere_core, wait_for
 
 pytestmark = pytest.mark.integration

@@ -15,7 +15,7 @@ from spinefarm.protocol.settings import JudgePolicy
 from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult
 from spinefarm.protocol.work import WorkGrant, WorkRequest
 from spinefarm.storage.hdf5 import Hdf5Storage
-from spinefarm.worker.service import build_evaluator
+from spinefarm.worker.service.zenoh_worker import build_evaluator
 from tests.coordinator_tests.helpers import FakeClock
 
 

@@ -16,7 +16,7 @@ import pytest
 from spinefarm.cli.main import main
 from spinefarm.robot.profile import load_profile, profile_hash
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.calibrate import CalibrationSettings
+from spinefarm.worker.tools.calibrate import CalibrationSettings
 
 ROOT = Path(__file__).resolve().parents[2]
 PROFILE = """constants:
@@ -95,7 +95,7 @@ def test_calibration_key_holds_the_profile_hash():
 
 def test_search_carries_the_profile_to_its_workers(tmp_path):
     from spinefarm.storage.hdf5_reader import read_run
-    from spinefarm.worker.trial import run_trial
+    from spinefarm.worker.trial.run import run_trial
 
     (tmp_path / "p.yaml").write_text(PROFILE)
     run = tmp_path / "run.h5"

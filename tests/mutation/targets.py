@@ -9,7 +9,7 @@ W, C, P, S = "tests/worker_tests", "tests/coordinator_tests", "tests/protocol_te
 TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     # fast, pure tests first: with -x a mutant they kill costs seconds; modules whose tests start processes or
     # compile kernels last
-    "scoring": ("spinefarm/worker/scoring.py", (f"{W}/test_scoring.py",)),
+    "scoring": ("spinefarm/worker/trial/scoring.py", (f"{W}/test_scoring.py",)),
     "sampler-paper": ("spinefarm/coordinator/samplers/hill_climb.py", (f"{C}/test_samplers.py",)),
     "sampler-registry": ("spinefarm/coordinator/samplers/registry.py", (f"{C}/test_samplers.py",)),
     "environment": ("spinefarm/protocol/environment.py", (f"{P}/test_environment.py",)),
@@ -18,12 +18,13 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     "runlock": ("spinefarm/storage/runlock.py", (f"{S}/test_runlock_links.py", f"{S}/test_no_locks.py")),
     "robust-scoring": ("spinefarm/protocol/robust.py",
                        (f"{P}/test_robust.py", f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
-    "robust-worlds": ("spinefarm/worker/robust.py", (f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
+    "robust-worlds": ("spinefarm/worker/trial/robust.py",
+                      (f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
     "ladder": ("spinefarm/coordinator/fidelity.py", (f"{C}/test_fidelity.py", f"{C}/test_ladder.py")),
-    "calibration": ("spinefarm/worker/calibrate.py",
+    "calibration": ("spinefarm/worker/tools/calibrate.py",
                     (f"{W}/test_calibration_thresholds.py", f"{W}/test_calibrate.py")),
     "engine-auto": ("spinefarm/cli/engine_auto.py", ("tests/cli_tests/test_engine_auto.py", f"{W}/test_calibrate.py")),
     "contact-guard": ("spinefarm/worker/engines/contact_guard.py",
                       (f"{W}/test_contact_guard.py", f"{W}/test_mujoco.py")),
-    "sandbox": ("spinefarm/worker/sandbox.py", (f"{W}/test_trial_limit.py",)),
+    "sandbox": ("spinefarm/worker/service/sandbox.py", (f"{W}/test_trial_limit.py",)),
 }

@@ -27,8 +27,8 @@ def package(tmp_path):
 def test_the_digest_is_a_sha256_of_the_simulating_sources_only(package):
     names = {p.relative_to(package).as_posix() for p in simulating_sources(package)}
     assert {"robot/engines.py", "worker/engines/bullet.py", "worker/control/law.py", "worker/sim/strings.py",
-            "worker/trial.py", "worker/scoring.py"} <= names
-    assert not names & {"worker/service.py", "coordinator/core.py", "api/app.py"}
+            "worker/trial/run.py", "worker/trial/scoring.py"} <= names
+    assert not names & {"worker/service/zenoh_worker.py", "coordinator/core.py", "api/app.py"}
     before = digest_of(package)
     assert before == code_digest() and len(before) == 64 and int(before, 16) >= 0
     (package / "worker" / "service.py").write_text("# transport only\n", encoding="utf-8")

@@ -10,8 +10,8 @@ import sys
 import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.accuracy import pareto
-from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.tools.accuracy import pareto
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
 
 
 def test_accuracy_command_writes_table_json_and_plot(tmp_path):

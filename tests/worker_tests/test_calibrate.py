@@ -16,7 +16,7 @@ from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.robot.morphology.registry import builtin_path, load_morphology
 from spinefarm.storage.hdf5_reader import read_run
-from spinefarm.worker.calibrate import agreement, decide
+from spinefarm.worker.tools.calibrate import agreement, decide
 from tests.coordinator_tests.procs import ROOT
 from tests.http_server import served
 
@@ -121,7 +121,7 @@ def test_the_choice_is_typed_settings_that_round_trip_and_refuse_bad_fields():
 def test_a_change_of_the_simulating_code_calibrates_again(tmp_path):
     """The cache is keyed by the simulating code's contents: an engine's model that changes (a friction cone,
     say) is not judged by a calibration of the old one."""
-    from spinefarm.worker.calibrate import (
+    from spinefarm.worker.tools.calibrate import (
         CalibrationSettings,
         cache_path,
         code_digest,

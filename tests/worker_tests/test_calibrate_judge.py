@@ -11,10 +11,10 @@ import numpy as np
 from spinefarm.cli.main import build_parser
 from spinefarm.robot.morphology.registry import builtin_path, load_morphology
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker import shipped_calibration
-from spinefarm.worker.calibrate import CalibrationSettings, calibrate, calibration
-from spinefarm.worker.shipped_calibration import shipped
-from spinefarm.worker.trial import run_trial
+from spinefarm.worker.tools import shipped_calibration
+from spinefarm.worker.tools.calibrate import CalibrationSettings, calibrate, calibration
+from spinefarm.worker.tools.shipped_calibration import shipped
+from spinefarm.worker.trial.run import run_trial
 
 JUDGE_DT_S = 0.00025  # the judge's documented step (docs/accuracy.md: Bullet within ~1.5 % there)
 ROBOT = "tetrahedral-complex"
@@ -32,7 +32,7 @@ def test_the_reference_runs_at_the_judges_step_not_bullets_default():
     assert out["tiers"]["bullet"]["dt_s"] == JUDGE_DT_S and out["tiers"]["mujoco"]["dt_s"] == 0.001
     # the figures are those of trials at that step: gait 1 replayed on its own at 0.25 ms and at Bullet's 1 ms
     morph = load_morphology(ROBOT)
-    from spinefarm.worker.trial import random_unit_params
+    from spinefarm.worker.trial.run import random_unit_params
 
     unit = np.asarray(random_unit_params(morph, 1, None))
     at = {dt: run_trial(morph, unit, TrialConfig(duration_s=0.6, settle_s=0.2, engine="bullet", dt_s=dt), 1)

@@ -1,4 +1,4 @@
-"""`--engine auto`'s rule (docs/engines.md, worker.calibrate): MuJoCo screens when Spearman's rho >= 0.9, the
+"""`--engine auto`'s rule (docs/engines.md, worker.tools.calibrate): MuJoCo screens when Spearman's rho >= 0.9, the
 top-10 overlap >= 8 of 10 and the median MuJoCo/Bullet distance ratio lies in [0.9, 1.1], the ratio over the
 gaits that move (>= 1 cm) in Bullet. Each threshold is probed on both sides with figures worked by hand:
 rho = 1 - 6 sum(d^2) / (n (n^2 - 1)) for ranks without ties."""
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spinefarm.worker.calibrate import agreement, decide
+from spinefarm.worker.tools.calibrate import agreement, decide
 
 
 def _swapped(n: int, pairs) -> tuple[np.ndarray, np.ndarray]:

@@ -8,11 +8,11 @@ import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig, build_terrain
-from spinefarm.worker import guard
-from spinefarm.worker.episode import STRETCH_BASE_MIN_CM, check_state
-from spinefarm.worker.setup import SetupCache
 from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial import guard
+from spinefarm.worker.trial.episode import STRETCH_BASE_MIN_CM, check_state
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.setup import SetupCache
 
 
 def _state(seed: int):

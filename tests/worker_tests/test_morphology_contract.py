@@ -1,4 +1,4 @@
-"""The contract every discovered spec file meets (worker.contract, as `spinefarm check` runs it), and the
+"""The contract every discovered spec file meets (worker.tools.contract, as `spinefarm check` runs it), and the
 derived numbers of spec section 6 for the paper's spines (EXPECTED, computed independently from the
 geometry; DOCUMENTED adds the hardware Tetraspine of paper section V). A new spec file needs no entry here.
 """
@@ -14,15 +14,15 @@ import pytest
 from spinefarm.robot.bodies import build_bodies, build_strings, lowest_rod_surface_cm
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
 from spinefarm.robot.spaces import NtrtTableSpace, param_space
-from spinefarm.worker.contract import (
+from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.tools.contract import (
     check_builds,
     check_deterministic,
     check_passive_settle,
     check_sane_numbers,
     passive_params,
 )
-from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial import TrialConfig, simulate, string_tables
+from spinefarm.worker.trial.run import TrialConfig, simulate, string_tables
 from tests.worker_tests.helpers import ENGINES
 
 
@@ -217,7 +217,7 @@ def test_octahedral_ligaments_are_driven_to_start_minus_half_a_centimetre():
 @pytest.mark.parametrize("engine", ENGINES)
 def test_octahedral_vertebrae_rest_on_one_rod_each(engine):
     """Paper, section IV-C: "When resting on the ground, only one rod from each vertebrae touches"."""
-    from spinefarm.worker.render import rod_segments
+    from spinefarm.worker.tools.render import rod_segments
 
     morph = load_morphology("octahedral-complex")
     bodies = build_bodies(morph.structure)

@@ -17,9 +17,9 @@ from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import GroundSpec, SceneConfig, build_terrain, surface_height_cm
 from spinefarm.worker.engines.mujoco import MujocoPhysics, MujocoSettings
-from spinefarm.worker.setup import SetupCache
 from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial, simulate
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial, simulate
+from spinefarm.worker.trial.setup import SetupCache
 from tests.worker_tests.helpers import ENGINES, PassiveRig, two_rod_structure
 
 V_CM_S, A_CM_S2 = 24.0, 10000.0
@@ -55,7 +55,7 @@ def test_motor_limits_do_not_depend_on_the_step_in_the_engine(engine):
 SNIPPET = """
 import json
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
 m = load_morphology("tetraspine")
 r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco"), seed=11)
 d = r.to_dict(); d.pop("wall_time_s")
@@ -169,7 +169,7 @@ def test_friction_is_the_product_of_ground_and_rod(engine):
 def _pushed_segment_slides_cm(engine: str, force: np.ndarray, options: dict | None = None) -> float:
     """One octahedral segment dropped on flat ground, settled 0.3 s, then pushed 0.4 s by `force` at its COM."""
     from spinefarm.worker.engines.base import engine_class
-    from spinefarm.worker.setup import TrialSetup
+    from spinefarm.worker.trial.setup import TrialSetup
 
     setup = TrialSetup(load_morphology("octahedral-complex"), TrialConfig(engine=engine,
                                                                           engine_options=options or {}), None)

@@ -15,7 +15,7 @@ import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.trial import random_unit_params, run_trial, simulate
+from spinefarm.worker.trial.run import random_unit_params, run_trial, simulate
 
 GAIT = Path(__file__).resolve().parents[2] / "examples" / "gaits" / "tetraspine.json"
 G_M_S2 = 9.81
@@ -101,7 +101,7 @@ def test_the_judge_runs_and_counts_its_perturbed_half():
     from spinefarm.protocol.settings import TaskFidelity
     from spinefarm.protocol.states import Verification
     from spinefarm.protocol.work import TrialAssignment
-    from spinefarm.worker.tasks import physics_evaluator
+    from spinefarm.worker.service.assignment import physics_evaluator
 
     morph = load_morphology("tetraspine-ntrt")
     u = random_unit_params(morph, 4)

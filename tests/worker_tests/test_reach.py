@@ -14,11 +14,11 @@ from spinefarm.robot.bodies import build_bodies, build_strings
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
 from spinefarm.robot.reach import REACH_MARGIN_CM, reachable_rod_pairs
 from spinefarm.robot.scene import SceneConfig, build_terrain
-from spinefarm.worker.accuracy import DISTANCE_FLOOR_M, rel
 from spinefarm.worker.engines.contact_guard import _segment_distance
 from spinefarm.worker.engines.mujoco import MujocoPhysics
 from spinefarm.worker.engines.mujoco_model import MujocoSettings
-from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.tools.accuracy import DISTANCE_FLOOR_M, rel
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
 
 # segment 0 and 1: a short hub rod carrying both string anchors and a far rod 40-60 cm out along x; two stiff
 # strings hold the hubs at most 10 cm (plus 1.4 cm of stretch) apart, so a hub can never reach the other

@@ -12,8 +12,8 @@ from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.spaces import param_space
-from spinefarm.worker.render import Frame, frames_from_record, initial_frame, render, rod_segments
-from spinefarm.worker.trial import TrialConfig, simulate
+from spinefarm.worker.tools.render import Frame, frames_from_record, initial_frame, render, rod_segments
+from spinefarm.worker.trial.run import TrialConfig, simulate
 
 
 def _image(path: Path) -> np.ndarray:

@@ -13,7 +13,7 @@ from spinefarm.cli.main import main
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.spaces import controller_space, param_space
-from spinefarm.worker.replay import (
+from spinefarm.worker.tools.replay import (
     PUBLISHED_DIR,
     REFERENCES,
     detect_morphology,
@@ -143,7 +143,7 @@ def test_replay_command_json_short(capsys):
 def test_replay_text_says_when_it_diverges(monkeypatch, capsys):
     from dataclasses import replace as dc_replace
 
-    import spinefarm.worker.replay as rp
+    import spinefarm.worker.tools.replay as rp
 
     real = rp.replay(_folder("octahedral-complex"), duration_s=0.05)
     failed = dc_replace(real, result=dc_replace(real.result, status=type(real.result.status)("failed"),

@@ -1,4 +1,4 @@
-"""A robust trial's figures (docs/robust.md's promise, worker.robust): the parts are the medians of the
+"""A robust trial's figures (docs/robust.md's promise, worker.trial.robust): the parts are the medians of the
 episodes (not their mean), the statistics are worked by hand, and a drawn friction reaches the simulator."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import pytest
 from spinefarm.protocol.robust import EpisodeDraw, RobustSpec, parse_randomize, statistic
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.robust import combine, run_episodes
-from spinefarm.worker.trial import TrialConfig, random_unit_params
+from spinefarm.worker.trial.robust import combine, run_episodes
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params
 from tests.storage_tests.conftest import result
 
 

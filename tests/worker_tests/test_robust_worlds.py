@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from spinefarm.protocol.robust import RobustSpec, draw_episode
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.robust import episode_world, run_episodes
-from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.robust import episode_world, run_episodes
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
 
 
 def singles(morph, u, cfg, spec, seed):

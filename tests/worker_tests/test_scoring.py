@@ -1,4 +1,4 @@
-"""Scoring (worker.scoring, worker.episode.score) against figures worked by hand: the planar distance in the
+"""Scoring (worker.trial.scoring, worker.trial.episode.score) against figures worked by hand: the planar distance in the
 ground plane (x, z; y is up), the mass-weighted centre, COT = W / (m g d) with g = 9.81 m/s^2, work converted
 from kg cm^2/s^2 to J (x 1e-4), and a settle phase's work never counted as locomotion's."""
 
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker import scoring
-from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial import scoring
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 
 
 def test_planar_distance_ignores_height():

@@ -14,7 +14,7 @@ from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.protocol.work import TrialAssignment
-from spinefarm.worker.service import (
+from spinefarm.worker.service.zenoh_worker import (
     Backoff,
     WorkerService,
     WorkerTimings,
@@ -111,7 +111,7 @@ def test_results_are_resent_until_the_coordinator_acknowledges_them():
 
 
 def test_auto_batch_follows_the_mean_trial_time():
-    from spinefarm.worker.service import BatchSizer
+    from spinefarm.worker.service.zenoh_worker import BatchSizer
 
     auto = BatchSizer(None, target_s=0.5, max_batch=64)
     assert auto.size() == 1  # nothing measured yet: one trial

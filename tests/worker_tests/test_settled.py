@@ -1,4 +1,4 @@
-"""The settled start (worker.settled): a settle phase simulated once per set-up and start pose, every later
+"""The settled start (worker.trial.settled): a settle phase simulated once per set-up and start pose, every later
 trial started from its end, gives what settling in every trial gives."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import dataclasses
 import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.setup import SetupCache
-from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate, simulate_batch
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate, simulate_batch
+from spinefarm.worker.trial.setup import SetupCache
 
 
 def _same(a, b) -> None:

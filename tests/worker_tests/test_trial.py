@@ -16,7 +16,7 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.structure import StringMaterial
 from spinefarm.robot.morphology.variants import with_strings
 from spinefarm.robot.spaces import controller_space, param_space
-from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial, simulate
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial, simulate
 
 
 def test_passive_tetraspine_settles_and_holds_its_shape():
@@ -79,7 +79,7 @@ TRIAL_SNIPPET = """
 import json
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_strings
-from spinefarm.worker.trial import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
 m = load_morphology("tetraspine")
 r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11)
 d = r.to_dict(); d.pop("wall_time_s")
@@ -184,7 +184,7 @@ def test_settle_phase_scores_locomotion_from_the_settled_pose(engine):
 def test_a_reused_setup_builds_the_controller_space_once(monkeypatch):
     """The NTRT spaces take milliseconds to build; trials sharing a set-up share the space too."""
     from spinefarm.robot import spaces
-    from spinefarm.worker.setup import SetupCache
+    from spinefarm.worker.trial.setup import SetupCache
 
     built = []
     original = spaces.SPACES["ntrt"]

@@ -16,7 +16,7 @@ from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.protocol.work import TrialAssignment
 from spinefarm.storage.hdf5_reader import read_run
-from spinefarm.worker.sandbox import (
+from spinefarm.worker.service.sandbox import (
     SandboxProblem,
     SandboxStopped,
     TrialLimit,
@@ -243,7 +243,7 @@ def test_a_judge_at_a_finer_step_in_another_engine_is_not_timed_out_by_the_scree
 _ORPHAN_PARENT = """
 import sys, threading, time
 from tests.worker_tests.test_trial_limit import at, poisoned
-from spinefarm.worker.sandbox import TrialSandbox
+from spinefarm.worker.service.sandbox import TrialSandbox
 box = TrialSandbox(poisoned("orphan", 0.05))
 box.start()
 threading.Thread(target=box.run, args=(at(0.05),), daemon=True).start()  # a trial that hangs

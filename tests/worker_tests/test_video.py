@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from spinefarm.cli.main import main
-from spinefarm.worker.motion import record_every_s
+from spinefarm.worker.tools.motion import record_every_s
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -12,8 +12,8 @@ from spinefarm.robot.engines import engine_names
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig, build_terrain
 from spinefarm.worker.engines.mujoco import MujocoPhysics, MujocoSettings
-from spinefarm.worker.setup import SetupCache
-from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate, simulate_batch
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate, simulate_batch
+from spinefarm.worker.trial.setup import SetupCache
 
 SEEDS = [1, 2, 3, 4]
 

@@ -1,4 +1,4 @@
-// The gait, moving: a trial's recorded motion (worker/motion.py's JSON) played in 3D with three.js.
+// The gait, moving: a trial's recorded motion (worker/tools/motion.py's JSON) played in 3D with three.js.
 // Rods are cylinders posed with their body, strings are lines coloured by tension (blue low, red high),
 // the centre of mass leaves a trail over the ground. One Player drives any number of views in step.
 import * as THREE from "three";

@@ -1,7 +1,7 @@
 """The control law: the CPG and the string law as one step, poses in, one net wrench per body out, for a
 batch of B worlds.
 
-Per world and physics step (`law_step_world`, compiled once and used by every loop in worker.loop): advance
+Per world and physics step (`law_step_world`, compiled once and used by every loop in worker.trial.loop): advance
 the CPG by its update period when one is due, then run the string kernel (impedance -> motor -> string law ->
 per-body wrench). The CPG either holds its output between updates (NTRT's controlTime, updated at the end of
 each period) or, at its own step longer than the physics step, runs one update ahead and the setpoints between

@@ -1,7 +1,7 @@
 """The physics seam: a backend builds B worlds of rigid segments on a terrain and steps them.
 
 A backend knows nothing of strings, CPGs or scoring: it is handed one net wrench per body and world. The
-trial loop (worker.loop) calls, per batch of trials:
+trial loop (worker.trial.loop) calls, per batch of trials:
   __init__(bodies, terrain, dt_s, settings, start_offsets_cm, start_rotation, collision_pairs_off, n_worlds)
                                   once: build B worlds at the start pose (start_offsets_cm (B, nb, 3) per world,
                                   or (nb, 3) / None for one world; n_worlds given alone: B worlds, no offsets)
@@ -27,13 +27,13 @@ Optional abilities, declared in the engine's registry entry (spinefarm.robot.eng
   velocities(), set_velocity()    "velocities": world-frame body velocities, for checks and tests
   snapshot(world), restore(world, state)
                                   "snapshot": a world's whole state, and putting it back into a world of the same
-                                  model, which then goes on in the same bits (worker.settled)
+                                  model, which then goes on in the same bits (worker.trial.settled)
   set_state(world, poses, velocities)
                                   "set_state": every body's pose (nb, 7) COM cm + quaternion x, y, z, w and
                                   velocity (nb, 6) cm/s and rad/s, world frame, one write per body
   compiled_worlds()               "compiled_step": per world (address of a C function void step(uint64 model,
                                   uint64 data), model address, data address, state (nb, k), pose_columns (7,)
-                                  int64, wrench (nb, 6)), for the compiled loop of worker.loop
+                                  int64, wrench (nb, 6)), for the compiled loop of worker.trial.loop
 
 Engine knobs (solver, contacts, friction combination, workarounds) live in each backend's settings
 dataclass, built from TrialConfig.engine_options by `settings_from_options`, never in morphology data.

@@ -141,7 +141,7 @@ class MujocoPhysics(BasePhysics):
 
     def compiled_worlds(self) -> list[tuple]:
         """Per world (address of mj_step, model address, data address, qpos (nb, 7), POSE_COLUMNS, xfrc (nb, 6));
-        see worker.loop."""
+        see worker.trial.loop."""
         step = ctypes.cast(mj_step_cfunc(), ctypes.c_void_p).value
         return [(step, self.model._address, d._address, q, self._order, x) for d, q, x in
                 zip(self.data, self.qpos, self.xfrc, strict=True)]

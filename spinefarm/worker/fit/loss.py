@@ -79,7 +79,7 @@ def candidate_loss(morph: Morphology, cfg: TrialConfig, recordings: list[Prepare
     """fit_loss, or DIVERGED_CM for constants the physics step cannot simulate (strings made too stiff or too
     damped for it): the search scores them as a diverged window and moves away, instead of stopping."""
     from spinefarm.robot.profile import apply_profile
-    from spinefarm.worker.episode import choose_step
+    from spinefarm.worker.trial.episode import choose_step
 
     try:
         choose_step(apply_profile(morph, cfg.profile), cfg)

@@ -72,7 +72,7 @@ def _read_trial_record(z: np.lib.npyio.NpzFile, path: Path) -> Recording:
 
 def from_trajectory(arrays: dict[str, np.ndarray], config: dict, params: dict, source: str = "",
                     morphology: str = "") -> Recording:
-    """A Recording of a trial's trajectory (worker.batch.Trajectory.arrays(): poses (n, nb, 7) cm + quaternion
+    """A Recording of a trial's trajectory (worker.trial.batch.Trajectory.arrays(): poses (n, nb, 7) cm + quaternion
     (x, y, z, w), rest lengths in cm, tensions in N) under its trial config (a dict) and named parameters."""
     poses = arrays["poses"]
     rest = arrays["rest_length_cm"] * 0.01 if "rest_length_cm" in arrays else None

@@ -24,8 +24,8 @@ from spinefarm.worker.control.law import string_tables
 from spinefarm.worker.engines.base import BasePhysics
 from spinefarm.worker.fit.recording import Recording, RecordingError
 from spinefarm.worker.fit.state import engine_poses, rest_lengths_cm, velocities
-from spinefarm.worker.setup import TrialSetup
 from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.trial.setup import TrialSetup
 
 
 @dataclass(frozen=True)

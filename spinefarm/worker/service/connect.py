@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Generic, TypeVar
 
-from spinefarm.worker.pacing import EXIT_REFUSED, Backoff, listening_endpoints
+from spinefarm.worker.service.pacing import EXIT_REFUSED, Backoff, listening_endpoints
 
 log = logging.getLogger("spinefarm.worker")
 # A worker still without its coordinator after this long says so (then keeps trying).

@@ -22,11 +22,11 @@ from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.variants import with_density_factor
 from spinefarm.robot.profile import apply_profile, engine_only
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.setup import SetupCache
-from spinefarm.worker.trial import simulate_batch
+from spinefarm.worker.trial.run import simulate_batch
+from spinefarm.worker.trial.setup import SetupCache
 
 
-class World(NamedTuple):
+class EpisodeWorld(NamedTuple):
     """One episode's world: its draw (and seed), the morphology (masses drawn) and the trial config
     (friction, jitter, scene)."""
 
@@ -35,7 +35,7 @@ class World(NamedTuple):
     config: TrialConfig
 
 
-def episode_world(morph: Morphology, cfg: TrialConfig, draw: EpisodeDraw) -> World:
+def episode_world(morph: Morphology, cfg: TrialConfig, draw: EpisodeDraw) -> EpisodeWorld:
     """The world of one draw: friction x friction_scale (of the scene's, the config's or the robot's), rod
     density x mass_scale, the draw's start jitter, and rough ground seeded by the draw when asked."""
     morph = apply_profile(morph, cfg.profile)  # scaled below: the worlds' configs keep its engine constants only
@@ -48,14 +48,14 @@ def episode_world(morph: Morphology, cfg: TrialConfig, draw: EpisodeDraw) -> Wor
                                  profile=engine_only(cfg.profile),
                                  pose_jitter_cm=draw.start_jitter_cm or cfg.pose_jitter_cm)
     world_morph = morph if draw.mass_scale == 1.0 else with_density_factor(morph, draw.mass_scale)
-    return World(draw, world_morph, config)
+    return EpisodeWorld(draw, world_morph, config)
 
 
-def run_worlds(worlds: Sequence[World], params: np.ndarray | Mapping[str, float], controller: str | None,
+def run_worlds(worlds: Sequence[EpisodeWorld], params: np.ndarray | Mapping[str, float], controller: str | None,
                setup: SetupCache | None = None) -> list[TrialResult]:
     """One result per world, in order (each world seeded by its draw). Worlds that share a morphology and a
     trial config (they differ only in their seeds: start jitter alone is randomised) run as one batch of
-    worlds (worker.trial.simulate_batch); a drawn friction or mass makes each world a batch of its own."""
+    worlds (worker.trial.run.simulate_batch); a drawn friction or mass makes each world a batch of its own."""
     groups: dict[tuple[Morphology, str], list[int]] = {}
     for i, w in enumerate(worlds):
         groups.setdefault((w.morph, w.config.config_hash()), []).append(i)

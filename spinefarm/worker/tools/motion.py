@@ -5,7 +5,7 @@ bodies' poses (COM cm + quaternion xyzw), the string tensions (N) and the robot'
 30 s gait of a 12-segment spine at 30 frames per second is a few hundred kB. Y is up; the flat ground's top
 is at GROUND_TOP_CM.
 
-`python -m spinefarm.worker.motion JOB.json OUT.json` re-simulates a stored trial as its run did (the API
+`python -m spinefarm.worker.tools.motion JOB.json OUT.json` re-simulates a stored trial as its run did (the API
 calls it in a subprocess, as it does for pictures). JOB holds morphology (a Morphology.to_dict() or a
 name), controller, trial_config, params_unit, seed.
 """
@@ -97,7 +97,7 @@ def motion_record(motion: dict[str, Any]) -> dict[str, np.ndarray]:
 def simulate_motion(job: dict[str, Any]) -> dict[str, Any]:
     """Re-simulate a stored trial with recording on and return its motion document."""
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial import TrialConfig, simulate
+    from spinefarm.worker.trial.run import TrialConfig, simulate
 
     morph = load_morphology(job["morphology"])
     base = dict(job["trial_config"])
@@ -113,7 +113,7 @@ def main(argv: list[str]) -> int:
     from spinefarm.protocol.errors import SpinefarmError
 
     if len(argv) != 2:
-        print("usage: python -m spinefarm.worker.motion JOB.json OUT.json", file=sys.stderr)
+        print("usage: python -m spinefarm.worker.tools.motion JOB.json OUT.json", file=sys.stderr)
         return 2
     try:
         doc = simulate_motion(json.loads(Path(argv[0]).read_text()))

@@ -14,7 +14,7 @@ import numpy as np
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.profile import ground_friction
-from spinefarm.worker.trial import TrialConfig, run_trial
+from spinefarm.worker.trial.run import TrialConfig, run_trial
 
 
 @dataclass(frozen=True)

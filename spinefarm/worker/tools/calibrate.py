@@ -13,7 +13,7 @@ and the ratio is within [0.9, 1.1]; a search then screens on MuJoCo, otherwise i
 
 Results are cached as JSON by the spec's hash, the calibration's settings and a digest of the simulating
 code and engine versions (cache_dir()): a change of either engine's model calibrates again. The built-ins'
-results ship with the package (worker.shipped_calibration), used when the spec's hash and the settings' key
+results ship with the package (worker.tools.shipped_calibration), used when the spec's hash and the settings' key
 match.
 """
 
@@ -38,7 +38,7 @@ from spinefarm.protocol.run import json_hash
 from spinefarm.protocol.settings import JUDGE_DT_S, JUDGE_ENGINE
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.profile import profile_hash
-from spinefarm.worker.pool import Progress, run_jobs
+from spinefarm.worker.tools.pool import Progress, run_jobs
 
 RHO_MIN = 0.9
 TOP_K = 10
@@ -148,7 +148,7 @@ def reference_step(source: str) -> tuple[float, bool]:
     """(the reference's step in s, whether it is the automatic one): the judge's step, or the automatic
     step for a robot whose string network is unstable at it (where a search's judge would refuse it)."""
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.episode import choose_step
+    from spinefarm.worker.trial.episode import choose_step
 
     morph = load_morphology(source)
     try:
@@ -160,9 +160,9 @@ def reference_step(source: str) -> tuple[float, bool]:
 def _trial(job: tuple) -> tuple[float, float]:
     """(distance m or nan, CPU s per simulated s) of one trial."""
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.episode import choose_step
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import run_trial
+    from spinefarm.worker.trial.episode import choose_step
+    from spinefarm.worker.trial.run import run_trial
+    from spinefarm.worker.trial.setup import SetupCache
 
     global _CACHE
     _CACHE = _CACHE or SetupCache(8)
@@ -242,7 +242,7 @@ def _short_search(source: str, gaits: list, screen: list, s: CalibrationSettings
 def calibrate(source: str, settings: CalibrationSettings, progress: Progress | None = None) -> dict[str, Any]:
     """Run the calibration of a robot (built-in name or spec file) and return its figures and decision;
     `progress(done, total)` after each trial."""
-    from spinefarm.worker.trial import random_unit_params
+    from spinefarm.worker.trial.run import random_unit_params
 
     t_wall = time.time()
     morph = load_morphology(source)
@@ -283,7 +283,7 @@ def calibrate(source: str, settings: CalibrationSettings, progress: Progress | N
 
 def _step_of(morph: Any, engine: str, s: CalibrationSettings) -> float:
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.episode import choose_step
+    from spinefarm.worker.trial.episode import choose_step
 
     return choose_step(morph, TrialConfig(engine=engine, dt_s=s.dt_s, auto_dt=s.auto_dt))
 
@@ -301,7 +301,8 @@ def cache_dir() -> Path:
 
 
 # what decides how a trial moves: the model, the control law and both engines' code and versions
-SIMULATING_CODE = ("robot", "worker/engines", "worker/sim", "worker/control", "worker/loop.py", "worker/trial.py")
+SIMULATING_CODE = ("robot", "worker/engines", "worker/sim", "worker/control", "worker/trial/loop.py",
+                   "worker/trial/run.py")
 ENGINE_PACKAGES = ("mujoco", "pybullet", "numpy", "numba")
 
 
@@ -325,7 +326,7 @@ def code_digest(paths: list[Path], packages: tuple[str, ...] = ()) -> str:
 
 @functools.lru_cache(maxsize=1)
 def simulating_code_digest() -> str:
-    root = Path(__file__).resolve().parents[1]  # the installed spinefarm package (or the checkout)
+    root = Path(__file__).resolve().parents[2]  # the installed spinefarm package (or the checkout)
     return code_digest([root / p for p in SIMULATING_CODE], ENGINE_PACKAGES)
 
 
@@ -338,7 +339,7 @@ def calibration(source: str, settings: CalibrationSettings, refresh: bool = Fals
                 progress: Progress | None = None) -> tuple[dict[str, Any], bool]:
     """(the calibration of this robot under these settings, whether it came from the cache or the shipped
     calibrations; then its "shipped" is True for the latter)."""
-    from spinefarm.worker.shipped_calibration import shipped
+    from spinefarm.worker.tools.shipped_calibration import shipped
 
     if not refresh and (hit := shipped(source, settings)) is not None:
         return {**hit, "shipped": True}, True

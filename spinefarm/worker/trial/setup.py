@@ -26,8 +26,8 @@ from spinefarm.robot.spaces import controller_space
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.control.law import string_tables
 from spinefarm.worker.engines.base import BasePhysics, EngineFactory, engine_class
-from spinefarm.worker.episode import build_poses, choose_step, start_lift_cm, start_rotation
-from spinefarm.worker.settled import SettledStarts
+from spinefarm.worker.trial.episode import build_poses, choose_step, start_lift_cm, start_rotation
+from spinefarm.worker.trial.settled import SettledStarts
 
 
 class TrialSetup:
@@ -54,7 +54,7 @@ class TrialSetup:
         self._scene: BasePhysics | None = None
         self.scenes_built = 0
         self._rod_pairs: np.ndarray | None = None
-        self.settled = SettledStarts()  # settle ends kept for later trials (worker.settled)
+        self.settled = SettledStarts()  # settle ends kept for later trials (worker.trial.settled)
 
     def string_tables(self, network: CpgNetwork) -> tuple[np.ndarray, np.ndarray]:
         """Fresh copies of the packed string parameters and initial state for this network's node map."""

@@ -6,8 +6,8 @@ config.pose_jitter_cm); it returns one TrialOutcome per world, the same bits as 
 that diverges stops alone; a world its engine asks to run again in other settings (MuJoCo's contact guard:
 BasePhysics.retries) is run again from its start, alone, and says so in its result's extras.
 
-The loop itself is worker.loop (control law -> engine); phases and checks are worker.batch; the start pose,
-step, guards and score are worker.episode.
+The loop itself is worker.trial.loop (control law -> engine); phases and checks are worker.trial.batch; the start pose,
+step, guards and score are worker.trial.episode.
 """
 
 from __future__ import annotations
@@ -27,12 +27,12 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.profile import apply_profile
 from spinefarm.robot.spaces import param_space
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.batch import Batch, Timing, Trajectory, World
 from spinefarm.worker.control.law import ControlLaw, string_tables
 from spinefarm.worker.engines.base import EngineFactory
-from spinefarm.worker.episode import Measured, choose_step, score
-from spinefarm.worker.settled import settle_key
-from spinefarm.worker.setup import SetupCache, TrialSetup, setup_key
+from spinefarm.worker.trial.batch import Batch, Timing, Trajectory, WorldLog
+from spinefarm.worker.trial.episode import EpisodeEnd, choose_step, score
+from spinefarm.worker.trial.settled import settle_key
+from spinefarm.worker.trial.setup import SetupCache, TrialSetup, setup_key
 
 __all__ = ["Trajectory", "TrialConfig", "TrialOutcome", "choose_step", "random_unit_params", "run_trial", "simulate",
            "simulate_batch", "string_tables"]
@@ -123,7 +123,7 @@ def _simulate(morphology: Morphology | str | Mapping, params: list, cfg: TrialCo
 
 def _settle_key(setup: TrialSetup, scene_factory: EngineFactory | None, timing: Timing, law: ControlLaw,
                 offsets: list) -> str | None:
-    """The settle's key (worker.settled) when this batch may start from a kept settle end: a settle phase, no
+    """The settle's key (worker.trial.settled) when this batch may start from a kept settle end: a settle phase, no
     recording, the set-up's own engine able to snapshot a world, and every world of the batch the same start
     pose and string tables."""
     if not timing.n_settle or timing.record_every or scene_factory is not None \
@@ -146,13 +146,13 @@ def _timing(morph: Morphology, cfg: TrialConfig, dt: float) -> Timing:
                   dt_s=dt, cpg_own_step_s=own)
 
 
-def _outcome(morph: Morphology, setup: TrialSetup, cfg: TrialConfig, timing: Timing, w: World, seed: int,
+def _outcome(morph: Morphology, setup: TrialSetup, cfg: TrialConfig, timing: Timing, w: WorldLog, seed: int,
              wall_s: float) -> TrialOutcome:
     n_settle, dt = timing.n_settle, timing.dt_s
     loco_steps = max(0, w.steps_done - n_settle) if w.settle_poses is not None else 0 if n_settle else w.steps_done
     extras = {"dt_s": dt, "engine": cfg.engine, "settle_s": n_settle * dt}
     # the start pose without jitter (or the pose after the settle): distances count from it
-    measured = Measured(w.end_poses, loco_steps, dt, w.end_work - w.settle_work, w.reason, w.settle_poses)
+    measured = EpisodeEnd(w.end_poses, loco_steps, dt, w.end_work - w.settle_work, w.reason, w.settle_poses)
     result = score(morph, setup.masses, setup.build, measured, seed, wall_s, extras)
     path = np.array(w.com_path)
     return TrialOutcome(result, w.trajectory, path, np.arange(len(path)) * timing.check_every * dt)

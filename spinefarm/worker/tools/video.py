@@ -57,7 +57,7 @@ def gif_durations_ms(motion: dict[str, Any]) -> list[int]:
 
 def _posed(motion: dict[str, Any], i: int) -> tuple[np.ndarray, np.ndarray]:
     """World rod ends (n_rods, 2, 3) and string ends (n_strings, 2, 3) of frame i, in cm."""
-    from spinefarm.worker.render import _rotation
+    from spinefarm.worker.tools.render import _rotation
 
     poses = np.asarray(motion["poses"][i], dtype=float).reshape(-1, 7)
     rots = [_rotation(p[3:7]) for p in poses]

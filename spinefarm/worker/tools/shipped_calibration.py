@@ -14,11 +14,11 @@ from spinefarm.robot.morphology.registry import load_morphology
 
 
 class Keyed(Protocol):
-    """A calibration's settings (worker.calibrate.CalibrationSettings), by what its result depends on."""
+    """A calibration's settings (worker.tools.calibrate.CalibrationSettings), by what its result depends on."""
 
     def key(self) -> str: ...
 
-SHIPPED_DIR = Path(__file__).resolve().parents[1] / "robot" / "calibrations"
+SHIPPED_DIR = Path(__file__).resolve().parents[2] / "robot" / "calibrations"
 
 
 def shipped_path(name: str) -> Path:

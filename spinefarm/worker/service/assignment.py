@@ -115,8 +115,8 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
     import numpy as np
 
     from spinefarm.worker.engines.base import engine_class
-    from spinefarm.worker.setup import SetupCache
-    from spinefarm.worker.trial import run_trial
+    from spinefarm.worker.trial.run import run_trial
+    from spinefarm.worker.trial.setup import SetupCache
 
     if trial_config.engine in available_engines():
         engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)
@@ -128,8 +128,8 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
     def evaluate(a: TrialAssignment) -> TrialResult:
         cfg = task_config(trial_config, a)
         params = np.asarray(a.params_unit, dtype=float)
-        if spec.active:  # K randomised episodes of this parameter set, at this task's fidelity (worker.robust)
-            from spinefarm.worker.robust import run_episodes
+        if spec.active:  # K randomised episodes of this parameter set, at this task's fidelity (worker.trial.robust)
+            from spinefarm.worker.trial.robust import run_episodes
 
             k = dataclasses.replace(spec, episodes=spec.episodes_for(a.duration_s), rung_episodes=(),
                                     rung_durations_s=())

@@ -29,11 +29,11 @@ from spinefarm.protocol.results import TrialResult, fit_for_protocol
 from spinefarm.protocol.run import RunConfig, WorkerProblem
 from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult
 from spinefarm.protocol.work import RunInfo, TrialAssignment, WorkGrant, WorkRequest
-from spinefarm.worker.connect import Connector
-from spinefarm.worker.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
-from spinefarm.worker.pacing import Backoff, BatchSizer, default_worker_id, mark_ready
-from spinefarm.worker.sandbox import MIN_LIMIT_S, SandboxStopped, TrialLimit, TrialSandbox
-from spinefarm.worker.tasks import available_engines, environment
+from spinefarm.worker.service.assignment import available_engines, environment
+from spinefarm.worker.service.connect import Connector
+from spinefarm.worker.service.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
+from spinefarm.worker.service.pacing import Backoff, BatchSizer, default_worker_id, mark_ready
+from spinefarm.worker.service.sandbox import MIN_LIMIT_S, SandboxStopped, TrialLimit, TrialSandbox
 
 __all__ = ["Backoff", "BatchSizer", "WorkerService", "WorkerTimings", "ZenohAccess", "build_evaluator",
            "default_worker_id", "sphere_result"]
@@ -129,7 +129,7 @@ class WorkerService:
             raise ConfigError("batch out of range", received=batch, expected="1 <= batch <= 4096, or auto")
         self.batch = BatchSizer(batch)
         self.exit_when_done = exit_when_done
-        self.isolate = isolate   # trials in a child process under a wall-clock limit (worker.sandbox)
+        self.isolate = isolate   # trials in a child process under a wall-clock limit (worker.service.sandbox)
         self.timings = timings or WorkerTimings()
         self._sandboxes: list[TrialSandbox] = []
         # SPINEFARM_ACK_LOG: one line per verdict received (run, trial, verdict, status, distance), for the
@@ -199,7 +199,7 @@ class WorkerService:
         return self._evaluators[config_hash]
 
     def _build(self, config: RunConfig) -> Evaluator:
-        """In a trial process with a wall-clock limit per trial (worker.sandbox), or in this one (the test
+        """In a trial process with a wall-clock limit per trial (worker.service.sandbox), or in this one (the test
         objective without fault bands cannot hang: its microsecond trials skip the ~0.2 ms round trip)."""
         if not self.isolate or (config.is_test_objective and "poison" not in config.trial_config):
             return build_evaluator(config)

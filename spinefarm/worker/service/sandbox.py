@@ -32,7 +32,7 @@ from spinefarm.protocol.errors import SpinefarmError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.work import TrialAssignment
-from spinefarm.worker.evaluators import build_evaluator, failed_result
+from spinefarm.worker.service.evaluators import build_evaluator, failed_result
 
 MIN_LIMIT_S = 30.0
 LIMIT_FACTOR = 8.0

@@ -17,7 +17,7 @@ from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.protocol.work import TrialAssignment
 from spinefarm.robot.spaces import param_space
-from spinefarm.worker.tasks import physics_evaluator, with_fault
+from spinefarm.worker.service.assignment import physics_evaluator, with_fault
 
 Evaluator = Callable[[TrialAssignment], TrialResult | None]  # None: abandoned (the worker is stopping)
 
@@ -79,7 +79,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
 
         return sphere
     from spinefarm.robot.morphology.model import Morphology
-    from spinefarm.worker.trial import TrialConfig
+    from spinefarm.worker.trial.run import TrialConfig
 
     morphology = Morphology.from_dict(config.morphology_spec)
     trial_config = TrialConfig.from_dict(config.trial_config)

@@ -1,6 +1,6 @@
-"""The settled start: a settle phase (the CPG held at rest, worker.batch) does not depend on the parameter set,
+"""The settled start: a settle phase (the CPG held at rest, worker.trial.batch) does not depend on the parameter set,
 only on the robot, the engine and its settings, the step, the scene, the start pose and the string tables, all
-fixed by a trial set-up (worker.setup) and the key below. So it is simulated once, its end kept (in process,
+fixed by a trial set-up (worker.trial.setup) and the key below. So it is simulated once, its end kept (in process,
 with the set-up), and every later trial of the same key starts from it: the same bits as settling again, on
 engines that can snapshot a world ("snapshot" in robot.engines).
 """
@@ -21,7 +21,7 @@ from spinefarm.worker.sim import strings as sk
 @dataclass
 class Settled:
     """One world at the end of its settle phase: the engine's snapshot of it, its string state (s, N_STATE), its
-    reel-in work (internal units), its measurements so far (a worker.batch.World) and the steps taken."""
+    reel-in work (internal units), its measurements so far (a worker.trial.batch.WorldLog) and the steps taken."""
 
     engine_state: Any
     string_state: np.ndarray

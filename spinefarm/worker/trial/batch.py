@@ -1,7 +1,7 @@
 """A batch of B worlds through one trial's phases (settle, then locomotion) and its divergence checks.
 
-Engine-neutral: the steps go through worker.loop (control law + engine), the guards and the score through
-worker.episode. The worlds move in lockstep; a world that diverges, or that its engine wants to run again
+Engine-neutral: the steps go through worker.trial.loop (control law + engine), the guards and the score through
+worker.trial.episode. The worlds move in lockstep; a world that diverges, or that its engine wants to run again
 in other settings (BasePhysics.retries), leaves the batch and the others go on, unchanged in every bit.
 """
 
@@ -15,13 +15,13 @@ import numpy as np
 from spinefarm.robot.morphology.structure import NEWTON
 from spinefarm.robot.scene import Terrain
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker import guard, scoring
 from spinefarm.worker.control.law import ControlLaw
 from spinefarm.worker.engines.base import BasePhysics
-from spinefarm.worker.episode import STRETCH_BASE_MIN_CM, check_state
-from spinefarm.worker.loop import advance, stepper
-from spinefarm.worker.settled import Settled
 from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.trial import guard, scoring
+from spinefarm.worker.trial.episode import STRETCH_BASE_MIN_CM, check_state
+from spinefarm.worker.trial.loop import advance, stepper
+from spinefarm.worker.trial.settled import Settled
 
 
 @dataclass
@@ -67,7 +67,7 @@ class Timing:
 
 
 @dataclass
-class World:
+class WorldLog:
     """One world's measurements: the last sane check (pose, step, work) a diverged trial is scored from, the
     COM path, the pose and work at the end of the settle phase, and why it stopped."""
 
@@ -95,7 +95,7 @@ class Batch:
         self.engine, self.law, self.timing, self.cfg = engine, law, timing, cfg
         self.masses, self.start_length_cm, self.terrain = masses, start_length_cm, terrain
         poses = engine.read_poses()
-        self.worlds = [World(p[:, :3].copy(), p.copy(), [scoring.robot_com_cm(p, masses)]) for p in poses]
+        self.worlds = [WorldLog(p[:, :3].copy(), p.copy(), [scoring.robot_com_cm(p, masses)]) for p in poses]
         if timing.record_every:
             for w in self.worlds:
                 w.trajectory = Trajectory()
@@ -103,14 +103,14 @@ class Batch:
         self.done = 0  # steps since the start, settle included, of every world still running
         self._recorded = self.done  # the index of the step the recorder sees next
         self.run_steps = stepper(engine, law, self._record if timing.record_every else None)
-        # the compiled fast path of the guard check (worker.guard); None: the exact check every time
+        # the compiled fast path of the guard check (worker.trial.guard); None: the exact check every time
         self._boxes = guard.level_boxes(terrain)
         self._limits = guard.limits(cfg)
         self._base_len = np.maximum(start_length_cm, STRETCH_BASE_MIN_CM).astype(np.float64)
 
-    def run(self, settled: Settled | None = None, keep_settled: bool = False) -> list[World]:
+    def run(self, settled: Settled | None = None, keep_settled: bool = False) -> list[WorldLog]:
         """Both phases, or with `settled` (every world's start pose and string tables those of its key,
-        worker.settled) locomotion only, every world starting from that settle's end. keep_settled: keep world
+        worker.trial.settled) locomotion only, every world starting from that settle's end. keep_settled: keep world
         0's settle end in self.settled (if it settled and its engine can snapshot it)."""
         t = self.timing
         phases = ((t.n_settle, 0), (t.n_steps, t.cpg_every))

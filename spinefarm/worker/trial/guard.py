@@ -1,5 +1,5 @@
 """The guard check's fast path: one compiled pass that says a world is clearly sane, so the exact check
-(worker.episode.check_state, a dozen numpy calls every 10 ms of every world) runs only near a limit.
+(worker.trial.episode.check_state, a dozen numpy calls every 10 ms of every world) runs only near a limit.
 
 `clearly_sane` is True only when every guard passes with a relative margin of MARGIN, which covers the last-bit
 differences between its loops and numpy's reductions; anywhere else (a non-finite pose, a limit within the margin,
@@ -16,7 +16,7 @@ from numba import njit
 
 from spinefarm.robot.scene import Terrain
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.scoring import CM
+from spinefarm.worker.trial.scoring import CM
 
 MARGIN = 1e-9
 

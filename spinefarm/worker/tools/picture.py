@@ -1,7 +1,7 @@
 """The gait picture of a stored trial: re-simulate it as the run did (or read its recorded motion, JOB's
 motion_file) and draw the `render` strip.
 
-Run as `python -m spinefarm.worker.picture JOB.json OUT.png` (the API calls it in a subprocess, so a server
+Run as `python -m spinefarm.worker.tools.picture JOB.json OUT.png` (the API calls it in a subprocess, so a server
 without the simulator still serves everything else). JOB holds morphology (a Morphology.to_dict()),
 controller, trial_config, params_unit, seed and frames.
 """
@@ -17,10 +17,10 @@ import numpy as np
 
 
 def render_motion_file(job: dict[str, Any], out: str | Path) -> Path:
-    """The strip drawn from an already recorded motion (worker/motion.py's JSON): no simulation."""
+    """The strip drawn from an already recorded motion (worker/tools/motion.py's JSON): no simulation."""
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.motion import motion_record
-    from spinefarm.worker.render import frames_from_record, render
+    from spinefarm.worker.tools.motion import motion_record
+    from spinefarm.worker.tools.render import frames_from_record, render
 
     morph = load_morphology(job["morphology"])
     motion = json.loads(Path(job["motion_file"]).read_text())
@@ -35,8 +35,8 @@ def render_motion_file(job: dict[str, Any], out: str | Path) -> Path:
 
 def render_trial(job: dict[str, Any], out: str | Path) -> Path:
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.render import frames_from_record, render
-    from spinefarm.worker.trial import TrialConfig, simulate
+    from spinefarm.worker.tools.render import frames_from_record, render
+    from spinefarm.worker.trial.run import TrialConfig, simulate
 
     if job.get("motion_file"):
         return render_motion_file(job, out)
@@ -59,7 +59,7 @@ def main(argv: list[str]) -> int:
     from spinefarm.protocol.errors import SpinefarmError
 
     if len(argv) != 2:
-        print("usage: python -m spinefarm.worker.picture JOB.json OUT.png", file=sys.stderr)
+        print("usage: python -m spinefarm.worker.tools.picture JOB.json OUT.png", file=sys.stderr)
         return 2
     try:
         render_trial(json.loads(Path(argv[0]).read_text()), argv[1])

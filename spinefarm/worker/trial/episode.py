@@ -19,8 +19,8 @@ from spinefarm.robot.bodies import BodyModel, Quaternion, quaternion_matrix
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.scene import GROUND_TOP_CM, SceneConfig, Terrain, surface_height_cm
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker import scoring
 from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.trial import scoring
 
 if TYPE_CHECKING:
     from spinefarm.worker.sim.stability import StabilityEstimate
@@ -119,10 +119,10 @@ def check_state(poses: np.ndarray, last: np.ndarray, masses: np.ndarray, sstate:
 
 
 @dataclass(frozen=True)
-class Measured:
-    """What a trial measured, for its score: end_poses (nb, 7), steps_done (of locomotion) of dt_s each,
-    work_internal (kg cm^2/s^2, of locomotion), reason ("" if it completed), start: the poses locomotion is
-    scored from (the end of a settle phase; None: the build pose)."""
+class EpisodeEnd:
+    """How an episode ended, for its score (protocol.measured.Measured is the scored numbers): end_poses
+    (nb, 7), steps_done (of locomotion) of dt_s each, work_internal (kg cm^2/s^2, of locomotion), reason ("" if it
+    completed), start: the poses locomotion is scored from (the end of a settle phase; None: the build pose)."""
 
     end_poses: np.ndarray
     steps_done: int
@@ -132,7 +132,7 @@ class Measured:
     start: np.ndarray | None = None
 
 
-def score(morph: Morphology, masses: np.ndarray, build: np.ndarray, measured: Measured, seed: int,
+def score(morph: Morphology, masses: np.ndarray, build: np.ndarray, measured: EpisodeEnd, seed: int,
           wall_time_s: float, extras: dict[str, float]) -> TrialResult:
     """A TrialResult from the start pose `build` (without jitter) and what was measured: the whole
     robot's COM distance, NTRT's scored-segment distance, speed, work and cost of transport.

@@ -59,7 +59,7 @@ def recorded_run(folder: str | Path) -> NtrtReference | None:
 
 
 # NTRT's published parameter sets ship with the package (data, Apache-2.0: LICENSE and NOTICE beside them)
-PUBLISHED_DIR = Path(__file__).resolve().parent / "replay_data"
+PUBLISHED_DIR = Path(__file__).resolve().parents[1] / "replay_data"
 PUBLISHED = {name: PUBLISHED_DIR / folder / "paper-2014-06-07" for folder, name in ROBOT_FOLDERS.items()
              if folder != "ribDemo"}
 
@@ -210,7 +210,7 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     under a profile's constants if given (robot.profile). A recorded run's folder is compared with NTRT's
     recorded distance."""
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial import TrialConfig, simulate
+    from spinefarm.worker.trial.run import TrialConfig, simulate
 
     morph = load_morphology(morphology or detect_morphology(folder))
     params = read_parameter_set(folder, suffix)

@@ -1,0 +1,1 @@
+"""Tools a user runs over trials: calibrate, accuracy, replay, verify, render, video, picture, contract."""
