@@ -5,7 +5,7 @@ looks, the COM path, the set-up and result), per built-in.
 
     python bench/control_split.py [--spines all] [--seconds 3] [--repeats 3] [--controller NAME]
 
-The trial runs through worker.trial.simulate with the loop's compiled run (worker.loop.run_compiled) swapped for
+The trial runs through worker.trial.run.simulate with the loop's compiled run (worker.trial.loop.run_compiled) swapped for
 a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
 unchanged: `same_distance` checks it); the counter runs in wall time, so its shares split the CPU time of the
 compiled calls (process_time around each). The CPG alone is timed
@@ -39,8 +39,8 @@ from spinefarm.robot.morphology.registry import builtin_names, load_morphology  
 from spinefarm.worker import loop  # noqa: E402
 from spinefarm.worker.control.cpg import rk4_advance  # noqa: E402
 from spinefarm.worker.control.law import STATUS_OK, law_step_world  # noqa: E402
-from spinefarm.worker.setup import SetupCache  # noqa: E402
-from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate  # noqa: E402
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate  # noqa: E402
+from spinefarm.worker.trial.setup import SetupCache  # noqa: E402
 
 
 @intrinsic
@@ -54,7 +54,7 @@ def _ticks(typingctx):
 
 @njit
 def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks):
-    """worker.loop.run_compiled with ticks[0..3] += copy-in + copy-out, law, mj_step, calls."""
+    """worker.trial.loop.run_compiled with ticks[0..3] += copy-in + copy-out, law, mj_step, calls."""
     step, m_addr, d_addr, state, columns, wrench = world
     force = strings[6][b]
     torque = strings[7][b]

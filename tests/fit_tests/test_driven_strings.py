@@ -15,7 +15,7 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.fit.readers import read_recording
 from spinefarm.worker.fit.recording import RecordingError
 from spinefarm.worker.fit.windows import Window, run_windows
-from spinefarm.worker.setup import TrialSetup
+from spinefarm.worker.trial.setup import TrialSetup
 
 NTRT = Path("/work/shared/ntrt-recordings")
 OCTA = NTRT / "OctahedralComplex" / "published"
