@@ -5,8 +5,8 @@ looks, the COM path, the set-up and result), per built-in.
 
     python bench/control_split.py [--spines all] [--seconds 3] [--repeats 3] [--controller NAME]
 
-The trial runs through worker.trial.run.simulate with the loop's compiled run (worker.trial.loop.run_compiled) swapped for
-a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
+The trial runs through worker.trial.run.simulate, with the loop's compiled run (worker.trial.loop.run_compiled) swapped
+for a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
 unchanged: `same_distance` checks it); the counter runs in wall time, so its shares split the CPU time of the
 compiled calls (process_time around each). The CPG alone is timed
 apart in a compiled loop on a copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
