@@ -12,6 +12,8 @@ from spinefarm.cli.default_step import AUTO, choose_stable_default, step_overrid
 from spinefarm.cli.profile_argument import add_profile_argument, profile_from
 from spinefarm.cli.robot_argument import add_robot_argument
 
+FIT_EVALUATIONS = 40  # search --engine auto's budget for fitting a user's robot's screen (docs/engines.md)
+
 if TYPE_CHECKING:
     from spinefarm.worker.tools.calibrate import CalibrationSettings
 
@@ -44,6 +46,10 @@ def add_calibration_arguments(p: argparse.ArgumentParser, prefix: str = "") -> N
     p.add_argument(f"--{prefix}bests", type=int, default=10, help="how many of its bests (default 10)")
     p.add_argument(f"--{prefix}duration", type=float, default=5.0, help="simulated seconds per trial (default 5)")
     p.add_argument(f"--{prefix}settle", type=float, default=1.0, help="settle phase before scoring (default 1 s)")
+    p.add_argument(f"--{prefix}fit-screen", type=int, default=FIT_EVALUATIONS if prefix else 0, metavar="N",
+                   help="when the screen disagrees, fit MuJoCo's contact constants to recordings the judge makes "
+                        f"(N losses; 0: no fit; default {FIT_EVALUATIONS if prefix else 0}) and calibrate again "
+                        "(docs/engines.md)")
     if not prefix:
         p.add_argument("--controller", default=None, help="controller space (default: the robot's first)")
         p.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
@@ -86,6 +92,8 @@ def summary(result: dict, cached: bool) -> str:
         step = f" at {1e3 * t['dt_s']:g} ms" if t.get("dt_s") else ""
         lines.append(f"  {tier:7s}{step} {t['cpu_s_per_sim_s']:.3f} CPU s per simulated s, step error {err}")
     lines.append(f"  decision: {result['decision']} ({result['reason']})")
+    if result.get("screen_fit"):
+        lines.append(f"  {result['screen_fit']['summary']}")
     return "\n".join(lines)
 
 
@@ -106,7 +114,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if not args.morphology:
         raise ParameterError("calibrate needs a robot", received="nothing",
                              expected="a built-in name (spinefarm morphologies) or a .yaml spec file")
+    from spinefarm.worker.tools.screen_fit import FitBudget
+
     settings = settings_from(args)  # every value checked before the robot is loaded or a trial runs
+    budget = FitBudget(evaluations=args.fit_screen)
     morph = load_morphology(args.morphology)
     if choose_stable_default(args, morph, TIERS):
         settings = settings_from(args)
@@ -122,5 +133,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   f"{settings.jobs} process{'es' if settings.jobs > 1 else ''} (cached after the first time)",
                   file=sys.stderr, flush=True)
         result, cached = calibration(args.morphology, settings, refresh=args.refresh, progress=wait)
+        if budget.evaluations and result["decision"] != "mujoco":
+            from spinefarm.worker.tools.screen_fit import with_screen_fit
+
+            if not args.json:
+                print(f"the screen disagrees: fitting it to the judge ({budget.describe()})", file=sys.stderr)
+            result = with_screen_fit(args.morphology, settings, result, budget, progress=wait)
     print(json.dumps(clean({**result, "cached": cached})) if args.json else summary(result, cached))
     return 0

@@ -53,7 +53,14 @@ def choose_engine(args: argparse.Namespace) -> Any:
     # checked here, so a bad --calibrate-* value is an error, not a fall back to Bullet
     settings = settings_from(args, "calibrate-", controller=args.controller,
                              jobs=max(1, min(2, getattr(args, "workers", 1) or 1)))
+<<<<<<< ours
     from spinefarm.worker.tools.shipped_calibration import shipped
+=======
+    from spinefarm.worker.tools.screen_fit import FitBudget
+    from spinefarm.worker.tools.shipped_calibration import shipped
+>>>>>>> theirs
+
+    budget = FitBudget(evaluations=args.calibrate_fit_screen)  # a user's robot's screen is fitted within it
 
     hit = shipped(args.morphology, settings)  # a built-in's, made for this model: no child
     result, cached = (None, False) if hit is None else ({**hit, "shipped": True}, True)
@@ -61,7 +68,7 @@ def choose_engine(args: argparse.Namespace) -> Any:
         print(f"engine auto: calibrating the tiers on {args.morphology} against the judge (cached after the "
               "first time) ...", file=sys.stderr)
         try:
-            result, cached = calibrate_in_child(args.morphology, settings,
+            result, cached = calibrate_in_child(args.morphology, settings, budget.evaluations,
                                                 quiet=bool(getattr(args, "quiet", False)))
         except SpinefarmError as exc:  # e.g. a robot no default step can simulate: the run's own checks say it
             print(f"engine auto: the calibration could not run ({exc}); bullet", file=sys.stderr)
@@ -78,7 +85,8 @@ def choose_engine(args: argparse.Namespace) -> Any:
     return choice
 
 
-def calibrate_in_child(morphology: str, settings: Any, quiet: bool = False) -> tuple[dict[str, Any], bool]:
+def calibrate_in_child(morphology: str, settings: Any, fit_evaluations: int = 0, quiet: bool = False
+                       ) -> tuple[dict[str, Any], bool]:
     """`spinefarm calibrate --json` in its own process: calibrating runs both simulators, and the search's own
     process (the coordinator) never loads one. Its progress lines pass through to this standard error (drawn
     for a terminal when this is one; none with `quiet`). Ended with the search: terminated on any exception (Ctrl-C's
@@ -90,7 +98,9 @@ def calibrate_in_child(morphology: str, settings: Any, quiet: bool = False) -> t
     cmd = [sys.executable, "-P", "-m", "spinefarm", "calibrate", morphology, "--json",
            "--gaits", str(settings.gaits), "--search-trials", str(settings.search_trials),
            "--bests", str(settings.bests), "--duration", repr(settings.duration_s),
-           "--settle", repr(settings.settle_s), "--jobs", str(settings.jobs)]
+           "--settle", repr(settings.settle_s), "--jobs", str(settings.jobs), "--fit-screen", str(fit_evaluations)]
+    if settings.profile:  # the user's --profile, as the calibration's settings hold it
+        cmd += ["--profile", _profile_file(dict(settings.profile))]
     if settings.controller:
         cmd += ["--controller", settings.controller]
     if settings.auto_dt or settings.dt_s is not None:
@@ -113,6 +123,26 @@ def calibrate_in_child(morphology: str, settings: Any, quiet: bool = False) -> t
         raise ConfigError(f"spinefarm calibrate {morphology} failed: {lines[-1].split(chr(13))[-1][:300]}")
     result = json.loads(out.strip().splitlines()[-1])
     return result, bool(result.pop("cached", False))
+
+
+def screen_profile(choice: Any) -> dict[str, float]:
+    """The constants a fitted screen adds to the run's profile (MuJoCo-only: the judge is unchanged), {} when
+    the screen was not fitted or the search runs on the judge's engine."""
+    fit = getattr(choice, "screen_fit", None)
+    return dict(fit["fitted"]) if fit and choice.engine == "mujoco" else {}
+
+
+def _profile_file(constants: dict[str, float]) -> str:
+    """The constants as a profile file for the child (kept in the cache folder, named by their hash)."""
+    import yaml
+
+    from spinefarm.robot.profile import profile_hash
+    from spinefarm.worker.tools.calibrate import cache_dir
+
+    path = cache_dir() / "profiles" / f"{profile_hash(constants)}.yaml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump({"constants": constants}))
+    return str(path)
 
 
 def _relay(stream: Any, tail: bytearray) -> None:

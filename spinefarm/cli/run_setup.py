@@ -115,7 +115,7 @@ def open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
 
 def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     """The RunConfig and SearchSettings of a new run (--engine auto resolved first)."""
-    from spinefarm.cli.engine_auto import choose_engine
+    from spinefarm.cli.engine_auto import choose_engine, screen_profile
     from spinefarm.cli.sim_commands import trial_overrides
     from spinefarm.coordinator.fidelity import parse_rungs
     from spinefarm.coordinator.problem import build_run_config
@@ -134,9 +134,12 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
             raise ConfigError("--duration and --rungs disagree on the trial length", received=args.duration,
                               expected=f"--rungs ending at the full length ({rungs[-1]:g} s) alone")
         args.duration = rungs[-1]
+    overrides = trial_overrides(args)
+    if fitted := screen_profile(choice):  # the screen's fitted constants travel with the run's trials
+        overrides["profile"] = {**overrides.get("profile", {}), **fitted}
     config = build_run_config(run_id, args.morphology, objective=args.objective, seed=args.seed,
                               controller=args.controller, duration_s=args.duration,
-                              trial_overrides=trial_overrides(args),
+                              trial_overrides=overrides,
                               robust=robust_settings(args, tuple(rungs) if rungs else None))
     check_step(config)
     lease = args.lease

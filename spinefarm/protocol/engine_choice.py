@@ -19,7 +19,7 @@ class EngineChoice:
     """engine: the tier chosen (mujoco screens, else bullet); mode: "auto"; cached: the calibration came
     from the cache or the package; shipped: from the package (robot/calibrations, made by
     bench/ship_calibrations.py); screen_fit: what fitting the screen to the judge did when the unfitted screen
-    failed (worker.screen_fit: its decision, the fitted profile and its hash, the figures before and after),
+    failed (worker.tools.screen_fit: its decision, the fitted profile and its hash, the figures before and after),
     None when no fit ran; rungs_added: the screening rungs auto added ("S,S", None: none added); spearman,
     top_overlap of top_k, median_distance_ratio (MuJoCo/Bullet over n_moving gaits that move): the
     agreement; n_random, n_bests: the gaits compared; spec_hash: the robot calibrated; reason: the decision

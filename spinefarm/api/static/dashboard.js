@@ -213,8 +213,10 @@ async function showRun(runId, gen, first) {
 // how `search --engine auto` chose the tier: the calibration's figures, its reason on hover
 function engineChoiceCard(c) {
   const text = `${esc(c.engine)}: ρ ${fmt(c.spearman, 3)}, top-${c.top_k} ${c.top_overlap}, ratio ${fmt(c.median_distance_ratio, 3)}`;
-  return `<div class="card" title="${esc(c.reason || "")}" data-engine-choice="${esc(c.engine)}"><div class="v">${text}</div>`
-    + `<div class="k">engine auto${c.cached ? " (cached calibration)" : ""}</div></div>`;
+  const why = c.screen_fit ? `${c.reason || ""}\n${c.screen_fit.summary || ""}` : c.reason || "";
+  return `<div class="card" title="${esc(why)}" data-engine-choice="${esc(c.engine)}"><div class="v">${text}</div>`
+    + `<div class="k">engine auto${c.shipped ? " (shipped calibration)" : c.cached ? " (cached calibration)" : ""}`
+    + `${c.screen_fit ? `; screen fitted to the judge (profile ${esc(c.screen_fit.profile_hash)}), then ${esc(c.screen_fit.decision)}` : ""}</div></div>`;
 }
 
 // ---------------------------------------------------------------- one trial
