@@ -22,7 +22,12 @@ plausible range are fitted (NTRT_FIT, per engine). Prints
 "held_out_improves", "inside_ranges", "folds", "constants", "profile", ...}}}}.
 
     python bench/fit.py --ntrt [--spines tetraspine-ntrt2026 ...] [--engines mujoco bullet] [--fit NAME,...]
-                        [--evaluations N] [--restarts N] [--span 10] [--stride 1] [--replay-duration S]
+                        [--evaluations N] [--restarts N] [--span 10] [--stride 1] [--replay-duration S] [--jobs N]
+
+--ntrt --scan NAME=V1,V2,...: no fit (for a budget a leave-one-out fit exceeds): per spine and engine the window
+error of each recording at these values of one constant, and each recording's gait replayed against NTRT's
+distance in the same time ({"spines": {SPINE: {ENGINE: {"window_error_cm": {V: {RECORDING: e, "all": e}},
+"replay_ratio": {RECORDING: r}}}}}).
 """
 
 from __future__ import annotations
@@ -104,8 +109,8 @@ def ntrt_bench(args: argparse.Namespace) -> dict:
         for engine in args.engines:
             t0 = time.time()
             cfg, bounds = TrialConfig(engine=engine), parse_fit(args.fit or NTRT_FIT[engine])
-            loo = leave_one_out(morph, cfg, recs, bounds, args.restarts, args.evaluations)
-            fitted = fit_constants(morph, cfg, recs, [], bounds, args.restarts, args.evaluations)
+            loo = leave_one_out(morph, cfg, recs, bounds, args.restarts, args.evaluations, jobs=args.jobs)
+            fitted = fit_constants(morph, cfg, recs, [], bounds, args.restarts, args.evaluations, jobs=args.jobs)
             before, after = (_replay_ratio(morph, engine, profile, folder / "published", args.replay_duration)
                              for profile in ({}, fitted["profile"]))
             inside = not any(c["at_bound"] for c in fitted["constants"].values())
@@ -116,6 +121,35 @@ def ntrt_bench(args: argparse.Namespace) -> dict:
                 "held_out_improves": loo["window_error_after"] < loo["window_error_before"],
                 "inside_ranges": inside, "profile": fitted["profile"], "constants": fitted["constants"],
                 "wall_s": time.time() - t0}
+    return out
+
+
+def scan_bench(args: argparse.Namespace) -> dict:
+    """--ntrt --scan NAME=V1,V2,...: where a full leave-one-out fit does not fit the machine's budget, the window
+    error of every recording at a few values of one constant (the model's own among them: is there anything for
+    a fit to gain, and in which direction), and each recording's gait replayed against NTRT's distance."""
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.profile import check_constants
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.loss import window_error_cm
+
+    name, _, values = args.scan.partition("=")
+    out: dict = {"spines": {}, "command": "python bench/fit.py --ntrt " + " ".join(sys.argv[2:])}
+    for spine in args.spines:
+        morph, folder = load_morphology(spine), Path(args.recordings) / NTRT_FOLDERS[spine]
+        recs = ntrt_recordings(folder, args.window, args.stride, args.span)
+        out["spines"][spine] = {}
+        for engine in args.engines:
+            t0, rows = time.time(), {}
+            for v in values.split(","):
+                cfg = TrialConfig(engine=engine, profile=check_constants({name: float(v)}))
+                per = {p.name: window_error_cm(morph, cfg, [p]) for p in recs}
+                rows[v] = {**per, "all": window_error_cm(morph, cfg, recs)}
+                print(json.dumps({spine: {engine: {name: {v: rows[v]}}}}), file=sys.stderr, flush=True)
+            ratios = {p.name: _replay_ratio(morph, engine, {}, folder / p.name, None) for p in recs}
+            out["spines"][spine][engine] = {"constant": name, "window_error_cm": rows, "replay_ratio": ratios,
+                                            "windows": {p.name: len(p.windows) for p in recs},
+                                            "wall_s": time.time() - t0}
     return out
 
 
@@ -169,6 +203,8 @@ def main() -> None:
     ap.add_argument("--engines", nargs="+", default=["mujoco", "bullet"])
     ap.add_argument("--recordings", default="/work/shared/ntrt-recordings", help="NTRT's recordings folder")
     ap.add_argument("--fit", default=None, help="with --ntrt: NAME[=LO:HI],... (default per engine: NTRT_FIT)")
+    ap.add_argument("--scan", default=None, metavar="NAME=V1,V2,...",
+                    help="with --ntrt: no fit; the window error at these values of one constant, and the replays")
     ap.add_argument("--span", type=float, default=10.0, help="with --ntrt: seconds of each recording fitted")
     ap.add_argument("--stride", type=float, default=1.0)
     ap.add_argument("--replay-duration", type=float, default=None)
@@ -179,10 +215,12 @@ def main() -> None:
     ap.add_argument("--window", type=float, default=0.2)
     ap.add_argument("--restarts", type=int, default=3)
     ap.add_argument("--evaluations", type=int, default=400)
+    ap.add_argument("--jobs", type=int, default=1, help="with --ntrt: processes computing a generation's losses")
     args = ap.parse_args()
     if args.identify + args.windows + args.ntrt != 1:
         ap.error("say what to measure: --identify, --windows or --ntrt")
-    bench = identify_bench if args.identify else windows_bench if args.windows else ntrt_bench
+    bench = identify_bench if args.identify else windows_bench if args.windows else \
+        scan_bench if args.scan else ntrt_bench
     print(json.dumps(bench(args)))
 
 

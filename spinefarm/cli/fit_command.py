@@ -44,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--restarts", type=int, default=3, help="CMA-ES starts (default 3), for the spread")
     p.add_argument("--evaluations", type=int, default=120, help="losses per start (default 120)")
     p.add_argument("--seed", type=checks.seed, default=0)
+    p.add_argument("--jobs", type=int, default=1, help="processes computing a generation's losses (default 1)")
     p.add_argument("--out", type=Path, default=None, help="write the profile here (.yaml)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_fit)
@@ -56,11 +57,13 @@ def cmd_fit(args: argparse.Namespace) -> int:
     from spinefarm.worker.fit.loss import prepare
     from spinefarm.worker.fit.readers import read_recording
     from spinefarm.worker.fit.search import parse_fit
+    from spinefarm.worker.fit.windows import driven_strings
 
     if args.out is not None:
         checks.output_path("--out", args.out, (".yaml", ".yml"))
     checks.at_least("--restarts", args.restarts, 1, "CMA-ES starts")
     checks.at_least("--evaluations", args.evaluations, 6, "losses per start")
+    checks.at_least("--jobs", args.jobs, 1, "processes")
     bounds = parse_fit(args.fit)
     morph = load_morphology(args.morphology)
     cfg = TrialConfig(engine=args.engine or "bullet", engine_options=parse_engine_options(args.engine_option),
@@ -71,7 +74,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
         out = []
         for path in paths:
             rec = read_recording(path)
-            rec.check_robot(morph.structure.n_segments, len(morph.structure.strings), morph.name)
+            rec.check_robot(morph.structure.n_segments, len(morph.structure.strings), morph.name,
+                            driven_strings(morph))
             out.append(prepare(str(path), rec, args.window, stride, args.skip))
         return out
 
@@ -79,7 +83,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
     from spinefarm.cli.waiting import Waiting
 
     with Waiting("fit", "losses") as wait:
-        result = fit_constants(morph, cfg, fitted, held, bounds, args.restarts, args.evaluations, args.seed, wait)
+        result = fit_constants(morph, cfg, fitted, held, bounds, args.restarts, args.evaluations, args.seed, wait,
+                               args.jobs)
     result = {"robot": morph.name, "engine": cfg.engine, "window_s": args.window, "stride_s": stride, **result}
     if args.out is not None:
         write_profile(args.out, morph.name, result, " ".join(["spinefarm", *sys.argv[1:]]))

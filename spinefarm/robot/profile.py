@@ -89,9 +89,31 @@ def check_constants(constants: Mapping[str, float]) -> dict[str, float]:
     return dict(sorted(out.items()))
 
 
-def load_profile(path: Path | str) -> dict[str, float]:
-    """A profile file's constants, checked (unknown keys and names, values outside their ranges refused)."""
-    path = Path(path)
+PROFILES_DIR = Path(__file__).parent / "profiles"  # the built-in profiles, shipped in the wheel (package data)
+
+
+def builtin_profiles(folder: Path = PROFILES_DIR) -> list[str]:
+    """The built-in profiles' names (their files' stems)."""
+    return sorted(f.stem for f in folder.glob("*.yaml"))
+
+
+def profile_path(name_or_path: Path | str, folder: Path = PROFILES_DIR) -> Path:
+    """A profile's file: the path itself when it is one, else the built-in profile of that name (a user's file
+    wins over a built-in of the same name, as a spec file does over a built-in robot)."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    builtin = folder / f"{path.name}.yaml"
+    if str(path) == path.name and not path.suffix and builtin.is_file():
+        return builtin
+    raise ConfigError("no profile file or built-in profile of that name", received=str(name_or_path),
+                      expected=f"a YAML file's path or one of {builtin_profiles(folder)}")
+
+
+def load_profile(path: Path | str, folder: Path = PROFILES_DIR) -> dict[str, float]:
+    """A profile's constants (a file's path or a built-in's name), checked (unknown keys and names, values outside
+    their ranges refused)."""
+    path = profile_path(path, folder)
     try:
         doc = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as exc:

@@ -14,15 +14,11 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.fit.readers import read_recording
 from spinefarm.worker.fit.recording import RecordingError
-from spinefarm.worker.fit.windows import Window, run_windows
+from spinefarm.worker.fit.windows import Window, driven_strings, run_windows
 from spinefarm.worker.trial.setup import TrialSetup
 
 NTRT = Path("/work/shared/ntrt-recordings")
 OCTA = NTRT / "OctahedralComplex" / "published"
-
-
-def _driven(morph) -> np.ndarray:
-    return np.array([i for i, s in enumerate(morph.structure.strings) if morph.control.gains(s.tag) is not None])
 
 
 @pytest.mark.skipif(not OCTA.exists(), reason="NTRT's recordings are not on this machine")
@@ -32,7 +28,7 @@ def test_recorded_strings_are_the_driven_ones_in_ntrt_order(spine, folder):
     morph = load_morphology(spine)
     rec = read_recording(NTRT / folder / "published")
     n = len(morph.structure.strings)
-    recorded = rec.check_robot(rec.n_segments, n, spine, _driven(morph))
+    recorded = rec.check_robot(rec.n_segments, n, spine, driven_strings(morph))
     assert rec.n_strings < n and len(recorded) == rec.n_strings
     # NTRT's own start lengths of its muscles (model-meta.txt), in its order, are our driven strings' ones
     meta = (NTRT / folder / "published" / "model-meta.txt").read_text()
@@ -46,7 +42,7 @@ def test_other_string_counts_refused_naming_both():
     morph = load_morphology("octahedral-complex-ntrt2026")
     rec = read_recording(OCTA)
     with pytest.raises(RecordingError) as err:
-        rec.check_robot(12, 90, "octahedral-complex-ntrt2026", _driven(morph)[:40])
+        rec.check_robot(12, 90, "octahedral-complex-ntrt2026", driven_strings(morph)[:40])
     assert "received '44 strings'; expected 90 strings (or 40, the driven ones)" in str(err.value)
     assert "\n" not in str(err.value)
 

@@ -87,6 +87,24 @@ def test_constants_the_step_cannot_simulate_score_as_diverged_not_an_error(recor
     assert candidate_loss(morph, stable, rec) == fit_loss(morph, stable, rec) < 100.0
 
 
+def test_a_generation_in_processes_is_the_fit_in_one(recordings):
+    """--jobs: the same candidates (CMA-ES asks a whole generation before any loss) and the same losses, so the
+    same fit to the bit; the losses differ between candidates (the search was not flat)."""
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.fitting import fit_constants
+    from spinefarm.worker.fit.loss import prepare
+    from spinefarm.worker.fit.readers import read_recording
+    from spinefarm.worker.fit.search import parse_fit
+
+    morph = load_morphology("tetraspine-ntrt")
+    recs = [prepare(n, read_recording(recordings / f"{n}.npz"), 0.1, 0.2) for n in ("r1", "r2", "r3")]
+    bounds = parse_fit("ground_friction=0.3:1.3,string_damping_n_s_per_m=5:20")
+    one, two = (fit_constants(morph, TrialConfig(engine="mujoco"), recs, [], bounds, 1, 12, 0, None, jobs)
+                for jobs in (1, 2))
+    assert one["restarts"] == two["restarts"] and one["constants"] == two["constants"]
+    assert one["loss"]["after"] < one["loss"]["before"]
+
+
 def test_fit_recovers_constants_on_a_tiny_robot():
     morph = load_morphology("tetraspine-ntrt")
     true = {"ground_friction": 0.65, "string_stiffness_n_per_m": 1300.0}

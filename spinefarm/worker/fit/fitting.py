@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 from spinefarm.robot.morphology.model import Morphology
@@ -20,16 +21,56 @@ def with_values(cfg: TrialConfig, values: Mapping[str, float]) -> TrialConfig:
     return dataclasses.replace(cfg, profile={**cfg.profile, **values})
 
 
+class Losses:
+    """A generation's candidate losses (search.minimise's `losses`): in this process one after another, or with
+    jobs > 1 in that many processes, each holding the robot and the recordings once. The seam where the
+    windows could instead go to the workers over Zenoh, as trials do."""
+
+    def __init__(self, morph: Morphology, cfg: TrialConfig, fitted: Sequence[Prepared], jobs: int = 1) -> None:
+        self.task = (morph, cfg, list(fitted))
+        self.pool = None if jobs <= 1 else ProcessPoolExecutor(jobs, initializer=_hold, initargs=self.task)
+
+    def __call__(self, candidates: list[dict[str, float]]) -> list[float]:
+        if self.pool is None:
+            return [_loss(self.task, v) for v in candidates]
+        return list(self.pool.map(_held_loss, candidates))
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
+
+
+_HELD: tuple = ()  # a pool process's (morph, cfg, recordings), sent once
+
+
+def _hold(*task: Any) -> None:
+    global _HELD
+    _HELD = task
+
+
+def _held_loss(values: dict[str, float]) -> float:
+    return _loss(_HELD, values)
+
+
+def _loss(task: tuple, values: dict[str, float]) -> float:
+    morph, cfg, fitted = task
+    return candidate_loss(morph, with_values(cfg, values), fitted)
+
+
 def fit_constants(morph: Morphology, cfg: TrialConfig, fitted: Sequence[Prepared], held_out: Sequence[Prepared],
                   bounds: Sequence[Bound], restarts: int = 3, evaluations: int = 120, seed: int = 0,
-                  progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
-    """Fit `bounds`' constants to the `fitted` recordings, starting from the model's values under cfg's profile;
-    the figures per recording (fitted and held out) before and after."""
+                  progress: Callable[[int, int], None] | None = None, jobs: int = 1) -> dict[str, Any]:
+    """Fit `bounds`' constants to the `fitted` recordings, starting from the model's values under cfg's profile
+    (the candidates' losses in `jobs` processes); the figures per recording (fitted and held out) before and
+    after."""
     start = {b.name: min(max(current_value(apply_profile(morph, cfg.profile), b.name, cfg.engine,
                                            {**cfg.engine_options, **_engine_part(cfg)}), b.low), b.high)
              for b in bounds}
-    found = minimise(lambda v: candidate_loss(morph, with_values(cfg, v), list(fitted)), bounds, start,
-                     restarts, evaluations, seed, progress)
+    losses = Losses(morph, cfg, fitted, jobs)
+    try:
+        found = minimise(losses, bounds, start, restarts, evaluations, seed, progress)
+    finally:
+        losses.close()
     after = with_values(cfg, found.values)
     spread = found.spread()
     return {

@@ -16,13 +16,13 @@ from spinefarm.worker.fit.search import Bound
 
 
 def leave_one_out(morph: Morphology, cfg: TrialConfig, recordings: Sequence[Prepared], bounds: Sequence[Bound],
-                  restarts: int = 2, evaluations: int = 60, seed: int = 0) -> dict[str, Any]:
+                  restarts: int = 2, evaluations: int = 60, seed: int = 0, jobs: int = 1) -> dict[str, Any]:
     """{"folds": [{held_out, before, after, constants}], "window_error_before", "window_error_after"}: the
     held-out window errors (cm) per fold and their medians."""
     folds = []
     for i, held in enumerate(recordings):
         rest = [p for j, p in enumerate(recordings) if j != i]
-        out = fit_constants(morph, cfg, rest, [held], bounds, restarts, evaluations, seed)
+        out = fit_constants(morph, cfg, rest, [held], bounds, restarts, evaluations, seed, jobs=jobs)
         figures = out["recordings"][held.name]
         folds.append({"held_out": held.name, "before": figures["before"]["window_error_cm"],
                       "after": figures["after"]["window_error_cm"],

@@ -84,11 +84,12 @@ class SearchResult:
         return out
 
 
-def minimise(loss: Callable[[Mapping[str, float]], float], bounds: Sequence[Bound], start: Mapping[str, float],
-             restarts: int = 3, evaluations: int = 120, seed: int = 0,
+def minimise(losses: Callable[[list[dict[str, float]]], Sequence[float]], bounds: Sequence[Bound],
+             start: Mapping[str, float], restarts: int = 3, evaluations: int = 120, seed: int = 0,
              progress: Callable[[int, int], None] | None = None) -> SearchResult:
     """CMA-ES restarts of `evaluations` losses each: the first from `start`, the others from seeded random points;
-    `progress(done, total)` after each loss."""
+    `losses` takes a whole generation's candidates at once (the seam where they may be evaluated in parallel,
+    in processes or on workers) and returns their losses in order; `progress(done, total)` after each loss."""
     from cmaes import CMA
 
     rng = np.random.default_rng(seed)
@@ -99,10 +100,10 @@ def minimise(loss: Callable[[Mapping[str, float]], float], bounds: Sequence[Boun
                   population_size=max(6, 4 + int(3 * math.log(len(bounds)))))
         best = (math.inf, x0)
         while count < evaluations * (r + 1):
+            xs = [opt.ask() for _ in range(opt.population_size)]
+            values = losses([{b.name: b.value(u) for b, u in zip(bounds, x, strict=True)} for x in xs])
             told = []
-            for _ in range(opt.population_size):
-                x = opt.ask()
-                value = loss({b.name: b.value(u) for b, u in zip(bounds, x, strict=True)})
+            for x, value in zip(xs, values, strict=True):
                 count += 1
                 if progress is not None:
                     progress(min(count, evaluations * restarts), evaluations * restarts)

@@ -61,6 +61,12 @@ class WindowRun:
     tension_n: np.ndarray
 
 
+def driven_strings(morph: Morphology) -> np.ndarray:
+    """The robot's controller-driven strings (their tags have control gains), in its string order."""
+    return np.array([i for i, s in enumerate(morph.structure.strings) if morph.control.gains(s.tag) is not None],
+                    dtype=int)
+
+
 def run_windows(morph: Morphology, cfg: TrialConfig, rec: Recording, windows: list[Window]) -> list[WindowRun]:
     """Every window simulated from its recorded start state under cfg (its profile applied)."""
     if rec.rest_length_m is None:
@@ -71,8 +77,7 @@ def run_windows(morph: Morphology, cfg: TrialConfig, rec: Recording, windows: li
                           expected="an engine with the set_state ability")
     morph = apply_profile(morph, cfg.profile)
     setup = TrialSetup(morph, cfg, None)
-    driven = [i for i, s in enumerate(morph.structure.strings) if morph.control.gains(s.tag) is not None]
-    recorded = rec.check_robot(len(setup.bodies), len(morph.structure.strings), morph.name, np.array(driven))
+    recorded = rec.check_robot(len(setup.bodies), len(morph.structure.strings), morph.name, driven_strings(morph))
     out = _batch(setup, rec, windows, recorded)
     retry = [w for w, o in enumerate(out) if o is None]
     if retry:  # the engine asked for other settings (MuJoCo's contact guard): those windows again, in them
