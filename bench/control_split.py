@@ -7,8 +7,9 @@ looks, the COM path, the set-up and result), per built-in.
 
 The trial runs through worker.trial.simulate with the loop's compiled run (worker.loop.run_compiled) swapped for
 a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
-unchanged: `same_distance` checks it); the counter runs in wall time, so its shares split the CPU time of the
-compiled calls (process_time around each). The CPG alone is timed
+unchanged: `same_distance` checks it); the counter runs in wall time, so a step that took longer than
+PREEMPTED_US (another process ran in it) is left out of the per-step means (`steps_preempted`). The CPG alone
+is timed
 apart in a compiled loop on a copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
 `law - cpg` is the string kernel's. Shares are of the whole step (CPU time of the whole trial over its steps):
 `control_share` = 1 - in-trial mj_step / whole (bench/trial_speed.py's figure uses a bare mj_step from the end
@@ -42,6 +43,9 @@ from spinefarm.worker.control.law import STATUS_OK, law_step_world  # noqa: E402
 from spinefarm.worker.setup import SetupCache  # noqa: E402
 from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate  # noqa: E402
 
+# a step this long had another process's time slice in it (the slowest step measured: ~0.35 ms, ribbed)
+PREEMPTED_US = 1500.0
+
 
 @intrinsic
 def _ticks(typingctx):
@@ -53,8 +57,9 @@ def _ticks(typingctx):
 
 
 @njit
-def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks):
-    """worker.loop.run_compiled with ticks[0..3] += copy-in + copy-out, law, mj_step, calls."""
+def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, preempted):
+    """worker.loop.run_compiled with ticks[0..2] += copy-in + copy-out, law, mj_step over the steps that took
+    fewer than `preempted` ticks, ticks[3] += 1 (calls), ticks[4] += steps kept, ticks[5] += steps left out."""
     step, m_addr, d_addr, state, columns, wrench = world
     force = strings[6][b]
     torque = strings[7][b]
@@ -77,10 +82,28 @@ def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks):
         t3 = _ticks()
         loop._call_step(step, m_addr, d_addr)
         t4 = _ticks()
+        if t4 - t0 >= preempted:  # another process ran in between: the counter runs in wall time
+            ticks[5] += 1
+            continue
         ticks[0] += (t1 - t0) + (t3 - t2)
         ticks[1] += t2 - t1
         ticks[2] += t4 - t3
+        ticks[4] += 1
     return STATUS_OK, n_steps
+
+
+@njit
+def _ticks_now():
+    return _ticks()
+
+
+def ticks_per_us() -> float:
+    """The counter's rate, against perf_counter (both wall time)."""
+    _ticks_now()
+    t0, k0 = time.perf_counter(), _ticks_now()
+    while time.perf_counter() - t0 < 0.2:
+        pass
+    return (_ticks_now() - k0) / ((time.perf_counter() - t0) * 1e6)
 
 
 @njit
@@ -103,16 +126,13 @@ def cpg_us_per_step(law, repeats: int = 3000) -> float:
     return (time.process_time() - t0) / repeats * 1e6 / every
 
 
-def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controller: str | None) -> dict:
-    ticks = np.zeros(4, dtype=np.int64)
-    compiled_s = [0.0]
+def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controller: str | None, tpu: float
+              ) -> dict:
+    ticks = np.zeros(6, dtype=np.int64)
     plain = loop.run_compiled
 
     def timed(world, cpg, strings, clock, b, n_steps, poses):
-        t = time.process_time()
-        out = _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks)
-        compiled_s[0] += time.process_time() - t
-        return out
+        return _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, int(PREEMPTED_US * tpu))
     loop.run_compiled = timed
     try:
         t0 = time.process_time()
@@ -122,16 +142,16 @@ def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controll
         loop.run_compiled = plain
     reference = simulate(morph, u, cfg, seed, controller=controller, setup=cache).result  # the plain loop
     steps = res.sim_time_s / res.extras["dt_s"] + round(cfg.settle_s / res.extras["dt_s"])
-    # the counter runs in wall time (another process's slices included): it splits the calls' CPU time
-    copies, law_us, mj = (ticks[:3] / ticks[:3].sum() * compiled_s[0] * 1e6 / steps).tolist()
+    copies, law_us, mj = (ticks[:3] / tpu / ticks[4]).tolist()  # per step, over the steps not preempted
     whole = whole_s * 1e6 / steps
     return {"whole": whole, "mj_step": mj, "law": law_us, "copies": copies,
             "python": whole - mj - law_us - copies, "compiled_calls_per_step": ticks[3] / steps,
+            "steps_preempted": int(ticks[5]), "steps_timed": int(ticks[4]),
             "same_distance": res.distance_m == reference.distance_m, "distance_m": res.distance_m,
             "segment_contacts": res.extras.get("segment_contacts", "left out")}
 
 
-def spine_split(name: str, seconds: float, repeats: int, controller: str | None) -> dict:
+def spine_split(name: str, seconds: float, repeats: int, controller: str | None, tpu: float) -> dict:
     from spinefarm.worker.control.law import ControlLaw
 
     morph = load_morphology(name)
@@ -140,7 +160,7 @@ def spine_split(name: str, seconds: float, repeats: int, controller: str | None)
     rows = []
     for r in range(repeats + 1):  # the first warms caches and compiled code
         u = random_unit_params(morph, 1 + r, controller)
-        row = one_trial(morph, u, cfg, 1 + r, cache, controller)
+        row = one_trial(morph, u, cfg, 1 + r, cache, controller, tpu)
         setup = cache.get(morph, cfg, controller)
         net = setup.space.network(setup.space.param_space.physical(u))
         g = setup.geom
@@ -171,7 +191,8 @@ def main() -> None:
     ap.add_argument("--controller", default=None, help="controller space (default: each spine's own)")
     args = ap.parse_args()
     names = builtin_names() if args.spines == "all" else args.spines.split(",")
-    spines = {n: spine_split(n, args.seconds, args.repeats, args.controller) for n in names}
+    tpu = ticks_per_us()
+    spines = {n: spine_split(n, args.seconds, args.repeats, args.controller, tpu) for n in names}
     print(json.dumps({"spines": spines, "seconds": args.seconds, "repeats": args.repeats,
                       "controller": args.controller}))
 
