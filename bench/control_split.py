@@ -7,8 +7,9 @@ looks, the COM path, the set-up and result), per built-in.
 
 The trial runs through worker.trial.simulate with the loop's compiled run (worker.loop.run_compiled) swapped for
 a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
-unchanged: `same_distance` checks it); the counter runs in wall time, so a step that took longer than
-PREEMPTED_US (another process ran in it) is left out of the per-step means (`steps_preempted`). The CPG alone
+unchanged: `same_distance` checks it); the counter runs in wall time, so a step with a part longer than
+PREEMPTED_US (the law: plus twice a CPG update) had another process in it and is left out of the per-step means
+(`steps_preempted`). The CPG alone
 is timed
 apart in a compiled loop on a copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
 `law - cpg` is the string kernel's. Shares are of the whole step (CPU time of the whole trial over its steps):
@@ -23,6 +24,7 @@ seeded random gaits after a warm-up trial.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -43,7 +45,8 @@ from spinefarm.worker.control.law import STATUS_OK, law_step_world  # noqa: E402
 from spinefarm.worker.setup import SetupCache  # noqa: E402
 from spinefarm.worker.trial import TrialConfig, random_unit_params, simulate  # noqa: E402
 
-# a step this long had another process's time slice in it (the slowest step measured: ~0.35 ms, ribbed)
+# a part of a step this long had another process's time slice in it (the slowest mj_step measured: ~0.35 ms,
+# ribbed); the law's cap adds twice a CPG update (NTRT's 0.1 s update: 100 RK4 steps at once, up to ~2 ms)
 PREEMPTED_US = 1500.0
 
 
@@ -57,9 +60,10 @@ def _ticks(typingctx):
 
 
 @njit
-def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, preempted):
-    """worker.loop.run_compiled with ticks[0..2] += copy-in + copy-out, law, mj_step over the steps that took
-    fewer than `preempted` ticks, ticks[3] += 1 (calls), ticks[4] += steps kept, ticks[5] += steps left out."""
+def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, caps):
+    """worker.loop.run_compiled with ticks[0..2] += copy-in + copy-out, law, mj_step over the steps whose parts
+    all took fewer ticks than caps (copies, law, mj_step), ticks[3] += 1 (calls), ticks[4] += steps kept,
+    ticks[5] += steps left out."""
     step, m_addr, d_addr, state, columns, wrench = world
     force = strings[6][b]
     torque = strings[7][b]
@@ -82,7 +86,7 @@ def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, preempted):
         t3 = _ticks()
         loop._call_step(step, m_addr, d_addr)
         t4 = _ticks()
-        if t4 - t0 >= preempted:  # another process ran in between: the counter runs in wall time
+        if (t1 - t0) + (t3 - t2) >= caps[0] or t2 - t1 >= caps[1] or t4 - t3 >= caps[2]:  # another process ran
             ticks[5] += 1
             continue
         ticks[0] += (t1 - t0) + (t3 - t2)
@@ -126,13 +130,15 @@ def cpg_us_per_step(law, repeats: int = 3000) -> float:
     return (time.process_time() - t0) / repeats * 1e6 / every
 
 
-def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controller: str | None, tpu: float
-              ) -> dict:
+def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controller: str | None,
+              caps: np.ndarray) -> dict:
+    """One trial through the timed loop (caps: ticks per part beyond which a step counts as preempted)."""
+    tpu = caps[3]
     ticks = np.zeros(6, dtype=np.int64)
     plain = loop.run_compiled
 
     def timed(world, cpg, strings, clock, b, n_steps, poses):
-        return _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, int(PREEMPTED_US * tpu))
+        return _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, caps)
     loop.run_compiled = timed
     try:
         t0 = time.process_time()
@@ -152,15 +158,20 @@ def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controll
 
 
 def spine_split(name: str, seconds: float, repeats: int, controller: str | None, tpu: float) -> dict:
+    from spinefarm.protocol.errors import ConfigError
     from spinefarm.worker.control.law import ControlLaw
+    from spinefarm.worker.episode import choose_step
 
     morph = load_morphology(name)
     cfg = TrialConfig(duration_s=seconds, engine="mujoco")
+    try:
+        choose_step(morph, cfg)
+    except ConfigError:  # a string network the default step cannot take (tetraspine-hardware): the automatic one
+        cfg = dataclasses.replace(cfg, auto_dt=True)
     cache = SetupCache()
     rows = []
     for r in range(repeats + 1):  # the first warms caches and compiled code
         u = random_unit_params(morph, 1 + r, controller)
-        row = one_trial(morph, u, cfg, 1 + r, cache, controller, tpu)
         setup = cache.get(morph, cfg, controller)
         net = setup.space.network(setup.space.param_space.physical(u))
         g = setup.geom
@@ -168,7 +179,12 @@ def spine_split(name: str, seconds: float, repeats: int, controller: str | None,
                          len(setup.bodies), cfg.cpg_max_step_s, cfg.motor_model)
         every = max(1, round(morph.control.cpg_update_period_s / setup.dt))
         law.begin_phase(every, setup.dt, cfg.cpg_own_step_s if every == 1 else None)
-        row["cpg"] = cpg_us_per_step(law)
+        cpg = cpg_us_per_step(law)
+        update_us = cpg * max(1, int(law.clock[1][0]))
+        caps = np.array([PREEMPTED_US, PREEMPTED_US + 2 * update_us, PREEMPTED_US, 0]) * tpu
+        caps[3] = tpu
+        row = one_trial(morph, u, cfg, 1 + r, cache, controller, caps)
+        row["cpg"] = cpg
         row["strings"] = row["law"] - row["cpg"]
         if r:
             rows.append(row)
