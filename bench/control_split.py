@@ -5,10 +5,12 @@ looks, the COM path, the set-up and result), per built-in.
 
     python bench/control_split.py [--spines all] [--seconds 3] [--repeats 3] [--controller NAME]
 
-The trial runs through worker.trial.run.simulate, with the loop's compiled run (worker.trial.loop.run_compiled) swapped
+The trial runs through worker.trial.run.simulate with the loop's compiled run (worker.trial.loop.run_compiled) swapped
 for a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
-unchanged: `same_distance` checks it); the counter runs in wall time, so its shares split the CPU time of the
-compiled calls (process_time around each). The CPG alone is timed
+unchanged: `same_distance` checks it); the counter runs in wall time, so a step with a part longer than
+PREEMPTED_US (the law: plus twice a CPG update) had another process in it and is left out of the per-step means
+(`steps_preempted`). The CPG alone
+is timed
 apart in a compiled loop on a copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
 `law - cpg` is the string kernel's. Shares are of the whole step (CPU time of the whole trial over its steps):
 `control_share` = 1 - in-trial mj_step / whole (bench/trial_speed.py's figure uses a bare mj_step from the end
@@ -22,6 +24,7 @@ seeded random gaits after a warm-up trial.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -42,6 +45,10 @@ from spinefarm.worker.control.law import STATUS_OK, law_step_world  # noqa: E402
 from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate  # noqa: E402
 from spinefarm.worker.trial.setup import SetupCache  # noqa: E402
 
+# a part of a step this long had another process's time slice in it (the slowest mj_step measured: ~0.35 ms,
+# ribbed); the law's cap adds twice a CPG update (NTRT's 0.1 s update: 100 RK4 steps at once, up to ~2 ms)
+PREEMPTED_US = 1500.0
+
 
 @intrinsic
 def _ticks(typingctx):
@@ -53,8 +60,10 @@ def _ticks(typingctx):
 
 
 @njit
-def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks):
-    """worker.trial.loop.run_compiled with ticks[0..3] += copy-in + copy-out, law, mj_step, calls."""
+def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, caps):
+    """worker.trial.loop.run_compiled with ticks[0..2] += copy-in + copy-out, law, mj_step over the steps whose parts
+    all took fewer ticks than caps (copies, law, mj_step), ticks[3] += 1 (calls), ticks[4] += steps kept,
+    ticks[5] += steps left out."""
     step, m_addr, d_addr, state, columns, wrench = world
     force = strings[6][b]
     torque = strings[7][b]
@@ -77,10 +86,28 @@ def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks):
         t3 = _ticks()
         loop._call_step(step, m_addr, d_addr)
         t4 = _ticks()
+        if (t1 - t0) + (t3 - t2) >= caps[0] or t2 - t1 >= caps[1] or t4 - t3 >= caps[2]:  # another process ran
+            ticks[5] += 1
+            continue
         ticks[0] += (t1 - t0) + (t3 - t2)
         ticks[1] += t2 - t1
         ticks[2] += t4 - t3
+        ticks[4] += 1
     return STATUS_OK, n_steps
+
+
+@njit
+def _ticks_now():
+    return _ticks()
+
+
+def ticks_per_us() -> float:
+    """The counter's rate, against perf_counter (both wall time)."""
+    _ticks_now()
+    t0, k0 = time.perf_counter(), _ticks_now()
+    while time.perf_counter() - t0 < 0.2:
+        pass
+    return (_ticks_now() - k0) / ((time.perf_counter() - t0) * 1e6)
 
 
 @njit
@@ -103,16 +130,15 @@ def cpg_us_per_step(law, repeats: int = 3000) -> float:
     return (time.process_time() - t0) / repeats * 1e6 / every
 
 
-def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controller: str | None) -> dict:
-    ticks = np.zeros(4, dtype=np.int64)
-    compiled_s = [0.0]
+def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controller: str | None,
+              caps: np.ndarray) -> dict:
+    """One trial through the timed loop (caps: ticks per part beyond which a step counts as preempted)."""
+    tpu = caps[3]
+    ticks = np.zeros(6, dtype=np.int64)
     plain = loop.run_compiled
 
     def timed(world, cpg, strings, clock, b, n_steps, poses):
-        t = time.process_time()
-        out = _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks)
-        compiled_s[0] += time.process_time() - t
-        return out
+        return _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, caps)
     loop.run_compiled = timed
     try:
         t0 = time.process_time()
@@ -122,25 +148,30 @@ def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controll
         loop.run_compiled = plain
     reference = simulate(morph, u, cfg, seed, controller=controller, setup=cache).result  # the plain loop
     steps = res.sim_time_s / res.extras["dt_s"] + round(cfg.settle_s / res.extras["dt_s"])
-    # the counter runs in wall time (another process's slices included): it splits the calls' CPU time
-    copies, law_us, mj = (ticks[:3] / ticks[:3].sum() * compiled_s[0] * 1e6 / steps).tolist()
+    copies, law_us, mj = (ticks[:3] / tpu / ticks[4]).tolist()  # per step, over the steps not preempted
     whole = whole_s * 1e6 / steps
     return {"whole": whole, "mj_step": mj, "law": law_us, "copies": copies,
             "python": whole - mj - law_us - copies, "compiled_calls_per_step": ticks[3] / steps,
+            "steps_preempted": int(ticks[5]), "steps_timed": int(ticks[4]),
             "same_distance": res.distance_m == reference.distance_m, "distance_m": res.distance_m,
             "segment_contacts": res.extras.get("segment_contacts", "left out")}
 
 
-def spine_split(name: str, seconds: float, repeats: int, controller: str | None) -> dict:
+def spine_split(name: str, seconds: float, repeats: int, controller: str | None, tpu: float) -> dict:
+    from spinefarm.protocol.errors import ConfigError
     from spinefarm.worker.control.law import ControlLaw
+    from spinefarm.worker.trial.episode import choose_step
 
     morph = load_morphology(name)
     cfg = TrialConfig(duration_s=seconds, engine="mujoco")
+    try:
+        choose_step(morph, cfg)
+    except ConfigError:  # a string network the default step cannot take (tetraspine-hardware): the automatic one
+        cfg = dataclasses.replace(cfg, auto_dt=True)
     cache = SetupCache()
     rows = []
     for r in range(repeats + 1):  # the first warms caches and compiled code
         u = random_unit_params(morph, 1 + r, controller)
-        row = one_trial(morph, u, cfg, 1 + r, cache, controller)
         setup = cache.get(morph, cfg, controller)
         net = setup.space.network(setup.space.param_space.physical(u))
         g = setup.geom
@@ -148,7 +179,12 @@ def spine_split(name: str, seconds: float, repeats: int, controller: str | None)
                          len(setup.bodies), cfg.cpg_max_step_s, cfg.motor_model)
         every = max(1, round(morph.control.cpg_update_period_s / setup.dt))
         law.begin_phase(every, setup.dt, cfg.cpg_own_step_s if every == 1 else None)
-        row["cpg"] = cpg_us_per_step(law)
+        cpg = cpg_us_per_step(law)
+        update_us = cpg * max(1, int(law.clock[1][0]))
+        caps = np.array([PREEMPTED_US, PREEMPTED_US + 2 * update_us, PREEMPTED_US, 0]) * tpu
+        caps[3] = tpu
+        row = one_trial(morph, u, cfg, 1 + r, cache, controller, caps)
+        row["cpg"] = cpg
         row["strings"] = row["law"] - row["cpg"]
         if r:
             rows.append(row)
@@ -171,7 +207,8 @@ def main() -> None:
     ap.add_argument("--controller", default=None, help="controller space (default: each spine's own)")
     args = ap.parse_args()
     names = builtin_names() if args.spines == "all" else args.spines.split(",")
-    spines = {n: spine_split(n, args.seconds, args.repeats, args.controller) for n in names}
+    tpu = ticks_per_us()
+    spines = {n: spine_split(n, args.seconds, args.repeats, args.controller, tpu) for n in names}
     print(json.dumps({"spines": spines, "seconds": args.seconds, "repeats": args.repeats,
                       "controller": args.controller}))
 

@@ -214,6 +214,23 @@ class ControlLaw:
         taken)."""
         return law_step(self.cpg, self.strings, self.clock, poses, active, self.status)
 
+    def _world_arrays(self) -> tuple[np.ndarray, ...]:
+        """Every array that carries a world's law from one step to the next (scratch and per-step outputs
+        aside, which each step writes before reading)."""
+        return (self.cpg_state, self.cpg_output_cm_s, self._ahead, self._behind, self.state, self.work,
+                self.tension, self.force, self.torque, self.steps, self.quiet)
+
+    def snapshot(self, world: int) -> tuple[np.ndarray, ...]:
+        """World `world`'s law state mid-phase (copies): with the engine's snapshot of the world, all a trial
+        needs to go on later from this step."""
+        return tuple(np.array(a[world], copy=True) for a in self._world_arrays())
+
+    def restore(self, world: int, saved: tuple[np.ndarray, ...]) -> None:
+        """World `world` takes a snapshot(); the law must be in the phase it was taken in (begin_phase with the
+        same arguments), which fixes the CPG's plan."""
+        for a, s in zip(self._world_arrays(), saved, strict=True):
+            a[world] = s
+
     def work_internal(self, world: int) -> float:
         """Reel-in work of world `world` so far, internal units (kg cm^2/s^2)."""
         return float(self.work[world, 0])
