@@ -14,12 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spinefarm.protocol.errors import SpinefarmError
+from spinefarm.protocol.errors import ConfigError, SpinefarmError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.engines import DEFAULT_ENGINE
 from spinefarm.robot.morphology.bodycheck import static_problem
 from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.spaces import param_space
+from spinefarm.robot.trial_config import TrialConfig
 
 INFEASIBLE = "infeasible: "
 SETTLE_S = 2.0  # passive seconds: the built-ins reach rest (< 0.2 cm/s) well within them
@@ -34,11 +36,32 @@ class Feasibility:
     reason: str = ""
 
 
+def passive_params(morph: Morphology, seed: int = 1) -> np.ndarray:
+    """A seeded random parameter vector (unit cube) with every CPG amplitude at its smallest value."""
+    space = param_space(morph)
+    physical = space.from_unit(np.random.default_rng(seed).random(len(space)))
+    amplitude = [i for i, n in enumerate(space.names) if "amplitude" in n]
+    for i in amplitude:
+        physical[i] = max(0.0, space.lows[i])
+    return space.to_unit(physical)
+
+
+def step_config(morph: Morphology, engine: str, **kw) -> TrialConfig:
+    """The default step, or the automatic one for a structure known to be unstable at it."""
+    from spinefarm.worker.episode import choose_step
+
+    try:
+        cfg = TrialConfig(engine=engine, **kw)
+        choose_step(morph, cfg)
+        return cfg
+    except ConfigError:
+        return TrialConfig(engine=engine, auto_dt=True, **kw)
+
+
 def _passive_problem(morph: Morphology, engine: str, settle_s: float) -> str | None:
-    from spinefarm.worker.contract import _step_config, passive_params
     from spinefarm.worker.trial import simulate
 
-    cfg = _step_config(morph, engine, duration_s=settle_s, record_every_s=settle_s / 20)
+    cfg = step_config(morph, engine, duration_s=settle_s, record_every_s=settle_s / 20)
     out = simulate(morph, passive_params(morph), cfg, 0)
     if not out.result.ok:
         return f"no stable step: {out.result.reason}"
