@@ -118,3 +118,27 @@ def with_body_search(config: RunConfig, source: str) -> RunConfig:
     space = search.space(param_space(Morphology.from_dict(config.morphology_spec), config.controller))
     return dataclasses.replace(config, param_space=tuple(space.describe()), space_hash=space.space_hash(),
                                body=search.to_dict())
+
+
+def body_spec_text(search: BodySearch, values: Mapping[str, float], header: str) -> str:
+    """A robot file of this body: the run's spec document with the values written in, no `search:` block.
+    Floats are written as the shortest text that reads back as the same bits, so the file builds the very robot
+    the trial ran."""
+    import yaml
+
+    from spinefarm.robot.morphology.specfile import TOP_KEYS
+
+    doc = plain(with_body(search.document, dict(values)))  # type: ignore[arg-type]
+    doc = {k: doc[k] for k in sorted(doc, key=lambda k: TOP_KEYS.index(k) if k in TOP_KEYS else len(TOP_KEYS))}
+    comments = "".join(f"# {line}\n" for line in header.splitlines())
+    return comments + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)
+
+
+def body_of_trial(config: RunConfig, params_unit: np.ndarray) -> tuple[dict[str, float], np.ndarray]:
+    """A co-designed trial's body constants (path -> value) and its gait's unit vector, as its worker split them."""
+    from spinefarm.robot.spaces import param_space
+
+    search = BodySearch.from_dict(config.body)
+    bodies = Bodies(search, search.space(param_space(Morphology.from_dict(config.morphology_spec),
+                                                     config.controller)))
+    return search.values(bodies.space.from_unit(params_unit)), np.asarray(params_unit, dtype=float)[:bodies.n_gait]
