@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 from spinefarm.cli import checks
 from spinefarm.protocol.errors import ConfigError
@@ -13,9 +14,11 @@ def cmd_export(args: argparse.Namespace) -> int:
     from spinefarm.storage.export import best_table, write_csv
     from spinefarm.storage.hdf5 import Hdf5Storage
 
-    if all(v is None for v in (args.csv, args.best, args.pareto, args.parquet, args.gait)):
+    if all(v is None for v in (args.csv, args.best, args.pareto, args.parquet, args.gait, args.spec)):
         raise ConfigError("nothing to export", expected="--csv [OUT.csv], --parquet OUT.parquet, --best K, "
-                          "--pareto [OUT.csv] and/or --gait OUT.json")
+                          "--pareto [OUT.csv], --gait OUT.json and/or --spec OUT.yaml")
+    if args.spec is not None:
+        checks.output_path("--spec", args.spec, (".yaml", ".yml"))
     if args.csv not in (None, "-"):
         checks.output_path("--csv", args.csv, (".csv",))
     if args.pareto not in (None, "-"):
@@ -47,13 +50,47 @@ def cmd_export(args: argparse.Namespace) -> int:
             with open(args.pareto, "w", newline="") as fh:
                 write_csv(storage, fh, ids)
             print(f"wrote {len(ids)} Pareto-front trials to {args.pareto}", file=sys.stderr)
+    body = storage.run_meta().run.get("body")
+    if args.spec is not None:
+        _write_body(storage, args.spec, args.trial)
     if args.gait is not None:
         from spinefarm.storage.export import gait_params, write_gait
 
-        write_gait(args.gait, gait_params(storage, args.trial))
+        gait = gait_params(storage, args.trial)
+        if body:  # the body's constants go to --spec's robot file; the gait file holds the gait alone
+            from spinefarm.robot.codesign import BODY_PREFIX
+
+            gait["params"] = {k: v for k, v in gait["params"].items() if not k.startswith(BODY_PREFIX)}
+        write_gait(args.gait, gait)
         which = "the best trial" if args.trial is None else f"trial {args.trial}"
         print(f"wrote the parameters of {which} to {args.gait}", file=sys.stderr)
     return 0
+
+
+def _write_body(storage: Any, out: str, trial_id: int | None) -> None:
+    """The best trial's (or trial_id's) body as a robot file that builds the robot it ran."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from spinefarm.protocol.run import RunConfig
+    from spinefarm.robot.codesign import BodySearch, body_of_trial, body_spec_text
+    from spinefarm.storage.export import gait_params
+
+    meta = storage.run_meta()
+    if not meta.run.get("body"):
+        raise ConfigError("--spec needs a co-designed run", received=f"run {meta.run_id} searched a fixed body",
+                          expected="a run of a spec file with a `search:` block")
+    source = gait_params(storage, trial_id)["source"]  # the best complete trial, or trial_id if complete
+    record = storage.trial(source["trial_id"])
+    config = RunConfig.from_dict(meta.run)
+    values, _ = body_of_trial(config, np.asarray(record.params_unit, dtype=float))
+    header = (f"the body of trial {record.trial_id} of run {meta.run_id}: distance {record.distance_m:.6g} m, "
+              f"speed {record.speed_cm_s:.4g} cm/s, COT {record.cot:.4g} (seed {record.seed})\n"
+              + "".join(f"{path} = {v!r}\n" for path, v in values.items()))
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    Path(out).write_text(body_spec_text(BodySearch.from_dict(config.body), values, header))
+    print(f"wrote the body of trial {record.trial_id} to {out}", file=sys.stderr)
 
 
 def _write_parquet(run_file: str, out: str) -> None:

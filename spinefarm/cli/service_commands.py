@@ -68,7 +68,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write the Pareto front of speed and COT as CSV, fastest first (to OUT.csv, or stdout)")
     p.add_argument("--gait", metavar="OUT.json", help="write the best trial as a --params file for "
                    "`spinefarm trial` (named physical values, controller space, scores)")
-    p.add_argument("--trial", type=int, metavar="N", help="with --gait: this trial instead of the best")
+    p.add_argument("--spec", metavar="OUT.yaml", help="a co-designed run (a spec file with a `search:` block): "
+                   "write the best trial's body (or --trial's) as a robot file; with --gait, the gait alone")
+    p.add_argument("--trial", type=int, metavar="N", help="with --gait or --spec: this trial instead of the best")
     p.set_defaults(func=cmd_export)
 
 

@@ -305,8 +305,14 @@ def _stored_trial(path: Path, trial_id: int | None
         config["engine"] = rec.engine
     if math.isfinite(rec.dt_s):
         config["dt_s"] = rec.dt_s
-    return (meta.morphology_spec or meta.morphology, meta.controller, np.asarray(rec.params_unit), rec.seed,
-            config, rec.trial_id)
+    spec, params = meta.morphology_spec or meta.morphology, np.asarray(rec.params_unit)
+    if meta.run.get("body"):  # a co-designed run: the trial's own body, and its gait's part of the vector
+        from spinefarm.protocol.run import RunConfig
+        from spinefarm.robot.codesign import BodySearch, body_of_trial
+
+        values, params = body_of_trial(RunConfig.from_dict(meta.run), params)
+        spec = BodySearch.from_dict(meta.run["body"]).body(values).to_dict()
+    return spec, meta.controller, params, rec.seed, config, rec.trial_id
 
 
 def _physical(morph: Morphology, params: np.ndarray | dict, controller: str | None) -> np.ndarray:

@@ -71,10 +71,12 @@ def build_run_config(run_id: str, morphology: str, *, objective: str = "distance
         return RunConfig(run_id, morphology, {}, None, tuple(space.describe()),
                          {"duration_s": duration_s, **({"engine": engine} if engine else {})}, objective, seed,
                          space_hash=space.space_hash())
+    from spinefarm.robot.codesign import with_body_search
     from spinefarm.robot.morphology.registry import load_morphology
 
-    return run_config_for(run_id, load_morphology(morphology), objective=objective, seed=seed,
-                          controller=controller, duration_s=duration_s, trial_overrides=trial_overrides)
+    return with_body_search(run_config_for(run_id, load_morphology(morphology), objective=objective, seed=seed,
+                                           controller=controller, duration_s=duration_s,
+                                           trial_overrides=trial_overrides), morphology)
 
 
 def run_config_for(run_id: str, morphology: Morphology | dict[str, Any], *, objective: str = "distance",

@@ -35,6 +35,8 @@ class RunConfig:
     spec_hash, space_hash, trial_config_hash: what a worker must reproduce from the above.
     robust: protocol.robust.RobustSpec.to_dict() of a robust run (K randomised episodes per parameter
     set), empty otherwise (and then left out of to_dict, so a plain run's hash is as before).
+    body: robot.codesign.BodySearch.to_dict() of a run that searches the body with the gait (the param space
+    then ends with the body's constants), empty otherwise (and left out of to_dict as robust is).
     """
 
     KIND = "run_config"
@@ -50,12 +52,14 @@ class RunConfig:
     space_hash: str = ""
     trial_config_hash: str = ""
     robust: dict[str, Any] = field(default_factory=dict)
+    body: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["param_space"] = [dict(p) for p in self.param_space]
-        if not self.robust:
-            del d["robust"]
+        for key in ("robust", "body"):
+            if not d[key]:
+                del d[key]
         return d
 
     def config_hash(self) -> str:
@@ -94,10 +98,14 @@ class RunConfig:
         except ConfigError as exc:
             raise MessageError(f"run config field 'robust' is malformed: {exc}", received=data.get("robust"),
                                expected="{episodes, randomize, statistic}") from exc
+        body = data.get("body") or {}
+        if not isinstance(body, dict):
+            raise MessageError("run config field 'body' has the wrong type", received=type(body).__name__,
+                               expected="a mapping (a co-designed run's body search) or nothing")
         return cls(get_field(data, "run_id", str, what), get_field(data, "morphology", str, what),
                    get_field(data, "morphology_spec", dict, what), controller, tuple(space),
                    get_field(data, "trial_config", dict, what), get_field(data, "objective", str, what),
-                   get_field(data, "seed", int, what), **hashes, robust=robust)
+                   get_field(data, "seed", int, what), **hashes, robust=robust, body=body)
 
 
 @dataclass(frozen=True)

@@ -112,7 +112,7 @@ def test_a_range_that_admits_no_valid_body():
     # 500 N on a 1000 N/m string is 50 cm of stretch: more than any Tetraspine string's 28.6 cm start length
     msg = fails(with_block("segments.rod_length_scale: [0.9, 1.1]", "string_materials.outer.pretension_n: [500, 900]"))
     assert "field search.string_materials.outer.pretension_n" in msg and f"line {TETRA_LINES + 3}" in msg
-    assert "admits no valid body" in msg and "cannot hold its pretension" in msg
+    assert "admits no valid body" in msg and "cannot hold their pretension" in msg
     # segments 0.3 cm apart put a rod of one through the next one's (radii 0.5 + 0.5 cm)
     msg = fails(with_block("segments.spacing_scale: [0.005, 0.01]"))
     assert "admits no valid body" in msg and "rods through each other" in msg

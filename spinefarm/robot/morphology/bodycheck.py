@@ -53,8 +53,8 @@ def short_strings(structure: StructureSpec) -> str | None:
         # pretension in N over stiffness in N/m is metres: x 100 for cm
         rest_cm = start_cm - 100.0 * mat.pretension_n / mat.stiffness_n_per_m
         if rest_cm < mat.min_rest_length_cm:
-            return (f"string {k} ({s.tag}) cannot hold its pretension: start {start_cm:.3g} cm, rest length "
-                    f"{rest_cm:.3g} cm < its floor {mat.min_rest_length_cm:g} cm")
+            return (f"strings cannot hold their pretension: string {k} ({s.tag}) starts {start_cm:.3g} cm long, "
+                    f"its rest length {rest_cm:.3g} cm < its floor {mat.min_rest_length_cm:g} cm")
     return None
 
 

@@ -107,14 +107,16 @@ def with_fault(result: TrialResult) -> TrialResult:
 
 
 def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None,
-                      robust: dict | None = None) -> Callable[[TrialAssignment], TrialResult]:
+                      robust: dict | None = None, bodies: Any = None) -> Callable[[TrialAssignment], TrialResult]:
     """A function of one assignment: the trial at its fidelity (a rung, the judge, an audit), with the
     judge's perturbed run when asked. A missing engine package or an option the engine does not have fails
     here, not in every trial (a worker without the run's engine says so in its requests and is only given
-    tasks in its engines)."""
+    tasks in its engines). bodies: a co-designed run's robot.codesign.Bodies; each trial then runs its own
+    body, checked first (worker.trial.feasibility)."""
     import numpy as np
 
     from spinefarm.worker.engines.base import engine_class
+    from spinefarm.worker.trial.feasibility import FeasibilityCache, infeasible_result
     from spinefarm.worker.trial.run import simulate
     from spinefarm.worker.trial.setup import SetupCache
 
@@ -124,10 +126,19 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
     from spinefarm.protocol.robust import RobustSpec
 
     spec = RobustSpec.from_dict(robust)
+    base = morphology
+
+    feasible = FeasibilityCache()
 
     def evaluate(a: TrialAssignment) -> TrialResult:
         cfg = task_config(trial_config, a)
         params = np.asarray(a.params_unit, dtype=float)
+        morphology = base
+        if bodies is not None:
+            morphology, params = bodies.split(params)
+            verdict = feasible.check(morphology, cfg.engine)
+            if not verdict.ok:
+                return infeasible_result(verdict, a.seed)
         if spec.active:  # K randomised episodes of this parameter set, at this task's fidelity (worker.trial.robust)
             from spinefarm.worker.trial.robust import run_episodes
 

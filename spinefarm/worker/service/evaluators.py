@@ -83,14 +83,21 @@ def build_evaluator(config: RunConfig) -> Evaluator:
 
     morphology = Morphology.from_dict(config.morphology_spec)
     trial_config = TrialConfig.from_dict(config.trial_config)
-    built = {"spec_hash": morphology.spec_hash(),
-             "space_hash": param_space(morphology, config.controller).space_hash(),
+    space = param_space(morphology, config.controller)
+    bodies = None
+    if config.body:  # a co-designed run: the body's constants follow the gait's parameters
+        from spinefarm.robot.codesign import Bodies, BodySearch
+
+        search = BodySearch.from_dict(config.body)
+        space = search.space(space)
+        bodies = Bodies(search, space)
+    built = {"spec_hash": morphology.spec_hash(), "space_hash": space.space_hash(),
              "trial_config_hash": trial_config.config_hash()}
     for name, value in built.items():
         if getattr(config, name) != value:
             raise RunMismatchError(f"this worker cannot reproduce the run's {name} (a different software "
                                    "version?)", received=value, expected=getattr(config, name))
-    return physics_evaluator(morphology, trial_config, config.controller, config.robust)
+    return physics_evaluator(morphology, trial_config, config.controller, config.robust, bodies)
 
 
 def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:

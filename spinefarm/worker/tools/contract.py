@@ -17,7 +17,9 @@ from spinefarm.robot.bodies import build_bodies, build_strings, lowest_rod_surfa
 from spinefarm.robot.engines import DEFAULT_ENGINE
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.spaces import controller_space, param_space
-from spinefarm.robot.trial_config import TrialConfig
+from spinefarm.worker.trial.feasibility import passive_params, step_config
+
+__all__ = ["CheckResult", "passive_params", "run_contract"]
 
 
 @dataclass(frozen=True)
@@ -25,29 +27,6 @@ class CheckResult:
     name: str
     passed: bool
     detail: str
-
-
-def passive_params(morph: Morphology, seed: int = 1) -> np.ndarray:
-    """A seeded random parameter vector (unit cube) with every CPG amplitude at its smallest value."""
-    space = param_space(morph)
-    physical = space.from_unit(np.random.default_rng(seed).random(len(space)))
-    amplitude = [i for i, n in enumerate(space.names) if "amplitude" in n]
-    for i in amplitude:
-        physical[i] = max(0.0, space.lows[i])
-    return space.to_unit(physical)
-
-
-def _step_config(morph: Morphology, engine: str, **kw) -> TrialConfig:
-    """The default step, or the automatic one for a structure known to be unstable at it."""
-    from spinefarm.protocol.errors import ConfigError
-    from spinefarm.worker.trial.episode import choose_step
-
-    try:
-        cfg = TrialConfig(engine=engine, **kw)
-        choose_step(morph, cfg)
-        return cfg
-    except ConfigError:
-        return TrialConfig(engine=engine, auto_dt=True, **kw)
 
 
 def check_builds(morph: Morphology) -> CheckResult:
@@ -90,7 +69,7 @@ def check_passive_settle(morph: Morphology, engine: str = DEFAULT_ENGINE, durati
     from spinefarm.worker.trial.run import simulate
 
     name = "passive settle holds its shape"
-    cfg = _step_config(morph, engine, duration_s=duration_s, record_every_s=duration_s / 20)
+    cfg = step_config(morph, engine, duration_s=duration_s, record_every_s=duration_s / 20)
     out = simulate(morph, passive_params(morph), cfg, 0)
     if not out.result.ok:
         return CheckResult(name, False, out.result.reason)
@@ -124,7 +103,7 @@ def check_deterministic(morph: Morphology, engine: str = DEFAULT_ENGINE) -> Chec
 
     name = "two runs agree"
     u = np.random.default_rng(7).random(len(param_space(morph)))
-    cfg = _step_config(morph, engine, duration_s=0.5, record_every_s=0.1)
+    cfg = step_config(morph, engine, duration_s=0.5, record_every_s=0.1)
     a, b = simulate(morph, u, cfg, 3), simulate(morph, u, cfg, 3)
     if not a.result.ok:
         return CheckResult(name, False, f"a short controlled trial failed: {a.result.reason}")
