@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from spinefarm.api.errors import InvalidQuery
+from spinefarm.protocol.states import REFUTED_VERDICTS
 from spinefarm.storage.base import BaseStorage
 
 GRID_MIN, GRID_MAX = 2, 200
@@ -86,7 +87,7 @@ def contour_view(storage: BaseStorage, x: str, y: str, grid: int, value: str = "
         params = np.asarray(cols["params"], dtype=float)
         z = np.asarray(cols[value], dtype=float)
         used = (np.asarray(cols["status"]) == b"complete") & np.isfinite(z) \
-            & (np.asarray(cols["verification"]) != b"not_reproduced") & (np.asarray(cols["rung"]) == rung)
+            & ~np.isin(cols["verification"], REFUTED_VERDICTS) & (np.asarray(cols["rung"]) == rung)
         ids = np.flatnonzero(used)
         px, py, pz = params[ids, jx], params[ids, jy], z[ids]
     else:

@@ -8,17 +8,21 @@ from pydantic import BaseModel, Field
 
 
 class Verification(BaseModel):
-    """Re-simulation of a trial that became best, at a finer step (not_checked, pending, holds,
-    not_reproduced); a not-reproduced trial never counts as best."""
+    """Re-simulation of a trial that became best, at a finer step or in another engine (not_checked, pending,
+    holds, moved, judged, diverged; older run files: not_reproduced). A judged set ranks by its judged
+    distance; a diverged (or not-reproduced) one never counts as best."""
 
     verdict: str
-    label: str | None = None  # "holds" (same engine, within tolerance) or "judged in bullet" (another engine)
+    # "holds" (same engine, within the robot's chaos floor), "moved 5.2% at the finer step", "judged in bullet"
+    label: str | None = None
     fine_step_distance_m: float | None
     screen_distance_m: float | None = None
     judge_distance_m: float | None = None
     screen_to_judge_ratio: float | None = None
     reason: str | None
     judge: str | None = None  # how it was re-simulated: "bullet at 0.25 ms", or a finer step of the same engine
+    counted_distance_m: float | None = Field(None, description="the distance that counts: the judge's when it "
+                                             "judged the set, else the screen's")
 
 
 class Audit(BaseModel):
@@ -88,7 +92,12 @@ class RunStatus(BaseModel):
     trials_planned: int = Field(description="evaluations it expects: the budget, plus a multi-fidelity run's "
                                 "promotions to longer trials")
     parameter_sets_sampled: int
-    trials_done: int = Field(description="evaluations finished (complete or failed)")
+    parameter_sets_done: int | None = Field(None, description="parameter sets whose first evaluation finished")
+    evaluations_done: int | None = Field(None, description="every finished simulation of any set: screen rungs, "
+                                         "judge runs, audits and referees")
+    best_distance_m: float | None = Field(None, description="the best set's distance that counts (judged when "
+                                          "the judge ran it)")
+    trials_done: int = Field(description="trial rows finished (complete or failed)")
     trials_complete: int
     trials_failed: int
     trials_leased: int | None

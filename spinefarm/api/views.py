@@ -11,6 +11,7 @@ import numpy as np
 
 from spinefarm.api.run_state import derive_state, live_figures, read_live
 from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
 from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, planned_evaluations
 
 
@@ -27,9 +28,12 @@ def judge_of(meta: Any) -> str:
 
 
 def verdict_label(rec: TrialRecord, meta: Any) -> str:
-    """"holds" only within tolerance at the same engine; a cross-engine judgement: "judged in ENGINE"."""
+    """"holds" within the robot's chaos floor at the same engine, "moved X % at the finer step" beyond it; a
+    cross-engine judgement: "judged in ENGINE"."""
     if rec.verification == "judged":
         return f"judged in {meta.settings.judge.rung.engine or 'the judge engine'}"
+    if rec.verification == "moved" and rec.verify_reason:
+        return rec.verify_reason.split(" (")[0]
     return rec.verification or "not_checked"
 
 
@@ -49,7 +53,9 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
                          "fine_step_distance_m": _num(rec.verify_distance_m),
                          "screen_distance_m": _num(rec.distance_m), "judge_distance_m": _num(rec.verify_distance_m),
                          "screen_to_judge_ratio": _num(rec.judge_ratio),
-                         "reason": rec.verify_reason or None, "judge": judge_of(meta)},
+                         "reason": rec.verify_reason or None, "judge": judge_of(meta),
+                         "counted_distance_m": _num(counted_distance_m(rec.verification, rec.distance_m,
+                                                                       rec.verify_distance_m))},
         "audit": {"state": rec.audit or "not_audited", "distance_m": _num(rec.audit_distance_m),
                   "worker_id": rec.audit_worker_id or None},
         "pareto_front": bool(rec.pareto_front),
@@ -89,6 +95,9 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "objective": meta.objective, "state": state, "trials_budget": meta.trials_budget,
         "trials_planned": planned,
         "parameter_sets_sampled": storage.count_rung(0),
+        **(evaluation_counts(cols) if n_trials else {"parameter_sets_done": 0, "evaluations_done": 0}),
+        "best_distance_m": _num(counted_distance_m(best[0].verification, best[0].distance_m,
+                                                   best[0].verify_distance_m)) if best else None,
         "trials_done": finished, "trials_complete": counts["complete"], "trials_failed": counts["failed"],
         "trials_leased": live.get("trials_leased") if state == "running" else None,
         "trials_queued": live.get("trials_queued") if state == "running" else None,

@@ -14,25 +14,32 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
+
 DISTANCE_OBJECTIVES = ("distance", "speed")  # an objective that is a score part already, shown as that part
 
 
 def progress(core: Any) -> tuple[int, int, str, str]:
-    """(trials done, budget, what follows a progress bar, the whole line for a log)."""
+    """(parameter sets done, sets asked for, what follows a progress bar, the whole line for a log). Sets and
+    evaluations are counted apart: a multi-fidelity run evaluates a set more than once."""
     with core.lock:  # the transport threads write the table concurrently
         st = core.status()
         best = core.study.storage.best(1)
-    done = st["trials_complete"] + st["trials_failed"]
-    budget = st.get("trials_planned", st["trials_budget"])
+    done, budget, evaluations = st["parameter_sets_done"], st["trials_budget"], st["evaluations_done"]
     width = 24
     fill = int(width * done / max(budget, 1))
-    best_s = f"{best[0].distance_m:.3f} m" if best else "-"
-    if best and core.study.storage.run_meta().objective not in DISTANCE_OBJECTIVES:
-        best_s += f" ({_g(best[0].speed_cm_s, 3)} cm/s, COT {_g(best[0].cot, 3)})"  # what a COT objective trades
+    best_s = "-"
+    if best:
+        b = best[0]
+        best_s = f"{counted_distance_m(b.verification, b.distance_m, b.verify_distance_m):.3f} m" + (
+            " judged" if b.verification in ("holds", "moved", "judged") else "")
+        if core.study.storage.run_meta().objective not in DISTANCE_OBJECTIVES:
+            best_s += f" ({_g(b.speed_cm_s, 3)} cm/s, COT {_g(b.cot, 3)})"  # what a COT objective trades
     eta = "-" if st["eta_s"] is None else f"{st['eta_s']:.0f}s"
-    text = f"{st['trials_failed']} failed, {st['rate_trials_s']:.1f}/s, best {best_s}"
-    return done, budget, text, (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{budget} trials ({st['trials_failed']} "
-                                f"failed)  {st['rate_trials_s']:.1f}/s  best {best_s}  ETA {eta}")
+    text = f"{evaluations} evaluations, {st['trials_failed']} failed, {st['rate_trials_s']:.1f}/s, best {best_s}"
+    return done, budget, text, (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{budget} parameter sets, "
+                                f"{evaluations} evaluations ({st['trials_failed']} failed)  "
+                                f"{st['rate_trials_s']:.1f}/s  best {best_s}  ETA {eta}")
 
 
 def verdict_text(b: Any, judge_engine: str | None) -> str:
@@ -44,6 +51,11 @@ def verdict_text(b: Any, judge_engine: str | None) -> str:
                 f"(the distance that counts; screen {b.distance_m:.4g} m, screen/judge ratio {b.judge_ratio:.3g})")
     if b.verification == "holds":
         return f"holds at a finer step ({b.verify_distance_m:.4g} m)"
+    if b.verification == "moved":  # kept: the judged distance is the one that counts
+        return f"{b.verify_reason.split(' (')[0]}: {b.verify_distance_m:.4g} m judged (the distance that counts; " \
+               f"screen {b.distance_m:.4g} m)"
+    if b.verification == "diverged":
+        return f"diverged in the judge's run ({b.verify_reason})"
     return {"pending": "verification pending", "": "not verified"}.get(b.verification, b.verification)
 
 
@@ -96,10 +108,10 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
     on how the search went (drift, audits)."""
     meta = storage.run_meta()
     counts = storage.counts()
-    finished = counts["complete"] + counts["failed"]
+    n = evaluation_counts(storage.columns())
     physical = bool(meta.morphology_spec)
-    lines = [f"{'search done' if done else 'search stopped'}: {finished} trials of {meta.morphology} "
-             f"({counts['failed']} failed), run {meta.run_id}"]
+    lines = [f"{'search done' if done else 'search stopped'}: {n['parameter_sets_done']} parameter sets, "
+             f"{n['evaluations_done']} evaluations of {meta.morphology} ({counts['failed']} failed), run {meta.run_id}"]
     lines += list(notes)
     if meta.settings.engine_choice is not None:  # how --engine auto chose the tier
         lines.append(meta.settings.engine_choice.describe())
@@ -111,7 +123,9 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
         engine = f" in {b.engine} at {b.dt_s * 1e3:g} ms" if b.engine and math.isfinite(b.dt_s) else ""
         lines += [f"best trial {b.trial_id} ({b.phase}, {b.sim_time_s:g} s{engine})",
                   "  " + _objective_text(meta, b)
-                  + f"distance {_g(b.distance_m)} m · speed {_g(b.speed_cm_s)} cm/s · COT {_g(b.cot)} · "
+                  + f"distance {_g(counted_distance_m(b.verification, b.distance_m, b.verify_distance_m))} m"
+                  + (" (judged)" if b.verification in ("holds", "moved", "judged") else "")
+                  + f" · speed {_g(b.speed_cm_s)} cm/s · COT {_g(b.cot)} · "
                   f"work {_g(b.work_j)} J",
                   f"  verdict: {verdict}"]
         if verbose:

@@ -6,6 +6,8 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from spinefarm.storage.ranking import evaluation_counts
+
 
 def live_status(core: Any) -> dict[str, Any]:
     """JSON-able status of a CoordinatorCore (its lock held)."""
@@ -20,6 +22,7 @@ def live_status(core: Any) -> dict[str, Any]:
         "failure": core.failure,
         "trials_budget": study.budget,
         "trials_planned": study.planned,
+        **evaluation_counts(study.storage.columns()),
         "trials_sampled": study.n_asked,
         "trials_complete": counts["complete"],
         "trials_failed": counts["failed"],

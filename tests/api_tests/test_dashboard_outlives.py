@@ -121,7 +121,7 @@ def test_search_serve_keeps_the_dashboard_up_until_ctrl_c(tmp_path):
             proc.wait(30)
     stdout, stderr = proc.communicate()
     assert "stays up on" in stderr
-    assert stdout.startswith("search done: 20 trials of sphere:3")
+    assert stdout.startswith("search done: 20 parameter sets, 20 evaluations of sphere:3")
 
 
 def test_the_state_comes_from_the_file_alone(tmp_path):

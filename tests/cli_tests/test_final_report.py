@@ -22,7 +22,8 @@ def search(tmp_path: Path, *extra: str) -> str:
 def test_the_report_is_short_and_says_what_to_run_next(tmp_path: Path):
     text = search(tmp_path)
     lines = text.strip().splitlines()
-    assert lines[0] == "search done: 12 trials of sphere:40 (0 failed), run " + lines[0].rsplit(" ", 1)[-1]
+    assert lines[0] == "search done: 12 parameter sets, 12 evaluations of sphere:40 (0 failed), run " \
+        + lines[0].rsplit(" ", 1)[-1]
     assert lines[1].startswith("best trial ")
     assert "distance" in lines[2] and "cm/s" in lines[2] and "COT" in lines[2]
     assert lines[3].startswith("  verdict: ")

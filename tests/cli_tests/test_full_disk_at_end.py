@@ -66,7 +66,8 @@ def test_a_disk_full_at_the_end_still_reports_with_rc_0_and_a_true_status(fs_16m
                        timeout=180)
     assert (fs_16mb / "filler").stat().st_size > 0  # the disk did fill up
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "search done: 40 trials of sphere:3" in r.stdout and "best trial " in r.stdout, r.stdout
+    assert "search done: 40 parameter sets, 40 evaluations of sphere:3" in r.stdout, r.stdout
+    assert "best trial " in r.stdout, r.stdout
     warnings = [ln for ln in r.stderr.splitlines() if ln.startswith("warning: ")]
     assert len(warnings) == 1 and "No space left on device" in warnings[0], r.stderr
     assert "Traceback" not in r.stderr and "error:" not in r.stderr, r.stderr

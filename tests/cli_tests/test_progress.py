@@ -55,5 +55,5 @@ def test_a_physics_search_on_a_terminal_keeps_its_progress_line_clean(tmp_path):
     assert f"(port {taken} is taken)" in out
     url_line = next(ln for ln in out.splitlines() if "dashboard on http://127.0.0.1:" in ln)
     assert f":{taken}/" not in url_line
-    assert "2/2 trials" in out and "\r" in out  # the bar redraws in place
+    assert "2/2 parameter sets" in out and "\r" in out  # the bar redraws in place
     assert "best trial" in out

@@ -96,3 +96,21 @@ def test_a_diverged_judge_run_is_never_best(tmp_path):
     book.settle_judge(1, result(1, 0.0, status=TrialStatus.FAILED, reason="diverged: nan"))
     assert storage.trial(1).verification == "diverged" and storage.best_ids(3) == [0, 2]
     storage.close()
+
+
+def test_a_same_engine_row_in_a_cross_engine_run_is_judged_against_the_floor(tmp_path):
+    # MuJoCo screens, Bullet judges; a raised-fidelity row ran in Bullet: that one is held to the floor (1 %)
+    meta = _robot_meta("tetraspine")
+    judge = JudgePolicy(rung=dataclasses.replace(meta.settings.judge.rung, engine="bullet", dt_s=2.5e-4))
+    meta = dataclasses.replace(meta, settings=dataclasses.replace(meta.settings, judge=judge))
+    storage = Hdf5Storage.create(tmp_path / "r.h5", meta)
+    for tid, (d, engine) in enumerate([(0.3, "mujoco"), (0.213, "bullet"), (0.2, "bullet")]):
+        storage.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, tid)
+        storage.finish_trial(tid, dataclasses.replace(result(tid, d), extras={"engine": engine}), d)
+    book = TaskBook(storage, meta.settings, "mujoco", 7, judged=True)
+    book.settle_judge(0, result(0, 0.15))     # another engine: its distance counts, whatever the change
+    book.settle_judge(1, result(1, 0.202))    # the same engine: 5.2 % > 1 %
+    book.settle_judge(2, result(2, 0.199))    # the same engine: 0.5 % <= 1 %
+    assert [storage.trial(t).verification for t in range(3)] == ["judged", "moved", "holds"]
+    assert storage.best_ids(3) == [1, 2, 0]   # by judged distance: 0.202, 0.199, 0.15 m
+    storage.close()

@@ -74,5 +74,5 @@ def test_a_cot_objective_search_reports_the_speed_and_cost_it_trades(tmp_path):
     r = run("search", "sphere:3", "--objective", "cot:5", "--trials", "30", "--workers", "1", "--out", str(out),
             "--api-port", "-1")
     assert r.returncode == 0, r.stderr
-    assert "30/30 trials" in r.stderr and " cm/s, COT " in r.stderr  # the progress line names both
+    assert "30/30 parameter sets, " in r.stderr and " cm/s, COT " in r.stderr  # the progress line names both
     assert "cot:5 " in r.stdout  # the report names the objective beside the score's parts

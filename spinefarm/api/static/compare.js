@@ -13,7 +13,7 @@ function bestSoFar(cols, key, sense) {
   const c = cols.columns;
   const rows = [];
   for (let i = 0; i < cols.n_trials; i++) {
-    if (c.status[i] === "complete" && c[key][i] !== null && c.verification[i] !== "not_reproduced") rows.push(i);
+    if (c.status[i] === "complete" && c[key][i] !== null && !["not_reproduced", "diverged"].includes(c.verification[i])) rows.push(i);
   }
   const trace = (order, x) => {
     let best = null;

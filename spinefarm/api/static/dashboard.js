@@ -172,14 +172,15 @@ async function showRun(runId, gen, first) {
   const step = status.step_s || meta.trial_config.dt_s;
   document.getElementById("cards").innerHTML = [
     card("robot", esc(status.morphology)), card("state", stateBadge(status.state)),
-    card("trials done", `${status.trials_done} / ${status.trials_planned}`),
-    ...(status.trials_planned > status.trials_budget
-      ? [card("parameter sets", `${status.parameter_sets_sampled} / ${status.trials_budget}`)] : []),
+    card("parameter sets", `${status.parameter_sets_done} / ${status.trials_budget}`),
+    card("evaluations", `${status.evaluations_done}`),
     ...(status.state === "running" ? [card("ETA", `<span id="eta">${fmtDuration(status.eta_s)}</span>`)] : []),
     card("failed", status.trials_failed), card("trials per second", fmt(status.rate_trials_s, 3)),
     ...(status.state === "running" || status.workers.length ? [card("workers", `${alive}${status.workers.length > alive
       ? " (+" + (status.workers.length - alive) + " gone)" : ""}`)] : []),
     card("best " + esc(meta.objective), best ? `<a href="#/run/${r}/trial/${best.trial_id}">${fmt(best.objective)}</a>` : "–"),
+    card("best distance (m)", best ? `${fmt(status.best_distance_m)}${["holds", "moved", "judged"].includes(best.verification.verdict)
+      ? ' <span class="muted">judged</span>' : ""}` : "–"),
     card("best speed (cm/s)", best ? fmt(best.scores.speed_cm_s) : "–"), card("best COT", best ? fmt(best.scores.cot) : "–"),
     card("best verified", best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.label || best.verification.verdict)}</span>` : "–"),
     ...(status.audit && status.audit.fraction > 0 ? [card("audits agree / disagree",

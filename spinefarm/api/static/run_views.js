@@ -44,7 +44,7 @@ function drawRunPlots(runId, cols, analysis, meta) {
   const n = cols.n_trials;
   const ok = [];  // trials that count: complete, finite objective, not refuted by re-simulation
   for (let i = 0; i < n; i++) {
-    if (c.status[i] === "complete" && c.objective[i] !== null && c.verification[i] !== "not_reproduced") ok.push(i);
+    if (c.status[i] === "complete" && c.objective[i] !== null && !["not_reproduced", "diverged"].includes(c.verification[i])) ok.push(i);
   }
   const objName = meta.objective;
   // best so far against trials

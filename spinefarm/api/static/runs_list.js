@@ -7,7 +7,8 @@ const RUN_COLUMNS = [  // [key, label, value of a run for sorting, left-aligned]
   ["state", "state", (r) => r.state, true], ["started", "started", (r) => r.started_at_unix_s, false],
   ["controller", "controller", (r) => r.controller, true], ["engine", "engine", (r) => r.engine, true],
   ["sampler", "sampler", (r) => r.sampler, true], ["objective", "objective", (r) => r.objective, true],
-  ["progress", "progress", (r) => r.trials_done / Math.max(1, r.trials_planned), false],
+  ["progress", "progress", (r) => runSets(r) / Math.max(1, r.trials_budget), false],
+  ["distance", "best distance (m)", (r) => r.best_distance_m, false],
   ["failed", "failed", (r) => r.trials_failed, false], ["eta", "ETA", (r) => r.eta_s, false],
   ["speed", "best speed (cm/s)", (r) => r.best && r.best.scores.speed_cm_s, false],
   ["cot", "best COT", (r) => r.best && r.best.scores.cot, false],
@@ -15,6 +16,9 @@ const RUN_COLUMNS = [  // [key, label, value of a run for sorting, left-aligned]
 ];
 const runsSort = {key: "started", dir: -1};
 const runsPicked = new Set();  // run ids ticked for comparison; kept while the list refreshes
+
+/** Parameter sets done (an older API's status has only the trial rows). */
+function runSets(r) { return r.parameter_sets_done != null ? r.parameter_sets_done : r.trials_done; }
 
 function runCell(key, r) {
   const best = r.best;
@@ -27,10 +31,12 @@ function runCell(key, r) {
     case "engine": return esc(r.engine || "–") + (r.rungs_s ? ` <span class="muted">rungs ${r.rungs_s.join(", ")} s</span>` : "");
     case "sampler": return esc(r.sampler || "–");
     case "objective": return esc(r.objective);
-    case "progress": {
-      const pct = Math.min(100, 100 * r.trials_done / Math.max(1, r.trials_planned));
-      return `<span class="bar"><span style="width:${pct}%"></span></span> ${r.trials_done}/${r.trials_planned}`;
+    case "progress": {  // parameter sets against the budget; a multi-fidelity run evaluates a set more than once
+      const pct = Math.min(100, 100 * runSets(r) / Math.max(1, r.trials_budget));
+      return `<span class="bar"><span style="width:${pct}%"></span></span> ${runSets(r)}/${r.trials_budget} sets`
+        + (r.evaluations_done != null ? ` <span class="muted">${r.evaluations_done} evaluations</span>` : "");
     }
+    case "distance": return r.best_distance_m != null ? fmt(r.best_distance_m) : "–";
     case "failed": return String(r.trials_failed);
     case "eta": return r.state === "running" ? fmtDuration(r.eta_s) : "–";
     case "speed": return best ? fmt(best.scores.speed_cm_s) : "–";
