@@ -37,6 +37,7 @@ def live_status(core: Any) -> dict[str, Any]:
         "eta_s": (remaining / rate) if rate > 0 else None,
         "rejected_messages": core.rejected_messages,
         "forged_results": core.forged_results,
+        "foreign_results": core.foreign_results,
         "unservable_workers": dict(core.unservable_workers),
         "dropped_results": dict(core.dropped_results),
         "workers": [{"worker_id": w.worker_id, "alive": w.alive, "leases": len(w.leases),
