@@ -52,3 +52,7 @@ class AuditState(StrEnum):
     def stored(self) -> bytes:
         return self.value.encode()
 
+
+# A pending audit the run ended without: every live worker was the result's own identity. The row stays pending
+# (a resume with another identity runs it); the status, report and API say this.
+UNAUDITED = "unaudited (no other worker identity)"
