@@ -14,7 +14,11 @@ Every worker logs each verdict it receives (SPINEFARM_ACK_LOG) and each grant's 
 checked against the verdicts: `lost` (acknowledged as stored, not in the file or with another distance),
 `duplicated` (acknowledged as stored twice). Latency is the worker's wait for its grant (a work query with
 the results it carries), over every grant of every worker, the killed ones' until their kill.
-`coordinator_rss_mb` is the coordinator's largest resident size, sampled every 0.5 s.
+`coordinator_rss_mb` is the coordinator's largest resident size, sampled every 0.5 s. The workers start once
+the coordinator serves (its first status file). With SPINEFARM_GRANT_LOG the coordinator logs each work request's
+arrival at its handler and the handler's time; `first_grant_split_ms` and `later_grants_split_ms` cut each grant's
+wait in three on that one clock: `to_handler_ms` (the worker process, the routers, the coordinator's transport
+thread and its queue), `in_handler_ms` (the core: its lock and work), `back_ms` (the reply to the worker's thread).
 
 usage: python bench/scale.py --workers 500 [--per-process 10] [--trials N] [--duration 10] [--jitter 0.5]
        [--kill 0.1] [--stagger 0.1] [--keep]
@@ -112,6 +116,15 @@ def _wait_listening(port: int, timeout_s: float = 30.0) -> None:
     raise SystemExit(f"nothing listens on port {port} after {timeout_s} s")
 
 
+def _wait_serving(coord: subprocess.Popen, out: Path, timeout_s: float) -> None:
+    """Until the coordinator writes its first status (it serves by then)."""
+    end = time.monotonic() + timeout_s
+    while not _status(out):
+        if coord.poll() is not None or time.monotonic() > end:
+            raise SystemExit(f"the coordinator did not start (rc {coord.poll()}); see {out.parent}/coordinator.log")
+        time.sleep(0.2)
+
+
 def _status(out: Path) -> dict:
     from spinefarm.storage.status import read_status
 
@@ -160,10 +173,38 @@ def _latencies(tmp: Path) -> dict:
             "later_grants_ms": _percentiles(ms[~first])}
 
 
-def _spinefarm(*args: str, log: Path) -> subprocess.Popen:
+def _split(tmp: Path) -> dict:
+    """Each grant's wait cut in three with the coordinator's own log (SPINEFARM_GRANT_LOG, same clock): on the way
+    to the coordinator's handler (the worker process, the routers, the coordinator's Zenoh threads and GIL), in
+    its handler (the core's lock and work), and back. The first and last parts are where the clients' own
+    scheduling on a shared machine shows; the middle one is the coordinator's."""
+    handled: dict[str, list[tuple[float, float]]] = {}
+    for line in (tmp / "coordinator-grants.log").read_text().splitlines():
+        t, ms, wid = line.split()
+        handled.setdefault(wid, []).append((float(t), float(ms)))
+    parts: dict[str, list[float]] = {"to_handler_ms": [], "in_handler_ms": [], "back_ms": []}
+    firsts: dict[str, list[float]] = {k: [] for k in parts}
+    seen: set[str] = set()
+    for p in tmp.glob("grants-*.log"):
+        for line in sorted(p.read_text().splitlines()):
+            recv_s, ms, wid = line.split()
+            end, start = float(recv_s), float(recv_s) - float(ms) / 1000
+            match = [(t, h) for t, h in handled.get(wid, ()) if start - 0.002 <= t <= end]
+            if not match:
+                continue
+            t, h = match[-1]
+            split = {"to_handler_ms": 1000 * (t - start), "in_handler_ms": h, "back_ms": 1000 * (end - t) - h}
+            for k, v in split.items():
+                (parts if wid in seen else firsts)[k].append(max(v, 0.0))
+            seen.add(wid)
+    return {"first_grant_split_ms": {k: _percentiles(np.array(v)) for k, v in firsts.items()},
+            "later_grants_split_ms": {k: _percentiles(np.array(v)) for k, v in parts.items()}}
+
+
+def _spinefarm(*args: str, log: Path, env: dict | None = None) -> subprocess.Popen:
     with open(log, "w") as fh:
         return subprocess.Popen([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
-                                stderr=fh)
+                                stderr=fh, env=env)
 
 
 def _routers(tmp: Path, workers: int, per_router: int) -> tuple[list[subprocess.Popen], list[str]]:
@@ -193,7 +234,12 @@ def run(args: argparse.Namespace) -> dict:
         routers, endpoints = _routers(tmp, args.workers, args.sessions_per_router)
         coord = _spinefarm("coordinator", "sphere:4", "--trials", str(trials), "--duration", str(args.duration),
                            "--run-id", RUN_ID, "--out", str(out), "--connect", endpoints[0], "--api-port", "-1",
-                           "--quiet", "--sampler", "random", log=tmp / "coordinator.log")
+                           "--quiet", "--sampler", "random", log=tmp / "coordinator.log",
+                           env={**os.environ, "SPINEFARM_GRANT_LOG": str(tmp / "coordinator-grants.log")})
+        # workers join a coordinator that serves (a farm's usual case). Started together, the 50 worker processes'
+        # imports starved the coordinator's start for over a minute on 2 cores; every worker was in and asking by
+        # then, and 500 first requests within 2 s queued ~0.5 s at its one transport thread (about 1 ms each).
+        _wait_serving(coord, out, args.timeout_s)
         per = args.per_process
         for first in range(0, args.workers, per):
             endpoint = endpoints[(first // per) % len(endpoints)]
@@ -228,7 +274,8 @@ def run(args: argparse.Namespace) -> dict:
                 late += 1
         checked = _check(out, tmp)
         result = {"workers": args.workers, "trials": trials, "stored": checked["stored"], "lost": checked["lost"],
-                "duplicated": checked["duplicated"], **_latencies(tmp), "coordinator_rss_mb": round(rss, 1),
+                "duplicated": checked["duplicated"], **_latencies(tmp), **_split(tmp),
+                "coordinator_rss_mb": round(rss, 1),
                 "exact_budget": checked["rows"] == trials and checked["stored"] == trials,
                 "acknowledged": checked["acknowledged"], "workers_killed": sum(
                     min(per, args.workers - i * per) for i in range(len(procs) - killed, len(procs))),

@@ -31,6 +31,8 @@ class Audit(BaseModel):
     state: str
     distance_m: float | None = None
     worker_id: str | None = None
+    note: str | None = Field(None, description="why a pending audit has not run: \"unaudited (no other worker "
+                             "identity)\" when the run ended with no worker of another identity to run it")
 
 
 class Trial(BaseModel):
@@ -119,7 +121,8 @@ class RunStatus(BaseModel):
     resume_command: str | None = Field(None, description="the command that continues a stopped run")
     audit: dict[str, Any] | None = Field(None, description="audits_pending/agrees/disagrees/quarantined, fraction, "
                                          "tolerance, the figures per worker environment, and comparisons: how many "
-                                         "audits demanded the same bits (exact) or the tolerance")
+                                         "audits demanded the same bits (exact) or the tolerance, and "
+                                         "unaudited: trial id -> why its audit stays pending")
     claimed_by: dict[str, str] = Field(default_factory=dict, description="other coordinators that claimed this "
                                        "run while it ran (their session: what was done)")
     fidelity_raised: str | None = Field(None, description="why the judge raised the screen's fidelity")

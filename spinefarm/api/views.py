@@ -64,6 +64,14 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
     }
 
 
+def _noted(view: dict[str, Any], unaudited: dict[str, str]) -> dict[str, Any]:
+    """A pending audit the coordinator could give to no other identity says so (the status file knows why)."""
+    why = unaudited.get(str(view["trial_id"]))
+    if why and view["audit"]["state"] == "pending":
+        view["audit"]["note"] = why
+    return view
+
+
 def rung_lengths_s(settings: Any) -> list[float] | None:
     """A multi-fidelity run's trial lengths, short to full (None for a run of one length)."""
     if settings.scheduler != "halving" or len(settings.ladder) < 2:
@@ -88,6 +96,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     steps = np.asarray(cols.get("dt_s", []), dtype=float)
     steps = steps[np.isfinite(steps)]
     best = storage.best(1)
+    unaudited = (live.get("audit") or {}).get("unaudited") or {}
     shown = str(path)
     tc = meta.trial_config
     return {
@@ -102,13 +111,13 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "trials_leased": live.get("trials_leased") if state == "running" else None,
         "trials_queued": live.get("trials_queued") if state == "running" else None,
         **live_figures(state, live, age, finished_at, max(0, planned - finished)),
-        "best": trial_view(storage, best[0]) if best else None,
+        "best": _noted(trial_view(storage, best[0]), unaudited) if best else None,
         # a finished run keeps the last the coordinator knew (who ran, who was quarantined); a stopped one shows none
         "workers": live.get("workers", []) if state in ("running", "stalled", "done") else [],
         "audit": {**storage.audit_counts(), "fraction": meta.settings.audit.fraction,
                   "tolerance": meta.settings.audit.tolerance,
                   "environments": (live.get("audit") or {}).get("environments", []),
-                  "comparisons": (live.get("audit") or {}).get("comparisons", {})},
+                  "comparisons": (live.get("audit") or {}).get("comparisons", {}), "unaudited": unaudited},
         "claimed_by": live.get("claimed_by") or {},
         "fidelity_raised": live.get("fidelity_raised"),
         "unservable_workers": (live.get("unservable_workers") or {}) if state in ("running", "stalled", "done") else {},

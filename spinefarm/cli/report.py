@@ -86,6 +86,9 @@ def describe_best(core: Any, path: Path, verbose: bool = False) -> str:
     if any(v for k, v in audit.items() if k.startswith("audits_")):
         notes.append("audits: " + ", ".join(f"{k[7:]} {v}" for k, v in audit.items() if k.startswith("audits_")))
     best = storage.best(1)
+    if best and best[0].trial_id in core.unaudited:
+        notes.append(f"the best, trial {best[0].trial_id}: {core.unaudited[best[0].trial_id]}; its audit stays pending "
+                     "(a resume with another worker identity runs it)")
     verdict = verdict_text(best[0], storage.run_meta().settings.judge.rung.engine) if best else ""
     return final_report(storage, path, verdict=verdict, done=core.done, verbose=verbose, notes=tuple(notes))
 

@@ -58,6 +58,7 @@ class CoordinatorCore(TaskDispatch):
         self.lock = threading.RLock()
         self.rejected_messages = 0
         self.forged_results = 0  # results quoting a lease this worker was never given
+        self.foreign_results = 0  # results leased by another instance of the run (refused unread)
         self.dropped_results: dict[str, int] = {v.value: 0 for v in Verdict if v != Verdict.STORED}
         self._finish_times: deque[float] = deque()
         self.told_done: set[str] = set()  # workers that have been told the budget is met
@@ -74,6 +75,7 @@ class CoordinatorCore(TaskDispatch):
         self.unservable_workers: dict[str, str] = {}  # worker -> why it cannot serve this run (others do)
         self.drift = self.tasks.drift()  # why the screen's fidelity was raised (None: it was not)
         self.audit_comparisons = {"exact": 0, "tolerance": 0}   # what audits were held to (tasks.settle_audit)
+        self.unaudited: dict[int, str] = {}   # rows whose audit stays pending, and why (dispatch)
         self.code_digest: str | None = None   # the run's simulating code: workers of another are left out
         self.holder = ""   # this coordinator's session (start time and Zenoh id), told to workers in grants
         self.claims: dict[str, str] = {}   # other coordinators that claimed this run -> what was done
@@ -178,7 +180,7 @@ class CoordinatorCore(TaskDispatch):
             return sub
         with self.lock:
             verdicts = self._settle_all(sub.worker_id, sub.items)
-        return None if verdicts is None else encode_message(ResultAck(verdicts))
+        return None if verdicts is None else encode_message(ResultAck(verdicts, self.holder))
 
     def _receive(self, payload: bytes, cls: type, what: str) -> Any:
         """The decoded message; else the answer to give: an error for a malformed one, None (no answer) once
@@ -195,7 +197,17 @@ class CoordinatorCore(TaskDispatch):
         longer be written."""
         self.scheduler.contact(worker_id)
         verdicts = []
+        foreign = [item.coordinator for item in items if item.coordinator != self.holder]
+        if foreign:  # leased by another instance of the run (before a restart, or a copy): nothing of them stored
+            self.foreign_results += len(foreign)
+            log.warning("worker %s returned %d result(s) leased by run instance %s, not this one (%s): refused",
+                        worker_id, len(foreign), ", ".join(f or "(none named)" for f in sorted(set(foreign))),
+                        self.holder)
         for item in items:
+            if item.coordinator != self.holder:
+                verdicts.append((item.result.trial_id, Verdict.STALE))
+                self.dropped_results[Verdict.STALE.value] += 1
+                continue
             v = self._settle(worker_id, item.lease_id, item.result, item.unreadable)
             verdicts.append((item.result.trial_id, v))
             if v == Verdict.STORED:

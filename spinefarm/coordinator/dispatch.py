@@ -11,6 +11,7 @@ from typing import Any
 from spinefarm.coordinator.tasks import REFEREE, split_key, task_key
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import TaskFidelity
+from spinefarm.protocol.states import UNAUDITED
 from spinefarm.protocol.submissions import Verdict
 from spinefarm.protocol.work import TrialAssignment
 
@@ -76,10 +77,15 @@ class TaskDispatch:
             # a live worker whose identity is still being asked may be the one that can run it
             if overtaken or not (reconnecting or any(self._eligible(key, w) or self.peers.identity(w) is None
                                                      for w in alive)):
-                if not overtaken:
+                # an audit no other identity can run stays pending, said as such, never silently dropped
+                unaudited = kind == "audit" and not overtaken
+                if unaudited:
+                    self.unaudited[tid] = UNAUDITED
+                    log.warning("no other worker identity can audit trial %d: it stays %s", tid, UNAUDITED)
+                elif not overtaken:
                     log.warning("no worker can run the %s task of trial %d: dropped", kind, tid)
                 self.scheduler.withdraw(key)
-                self.tasks.drop(key)
+                self.tasks.drop(key, keep_pending=unaudited)
         self._judge_best()
 
     def _refuse_quarantined(self, key: int, worker_id: str) -> Verdict | None:

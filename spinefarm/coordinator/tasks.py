@@ -154,10 +154,13 @@ class TaskBook:
         trials_s = float(np.sum(trial_wall_s, where=np.isfinite(trial_wall_s)))
         return self.judge_wall_s * (1.0 - share) > share * trials_s
 
-    def drop(self, key: int) -> None:
-        """A task no longer wanted (an overtaken best's judge, an audit nobody can run)."""
+    def drop(self, key: int, keep_pending: bool = False) -> None:
+        """A task no longer wanted (an overtaken best's judge, an audit nobody can run). keep_pending: the row's
+        audit stays pending in the file (re-issued on resume, when another identity may be there)."""
         self.pending.discard(key)
         kind, tid = split_key(key)
+        if keep_pending:
+            return
         if kind == "judge":
             self.storage.set_verification(tid, Verification.NOT_CHECKED)
         elif kind == "audit" and self.storage.columns()["audit"][tid] != AuditState.QUARANTINED.stored:

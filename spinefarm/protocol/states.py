@@ -59,3 +59,7 @@ class AuditState(StrEnum):
 JUDGED_VERDICTS = (Verification.HOLDS.stored, Verification.MOVED.stored, Verification.JUDGED.stored)
 # verdicts that keep a set from ever being best
 REFUTED_VERDICTS = (Verification.DIVERGED.stored, Verification.NOT_REPRODUCED.stored)
+
+# A pending audit the run ended without: every live worker was the result's own identity. The row stays pending
+# (a resume with another identity runs it); the status, report and API say this.
+UNAUDITED = "unaudited (no other worker identity)"

@@ -3,7 +3,7 @@ acknowledge each one."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import StrEnum
 from typing import Any
 
@@ -23,12 +23,22 @@ class SubmittedResult:
     lease_id: int
     result: TrialResult
     unreadable: str = ""
+    coordinator: str = ""   # the run instance that leased the trial (WorkGrant.coordinator); another refuses it
 
     def to_dict(self) -> dict[str, Any]:
-        return {"lease_id": self.lease_id, "result": self.result.to_dict()}
+        d: dict[str, Any] = {"lease_id": self.lease_id, "result": self.result.to_dict()}
+        if self.coordinator:
+            d["coordinator"] = self.coordinator
+        return d
 
     @classmethod
     def from_dict(cls, data: Any) -> SubmittedResult:
+        item = cls._from_dict(data)   # checks that data is an object
+        return replace(item, coordinator=limits.check_text(data.get("coordinator", ""),
+                                                           "submitted result field 'coordinator'", 120))
+
+    @classmethod
+    def _from_dict(cls, data: Any) -> SubmittedResult:
         raw = get_field(data, "result", dict, "submitted result")
         try:
             result = TrialResult.from_dict(raw)
@@ -84,11 +94,15 @@ class Verdict(StrEnum):
 
 @dataclass(frozen=True)
 class ResultAck:
+    """Verdicts on submitted results; coordinator: the run instance that gave them (a worker takes a verdict on a
+    result from the instance that leased it, or from the one it serves now)."""
+
     KIND = "result_ack"
     verdicts: tuple[tuple[int, Verdict], ...]
+    coordinator: str = ""
 
     def to_dict(self) -> dict[str, Any]:
-        return {"verdicts": [[t, str(v)] for t, v in self.verdicts]}
+        return {"verdicts": [[t, str(v)] for t, v in self.verdicts], "coordinator": self.coordinator}
 
     @classmethod
     def from_dict(cls, data: Any) -> ResultAck:
@@ -98,5 +112,5 @@ class ResultAck:
         except (TypeError, ValueError) as exc:
             raise MessageError("result ack has malformed verdicts", received=raw[:4],
                                expected=f"[trial_id, one of {[v.value for v in Verdict]}] pairs") from exc
-        return cls(verdicts)
+        return cls(verdicts, limits.check_text(data.get("coordinator", ""), "result ack field 'coordinator'", 120))
 

@@ -112,6 +112,7 @@ class Hdf5Storage(InMemoryStorage):
             _refuse_read_only(path)
             path.unlink(missing_ok=True)
             status_path(path).unlink(missing_ok=True)
+            meta = meta.opened("create")
             write_run(path, meta, TrialTable(meta.n_params).columns(), live=True)
             lock.bind(path)  # the new file's identity: a link to it is refused too
             _fsync_dir(path)  # the new name too must survive a power cut
@@ -146,6 +147,7 @@ class Hdf5Storage(InMemoryStorage):
                                        "promoted re-runs do not count)", received=trials_budget,
                                        expected=f"at least {max(n, 1)}")
                 meta = replace(meta, trials_budget=trials_budget)
+            meta = meta.opened("resume")   # a copy resumed elsewhere gets its own instance too
             episodes = read_episodes(path)
             real = path.resolve()  # a symlink stays a symlink: its target is what gets replaced
             real.with_name(real.name + ".compress-tmp").unlink(missing_ok=True)  # a close cut short

@@ -26,7 +26,7 @@ CHUNK_ROWS = 1024
 # Chunks are mostly fill values and repeated bytes early in a run: gzip (with byte shuffling, which
 # groups the bytes of floats) shrinks an 8-trial file from 2.5 MB to about 0.1 MB; readers need nothing extra.
 COMPRESSION = {"compression": "gzip", "compression_opts": 4, "shuffle": True}
-_JSON_FIELDS = ("sampler", "settings", "run", "environment")
+_JSON_FIELDS = ("sampler", "settings", "run", "environment", "instances")
 _TUPLE_FIELDS = ("param_names", "param_lows", "param_highs", "param_units")
 
 
@@ -83,11 +83,13 @@ def _check_shapes(f: h5py.File, meta: RunMeta, path: Path) -> None:
 def _parse_meta(f: h5py.File) -> RunMeta:
     kw: dict[str, Any] = {}
     for fld in fields(RunMeta):
-        if fld.name == "environment" and fld.name not in f.attrs:
-            continue  # written before runs recorded one
+        if fld.name in ("environment", "instances") and fld.name not in f.attrs:
+            continue  # written before runs recorded them
         raw = f.attrs[fld.name]
         if fld.name == "settings":
             kw[fld.name] = RunSettings.from_dict(json.loads(raw))
+        elif fld.name == "instances":
+            kw[fld.name] = _instances(json.loads(raw))
         elif fld.name in _JSON_FIELDS:
             kw[fld.name] = json.loads(raw)
         elif fld.name in ("param_names", "param_units"):
@@ -103,6 +105,12 @@ def _parse_meta(f: h5py.File) -> RunMeta:
         else:
             kw[fld.name] = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else str(raw)
     return RunMeta(**kw)
+
+
+def _instances(raw: Any) -> tuple[dict[str, Any], ...]:
+    if not isinstance(raw, list) or not all(isinstance(e, dict) and isinstance(e.get("instance"), str) for e in raw):
+        raise ValueError(f"attribute instances is not a list of {{'instance': ...}} entries: {str(raw)[:80]}")
+    return tuple(raw)
 
 
 def create_datasets(f: h5py.File, n_params: int, n_rows: int, compressed: bool = True) -> dict[str, h5py.Dataset]:

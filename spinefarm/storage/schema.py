@@ -6,7 +6,9 @@ sampled (status "waiting") and filled once when its result arrives (complete | f
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import secrets
+import time
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -61,6 +63,20 @@ class RunMeta:
     settings: RunSettings = field(default_factory=RunSettings)   # how the run searches, typed
     run: dict[str, Any] = field(default_factory=dict)   # the RunConfig, stored once
     environment: dict[str, Any] = field(default_factory=dict)   # what created the run (protocol.environment)
+    # every time a coordinator opened the run for writing, oldest first: {"instance", "how", "opened_at_unix_s"}
+    instances: tuple[dict[str, Any], ...] = ()
+
+    @property
+    def instance(self) -> str:
+        """The run instance of the coordinator that opened the file last ("" before any did)."""
+        return str(self.instances[-1]["instance"]) if self.instances else ""
+
+    def opened(self, how: str) -> RunMeta:
+        """This run opened for writing once more ("create" or "resume"): a fresh instance id in its history
+        (start time in ms, so an earlier instance sorts first, and 64 random bits a copy cannot share)."""
+        now = time.time()
+        entry = {"instance": f"{int(now * 1000)}-{secrets.token_hex(8)}", "how": how, "opened_at_unix_s": now}
+        return replace(self, instances=(*self.instances, entry))
 
     @property
     def n_params(self) -> int:

@@ -35,10 +35,10 @@ def _worker(endpoint: str, run_id: str, worker_id: str, env: dict | None = None)
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env={**os.environ, **(env or {})})
 
 
-def _forged(a, worker_id: str) -> SubmittedResult:
+def _forged(a, worker_id: str, coordinator: str) -> SubmittedResult:
     r = TrialResult(TrialStatus.COMPLETE, "", FORGED_M, 100 * FORGED_M, 10 * FORGED_M, 1.0, 0.001, 10.0, 0.01, 1.0,
                     a.seed, trial_id=a.trial_id, worker_id=worker_id)
-    return SubmittedResult(a.lease_id, r)
+    return SubmittedResult(a.lease_id, r, coordinator=coordinator)
 
 
 def _forge(endpoint: str, run_id: str, coord: subprocess.Popen, ids: tuple[str, ...], timeout_s: float) -> None:
@@ -57,7 +57,7 @@ def _forge(endpoint: str, run_id: str, coord: subprocess.Popen, ids: tuple[str, 
                 replies = list(s.get(keys.work(run_id), payload=encode_message(req), timeout=5))
                 grants = [decode_message(r.ok.payload.to_bytes(), WorkGrant) for r in replies if r.ok is not None]
                 if grants:
-                    pending[w] = tuple(_forged(a, w) for a in grants[0].assignments)
+                    pending[w] = tuple(_forged(a, w, grants[0].coordinator) for a in grants[0].assignments)
             time.sleep(0.02)
     finally:
         for h in held:

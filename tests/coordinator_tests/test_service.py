@@ -148,10 +148,10 @@ def test_results_ack_over_zenoh_is_idempotent(endpoint, client):
     service = CoordinatorService(core, storage, listen=[endpoint]).start()
     try:
         s = client()
-        (a,) = decode_message(query(s, keys.work(core.run_id), encode_message(_req("w1", 1))),
-                              WorkGrant).assignments
+        grant = decode_message(query(s, keys.work(core.run_id), encode_message(_req("w1", 1))), WorkGrant)
+        (a,) = grant.assignments
         r = TrialResult(TrialStatus.COMPLETE, "", 1.0, 0, 0, 0, 0, 1, 0, 1, a.seed, trial_id=a.trial_id)
-        sub = encode_message(ResultSubmission("w1", (SubmittedResult(a.lease_id, r),)))
+        sub = encode_message(ResultSubmission("w1", (SubmittedResult(a.lease_id, r, coordinator=grant.coordinator),)))
         first = decode_message(query(s, keys.results(core.run_id), sub), ResultAck)
         second = decode_message(query(s, keys.results(core.run_id), sub), ResultAck)
         assert [v.value for _, v in first.verdicts + second.verdicts] == ["stored", "duplicate"]

@@ -254,3 +254,23 @@ def test_a_worker_follows_the_coordinator_it_served_when_two_answer_for_its_run(
     restarted = WorkGrant("r1", "ab12cd34", (), 0.5, False, coordinator="300-ccc")
     assert w._holder_grant("r1", [restarted]) is restarted
     assert w._holder_grant("r1", [original, restarted]) is restarted
+
+
+def test_a_verdict_settles_a_result_only_from_the_instance_that_leased_it_or_the_one_served_now():
+    """A copy answering for the run cannot settle (say "stale" to) results leased by the holder, which then go
+    unstored; once the worker serves another instance (the holder restarted), that one's verdicts settle them."""
+    from spinefarm.protocol.results import TrialResult
+    from spinefarm.protocol.submissions import SubmittedResult, Verdict
+    from spinefarm.protocol.work import WorkGrant
+
+    w = WorkerService(ZenohAccess(), run_id="r1", worker_id="w1")
+    w._holder_grant("r1", [WorkGrant("r1", "ab12cd34", (), 0.5, False, coordinator="100-aaa")])
+    w._pending["r1"] = {t: SubmittedResult(t, TrialResult.failed("x", t, trial_id=t), coordinator="100-aaa")
+                        for t in (3, 5, 7)}
+    w._apply("r1", ((3, Verdict.STALE), (5, Verdict.STALE)), "200-bbb")   # the copy's verdicts
+    assert sorted(w._pending["r1"]) == [3, 5, 7]
+    w._apply("r1", ((3, Verdict.STORED),), "100-aaa")   # the holder's
+    assert sorted(w._pending["r1"]) == [5, 7]
+    w._holder_grant("r1", [WorkGrant("r1", "ab12cd34", (), 0.5, False, coordinator="300-ccc")])   # a restart
+    w._apply("r1", ((5, Verdict.STALE),), "300-ccc")
+    assert sorted(w._pending["r1"]) == [7]

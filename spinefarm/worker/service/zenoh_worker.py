@@ -214,10 +214,16 @@ class WorkerService:
         for _ in session.get(keys.problem(run_id), payload=payload, timeout=self.timings.query_timeout_s):
             pass
 
-    def _apply(self, run_id: str, verdicts: tuple) -> None:
+    def _apply(self, run_id: str, verdicts: tuple, coordinator: str) -> None:
+        """Verdicts of run instance `coordinator`, taken for the results it leased, or for any once this worker serves
+        it (the one that leased them is gone): a copy answering for the run cannot settle the holder's results."""
         pending = self._pending.get(run_id, {})
+        serving = coordinator == self._holders.get(run_id, coordinator)
         for trial_id, verdict in verdicts:
-            item = pending.pop(trial_id, None)
+            held = pending.get(trial_id)
+            if held is None or not (serving or held.coordinator in ("", coordinator)):
+                continue
+            item = pending.pop(trial_id)
             if item is not None and verdict.value != "stored":
                 log.info("trial %d of run %s not stored: %s", trial_id, run_id, verdict.value)
             if item is not None and self._ack_log is not None:
@@ -233,7 +239,7 @@ class WorkerService:
             sub = ResultSubmission(self.worker_id, tuple(pending.values()))
             acks, refused = self._query(session, keys.results(run_id), encode_message(sub), ResultAck)
             for ack in acks:
-                self._apply(run_id, ack.verdicts)
+                self._apply(run_id, ack.verdicts, ack.coordinator)
             if acks and run_id == self._current_run():
                 self._last_heard = time.monotonic()
             if not acks and self.exit_when_done and run_id in self._done_runs:
@@ -329,7 +335,7 @@ class WorkerService:
             return self._unanswered(session, run_id, resubmit=bool(refused and carried))
         self._last_heard = time.monotonic()
         grant = self._holder_grant(run_id, grants)
-        self._apply(run_id, grant.verdicts)
+        self._apply(run_id, grant.verdicts, grant.coordinator)
         if grant.run_done:
             self._done_runs.add(run_id)
             # a worker given its run exits; a roaming one looks for another open run first
@@ -346,7 +352,7 @@ class WorkerService:
                     self.exit_code = 3
                     return _Next.EXIT
             return _Next.BACK_OFF
-        self._run_batch(session, run_id, evaluate, grant.assignments)
+        self._run_batch(session, run_id, evaluate, grant)
         return _Next.RAN
 
     def _holder_grant(self, run_id: str, grants: list[WorkGrant]) -> WorkGrant:
@@ -374,19 +380,19 @@ class WorkerService:
         self._last_heard = time.monotonic()  # a roaming worker gives the next run its own time
         return _Next.AGAIN
 
-    def _run_batch(self, session: zenoh.Session, run_id: str, evaluate: Evaluator,
-                   assignments: tuple[TrialAssignment, ...]) -> None:
-        """Run a grant's trials in order, handing results in every submit_interval_s."""
+    def _run_batch(self, session: zenoh.Session, run_id: str, evaluate: Evaluator, grant: WorkGrant) -> None:
+        """Run a grant's trials in order, handing results in every submit_interval_s, each naming the instance
+        that leased it."""
         pending = self._pending.setdefault(run_id, {})
         last_submit = time.monotonic()
-        for a in assignments:
+        for a in grant.assignments:
             if self.stop.is_set() or self._silent():
                 break  # a coordinator silent this long is gone: its leases are void
             t0 = time.perf_counter()
             result = self._run_one(evaluate, a)
             if result is None:
                 break
-            pending[a.trial_id] = SubmittedResult(a.lease_id, result)
+            pending[a.trial_id] = SubmittedResult(a.lease_id, result, coordinator=grant.coordinator)
             self.batch.observe(time.perf_counter() - t0)
             self.trials_run += 1
             if time.monotonic() - last_submit >= self.timings.submit_interval_s:
