@@ -53,12 +53,8 @@ def choose_engine(args: argparse.Namespace) -> Any:
     # checked here, so a bad --calibrate-* value is an error, not a fall back to Bullet
     settings = settings_from(args, "calibrate-", controller=args.controller,
                              jobs=max(1, min(2, getattr(args, "workers", 1) or 1)))
-<<<<<<< ours
-    from spinefarm.worker.tools.shipped_calibration import shipped
-=======
     from spinefarm.worker.tools.screen_fit import FitBudget
     from spinefarm.worker.tools.shipped_calibration import shipped
->>>>>>> theirs
 
     budget = FitBudget(evaluations=args.calibrate_fit_screen)  # a user's robot's screen is fitted within it
 
