@@ -27,7 +27,7 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
                      f"{W}/test_calibrate_judge.py", f"{W}/test_calibrate.py")),
     "engine-auto": ("spinefarm/cli/engine_auto.py", ("tests/cli_tests/test_engine_auto.py", f"{W}/test_calibrate.py")),
     "contact-guard": ("spinefarm/worker/engines/contact_guard.py",
-                      (f"{W}/test_contact_guard.py", f"{W}/test_mujoco.py")),
+                      (f"{W}/test_segment_distance.py", f"{W}/test_contact_guard.py", f"{W}/test_mujoco.py")),
     "sandbox": ("spinefarm/worker/sandbox.py", (f"{W}/test_trial_limit_rule.py", f"{W}/test_trial_limit.py")),
 }
 
