@@ -32,3 +32,39 @@ def test_a_resume_or_a_test_objective_is_not_calibrated():
     assert choose_engine(sphere) is None and sphere.engine is None
     given = _args(engine="mujoco", engine_default=None)
     assert choose_engine(given) is None and given.engine == "mujoco"
+
+
+def _shipped(tmp_path, monkeypatch, decision: str) -> None:
+    """tetraspine's shipped calibration, its decision set by hand, as the only shipped file."""
+    import json
+
+    from spinefarm.worker.tools import shipped_calibration
+
+    result = json.loads(shipped_calibration.shipped_path("tetraspine").read_text())
+    (tmp_path / "tetraspine.json").write_text(json.dumps({**result, "decision": decision}))
+    monkeypatch.setattr(shipped_calibration, "SHIPPED_DIR", tmp_path)
+
+
+def _search(*argv: str) -> argparse.Namespace:
+    from spinefarm.cli.main import build_parser
+
+    return build_parser().parse_args(["search", "tetraspine", *argv])
+
+
+def test_a_mujoco_decision_screens_on_mujoco_over_a_sixth_a_third_and_the_whole(tmp_path, monkeypatch):
+    _shipped(tmp_path, monkeypatch, "mujoco")
+    args = _search()                         # tetraspine's trial: 30 s
+    choice = choose_engine(args)
+    assert (args.engine, args.rungs) == ("mujoco", "5,10,30")
+    assert (choice.engine, choice.cached, choice.rungs_added) == ("mujoco", True, "5,10,30")
+    args = _search("--duration", "12")
+    assert choose_engine(args).rungs_added == "2,4,12" and args.rungs == "2,4,12"
+    args = _search("--rungs", "1,3")         # the user's rungs are kept
+    assert choose_engine(args).rungs_added is None and args.rungs == "1,3"
+
+
+def test_a_bullet_decision_screens_nothing(tmp_path, monkeypatch):
+    _shipped(tmp_path, monkeypatch, "bullet")
+    args = _search()
+    choice = choose_engine(args)
+    assert (args.engine, args.rungs, choice.engine, choice.rungs_added) == ("bullet", None, "bullet", None)

@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from tests.mutation.targets import TARGETS
+from tests.mutation.targets import FUNCTIONS, TARGETS
 
 ROOT = Path(__file__).resolve().parents[2]
 STATUSES = {"ok_killed": "killed", "bad_survived": "survived", "bad_timeout": "timed_out",
@@ -37,13 +37,15 @@ def copy_tree(dest: Path) -> None:
             shutil.copy2(src, dest / name)
 
 
-def run_module(tree: Path, module: str, tests: tuple[str, ...]) -> int:
+def run_module(tree: Path, module: str, tests: tuple[str, ...], functions: tuple[str, ...] = ()) -> int:
     # mutmut 2 counts only exit code 1 as killed: a mutant that breaks an import (pytest's exit code 2, a
     # collection error) would count as survived, so pytest_exit makes every failure 1
     runner = " ".join([sys.executable, "-m", "tests.mutation.pytest_exit", "-x", "-q", "-p", "no:randomly", "-p",
                        "no:cacheprovider", *tests])
     env = dict(os.environ, PYTHONPATH=str(tree), SPINEFARM_MUTATION="1")
-    cmd = [sys.executable, "-m", "mutmut", "run", "--paths-to-mutate", module, "--runner", runner,
+    # restricted to some functions: mutmut started through tests.mutation.lines, which hands it their lines
+    tool = ["tests.mutation.lines", module, ",".join(functions), "--"] if functions else ["mutmut"]
+    cmd = [sys.executable, "-m", *tool, "run", "--paths-to-mutate", module, "--runner", runner,
            "--tests-dir", "tests", "--disable-mutation-types", "string,fstring,decorator",
            "--test-time-base", "20", "--simple-output", "--no-progress", "--CI"]
     return subprocess.run(cmd, cwd=tree, env=env, stdout=sys.stderr).returncode
@@ -103,10 +105,12 @@ def main(argv: list[str] | None = None) -> int:
         module, tests = TARGETS[name]
         started = time.monotonic()
         if not args.report_only:
-            run_module(tree, module, tests)
+            run_module(tree, module, tests, FUNCTIONS.get(name, ()))
             end_leftovers(tree)
         report[name], ids = counts(tree, module)
         report[name].update(module=module, tests=list(tests), seconds=round(time.monotonic() - started))
+        if name in FUNCTIONS:
+            report[name]["functions"] = list(FUNCTIONS[name])
         lived += [f"## {name} mutant {i}\n{diff(tree, i)}" for i in ids]
     total = {k: sum(r[k] for r in report.values()) for k in STATUSES.values()}
     tested = total["killed"] + total["survived"] + total["timed_out"] + total["suspicious"]
