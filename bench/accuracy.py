@@ -18,7 +18,7 @@ from statistics import median
 
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.tools.accuracy import rel
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 
 STEPS_S = (2e-3, 1e-3, 5e-4, 2.5e-4)
 REFERENCE_S = 1.25e-4
@@ -27,8 +27,8 @@ REFERENCE_S = 1.25e-4
 def one(job: tuple[str, int, float, float, str | None]) -> dict:
     name, seed, dt, duration, controller = job
     morph = load_morphology(name)
-    r = run_trial(morph, random_unit_params(morph, seed, controller),
-                  TrialConfig(duration_s=duration, dt_s=dt, controller=controller), seed)
+    r = simulate(morph, random_unit_params(morph, seed, controller),
+                 TrialConfig(duration_s=duration, dt_s=dt, controller=controller), seed).result
     return {"seed": seed, "dt_s": dt, "distance_m": r.distance_m, "cot": r.cot, "status": str(r.status),
             "reason": r.reason, "wall_s_per_sim_s": r.wall_time_s / max(r.sim_time_s, 1e-9)}
 

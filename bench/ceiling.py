@@ -27,7 +27,7 @@ def run(variant: str, gait_path: str, duration_s: float | None) -> dict:
     from spinefarm.cli.sim_commands import load_params_file
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.robot.morphology.variants import with_gains, with_strings
-    from spinefarm.worker.trial.run import TrialConfig, run_trial
+    from spinefarm.worker.trial.run import TrialConfig, simulate
 
     params, controller = load_params_file(Path(gait_path))
     morph = load_morphology(json.loads(Path(gait_path).read_text())["morphology"])
@@ -50,7 +50,7 @@ def run(variant: str, gait_path: str, duration_s: float | None) -> dict:
         cfg = dataclasses.replace(cfg, duration_s=2 * length)
     elif variant != "as_shipped":
         raise ValueError(variant)
-    r = run_trial(morph, params, cfg)
+    r = simulate(morph, params, cfg).result
     return {"variant": variant, "status": r.status.value, "speed_cm_s": r.speed_cm_s, "cot": r.cot,
             "distance_m": r.distance_m, "duration_s": cfg.duration_s, "wall_time_s": r.wall_time_s}
 

@@ -50,10 +50,10 @@ PAPER_SPEED_CM_S = {"tetraspine": 9.46, "tetrahedral-complex": 6.13, "octahedral
 
 
 def _trial(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int):
-    from spinefarm.worker.trial.run import TrialConfig, run_trial
+    from spinefarm.worker.trial.run import TrialConfig, simulate
 
-    return run_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
-                     controller=controller)
+    return simulate(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
+                    controller=controller).result
 
 
 def _verify(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int,
@@ -68,11 +68,11 @@ def _verify(morphology: str, controller: str | None, trial_config: dict, params_
 def _judge(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int,
            judge_dt_s: float) -> dict:
     """The Bullet judge's run of a screened trial at its converged step."""
-    from spinefarm.worker.trial.run import TrialConfig, run_trial
+    from spinefarm.worker.trial.run import TrialConfig, simulate
 
     cfg = TrialConfig.from_dict({**trial_config, "engine": "bullet", "engine_options": {}, "dt_s": judge_dt_s,
                                  "auto_dt": False})
-    r = run_trial(morphology, np.asarray(params_unit), cfg, seed, controller=controller)
+    r = simulate(morphology, np.asarray(params_unit), cfg, seed, controller=controller).result
     return {"holds": bool(r.ok), "speed_cm_s": float(r.speed_cm_s), "distance_m": float(r.distance_m)}
 
 

@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--morphology", default="tetraspine")
     args = ap.parse_args()
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.trial.run import run_trial
+    from spinefarm.worker.trial.run import simulate
 
     params = at_rest(args.morphology)
     t0 = time.time()
@@ -49,7 +49,7 @@ def main() -> None:
         out[engine] = []
         for settle_s, scored_s in ROWS:
             cfg = TrialConfig(duration_s=scored_s, settle_s=settle_s, engine=engine, controller="sidewinding")
-            r = run_trial(args.morphology, params, cfg, 0)
+            r = simulate(args.morphology, params, cfg, 0).result
             out[engine].append({"settle_s": settle_s, "scored_s": scored_s, "status": r.status.value,
                                 "distance_cm": round(100 * r.distance_m, 4)})
     print(json.dumps({"benchmark": "settle", "morphology": args.morphology, "rows": out,

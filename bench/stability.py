@@ -21,7 +21,7 @@ from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_density_factor, with_gains, with_strings
 from spinefarm.worker.sim.stability import estimate_stable_step
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 
 
 def _edge_params(morph: Morphology, seed: int) -> np.ndarray:
@@ -53,7 +53,7 @@ CASES: dict[str, tuple[str, Callable[[], Morphology], Callable[[Morphology, int]
 
 
 def stable(morph: Morphology, params: np.ndarray, dt: float, duration: float, seed: int) -> tuple[bool, str]:
-    r = run_trial(morph, params, TrialConfig(duration_s=duration, dt_s=dt, refuse_unstable_dt=False), seed)
+    r = simulate(morph, params, TrialConfig(duration_s=duration, dt_s=dt, refuse_unstable_dt=False), seed).result
     return r.status == "complete", r.reason
 
 

@@ -43,7 +43,7 @@ _CACHE = None  # one SetupCache per pool process: set-up reused as a worker does
 
 def _trial(args: tuple) -> dict:
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial.run import TrialConfig, run_trial
+    from spinefarm.worker.trial.run import TrialConfig, simulate
     from spinefarm.worker.trial.setup import SetupCache
 
     global _CACHE
@@ -62,7 +62,7 @@ def _trial(args: tuple) -> dict:
     except Exception:  # a step the string network cannot take: the automatic one
         cfg["auto_dt"] = True
     t0 = time.process_time()
-    r = run_trial(morph, np.asarray(unit), TrialConfig(**cfg), seed, setup=_CACHE, controller=controller)
+    r = simulate(morph, np.asarray(unit), TrialConfig(**cfg), seed, setup=_CACHE, controller=controller).result
     return {"distance_m": r.distance_m if r.ok else math.nan, "status": str(r.status), "dt_s": r.extras["dt_s"],
             "cpu_s": time.process_time() - t0}
 

@@ -19,13 +19,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from spinefarm.worker.tools.verify import VerifySettings, verify_trial  # noqa: E402
-from spinefarm.worker.trial.run import TrialConfig, run_trial  # noqa: E402
+from spinefarm.worker.trial.run import TrialConfig, simulate  # noqa: E402
 
 
 def check(gait_file: Path) -> dict:
     gait = json.loads(gait_file.read_text())
     robot, params, controller = gait["morphology"], gait["params"], gait.get("controller")
-    base = run_trial(robot, params, TrialConfig(), 0, controller=controller)
+    base = simulate(robot, params, TrialConfig(), 0, controller=controller).result
     v = verify_trial(robot, params, TrialConfig(), 0, base.distance_m, VerifySettings(perturb=True),
                      controller=controller)
     return {"distance_m": base.distance_m, "fine_distance_m": v.fine_distance_m, "fine_dt_s": v.fine_dt_s,

@@ -95,7 +95,7 @@ def test_calibration_key_holds_the_profile_hash():
 
 def test_search_carries_the_profile_to_its_workers(tmp_path):
     from spinefarm.storage.hdf5_reader import read_run
-    from spinefarm.worker.trial.run import run_trial
+    from spinefarm.worker.trial.run import simulate
 
     (tmp_path / "p.yaml").write_text(PROFILE)
     run = tmp_path / "run.h5"
@@ -108,8 +108,8 @@ def test_search_carries_the_profile_to_its_workers(tmp_path):
     assert meta.trial_config["profile_hash"] == profile_hash(load_profile(tmp_path / "p.yaml"))
     cfg = TrialConfig.from_dict(meta.trial_config)
     unit, seed, stored = np.array(rows["params_unit"][0]), int(rows["seed"][0]), float(rows["distance_m"][0])
-    again = run_trial(meta.morphology_spec, unit, cfg, seed)
-    bare = run_trial(meta.morphology_spec, unit, dataclasses.replace(cfg, profile={}), seed)
+    again = simulate(meta.morphology_spec, unit, cfg, seed).result
+    bare = simulate(meta.morphology_spec, unit, dataclasses.replace(cfg, profile={}), seed).result
     assert again.distance_m == stored != bare.distance_m  # the worker ran with the profile
 
 

@@ -11,7 +11,7 @@ import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.tools.accuracy import pareto
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 
 
 def test_accuracy_command_writes_table_json_and_plot(tmp_path):
@@ -36,10 +36,10 @@ def _errors_match_their_own_reference(report):
     morph = load_morphology("tetraspine-ntrt")
     u = random_unit_params(morph, 1)
     ref = report["reference"][0]
-    d_ref = run_trial(morph, u, TrialConfig(duration_s=0.2, dt_s=ref["dt_s"]), 1).distance_m
+    d_ref = simulate(morph, u, TrialConfig(duration_s=0.2, dt_s=ref["dt_s"]), 1).result.distance_m
     assert d_ref == ref["distance_m"]
     row = next(r for r in report["table"] if r["label"] == "dt 0.5 ms")
-    d = run_trial(morph, u, TrialConfig(duration_s=0.2, dt_s=5e-4), 1).distance_m
+    d = simulate(morph, u, TrialConfig(duration_s=0.2, dt_s=5e-4), 1).result.distance_m
     assert abs(d - d_ref) > 1e-6
     assert row["distance_errors"][0] == pytest.approx(abs(d - d_ref) / max(abs(d_ref), 0.01), rel=1e-9)
     assert row["median_distance_error_cm"] == pytest.approx(abs(d - d_ref) * 100.0, rel=1e-9)

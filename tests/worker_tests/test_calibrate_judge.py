@@ -14,7 +14,7 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.tools import shipped_calibration
 from spinefarm.worker.tools.calibrate import CalibrationSettings, calibrate, calibration
 from spinefarm.worker.tools.shipped_calibration import shipped
-from spinefarm.worker.trial.run import run_trial
+from spinefarm.worker.trial.run import simulate
 
 JUDGE_DT_S = 0.00025  # the judge's documented step (docs/accuracy.md: Bullet within ~1.5 % there)
 ROBOT = "tetrahedral-complex"
@@ -35,7 +35,7 @@ def test_the_reference_runs_at_the_judges_step_not_bullets_default():
     from spinefarm.worker.trial.run import random_unit_params
 
     unit = np.asarray(random_unit_params(morph, 1, None))
-    at = {dt: run_trial(morph, unit, TrialConfig(duration_s=0.6, settle_s=0.2, engine="bullet", dt_s=dt), 1)
+    at = {dt: simulate(morph, unit, TrialConfig(duration_s=0.6, settle_s=0.2, engine="bullet", dt_s=dt), 1).result
           .distance_m for dt in (JUDGE_DT_S, 0.001)}
     assert abs(at[JUDGE_DT_S] - at[0.001]) > 1e-5, at  # the steps are told apart on this gait
     assert out["distance_m"]["bullet"][0] == round(at[JUDGE_DT_S], 6)

@@ -10,7 +10,7 @@ import pytest
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.spaces import controller_space, followable_limits, param_space
-from spinefarm.worker.trial.run import TrialConfig, run_trial
+from spinefarm.worker.trial.run import TrialConfig, simulate
 
 BUILT_INS = ["tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed"]
 
@@ -43,7 +43,7 @@ def test_bounds_lie_inside_ntrt_and_every_corner_is_followable(name):
 def test_the_followable_space_runs_and_unknown_spaces_are_refused():
     morph = load_morphology("tetraspine-ntrt")
     u = np.random.default_rng(4).random(len(param_space(morph, "ntrt-followable")))
-    r = run_trial(morph, u, TrialConfig(duration_s=0.5, controller="ntrt-followable"))
+    r = simulate(morph, u, TrialConfig(duration_s=0.5, controller="ntrt-followable")).result
     assert r.ok and math.isfinite(r.distance_m)
     with pytest.raises(ConfigError, match="no controller space 'sidewinding-followable'"):
         param_space(morph, "sidewinding-followable")

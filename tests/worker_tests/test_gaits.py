@@ -11,7 +11,7 @@ import pytest
 from spinefarm.cli.sim_commands import load_params_file
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.spaces import param_space
-from spinefarm.worker.trial.run import TrialConfig, run_trial
+from spinefarm.worker.trial.run import TrialConfig, simulate
 
 ROOT = Path(__file__).resolve().parents[2] / "examples" / "gaits"
 GAITS = sorted(ROOT.rglob("*.json"))
@@ -28,5 +28,5 @@ def test_a_shipped_gait_loads_and_runs_for_one_second(path):
     assert record["morphology"] == path.stem and controller
     morph = load_morphology(path.stem)
     assert list(params) == param_space(morph, controller).names
-    r = run_trial(morph, params, TrialConfig(duration_s=1.0, controller=controller))
+    r = simulate(morph, params, TrialConfig(duration_s=1.0, controller=controller)).result
     assert r.ok and r.distance_m > 0

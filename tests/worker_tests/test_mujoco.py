@@ -18,7 +18,7 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import GroundSpec, SceneConfig, build_terrain, surface_height_cm
 from spinefarm.worker.engines.mujoco import MujocoPhysics, MujocoSettings
 from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial, simulate
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 from spinefarm.worker.trial.setup import SetupCache
 from tests.worker_tests.helpers import ENGINES, PassiveRig, two_rod_structure
 
@@ -55,9 +55,10 @@ def test_motor_limits_do_not_depend_on_the_step_in_the_engine(engine):
 SNIPPET = """
 import json
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 m = load_morphology("tetraspine")
-r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco"), seed=11)
+cfg = TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco")
+r = simulate(m, random_unit_params(m, 11), cfg, seed=11).result
 d = r.to_dict(); d.pop("wall_time_s")
 print(json.dumps(d))
 """
@@ -70,9 +71,9 @@ def test_bit_identical_across_processes():
     assert a == b and a["extras"]["engine"] == "mujoco"
     m = load_morphology("tetraspine")
     cfg = TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco")
-    here = run_trial(m, random_unit_params(m, 11), cfg, seed=11)
+    here = simulate(m, random_unit_params(m, 11), cfg, seed=11).result
     assert here.distance_m == a["distance_m"] and here.work_j == a["work_j"]
-    assert run_trial(m, random_unit_params(m, 11), cfg, seed=12).distance_m != a["distance_m"]
+    assert simulate(m, random_unit_params(m, 11), cfg, seed=12).result.distance_m != a["distance_m"]
 
 
 def test_fused_loop_gives_the_same_bits_as_the_step_by_step_loop():
@@ -89,16 +90,16 @@ def test_reused_setup_gives_the_same_bits_as_a_fresh_one():
     m = load_morphology("tetraspine-ntrt")
     cfg = TrialConfig(duration_s=0.3, engine="mujoco", pose_jitter_cm=0.01)
     cache = SetupCache()
-    reused = [run_trial(m, random_unit_params(m, s), cfg, s, setup=cache) for s in (1, 2, 1)]
+    reused = [simulate(m, random_unit_params(m, s), cfg, s, setup=cache).result for s in (1, 2, 1)]
     assert cache.get(m, cfg, None).scenes_built == 1  # one model compiled, then reset
-    fresh = run_trial(m, random_unit_params(m, 1), cfg, 1)
+    fresh = simulate(m, random_unit_params(m, 1), cfg, 1).result
     assert reused[0].distance_m == reused[2].distance_m == fresh.distance_m
     assert reused[1].distance_m != reused[0].distance_m
     # a shorter rung with a settle phase shares the set-up (and the compiled model) of the run
     rung = dataclasses.replace(cfg, duration_s=0.2, settle_s=0.1)
-    short = run_trial(m, random_unit_params(m, 1), rung, 1, setup=cache)
+    short = simulate(m, random_unit_params(m, 1), rung, 1, setup=cache).result
     assert cache.get(m, rung, None).scenes_built == 1
-    assert short.distance_m == run_trial(m, random_unit_params(m, 1), rung, 1).distance_m
+    assert short.distance_m == simulate(m, random_unit_params(m, 1), rung, 1).result.distance_m
     cache.close()
 
 
@@ -108,7 +109,7 @@ def test_absurd_stiffness_fails_as_diverged_on_mujoco(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=1e8)
     cfg = TrialConfig(duration_s=1.0, refuse_unstable_dt=False, engine="mujoco")
-    r = run_trial(morph, random_unit_params(morph, 1), cfg, seed=1)
+    r = simulate(morph, random_unit_params(morph, 1), cfg, seed=1).result
     assert r.status == TrialStatus.FAILED and r.reason.startswith("diverged"), r.reason
     assert r.sim_time_s < 1.0 and np.isfinite(r.distance_m) and r.distance_m < 100.0
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()  # MuJoCo's warnings go to logging, not a file
@@ -159,7 +160,7 @@ def test_friction_is_the_product_of_ground_and_rod(engine):
     for deg in (10.0, 20.0):
         for seconds in (1.0, 2.0):
             cfg = TrialConfig(duration_s=seconds, engine=engine, scene=SceneConfig(kind="slope", slope_deg=deg))
-            r = run_trial(morph, u, cfg, 1)
+            r = simulate(morph, u, cfg, 1).result
             assert r.ok, r.reason
             moved[deg, seconds] = r.distance_m
     assert moved[20.0, 2.0] - moved[20.0, 1.0] > 1.0, moved  # sliding faster and faster
@@ -260,8 +261,9 @@ def test_auto_segment_contacts_give_the_bits_of_modelled_ones(name, controller, 
     ribbed spine's ribs start 2 mm apart): either way the same result as modelling them throughout."""
     morph = load_morphology(name)
     u = random_unit_params(morph, 1, controller)
-    runs = {mode: run_trial(morph, u, TrialConfig(duration_s=seconds, engine="mujoco",
-                                                  engine_options={"segment_contacts": mode}), 1, controller=controller)
+    runs = {mode: simulate(morph, u, TrialConfig(duration_s=seconds, engine="mujoco",
+                                                 engine_options={"segment_contacts": mode}), 1,
+                           controller=controller).result
             for mode in ("scene", "auto")}
     assert runs["auto"].distance_m == runs["scene"].distance_m and runs["auto"].work_j == runs["scene"].work_j
     assert runs["auto"].extras.get("segment_contacts", "").startswith("modelled") == needs_contacts
@@ -273,9 +275,9 @@ def test_segments_that_come_near_are_watched_closer_not_modelled_at_once():
     with the contacts, and the result is still the bits of modelling them throughout."""
     morph = load_morphology("tetraspine")
     u = np.array([0.7357, 0.2892, 0.9969, 0.9913, 0.9932, 0.4873, 0.2978, 0.3533, 0.4918])
-    runs = {mode: run_trial(morph, u, TrialConfig(duration_s=1.0, settle_s=1.0, engine="mujoco", dt_s=2e-3,
-                                                  engine_options={"segment_contacts": mode}), 1,
-                            controller="sidewinding") for mode in ("scene", "auto")}
+    runs = {mode: simulate(morph, u, TrialConfig(duration_s=1.0, settle_s=1.0, engine="mujoco", dt_s=2e-3,
+                                                 engine_options={"segment_contacts": mode}), 1,
+                           controller="sidewinding").result for mode in ("scene", "auto")}
     assert runs["auto"].distance_m == runs["scene"].distance_m and runs["auto"].work_j == runs["scene"].work_j
     assert "segment_contacts" not in runs["auto"].extras, runs["auto"].extras
     assert runs["auto"].distance_m > 0.02  # it does move

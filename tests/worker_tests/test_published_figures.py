@@ -15,7 +15,7 @@ import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.trial.run import random_unit_params, run_trial, simulate
+from spinefarm.worker.trial.run import random_unit_params, simulate
 
 GAIT = Path(__file__).resolve().parents[2] / "examples" / "gaits" / "tetraspine.json"
 G_M_S2 = 9.81
@@ -108,7 +108,7 @@ def test_the_judge_runs_and_counts_its_perturbed_half():
     cfg = TrialConfig(duration_s=1.0)
     fine = dataclasses.replace(cfg, dt_s=cfg.step_s / 4)
     pert = dataclasses.replace(fine, pose_jitter_cm=0.01, ground_friction=morph.ground_friction * 1.1)
-    d_fine, d_pert = run_trial(morph, u, fine, 4).distance_m, run_trial(morph, u, pert, 4).distance_m
+    d_fine, d_pert = simulate(morph, u, fine, 4).result.distance_m, simulate(morph, u, pert, 4).result.distance_m
     change = abs(d_pert - d_fine) / d_fine
     assert change > 1e-3
     evaluate = physics_evaluator(morph, cfg, None)

@@ -18,7 +18,7 @@ from spinefarm.worker.engines.contact_guard import _segment_distance
 from spinefarm.worker.engines.mujoco import MujocoPhysics
 from spinefarm.worker.engines.mujoco_model import MujocoSettings
 from spinefarm.worker.tools.accuracy import DISTANCE_FLOOR_M, rel
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 
 # segment 0 and 1: a short hub rod carrying both string anchors and a far rod 40-60 cm out along x; two stiff
 # strings hold the hubs at most 10 cm (plus 1.4 cm of stretch) apart, so a hub can never reach the other
@@ -102,17 +102,17 @@ def test_a_spec_file_robot_leaves_out_what_its_strings_hold_apart(tmp_path: Path
     assert named == {("s0r0", "s1r0"), ("s0r1", "s1r1")}
     scene.close()
     # and a trial of the file runs in it
-    r = run_trial(str(path), random_unit_params(load_morphology(str(path)), 1),
-                  TrialConfig(duration_s=0.2, engine="mujoco", auto_dt=True,
-                              engine_options={"segment_contacts": "reach"}), 1)
+    r = simulate(str(path), random_unit_params(load_morphology(str(path)), 1),
+                 TrialConfig(duration_s=0.2, engine="mujoco", auto_dt=True,
+                             engine_options={"segment_contacts": "reach"}), 1).result
     assert r.ok, r.reason
 
 
 def test_reach_gives_the_bits_of_scene_while_no_segments_touch():
     morph = load_morphology("tetraspine")
     u = random_unit_params(morph, 1)
-    runs = {mode: run_trial(morph, u, TrialConfig(duration_s=1.0, engine="mujoco",
-                                                  engine_options={"segment_contacts": mode}), 1)
+    runs = {mode: simulate(morph, u, TrialConfig(duration_s=1.0, engine="mujoco",
+                                                 engine_options={"segment_contacts": mode}), 1).result
             for mode in ("scene", "reach")}
     assert runs["reach"].distance_m == runs["scene"].distance_m and runs["reach"].work_j == runs["scene"].work_j
     assert runs["reach"].distance_m != 0.0
@@ -152,7 +152,7 @@ def _distances(name: str, seeds: range, seconds: float) -> dict[str, list[float]
                                      ("twin", "scene", 1e-6, seed + 10_000)):
             cfg = TrialConfig(duration_s=seconds, engine="mujoco", pose_jitter_cm=jitter,
                               engine_options={"segment_contacts": mode})
-            out[key].append(run_trial(morph, u, cfg, s).distance_m)
+            out[key].append(simulate(morph, u, cfg, s).result.distance_m)
     return out
 
 

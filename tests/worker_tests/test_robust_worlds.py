@@ -5,14 +5,14 @@ from __future__ import annotations
 from spinefarm.protocol.robust import RobustSpec, draw_episode
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.trial.robust import episode_world, run_episodes
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 
 
 def singles(morph, u, cfg, spec, seed):
     out = []
     for k in range(spec.episodes):
         w = episode_world(morph, cfg, draw_episode(spec, seed, k))
-        out.append(run_trial(w.morph, u, w.config, w.draw.seed).distance_m)
+        out.append(simulate(w.morph, u, w.config, w.draw.seed).result.distance_m)
     return out
 
 

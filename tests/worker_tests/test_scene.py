@@ -12,7 +12,7 @@ from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig, build_terrain, pairs_off, surface_height_cm
 from spinefarm.worker.engines.bullet import BulletPhysics
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 
 
 def engine_surface(terrain, xs, zs) -> np.ndarray:
@@ -88,7 +88,7 @@ def test_robot_slides_down_a_steep_slippery_slope():
     u = random_unit_params(morph, 1)
     u[1] = 0.0
     scene = SceneConfig(kind="slope", slope_deg=25.0, friction=0.1)  # tan 25 deg = 0.47 > 0.1 effective
-    r = run_trial(morph, u, TrialConfig(duration_s=1.0, scene=scene), 1)
+    r = simulate(morph, u, TrialConfig(duration_s=1.0, scene=scene), 1).result
     assert r.status == TrialStatus.COMPLETE, r.reason
     assert r.distance_m > 0.5  # slid more than half a metre in a second (downhill is +z)
 
@@ -98,7 +98,7 @@ def test_every_scene_runs_and_is_recorded_in_the_config():
     u = random_unit_params(morph, 2)
     for cfg in (SceneConfig(kind="rough", rough_amplitude_cm=1.0), SceneConfig(kind="obstacles")):
         tc = TrialConfig(duration_s=0.3, scene=cfg)
-        assert run_trial(morph, u, tc, 2).status == TrialStatus.COMPLETE
+        assert simulate(morph, u, tc, 2).result.status == TrialStatus.COMPLETE
         assert TrialConfig.from_dict(tc.to_dict()) == tc
         assert tc.to_dict()["scene"]["kind"] == cfg.kind
 
@@ -139,12 +139,12 @@ def test_a_robot_off_the_grounds_edge_is_told_so_and_a_larger_ground_keeps_it_on
     morph = load_morphology("tetraspine-ntrt")
     u = random_unit_params(morph, 1)
     small = TrialConfig(duration_s=1.0, scene=SceneConfig(ground_half_extent_cm=10.0))  # narrower than the robot
-    r = run_trial(morph, u, small, 1)
+    r = simulate(morph, u, small, 1).result
     assert r.status == TrialStatus.FAILED
     assert r.reason.startswith("fell off the ground's edge: segment "), r.reason
     assert "half width of 10 cm" in r.reason and "--scene flat,ground_half_extent_cm=" in r.reason
     ntrt = TrialConfig(duration_s=1.0)
-    assert run_trial(morph, u, ntrt, 1).status == TrialStatus.COMPLETE
+    assert simulate(morph, u, ntrt, 1).result.status == TrialStatus.COMPLETE
     # NTRT's size is the default and is left out of stored configs, so their hashes are those from before the field
     explicit = TrialConfig(duration_s=1.0, scene=SceneConfig(ground_half_extent_cm=500.0))
     assert "ground_half_extent_cm" not in ntrt.to_dict()["scene"] and explicit.config_hash() == ntrt.config_hash()

@@ -13,7 +13,7 @@ from spinefarm.robot.morphology.model import ControlSpec, Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_density_factor, with_gains, with_strings
 from spinefarm.worker.sim.stability import estimate_stable_step
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 from tests.worker_tests.helpers import mass_between_anchors
 
 
@@ -37,7 +37,7 @@ def test_limit_scales_with_stiffness():
 def test_unstable_step_is_refused_with_the_estimate_in_the_message():
     morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=600_000.0)
     with pytest.raises(ConfigError) as exc:
-        run_trial(morph, random_unit_params(morph, 1), TrialConfig(duration_s=0.1, dt_s=2e-3), 1)
+        simulate(morph, random_unit_params(morph, 1), TrialConfig(duration_s=0.1, dt_s=2e-3), 1)
     text = str(exc.value)
     assert "omega_max" in text and "expected dt_s <=" in text and "received 0.002" in text
 
@@ -46,11 +46,11 @@ def test_auto_step_runs_the_stiff_case_stably():
     morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=600_000.0)
     u = random_unit_params(morph, 1)
     est = estimate_stable_step(morph)
-    r = run_trial(morph, u, TrialConfig(duration_s=0.3, auto_dt=True), 1)
+    r = simulate(morph, u, TrialConfig(duration_s=0.3, auto_dt=True), 1).result
     assert r.status == TrialStatus.COMPLETE, r.reason
     assert r.extras["dt_s"] == pytest.approx(0.5 * est.dt_limit_s)
     # and forcing a step twice the estimate past the refusal does diverge
-    forced = run_trial(morph, u, TrialConfig(duration_s=0.3, dt_s=2e-3, refuse_unstable_dt=False), 1)
+    forced = simulate(morph, u, TrialConfig(duration_s=0.3, dt_s=2e-3, refuse_unstable_dt=False), 1).result
     assert forced.status == TrialStatus.FAILED and forced.reason.startswith("diverged")
 
 
@@ -71,9 +71,10 @@ def test_light_segments_are_limited_by_damping_and_run_at_the_auto_step():
     est = estimate_stable_step(light)
     assert est.dt_damping_limit_s < est.dt_spring_limit_s  # damping rates, not stiffness, set the limit
     u = random_unit_params(light, 1)
-    ok = run_trial(light, u, TrialConfig(duration_s=0.5, auto_dt=True), 1)
+    ok = simulate(light, u, TrialConfig(duration_s=0.5, auto_dt=True), 1).result
     assert ok.status == TrialStatus.COMPLETE, ok.reason
-    forced = run_trial(light, u, TrialConfig(duration_s=0.5, dt_s=10 * est.dt_limit_s, refuse_unstable_dt=False), 1)
+    forced = simulate(light, u, TrialConfig(duration_s=0.5, dt_s=10 * est.dt_limit_s, refuse_unstable_dt=False),
+                      1).result
     assert forced.status == TrialStatus.FAILED and forced.reason.startswith("diverged")
 
 
@@ -92,6 +93,6 @@ def test_controller_side_hard_cases_stay_sane_at_the_default_step(case):
     u = _edge_unit(morph) if case in ("cpg-edge", "slack-taut-chatter") else random_unit_params(morph, 3)
     # these change the control, not the string network: the stable-step estimate is unchanged
     assert estimate_stable_step(morph).dt_limit_s == pytest.approx(estimate_stable_step(base).dt_limit_s)
-    r = run_trial(morph, u, TrialConfig(duration_s=1.0), 3)
+    r = simulate(morph, u, TrialConfig(duration_s=1.0), 3).result
     assert r.status == TrialStatus.COMPLETE, r.reason
     assert r.distance_m < 1.0 and np.isfinite(r.work_j)  # no runaway "gait"

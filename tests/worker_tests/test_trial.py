@@ -16,7 +16,7 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.structure import StringMaterial
 from spinefarm.robot.morphology.variants import with_strings
 from spinefarm.robot.spaces import controller_space, param_space
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial, simulate
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 
 
 def test_passive_tetraspine_settles_and_holds_its_shape():
@@ -37,7 +37,7 @@ def test_passive_tetraspine_settles_and_holds_its_shape():
 
 def test_controlled_trial_runs_and_moves():
     morph = load_morphology("tetraspine")
-    r = run_trial(morph, random_unit_params(morph, 7), TrialConfig(duration_s=2.0), seed=7)
+    r = simulate(morph, random_unit_params(morph, 7), TrialConfig(duration_s=2.0), seed=7).result
     assert r.status == TrialStatus.COMPLETE, r.reason
     assert r.distance_m > 0.005 and r.sim_time_s == pytest.approx(2.0)
     assert r.work_j > 0 and math.isfinite(r.cot) and r.cot > 0
@@ -46,15 +46,15 @@ def test_controlled_trial_runs_and_moves():
 
 def test_sidewinding_space_runs():
     morph = load_morphology("tetraspine")
-    r = run_trial(morph, random_unit_params(morph, 2, "sidewinding"), TrialConfig(duration_s=0.5), 2,
-                  controller="sidewinding")
+    r = simulate(morph, random_unit_params(morph, 2, "sidewinding"), TrialConfig(duration_s=0.5), 2,
+                 controller="sidewinding").result
     assert r.status == TrialStatus.COMPLETE and r.distance_m > 0
 
 
 def test_absurd_stiffness_fails_as_diverged_not_an_exception():
     morph = with_strings(load_morphology("tetraspine-ntrt"), stiffness_n_per_m=1e8)
     cfg = TrialConfig(duration_s=1.0, refuse_unstable_dt=False)  # run it anyway
-    r = run_trial(morph, random_unit_params(morph, 1), cfg, seed=1)
+    r = simulate(morph, random_unit_params(morph, 1), cfg, seed=1).result
     assert r.status == TrialStatus.FAILED
     assert r.reason.startswith("diverged")
     assert r.sim_time_s < 1.0  # stopped early, partial metrics kept
@@ -64,24 +64,24 @@ def test_absurd_stiffness_fails_as_diverged_not_an_exception():
 def test_bad_parameters_raise_named_errors():
     morph = load_morphology("tetraspine-ntrt")
     with pytest.raises(ParameterError, match="wrong length"):
-        run_trial(morph, np.zeros(5), TrialConfig(duration_s=0.01))
+        simulate(morph, np.zeros(5), TrialConfig(duration_s=0.01))
     bad = random_unit_params(morph, 1)
     bad[3] = np.nan
     with pytest.raises(ParameterError, match="non-finite"):
-        run_trial(morph, bad, TrialConfig(duration_s=0.01))
+        simulate(morph, bad, TrialConfig(duration_s=0.01))
     named = param_space(morph).to_named(param_space(morph).from_unit(random_unit_params(morph, 1)))
     named["cpg_frequency_coef_hz"] = 99.0
     with pytest.raises(ParameterError, match="outside its bounds"):
-        run_trial(morph, named, TrialConfig(duration_s=0.01))
+        simulate(morph, named, TrialConfig(duration_s=0.01))
 
 
 TRIAL_SNIPPET = """
 import json
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_strings
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, run_trial
+from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 m = load_morphology("tetraspine")
-r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11)
+r = simulate(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11).result
 d = r.to_dict(); d.pop("wall_time_s")
 print(json.dumps(d))
 """
@@ -93,9 +93,10 @@ def test_deterministic_across_processes():
     a, b = (json.loads(o.stdout.strip().splitlines()[-1]) for o in outs)
     assert a == b
     m = load_morphology("tetraspine")
-    here = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11)
+    here = simulate(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11).result
     assert here.distance_m == a["distance_m"] and here.work_j == a["work_j"]  # same bits
-    other_seed = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=12)
+    other_seed = simulate(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01),
+                          seed=12).result
     assert other_seed.distance_m != a["distance_m"]
 
 
@@ -111,15 +112,15 @@ def test_config_rejects_bad_values_with_the_field_name():
 
 def test_ntrt_motor_mode_runs():
     morph = load_morphology("tetraspine-ntrt")
-    r = run_trial(morph, random_unit_params(morph, 4), TrialConfig(duration_s=0.5, motor_model="ntrt2014"), 4)
+    r = simulate(morph, random_unit_params(morph, 4), TrialConfig(duration_s=0.5, motor_model="ntrt2014"), 4).result
     assert r.status == TrialStatus.COMPLETE and r.distance_m > 0
 
 
 def test_cpg_integration_error_is_small_against_substepping():
     morph = load_morphology("tetraspine-ntrt")
     u = random_unit_params(morph, 5)
-    base = run_trial(morph, u, TrialConfig(duration_s=1.0), 5)
-    fine = run_trial(morph, u, TrialConfig(duration_s=1.0, cpg_max_step_s=1e-3 / 8), 5)
+    base = simulate(morph, u, TrialConfig(duration_s=1.0), 5).result
+    fine = simulate(morph, u, TrialConfig(duration_s=1.0, cpg_max_step_s=1e-3 / 8), 5).result
     assert abs(base.distance_m - fine.distance_m) <= 0.02 * max(fine.distance_m, 0.01)
 
 
@@ -133,7 +134,8 @@ def test_default_cpg_sub_step_keeps_the_bits_of_1ms_sub_steps_on_ntrt_networks(n
     space = controller_space(morph)
     period = morph.control.cpg_update_period_s
     assert CpgIntegrator(space.network(space.param_space.from_unit(u))).plan(period) == (1e-3, round(period / 1e-3))
-    auto, fixed = (run_trial(morph, u, TrialConfig(duration_s=0.5, cpg_max_step_s=cap), 4) for cap in (None, 1e-3))
+    auto, fixed = (simulate(morph, u, TrialConfig(duration_s=0.5, cpg_max_step_s=cap), 4).result
+                   for cap in (None, 1e-3))
     assert (auto.distance_m, auto.work_j) == (fixed.distance_m, fixed.work_j)
 
 
@@ -153,8 +155,8 @@ def test_a_2ms_screen_of_a_sidewinding_gait_takes_one_cpg_step_per_update_at_no_
         worst = max(worst, float(np.max(np.abs(one.output_cm_s - fine.output_cm_s))))
     assert worst < 1e-6 * float(np.max(np.abs(fine.output_cm_s)))
     # the trial sees it only through the contacts' sensitivity (a 1e-9 cm start jitter moves it ~0.3 %)
-    auto, fixed = (run_trial(morph, u, TrialConfig(duration_s=2.0, engine="mujoco", dt_s=2e-3, cpg_max_step_s=cap),
-                             3, controller="sidewinding") for cap in (None, 1e-3))
+    auto, fixed = (simulate(morph, u, TrialConfig(duration_s=2.0, engine="mujoco", dt_s=2e-3, cpg_max_step_s=cap),
+                            3, controller="sidewinding").result for cap in (None, 1e-3))
     assert abs(auto.distance_m - fixed.distance_m) <= 0.02 * fixed.distance_m
 
 
@@ -170,8 +172,8 @@ def test_settle_phase_scores_locomotion_from_the_settled_pose(engine):
     morph = load_morphology("tetraspine-ntrt")
     u = random_unit_params(morph, 1)
     u[1] = 0.0
-    raw = run_trial(morph, u, TrialConfig(duration_s=1.0, engine=engine), 1)
-    settled = run_trial(morph, u, TrialConfig(duration_s=1.0, settle_s=1.0, engine=engine), 1)
+    raw = simulate(morph, u, TrialConfig(duration_s=1.0, engine=engine), 1).result
+    settled = simulate(morph, u, TrialConfig(duration_s=1.0, settle_s=1.0, engine=engine), 1).result
     assert raw.ok and settled.ok
     assert raw.distance_m > 0.02 and settled.distance_m < 0.1 * raw.distance_m
     assert settled.sim_time_s == pytest.approx(1.0) and settled.extras["settle_s"] == pytest.approx(1.0)

@@ -115,7 +115,7 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
     import numpy as np
 
     from spinefarm.worker.engines.base import engine_class
-    from spinefarm.worker.trial.run import run_trial
+    from spinefarm.worker.trial.run import simulate
     from spinefarm.worker.trial.setup import SetupCache
 
     if trial_config.engine in available_engines():
@@ -134,11 +134,11 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
             k = dataclasses.replace(spec, episodes=spec.episodes_for(a.duration_s), rung_episodes=(),
                                     rung_durations_s=())
             return with_fault(run_episodes(morphology, params, cfg, a.seed, k, controller=controller, setup=setup))
-        r = run_trial(morphology, params, cfg, a.seed, controller=controller, setup=setup)
+        r = simulate(morphology, params, cfg, a.seed, controller=controller, setup=setup).result
         if a.fidelity is not None and a.fidelity.perturb:
             friction = cfg.ground_friction if cfg.ground_friction is not None \
                 else ground_friction(morphology, cfg.profile)
-            p = run_trial(morphology, params, perturbed(cfg, friction), a.seed, controller=controller)
+            p = simulate(morphology, params, perturbed(cfg, friction), a.seed, controller=controller).result
             r = dataclasses.replace(r, extras={**r.extras, "perturbed_distance_m": p.distance_m if p.ok else
                                                float("nan")})
         return with_fault(r)

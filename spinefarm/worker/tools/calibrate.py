@@ -161,7 +161,7 @@ def _trial(job: tuple) -> tuple[float, float]:
     """(distance m or nan, CPU s per simulated s) of one trial."""
     from spinefarm.robot.trial_config import TrialConfig
     from spinefarm.worker.trial.episode import choose_step
-    from spinefarm.worker.trial.run import run_trial
+    from spinefarm.worker.trial.run import simulate
     from spinefarm.worker.trial.setup import SetupCache
 
     global _CACHE
@@ -173,7 +173,7 @@ def _trial(job: tuple) -> tuple[float, float]:
     if dt_scale != 1.0:  # a fraction of the step the trial would take (an automatic one included)
         cfg = dataclasses.replace(cfg, dt_s=choose_step(morph, cfg) * dt_scale, auto_dt=False)
     t0 = time.process_time()
-    r = run_trial(morph, np.asarray(unit), cfg, seed, controller=settings.controller, setup=_CACHE)
+    r = simulate(morph, np.asarray(unit), cfg, seed, controller=settings.controller, setup=_CACHE).result
     return (r.distance_m if r.ok else math.nan), (time.process_time() - t0) / max(r.sim_time_s, 1e-9)
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.profile import ground_friction
-from spinefarm.worker.trial.run import TrialConfig, run_trial
+from spinefarm.worker.trial.run import TrialConfig, simulate
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ def verify_trial(morphology: Morphology | str, params: np.ndarray, config: Trial
     s = settings or VerifySettings()
     morph = load_morphology(morphology)
     runs = verification_configs(config, s, morph)
-    results = {name: run_trial(morph, params, cfg, seed, controller=controller) for name, cfg in runs}
+    results = {name: simulate(morph, params, cfg, seed, controller=controller).result for name, cfg in runs}
     return judge(distance_m, results, runs[0][1].dt_s, s)
 
 
@@ -102,7 +102,7 @@ def verify_in_engine(morphology: Morphology | str, params: np.ndarray, config: T
     the one that counts; the result fails only if the judge's run fails."""
     morph = load_morphology(morphology)
     judge_cfg = dataclasses.replace(config, engine=engine, engine_options={}, dt_s=dt_s, auto_dt=False)
-    r = run_trial(morph, params, judge_cfg, seed, controller=controller)
+    r = simulate(morph, params, judge_cfg, seed, controller=controller).result
     change = abs(r.distance_m - distance_m) / max(abs(distance_m), 1e-9) if r.ok else math.inf
     return Verification(
         holds=r.ok, verdict="holds" if r.ok else f"not reproduced: {engine} run {r.status}: {r.reason}",
