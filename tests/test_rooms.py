@@ -109,7 +109,7 @@ def advance(engine, run, n_steps, active, horizon_steps):
     """n_steps through the engine."""
     engine.advance(run, n_steps, active, horizon_steps)
 '''
-RE_EXPORT = '"""Names from elsewhere."""\nfrom spinefarm.worker.trial.run import simulate\n\n__all__ = ["simulate"]\n'
+RE_EXPORT = '"""Names from elsewhere."""\nfrom spinefarm.protocol.run import RunConfig\n\n__all__ = ["RunConfig"]\n'
 CALLBACK = '''
 class Physics:
     def advance(self, run, n_steps, active):

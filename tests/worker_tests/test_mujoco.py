@@ -18,8 +18,8 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import GroundSpec, SceneConfig, build_terrain, surface_height_cm
 from spinefarm.worker.engines.mujoco import MujocoPhysics, MujocoSettings
 from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 from spinefarm.worker.trial.setup import SetupCache
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 from tests.worker_tests.helpers import ENGINES, PassiveRig, two_rod_structure
 
 V_CM_S, A_CM_S2 = 24.0, 10000.0
@@ -55,7 +55,7 @@ def test_motor_limits_do_not_depend_on_the_step_in_the_engine(engine):
 SNIPPET = """
 import json
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 m = load_morphology("tetraspine")
 cfg = TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco")
 r = simulate(m, random_unit_params(m, 11), cfg, seed=11).result

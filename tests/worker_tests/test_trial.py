@@ -16,7 +16,7 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.structure import StringMaterial
 from spinefarm.robot.morphology.variants import with_strings
 from spinefarm.robot.spaces import controller_space, param_space
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 
 def test_passive_tetraspine_settles_and_holds_its_shape():
@@ -79,7 +79,7 @@ TRIAL_SNIPPET = """
 import json
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_strings
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 m = load_morphology("tetraspine")
 r = simulate(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11).result
 d = r.to_dict(); d.pop("wall_time_s")

@@ -13,8 +13,8 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig, build_terrain
 from spinefarm.worker.engines.mujoco import MujocoPhysics, MujocoSettings
 from spinefarm.worker.trial.loop import advance
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate, simulate_batch
 from spinefarm.worker.trial.setup import SetupCache
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate, simulate_batch
 
 SEEDS = [1, 2, 3, 4]
 
