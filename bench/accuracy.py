@@ -18,7 +18,7 @@ from statistics import median
 
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.tools.accuracy import rel
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 STEPS_S = (2e-3, 1e-3, 5e-4, 2.5e-4)
 REFERENCE_S = 1.25e-4

@@ -1,5 +1,5 @@
 """Does stepping B worlds in one batch buy CPU time? CPU seconds per world and simulated second of MuJoCo
-trials run as one batch of B worlds (worker.trial.run.simulate_batch: one model, B data, one law over B worlds)
+trials run as one batch of B worlds (worker.trial.simulation.simulate_batch: one model, B data, one law over B worlds)
 against the same B parameter sets run one at a time, interleaved, set-ups reused.
 
     python bench/batch_worlds.py [--spine tetraspine] [--controller NAME] [--batches 1,4,8] [--seconds 3]
@@ -8,7 +8,7 @@ against the same B parameter sets run one at a time, interleaved, set-ups reused
 Prints one JSON object (last line): per B, `single_cpu_s_per_world_sim_s` and `batch_cpu_s_per_world_sim_s`
 (medians over --repeats rounds after a warm-up round, each round B fresh seeded random gaits),
 `batch_over_single` (below 1: the batch is cheaper per world) and `same_distances` (the batch's worlds give
-the single trials' bits, as worker.trial.run promises).
+the single trials' bits, as worker.trial.simulation promises).
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from spinefarm.robot.morphology.registry import load_morphology  # noqa: E402
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate, simulate_batch  # noqa: E402
 from spinefarm.worker.trial.setup import SetupCache  # noqa: E402
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate, simulate_batch  # noqa: E402
 
 
 def one_round(morph, b: int, first_seed: int, cfg: TrialConfig, controller: str | None,

@@ -27,7 +27,7 @@ def run(variant: str, gait_path: str, duration_s: float | None) -> dict:
     from spinefarm.cli.sim_commands import load_params_file
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.robot.morphology.variants import with_gains, with_strings
-    from spinefarm.worker.trial.run import TrialConfig, simulate
+    from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
     params, controller = load_params_file(Path(gait_path))
     morph = load_morphology(json.loads(Path(gait_path).read_text())["morphology"])

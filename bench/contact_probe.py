@@ -34,8 +34,8 @@ def probe(spine: str, engine: str, factors: list[float], settle_s: float, push_s
     from spinefarm.robot.bodies import quaternion_matrix
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.engines.base import GRAVITY_CM_S2, engine_class
-    from spinefarm.worker.trial.run import TrialConfig
     from spinefarm.worker.trial.setup import TrialSetup
+    from spinefarm.worker.trial.simulation import TrialConfig
 
     morph = load_morphology(spine)
     setup = TrialSetup(morph, TrialConfig(engine=engine, engine_options=options), None)

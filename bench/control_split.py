@@ -5,8 +5,8 @@ looks, the COM path, the set-up and result), per built-in.
 
     python bench/control_split.py [--spines all] [--seconds 3] [--repeats 3] [--controller NAME]
 
-The trial runs through worker.trial.run.simulate with the loop's compiled run (worker.trial.loop.run_compiled) swapped
-for a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
+The trial runs through worker.trial.simulation.simulate, with the loop's compiled run
+(worker.trial.loop.run_compiled) swapped for a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
 unchanged: `same_distance` checks it); the counter runs in wall time, so a step with a part longer than
 PREEMPTED_US (the law: plus twice a CPG update) had another process in it and is left out of the per-step means
 (`steps_preempted`). The CPG alone
@@ -42,8 +42,8 @@ from spinefarm.robot.morphology.registry import builtin_names, load_morphology  
 from spinefarm.worker import loop  # noqa: E402
 from spinefarm.worker.control.cpg import rk4_advance  # noqa: E402
 from spinefarm.worker.control.law import STATUS_OK, law_step_world  # noqa: E402
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate  # noqa: E402
 from spinefarm.worker.trial.setup import SetupCache  # noqa: E402
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate  # noqa: E402
 
 # a part of a step this long had another process's time slice in it (the slowest mj_step measured: ~0.35 ms,
 # ribbed); the law's cap adds twice a CPG update (NTRT's 0.1 s update: 100 RK4 steps at once, up to ~2 ms)

@@ -25,7 +25,7 @@ G_M_S2 = 9.81
 def terms(name: str, duration_s: float) -> dict:
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.simulation import simulate
 
     spec = json.loads((GAITS / f"{name}.json").read_text())
     morph = load_morphology(spec["morphology"])

@@ -26,8 +26,8 @@ import time
 import numpy as np
 
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 from spinefarm.worker.trial.setup import SetupCache
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 JITTER_CM = 1e-6
 

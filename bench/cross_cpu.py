@@ -36,7 +36,7 @@ def fingerprint(gait: Path, engine: str, duration_s: float, seed: int = 1) -> di
     import numpy as np
 
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.simulation import simulate
 
     spec = json.loads(gait.read_text())
     t0 = time.perf_counter()

@@ -37,8 +37,8 @@ from scipy.stats import spearmanr
 
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
 from spinefarm.worker.trial import scoring
-from spinefarm.worker.trial.run import TrialConfig, simulate
 from spinefarm.worker.trial.setup import SetupCache
+from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
 _CACHE = SetupCache()
 

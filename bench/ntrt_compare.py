@@ -57,7 +57,7 @@ def simulate_ours(folder: Path, morphology: str, motor_model: str, duration_s: f
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.robot.trial_config import TrialConfig
     from spinefarm.worker.tools.replay import read_parameter_set, unit_params
-    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.simulation import simulate
 
     morph = load_morphology(morphology)
     u = unit_params(morph, read_parameter_set(folder / "params"))

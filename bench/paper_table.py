@@ -44,7 +44,7 @@ def episode(gait: str, config: str, k: int, randomize: str, seed: int, duration_
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.robot.scene import parse_scene
     from spinefarm.worker.trial.robust import episode_world, run_worlds
-    from spinefarm.worker.trial.run import TrialConfig
+    from spinefarm.worker.trial.simulation import TrialConfig
 
     path = GAITS / f"{gait}.json"
     params, controller = load_params_file(path)

@@ -65,7 +65,7 @@ def measure_one(morphology: str, controller: str, params: dict, randomize: str, 
     from spinefarm.protocol.robust import RobustSpec, draw_episode, parse_randomize
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.trial.robust import episode_world, run_worlds
-    from spinefarm.worker.trial.run import TrialConfig
+    from spinefarm.worker.trial.simulation import TrialConfig
 
     morph = load_morphology(morphology)
     spec = RobustSpec(episodes=k + 1, randomize=parse_randomize(randomize))

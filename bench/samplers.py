@@ -50,7 +50,7 @@ PAPER_SPEED_CM_S = {"tetraspine": 9.46, "tetrahedral-complex": 6.13, "octahedral
 
 
 def _trial(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int):
-    from spinefarm.worker.trial.run import TrialConfig, simulate
+    from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
     return simulate(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
                     controller=controller).result
@@ -59,7 +59,7 @@ def _trial(morphology: str, controller: str | None, trial_config: dict, params_u
 def _verify(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int,
             distance_m: float) -> dict:
     from spinefarm.worker.tools.verify import VerifySettings, verify_trial
-    from spinefarm.worker.trial.run import TrialConfig
+    from spinefarm.worker.trial.simulation import TrialConfig
 
     return verify_trial(morphology, np.asarray(params_unit), TrialConfig.from_dict(trial_config), seed,
                         distance_m, VerifySettings(), controller=controller).to_dict()
@@ -68,7 +68,7 @@ def _verify(morphology: str, controller: str | None, trial_config: dict, params_
 def _judge(morphology: str, controller: str | None, trial_config: dict, params_unit: list, seed: int,
            judge_dt_s: float) -> dict:
     """The Bullet judge's run of a screened trial at its converged step."""
-    from spinefarm.worker.trial.run import TrialConfig, simulate
+    from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
     cfg = TrialConfig.from_dict({**trial_config, "engine": "bullet", "engine_options": {}, "dt_s": judge_dt_s,
                                  "auto_dt": False})

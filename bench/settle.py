@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--morphology", default="tetraspine")
     args = ap.parse_args()
     from spinefarm.robot.trial_config import TrialConfig
-    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.simulation import simulate
 
     params = at_rest(args.morphology)
     t0 = time.time()

@@ -37,7 +37,7 @@ def node_targets(morph, space, physical: np.ndarray) -> tuple[float, float]:
 
 def one(morph_name: str, controller: str, seed: int, duration_s: float, settle_s: float) -> dict:
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+    from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
     morph = load_morphology(morph_name)
     space = controller_space(morph, controller)

@@ -21,7 +21,7 @@ from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_density_factor, with_gains, with_strings
 from spinefarm.worker.sim.stability import estimate_stable_step
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 
 def _edge_params(morph: Morphology, seed: int) -> np.ndarray:

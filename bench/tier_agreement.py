@@ -43,8 +43,8 @@ _CACHE = None  # one SetupCache per pool process: set-up reused as a worker does
 
 def _trial(args: tuple) -> dict:
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial.run import TrialConfig, simulate
     from spinefarm.worker.trial.setup import SetupCache
+    from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
     global _CACHE
     _CACHE = _CACHE or SetupCache(8)
@@ -156,7 +156,7 @@ def _jobs(args: argparse.Namespace, tiers: dict, extra: dict, sets: int, duratio
           best_of: dict) -> list[tuple]:
     """One job per spine, tier, engine and parameter set: (spine, tier, engine, index, _trial's arguments)."""
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial.run import random_unit_params
+    from spinefarm.worker.trial.simulation import random_unit_params
 
     jobs: list[tuple] = []
     for spine in args.spines.split(","):

@@ -127,7 +127,7 @@ class MujocoSampled(_Sampler, MujocoPhysics):
 def run(spine: str, engine: str, seed: int, duration_s: float, settle_s: float, every_s: float,
         options: dict, controller: str | None) -> dict:
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+    from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
     morph = load_morphology(spine)
     cls = BulletSampled if engine == "bullet" else MujocoSampled

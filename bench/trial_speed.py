@@ -57,7 +57,7 @@ from spinefarm.robot.spaces import controller_space
 from spinefarm.worker.control.cpg import CpgIntegrator
 from spinefarm.worker.engines.bullet import BulletPhysics
 from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, string_tables
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, string_tables
 
 
 def measure(morph_name: str, steps: int, warmup: int, seed: int) -> dict:
@@ -140,8 +140,8 @@ def tiers(morph_name: str, seconds: float, repeats: int, mujoco_options: dict,
     segment-segment contacts) and Bullet at 0.25 ms (about MuJoCo's default-step accuracy, docs/accuracy.md).
     gaits: unit parameter vectors (of `controller`'s space) to run, one per round after a warm-up round;
     default: seeded random ones."""
-    from spinefarm.worker.trial.run import simulate
     from spinefarm.worker.trial.setup import SetupCache
+    from spinefarm.worker.trial.simulation import simulate
 
     morph = load_morphology(morph_name)
     configs = _tier_configs(seconds, mujoco_options)
@@ -197,8 +197,8 @@ def spine_speeds(morph_name: str, seconds: float, repeats: int) -> dict:
     default step: Bullet, MuJoCo as it runs by default, and MuJoCo's segment-segment contacts both ways."""
     from spinefarm.protocol.errors import ConfigError
     from spinefarm.worker.trial.episode import choose_step
-    from spinefarm.worker.trial.run import simulate
     from spinefarm.worker.trial.setup import SetupCache
+    from spinefarm.worker.trial.simulation import simulate
 
     morph = load_morphology(morph_name)
     configs = {name: TrialConfig(duration_s=seconds, engine=engine, engine_options=options)
@@ -303,8 +303,8 @@ def reach_pairs(morph, cfg: TrialConfig) -> dict:
 def settled_cost(morph_name: str, seconds: float, settle_s: float, repeats: int) -> dict:
     """CPU s per MuJoCo trial (settle_s then seconds of locomotion, set-up reused, seeded random gaits),
     interleaved: every trial starting from the kept settle end (worker.trial.settled) against every trial settling."""
-    from spinefarm.worker.trial.run import simulate
     from spinefarm.worker.trial.setup import SetupCache
+    from spinefarm.worker.trial.simulation import simulate
 
     morph = load_morphology(morph_name)
     cfg = TrialConfig(duration_s=seconds, settle_s=settle_s, engine="mujoco")
@@ -374,8 +374,8 @@ def best_gaits(path: str, count: int, apart: float = 0.1) -> tuple[list[np.ndarr
 
 def setup_cost(morph_name: str, repeats: int) -> dict:
     """Set-up of one trial (a 1-step trial's wall time): built fresh against reused, per engine."""
-    from spinefarm.worker.trial.run import simulate
     from spinefarm.worker.trial.setup import SetupCache
+    from spinefarm.worker.trial.simulation import simulate
 
     morph = load_morphology(morph_name)
     out = {}

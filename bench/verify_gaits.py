@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from spinefarm.worker.tools.verify import VerifySettings, verify_trial  # noqa: E402
-from spinefarm.worker.trial.run import TrialConfig, simulate  # noqa: E402
+from spinefarm.worker.trial.simulation import TrialConfig, simulate  # noqa: E402
 
 
 def check(gait_file: Path) -> dict:

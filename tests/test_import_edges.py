@@ -16,7 +16,7 @@ ALLOWED = {
     "spinefarm.protocol.work": set(),
     "spinefarm.protocol.errors": set(),
     "spinefarm.robot.morphology.registry": set(),
-    "spinefarm.worker.trial.run": {"numba"},
+    "spinefarm.worker.trial.simulation": {"numba"},
     "spinefarm.worker.engines.bullet": {"pybullet", "numba"},
     "spinefarm.worker.engines.mujoco": {"mujoco"},
     "spinefarm.worker.trial.setup": {"numba"},

@@ -40,7 +40,7 @@ def default_cache_dir() -> Path:
 
 def simulator_missing(engine: str) -> str | None:
     """Why this process cannot draw a trial of `engine`, or None when it can."""
-    for module in ("spinefarm.worker.trial.run", ENGINE_MODULES.get(engine, engine)):
+    for module in ("spinefarm.worker.trial.simulation", ENGINE_MODULES.get(engine, engine)):
         try:
             found = importlib.util.find_spec(module) is not None
         except (ImportError, ValueError):

@@ -28,7 +28,7 @@ def load_record(path: Path, morph_name: str) -> dict[str, np.ndarray]:
 
 
 def _params(morph: Any, path: Path | None, seed: int) -> tuple[Any, str | None]:
-    from spinefarm.worker.trial.run import random_unit_params
+    from spinefarm.worker.trial.simulation import random_unit_params
 
     if path is None:
         return random_unit_params(morph, seed), None
@@ -48,7 +48,7 @@ def simulate_recorded(args: argparse.Namespace, morph: Any, every_s: Callable[[f
     """(outcome, recorded arrays) of the short trial `render` draws: --params (else random parameters from
     --random-seed), --duration (else at most 5 s), --engine, --motor-model, recorded every every_s(duration)
     seconds; saved to --record when given."""
-    from spinefarm.worker.trial.run import TrialConfig, simulate
+    from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
     params, controller = _params(morph, args.params, args.random_seed)
     duration = args.duration or min(morph.duration_s, 5.0)

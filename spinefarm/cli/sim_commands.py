@@ -181,7 +181,7 @@ def result_summary(result: Any, morph_name: str, controller: str | None) -> dict
 
 def cmd_trial(args: argparse.Namespace) -> int:
     from spinefarm.protocol.environment import environment_record
-    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.simulation import simulate
 
     if args.record is not None:
         checks.output_path("--record", args.record, (".npz",))
@@ -216,7 +216,7 @@ def _trial_inputs(args: argparse.Namespace) -> tuple[Any, str | None, np.ndarray
     `trial` runs: a stored trial of --run, or a robot with --params or random parameters."""
     from spinefarm.cli.environment_notes import note_environment, recorded_environment
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial.run import random_unit_params
+    from spinefarm.worker.trial.simulation import random_unit_params
 
     if args.run is not None:
         morphology, controller, params, seed, base, stored_id = _stored_trial(args.run, args.trial_id)
@@ -244,7 +244,7 @@ def _trial_inputs(args: argparse.Namespace) -> tuple[Any, str | None, np.ndarray
 
 def _trial_config(args: argparse.Namespace, base: dict[str, Any], controller: str | None) -> Any:
     """The TrialConfig: a stored trial's config (`base`, else the defaults) with the flags on top."""
-    from spinefarm.worker.trial.run import TrialConfig
+    from spinefarm.worker.trial.simulation import TrialConfig
 
     overrides = trial_overrides(args)
     if "engine" in overrides and overrides["engine"] != base.get("engine", DEFAULT_ENGINE):

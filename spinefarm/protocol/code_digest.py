@@ -18,7 +18,7 @@ from spinefarm.protocol.errors import MessageError
 _PACKAGE = Path(__file__).resolve().parent.parent
 # whole folders, then single modules, relative to the package (the "Trial" part of the architecture)
 SIMULATING_DIRS = ("robot", "worker/engines", "worker/control", "worker/sim")
-SIMULATING_MODULES = ("worker/trial/run.py", "worker/trial/loop.py", "worker/trial/batch.py",
+SIMULATING_MODULES = ("worker/trial/simulation.py", "worker/trial/loop.py", "worker/trial/batch.py",
                       "worker/trial/scoring.py", "worker/trial/episode.py", "worker/trial/setup.py",
                       "worker/trial/settled.py", "worker/trial/robust.py", "worker/service/assignment.py",
                       "worker/service/evaluators.py", "protocol/run.py", "protocol/params.py")

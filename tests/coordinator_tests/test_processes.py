@@ -123,7 +123,7 @@ def test_late_joiner_and_a_leaver(tmp_path):
 
 
 def test_physics_search_with_two_worker_processes(tmp_path):
-    pytest.importorskip("spinefarm.worker.trial.run")
+    pytest.importorskip("spinefarm.worker.trial.simulation")
     out = tmp_path / "tetra.h5"
     proc = spinefarm("search", "tetraspine", "--trials", "4", "--workers", "2", "--duration", "0.5",
                      "--out", str(out), "--api-port", "-1", "--quiet", "--engine", "bullet")

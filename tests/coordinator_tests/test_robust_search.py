@@ -14,7 +14,7 @@ from spinefarm.protocol.robust import RobustSpec
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.storage.hdf5_reader import Hdf5Reader, read_episodes, read_meta, read_run
 from spinefarm.worker.trial.robust import run_episodes
-from spinefarm.worker.trial.run import TrialConfig
+from spinefarm.worker.trial.simulation import TrialConfig
 from tests.coordinator_tests.procs import ROOT
 from tests.http_server import served
 

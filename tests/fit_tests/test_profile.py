@@ -95,7 +95,7 @@ def test_calibration_key_holds_the_profile_hash():
 
 def test_search_carries_the_profile_to_its_workers(tmp_path):
     from spinefarm.storage.hdf5_reader import read_run
-    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.simulation import simulate
 
     (tmp_path / "p.yaml").write_text(PROFILE)
     run = tmp_path / "run.h5"

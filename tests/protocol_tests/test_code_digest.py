@@ -27,7 +27,7 @@ def package(tmp_path):
 def test_the_digest_is_a_sha256_of_the_simulating_sources_only(package):
     names = {p.relative_to(package).as_posix() for p in simulating_sources(package)}
     assert {"robot/engines.py", "worker/engines/bullet.py", "worker/control/law.py", "worker/sim/strings.py",
-            "worker/trial/run.py", "worker/trial/scoring.py"} <= names
+            "worker/trial/simulation.py", "worker/trial/scoring.py"} <= names
     assert not names & {"worker/service/zenoh_worker.py", "coordinator/core.py", "api/app.py"}
     before = digest_of(package)
     assert before == code_digest() and len(before) == 64 and int(before, 16) >= 0

@@ -14,7 +14,7 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.tools import shipped_calibration
 from spinefarm.worker.tools.calibrate import CalibrationSettings, calibrate, calibration
 from spinefarm.worker.tools.shipped_calibration import shipped
-from spinefarm.worker.trial.run import simulate
+from spinefarm.worker.trial.simulation import simulate
 
 JUDGE_DT_S = 0.00025  # the judge's documented step (docs/accuracy.md: Bullet within ~1.5 % there)
 ROBOT = "tetrahedral-complex"
@@ -32,7 +32,7 @@ def test_the_reference_runs_at_the_judges_step_not_bullets_default():
     assert out["tiers"]["bullet"]["dt_s"] == JUDGE_DT_S and out["tiers"]["mujoco"]["dt_s"] == 0.001
     # the figures are those of trials at that step: gait 1 replayed on its own at 0.25 ms and at Bullet's 1 ms
     morph = load_morphology(ROBOT)
-    from spinefarm.worker.trial.run import random_unit_params
+    from spinefarm.worker.trial.simulation import random_unit_params
 
     unit = np.asarray(random_unit_params(morph, 1, None))
     at = {dt: simulate(morph, unit, TrialConfig(duration_s=0.6, settle_s=0.2, engine="bullet", dt_s=dt), 1).result

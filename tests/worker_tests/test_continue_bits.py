@@ -10,8 +10,8 @@ import pytest
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.control.law import ControlLaw
 from spinefarm.worker.trial.loop import stepper
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params
 from spinefarm.worker.trial.setup import TrialSetup
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params
 
 FIRST_STEPS, MORE_STEPS = 1001, 143  # 1001: inside an interval of an interpolated CPG (every 2-4 steps),
 # late enough that the motors no longer all run at their acceleration limit (which would hide the setpoints)

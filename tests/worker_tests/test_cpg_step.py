@@ -13,7 +13,7 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.control.cpg import SLOW_RATE_STEP, CpgNetwork
 from spinefarm.worker.control.law import ControlLaw
 from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate, simulate_batch
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate, simulate_batch
 
 A = 20.0  # the amplitude rate a (1/s), CpgNetwork's default
 DT = 1e-3

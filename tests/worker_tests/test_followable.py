@@ -10,7 +10,7 @@ import pytest
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.spaces import controller_space, followable_limits, param_space
-from spinefarm.worker.trial.run import TrialConfig, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
 BUILT_INS = ["tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed"]
 

@@ -11,7 +11,7 @@ import pytest
 from spinefarm.cli.sim_commands import load_params_file
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.spaces import param_space
-from spinefarm.worker.trial.run import TrialConfig, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
 ROOT = Path(__file__).resolve().parents[2] / "examples" / "gaits"
 GAITS = sorted(ROOT.rglob("*.json"))

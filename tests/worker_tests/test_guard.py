@@ -11,8 +11,8 @@ from spinefarm.robot.scene import SceneConfig, build_terrain
 from spinefarm.worker.sim import strings as sk
 from spinefarm.worker.trial import guard
 from spinefarm.worker.trial.episode import STRETCH_BASE_MIN_CM, check_state
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 from spinefarm.worker.trial.setup import SetupCache
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 
 def _state(seed: int):

@@ -22,7 +22,7 @@ from spinefarm.worker.tools.contract import (
     check_sane_numbers,
     passive_params,
 )
-from spinefarm.worker.trial.run import TrialConfig, simulate, string_tables
+from spinefarm.worker.trial.simulation import TrialConfig, simulate, string_tables
 from tests.worker_tests.helpers import ENGINES
 
 

@@ -18,8 +18,8 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import GroundSpec, SceneConfig, build_terrain, surface_height_cm
 from spinefarm.worker.engines.mujoco import MujocoPhysics, MujocoSettings
 from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
 from spinefarm.worker.trial.setup import SetupCache
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 from tests.worker_tests.helpers import ENGINES, PassiveRig, two_rod_structure
 
 V_CM_S, A_CM_S2 = 24.0, 10000.0
@@ -55,9 +55,10 @@ def test_motor_limits_do_not_depend_on_the_step_in_the_engine(engine):
 SNIPPET = """
 import json
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 m = load_morphology("tetraspine")
-r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco"), seed=11)
+cfg = TrialConfig(duration_s=0.3, pose_jitter_cm=0.01, engine="mujoco")
+r = simulate(m, random_unit_params(m, 11), cfg, seed=11).result
 d = r.to_dict(); d.pop("wall_time_s")
 print(json.dumps(d))
 """
@@ -261,7 +262,8 @@ def test_auto_segment_contacts_give_the_bits_of_modelled_ones(name, controller, 
     morph = load_morphology(name)
     u = random_unit_params(morph, 1, controller)
     runs = {mode: simulate(morph, u, TrialConfig(duration_s=seconds, engine="mujoco",
-                                                 engine_options={"segment_contacts": mode}), 1, controller=controller).result
+                                                 engine_options={"segment_contacts": mode}), 1,
+                           controller=controller).result
             for mode in ("scene", "auto")}
     assert runs["auto"].distance_m == runs["scene"].distance_m and runs["auto"].work_j == runs["scene"].work_j
     assert runs["auto"].extras.get("segment_contacts", "").startswith("modelled") == needs_contacts

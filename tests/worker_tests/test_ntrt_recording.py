@@ -14,7 +14,7 @@ from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.tools.replay import detect_morphology, ntrt_motor, read_parameter_set, recorded_run, unit_params
-from spinefarm.worker.trial.run import simulate
+from spinefarm.worker.trial.simulation import simulate
 
 RECORDINGS = Path(__file__).parent / "data" / "ntrt-recordings"
 RUN = RECORDINGS / "TetraSpine" / "random-00"

@@ -15,7 +15,7 @@ import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.trial.run import random_unit_params, simulate
+from spinefarm.worker.trial.simulation import random_unit_params, simulate
 
 GAIT = Path(__file__).resolve().parents[2] / "examples" / "gaits" / "tetraspine.json"
 G_M_S2 = 9.81

@@ -18,7 +18,7 @@ from spinefarm.worker.engines.contact_guard import _segment_distance
 from spinefarm.worker.engines.mujoco import MujocoPhysics
 from spinefarm.worker.engines.mujoco_model import MujocoSettings
 from spinefarm.worker.tools.accuracy import DISTANCE_FLOOR_M, rel
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 # segment 0 and 1: a short hub rod carrying both string anchors and a far rod 40-60 cm out along x; two stiff
 # strings hold the hubs at most 10 cm (plus 1.4 cm of stretch) apart, so a hub can never reach the other

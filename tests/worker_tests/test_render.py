@@ -13,7 +13,7 @@ from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.spaces import param_space
 from spinefarm.worker.tools.render import Frame, frames_from_record, initial_frame, render, rod_segments
-from spinefarm.worker.trial.run import TrialConfig, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
 
 def _image(path: Path) -> np.ndarray:

@@ -12,7 +12,7 @@ from spinefarm.protocol.robust import EpisodeDraw, RobustSpec, parse_randomize, 
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.trial.robust import combine, run_episodes
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params
 from tests.storage_tests.conftest import result
 
 

@@ -12,7 +12,7 @@ from spinefarm.protocol.robust import EpisodeDraw
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig
 from spinefarm.worker.trial.robust import episode_world, first_episode
-from spinefarm.worker.trial.run import TrialConfig
+from spinefarm.worker.trial.simulation import TrialConfig
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from spinefarm.protocol.robust import RobustSpec, draw_episode
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.trial.robust import episode_world, run_episodes
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 
 def singles(morph, u, cfg, spec, seed):

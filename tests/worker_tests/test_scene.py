@@ -12,7 +12,7 @@ from spinefarm.robot.bodies import build_bodies
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig, build_terrain, pairs_off, surface_height_cm
 from spinefarm.worker.engines.bullet import BulletPhysics
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 
 def engine_surface(terrain, xs, zs) -> np.ndarray:

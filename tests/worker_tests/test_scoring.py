@@ -11,7 +11,7 @@ import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.trial import scoring
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 
 def test_planar_distance_ignores_height():

@@ -8,8 +8,8 @@ import dataclasses
 import pytest
 
 from spinefarm.robot.morphology.registry import load_morphology
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate, simulate_batch
 from spinefarm.worker.trial.setup import SetupCache
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate, simulate_batch
 
 
 def _same(a, b) -> None:

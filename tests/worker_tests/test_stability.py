@@ -13,7 +13,7 @@ from spinefarm.robot.morphology.model import ControlSpec, Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_density_factor, with_gains, with_strings
 from spinefarm.worker.sim.stability import estimate_stable_step
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 from tests.worker_tests.helpers import mass_between_anchors
 
 
@@ -73,7 +73,8 @@ def test_light_segments_are_limited_by_damping_and_run_at_the_auto_step():
     u = random_unit_params(light, 1)
     ok = simulate(light, u, TrialConfig(duration_s=0.5, auto_dt=True), 1).result
     assert ok.status == TrialStatus.COMPLETE, ok.reason
-    forced = simulate(light, u, TrialConfig(duration_s=0.5, dt_s=10 * est.dt_limit_s, refuse_unstable_dt=False), 1).result
+    forced = simulate(light, u, TrialConfig(duration_s=0.5, dt_s=10 * est.dt_limit_s, refuse_unstable_dt=False),
+                      1).result
     assert forced.status == TrialStatus.FAILED and forced.reason.startswith("diverged")
 
 

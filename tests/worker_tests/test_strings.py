@@ -98,7 +98,7 @@ def test_force_pairs_match_per_anchor_application_in_pybullet():
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.robot.scene import GroundSpec
     from spinefarm.worker.engines.bullet import BulletPhysics
-    from spinefarm.worker.trial.run import string_tables
+    from spinefarm.worker.trial.simulation import string_tables
 
     morph = load_morphology("tetraspine-ntrt")
     bodies = build_bodies(morph.structure)

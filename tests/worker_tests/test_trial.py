@@ -16,7 +16,7 @@ from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.structure import StringMaterial
 from spinefarm.robot.morphology.variants import with_strings
 from spinefarm.robot.spaces import controller_space, param_space
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 
 def test_passive_tetraspine_settles_and_holds_its_shape():
@@ -79,9 +79,9 @@ TRIAL_SNIPPET = """
 import json
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_strings
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 m = load_morphology("tetraspine")
-r = run_trial(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11)
+r = simulate(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11).result
 d = r.to_dict(); d.pop("wall_time_s")
 print(json.dumps(d))
 """
@@ -95,7 +95,8 @@ def test_deterministic_across_processes():
     m = load_morphology("tetraspine")
     here = simulate(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=11).result
     assert here.distance_m == a["distance_m"] and here.work_j == a["work_j"]  # same bits
-    other_seed = simulate(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01), seed=12).result
+    other_seed = simulate(m, random_unit_params(m, 11), TrialConfig(duration_s=0.3, pose_jitter_cm=0.01),
+                          seed=12).result
     assert other_seed.distance_m != a["distance_m"]
 
 
@@ -133,7 +134,8 @@ def test_default_cpg_sub_step_keeps_the_bits_of_1ms_sub_steps_on_ntrt_networks(n
     space = controller_space(morph)
     period = morph.control.cpg_update_period_s
     assert CpgIntegrator(space.network(space.param_space.from_unit(u))).plan(period) == (1e-3, round(period / 1e-3))
-    auto, fixed = (simulate(morph, u, TrialConfig(duration_s=0.5, cpg_max_step_s=cap), 4).result for cap in (None, 1e-3))
+    auto, fixed = (simulate(morph, u, TrialConfig(duration_s=0.5, cpg_max_step_s=cap), 4).result
+                   for cap in (None, 1e-3))
     assert (auto.distance_m, auto.work_j) == (fixed.distance_m, fixed.work_j)
 
 

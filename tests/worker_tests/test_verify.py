@@ -5,7 +5,7 @@ from __future__ import annotations
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.morphology.variants import with_strings
 from spinefarm.worker.tools.verify import VerifySettings, verify_trial
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 
 def test_creep_artefact_is_not_reproduced_at_a_finer_step():

@@ -12,8 +12,9 @@ from spinefarm.robot.engines import engine_names
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig, build_terrain
 from spinefarm.worker.engines.mujoco import MujocoPhysics, MujocoSettings
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate, simulate_batch
+from spinefarm.worker.trial.loop import advance
 from spinefarm.worker.trial.setup import SetupCache
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate, simulate_batch
 
 SEEDS = [1, 2, 3, 4]
 
@@ -73,7 +74,12 @@ def test_the_engine_hands_back_a_world_its_contact_guard_cannot_vouch_for():
     scene.qvel[1][1, :3] = [0.0, 0.0, -1e5]  # world 1: segment 1 flying at segment 0
     active = np.ones(2, dtype=bool)
     ran = []
-    scene.advance(lambda k, act: ran.append((k, act.copy())), 10, active, 10)
+
+    def run(k: int, act: np.ndarray) -> None:  # the loop's steps, here without a control law
+        ran.append((k, act.copy()))
+        for _ in range(k):
+            scene.step(act)
+    advance(scene, run, 10, active, 10)
     assert active.tolist() == [True, False]
     options, extras = scene.retries[1]
     assert options == {"segment_contacts": "scene"} and extras["segment_contacts"].startswith("modelled: gap")

@@ -11,10 +11,12 @@ trial loop (worker.trial.loop) calls, per batch of trials:
                                   kg*cm^2/s^2 about it, world frame, held for the next step only
   step(active)                    advance dt_s; active (B,) bool or None (all): worlds not active may be skipped
                                   (a CPU backend loops over its worlds; a batched one may step them all)
-  advance(run, n_steps, active, horizon_steps)
-                                  the engine's policy over a run of steps: by default run(n_steps, active); an
-                                  engine may split the run, or take a world out of `active` and put it in
-                                  `retries` with the settings it must be run again in (from its start)
+  steps_ahead(active, n_steps, horizon_steps)
+                                  the engine's policy over a run of steps, asked by the loop before each piece
+                                  and once after the last (n_steps: those left): how many the active worlds
+                                  may run now (by default all); an engine may shorten the piece, or take a world
+                                  out of `active` and put it in `retries` with the settings it must be run again
+                                  in (from its start). It is told nothing back: it reads its worlds' state.
   close()                         free the worlds (also via `with`)
 An engine whose wants_rod_pairs(settings) is true is also given rod_pairs=(p, 4) rows (body a, rod of a, body b,
 rod of b): the rod pairs of different segments that can come within reach of each other (robot.reach), so it
@@ -54,7 +56,6 @@ from spinefarm.robot.scene import Terrain
 
 GRAVITY_CM_S2 = 981.0
 
-Run = Callable[[int, np.ndarray], None]  # run(k, active): k steps of the active worlds (the loop's)
 Vector3 = Sequence[float] | np.ndarray
 
 
@@ -88,9 +89,9 @@ class BasePhysics:
         """Whether the constructor wants rod_pairs (robot.reach) with these settings."""
         return False
 
-    def advance(self, run: Run, n_steps: int, active: np.ndarray, horizon_steps: int) -> None:
-        """n_steps of the active worlds through run(k, active) (the loop's steps); see the module docstring."""
-        run(n_steps, active)
+    def steps_ahead(self, active: np.ndarray, n_steps: int, horizon_steps: int) -> int:
+        """How many of the next n_steps the active worlds may run now; see the module docstring."""
+        return n_steps
 
     def close(self) -> None:
         raise NotImplementedError

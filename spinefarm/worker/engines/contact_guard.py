@@ -9,7 +9,7 @@ next look (from their current speeds, with a factor of two to spare), no contact
 the trial is the same bits as one with the contacts modelled. The guard says how many steps are safe (up
 to the trial's next check, fewer when a gap could close sooner), and the trial loop looks again after
 them. Only when a gap could
-close within a single step is the trial run again from the start with the contacts (worker.trial.run).
+close within a single step is the trial run again from the start with the contacts (worker.trial.simulation).
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ from spinefarm.protocol.errors import ConfigError
 from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel, quaternion_matrix
 from spinefarm.robot.scene import GroundSpec, Terrain, pairs_off
-from spinefarm.worker.engines.base import BasePhysics, Run, Vector3, world_offsets
+from spinefarm.worker.engines.base import BasePhysics, Vector3, world_offsets
 from spinefarm.worker.engines.mujoco_model import (
     POSE_COLUMNS,
     MujocoSettings,
@@ -146,27 +146,18 @@ class MujocoPhysics(BasePhysics):
         return [(step, self.model._address, d._address, q, self._order, x) for d, q, x in
                 zip(self.data, self.qpos, self.xfrc, strict=True)]
 
-    def advance(self, run: Run, n_steps: int, active: np.ndarray, horizon_steps: int) -> None:
-        """With segment_contacts "auto", the steps are run in pieces no longer than the contact guard finds
-        safe (it looks again when a world reaches the end of its safe steps, at most horizon_steps ahead); a
-        world for which not even one step is safe leaves `active` for `retries`: run it again from its start
-        with segment_contacts "scene"."""
+    def steps_ahead(self, active: np.ndarray, n_steps: int, horizon_steps: int) -> int:
+        """With segment_contacts "auto", runs of steps no longer than the contact guard finds safe: it looks
+        again (at most horizon_steps ahead) at a world that has reached the end of its safe steps, counted by the
+        world's own clock; a world for which not even one step is safe leaves `active` for `retries` (run it
+        again from its start with segment_contacts "scene")."""
         if self.guard is None:
-            run(n_steps, active)
-            return
-        steps, safe = self._steps, self._safe_until
-        done = 0
+            return n_steps
+        for b, data in enumerate(self.data):
+            self._steps[b] = round(data.time / self.model.opt.timestep)
         self._look(active, horizon_steps)
-        while done < n_steps:
-            live = [b for b in range(self.n_worlds) if active[b]]
-            if not live:
-                return
-            k = min(n_steps - done, min(safe[b] - steps[b] for b in live))
-            run(k, active)
-            for b in live:
-                steps[b] += k
-            done += k
-            self._look(active, horizon_steps)
+        live = [b for b in range(self.n_worlds) if active[b]]
+        return min(n_steps, *(self._safe_until[b] - self._steps[b] for b in live)) if live else 0
 
     def _look(self, active: np.ndarray, horizon_steps: int) -> None:
         for b in range(self.n_worlds):

@@ -36,7 +36,7 @@ def record(morph: Morphology, cfg: TrialConfig, seed: int, duration_s: float) ->
     """A trial of a seeded random gait under cfg, recorded at every step, as a recording."""
     import numpy as np
 
-    from spinefarm.worker.trial.run import random_unit_params, simulate
+    from spinefarm.worker.trial.simulation import random_unit_params, simulate
 
     run = dataclasses.replace(cfg, duration_s=duration_s, record_every_s=cfg.step_s)
     unit = random_unit_params(morph, seed)

@@ -25,6 +25,7 @@ from spinefarm.worker.engines.base import BasePhysics
 from spinefarm.worker.fit.recording import Recording, RecordingError
 from spinefarm.worker.fit.state import engine_poses, rest_lengths_cm, velocities
 from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.trial.loop import advance
 from spinefarm.worker.trial.setup import TrialSetup
 
 
@@ -141,7 +142,7 @@ def _batch(setup: TrialSetup, rec: Recording, windows: list[Window], recorded: n
     try:
         shots.start(engine, rec, windows)
         active = np.ones(len(windows), dtype=bool)
-        engine.advance(lambda k, live: shots.run(engine, k, live), shots.n_steps, active, shots.n_steps)
+        advance(engine, lambda k, live: shots.run(engine, k, live), shots.n_steps, active, shots.n_steps)
         live = active & np.array([shots.n_steps in c for c in shots.check])
         shots.run(engine, 1, live)  # the last checked rows: their poses and the tensions those poses make
         return [None if w in engine.retries else shots.runs[w] for w in range(len(windows))]

@@ -117,8 +117,8 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
 
     from spinefarm.worker.engines.base import engine_class
     from spinefarm.worker.trial.feasibility import FeasibilityCache, infeasible_result
-    from spinefarm.worker.trial.run import simulate
     from spinefarm.worker.trial.setup import SetupCache
+    from spinefarm.worker.trial.simulation import simulate
 
     if trial_config.engine in available_engines():
         engine_class(trial_config.engine).settings_from_options(trial_config.engine_options)

@@ -79,7 +79,7 @@ def build_evaluator(config: RunConfig) -> Evaluator:
 
         return sphere
     from spinefarm.robot.morphology.model import Morphology
-    from spinefarm.worker.trial.run import TrialConfig
+    from spinefarm.worker.trial.simulation import TrialConfig
 
     morphology = Morphology.from_dict(config.morphology_spec)
     trial_config = TrialConfig.from_dict(config.trial_config)

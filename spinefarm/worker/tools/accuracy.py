@@ -23,7 +23,7 @@ from spinefarm.robot.engines import engine_spec
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.worker.tools.pool import Progress, process_pool
 from spinefarm.worker.trial import scoring
-from spinefarm.worker.trial.run import TrialConfig, random_unit_params, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate
 
 
 def baseline_label(engine: str = "bullet") -> str:

@@ -161,8 +161,8 @@ def _trial(job: tuple) -> tuple[float, float]:
     """(distance m or nan, CPU s per simulated s) of one trial."""
     from spinefarm.robot.trial_config import TrialConfig
     from spinefarm.worker.trial.episode import choose_step
-    from spinefarm.worker.trial.run import simulate
     from spinefarm.worker.trial.setup import SetupCache
+    from spinefarm.worker.trial.simulation import simulate
 
     global _CACHE
     _CACHE = _CACHE or SetupCache(8)
@@ -242,7 +242,7 @@ def _short_search(source: str, gaits: list, screen: list, s: CalibrationSettings
 def calibrate(source: str, settings: CalibrationSettings, progress: Progress | None = None) -> dict[str, Any]:
     """Run the calibration of a robot (built-in name or spec file) and return its figures and decision;
     `progress(done, total)` after each trial."""
-    from spinefarm.worker.trial.run import random_unit_params
+    from spinefarm.worker.trial.simulation import random_unit_params
 
     t_wall = time.time()
     morph = load_morphology(source)
@@ -302,7 +302,7 @@ def cache_dir() -> Path:
 
 # what decides how a trial moves: the model, the control law and both engines' code and versions
 SIMULATING_CODE = ("robot", "worker/engines", "worker/sim", "worker/control", "worker/trial/loop.py",
-                   "worker/trial/run.py")
+                   "worker/trial/simulation.py")
 ENGINE_PACKAGES = ("mujoco", "pybullet", "numpy", "numba")
 
 

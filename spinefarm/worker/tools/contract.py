@@ -66,7 +66,7 @@ def check_sane_numbers(morph: Morphology) -> CheckResult:
 
 def check_passive_settle(morph: Morphology, engine: str = DEFAULT_ENGINE, duration_s: float = 5.0) -> CheckResult:
     """With no CPG output the structure stays in one piece, above ground, in a steady shape, at rest."""
-    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.simulation import simulate
 
     name = "passive settle holds its shape"
     cfg = step_config(morph, engine, duration_s=duration_s, record_every_s=duration_s / 20)
@@ -99,7 +99,7 @@ def check_passive_settle(morph: Morphology, engine: str = DEFAULT_ENGINE, durati
 
 
 def check_deterministic(morph: Morphology, engine: str = DEFAULT_ENGINE) -> CheckResult:
-    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.simulation import simulate
 
     name = "two runs agree"
     u = np.random.default_rng(7).random(len(param_space(morph)))

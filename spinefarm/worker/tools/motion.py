@@ -97,7 +97,7 @@ def motion_record(motion: dict[str, Any]) -> dict[str, np.ndarray]:
 def simulate_motion(job: dict[str, Any]) -> dict[str, Any]:
     """Re-simulate a stored trial with recording on and return its motion document."""
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial.run import TrialConfig, simulate
+    from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
     morph = load_morphology(job["morphology"])
     base = dict(job["trial_config"])

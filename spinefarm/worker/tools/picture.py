@@ -36,7 +36,7 @@ def render_motion_file(job: dict[str, Any], out: str | Path) -> Path:
 def render_trial(job: dict[str, Any], out: str | Path) -> Path:
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.tools.render import frames_from_record, render
-    from spinefarm.worker.trial.run import TrialConfig, simulate
+    from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
     if job.get("motion_file"):
         return render_motion_file(job, out)

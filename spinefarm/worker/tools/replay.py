@@ -210,7 +210,7 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     under a profile's constants if given (robot.profile). A recorded run's folder is compared with NTRT's
     recorded distance."""
     from spinefarm.robot.morphology.registry import load_morphology
-    from spinefarm.worker.trial.run import TrialConfig, simulate
+    from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
     morph = load_morphology(morphology or detect_morphology(folder))
     params = read_parameter_set(folder, suffix)

@@ -60,7 +60,7 @@ def judge_recording(morph: Any, judge: Any, seed: int) -> Any:
 
     from spinefarm.robot.spaces import param_space
     from spinefarm.worker.fit.readers import from_trajectory
-    from spinefarm.worker.trial.run import random_unit_params, simulate
+    from spinefarm.worker.trial.simulation import random_unit_params, simulate
 
     unit = random_unit_params(morph, seed)
     out = simulate(morph, unit, judge, seed)

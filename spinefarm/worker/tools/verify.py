@@ -14,7 +14,7 @@ import numpy as np
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.profile import ground_friction
-from spinefarm.worker.trial.run import TrialConfig, simulate
+from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
 
 @dataclass(frozen=True)

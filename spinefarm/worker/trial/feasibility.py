@@ -59,7 +59,7 @@ def step_config(morph: Morphology, engine: str, **kw) -> TrialConfig:
 
 
 def _passive_problem(morph: Morphology, engine: str, settle_s: float) -> str | None:
-    from spinefarm.worker.trial.run import simulate
+    from spinefarm.worker.trial.simulation import simulate
 
     cfg = step_config(morph, engine, duration_s=settle_s, record_every_s=settle_s / 20)
     out = simulate(morph, passive_params(morph), cfg, 0)

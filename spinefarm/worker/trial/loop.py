@@ -2,9 +2,9 @@
 (worker.control.law), write the net wrench of every body, step.
 
 `stepper(engine, law, on_step)` makes run(k, active), k steps of the active worlds; `advance(engine, run,
-n_steps, active, horizon_steps)` runs n_steps of them as the engine's policy splits them (BasePhysics.advance:
-it may split the steps, e.g. to look for contacts it left out, or drop a world it must run again in other
-settings). Each run of steps goes one of two ways, the same law and
+n_steps, active, horizon_steps)` runs n_steps of them in the pieces the engine's policy allows (asked, never
+called back: BasePhysics.steps_ahead may shorten a piece, e.g. to look for contacts it left out, or drop a world
+it must run again in other settings). Each run of steps goes one of two ways, the same law and
 the same bits either way:
   - step by step through the seam: engine.read_poses() -> law.step() -> engine.apply_wrenches() ->
     engine.step(); used when recording (on_step sees every step) and for engines without a compiled step;
@@ -26,9 +26,10 @@ from numba.extending import intrinsic
 
 from spinefarm.robot.engines import engine_spec
 from spinefarm.worker.control.law import STATUS_OK, ControlLaw, law_step_world
-from spinefarm.worker.engines.base import BasePhysics, Run
+from spinefarm.worker.engines.base import BasePhysics
 
 OnStep = Callable[[np.ndarray, np.ndarray], None]
+Run = Callable[[int, np.ndarray], None]  # run(k, active): k steps of the active worlds
 
 
 @intrinsic
@@ -102,6 +103,12 @@ def stepper(engine: BasePhysics, law: ControlLaw, on_step: OnStep | None = None)
 
 
 def advance(engine: BasePhysics, run: Run, n_steps: int, active: np.ndarray, horizon_steps: int) -> None:
-    """n_steps of every active world through `run` (from stepper), as the engine's policy splits them.
-    horizon_steps: the caller looks at the state that often (an engine may plan that far ahead)."""
-    engine.advance(run, n_steps, active, horizon_steps)
+    """n_steps of every active world through `run` (from stepper), in the pieces the engine's policy allows
+    (BasePhysics.steps_ahead, asked before each piece and once after the last, so it may still hand a world
+    back). horizon_steps: the caller looks at the state that often (an engine may plan that far ahead)."""
+    done = 0
+    k = engine.steps_ahead(active, n_steps, horizon_steps)
+    while k > 0:
+        run(k, active)
+        done += k
+        k = engine.steps_ahead(active, n_steps - done, horizon_steps)

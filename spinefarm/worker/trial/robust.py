@@ -22,8 +22,8 @@ from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.variants import with_density_factor
 from spinefarm.robot.profile import apply_profile, engine_only
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.trial.run import simulate_batch
 from spinefarm.worker.trial.setup import SetupCache
+from spinefarm.worker.trial.simulation import simulate_batch
 
 
 class EpisodeWorld(NamedTuple):
@@ -55,7 +55,7 @@ def run_worlds(worlds: Sequence[EpisodeWorld], params: np.ndarray | Mapping[str,
                setup: SetupCache | None = None) -> list[TrialResult]:
     """One result per world, in order (each world seeded by its draw). Worlds that share a morphology and a
     trial config (they differ only in their seeds: start jitter alone is randomised) run as one batch of
-    worlds (worker.trial.run.simulate_batch); a drawn friction or mass makes each world a batch of its own."""
+    worlds (worker.trial.simulation.simulate_batch); a drawn friction or mass makes each world a batch of its own."""
     groups: dict[tuple[Morphology, str], list[int]] = {}
     for i, w in enumerate(worlds):
         groups.setdefault((w.morph, w.config.config_hash()), []).append(i)

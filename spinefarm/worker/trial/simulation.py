@@ -1,4 +1,5 @@
-"""Trials: run_trial / simulate for one, simulate_batch for B worlds at once.
+"""Trials: `simulate` runs one (the one way to run a trial from Python: `simulate(...).result` is its
+TrialResult), simulate_batch B worlds at once (its world axis: robust episodes, and simulate itself).
 
 simulate_batch(morphology, params, config, seeds, ...) is the world axis: B parameter sets (or one repeated,
 e.g. the episodes of a robust evaluation) with one seed each (the seed jitters world b's start pose by
@@ -34,7 +35,7 @@ from spinefarm.worker.trial.episode import EpisodeEnd, choose_step, score
 from spinefarm.worker.trial.settled import settle_key
 from spinefarm.worker.trial.setup import SetupCache, TrialSetup, setup_key
 
-__all__ = ["Trajectory", "TrialConfig", "TrialOutcome", "choose_step", "random_unit_params", "run_trial", "simulate",
+__all__ = ["Trajectory", "TrialConfig", "TrialOutcome", "choose_step", "random_unit_params", "simulate",
            "simulate_batch", "string_tables"]
 
 
@@ -156,15 +157,6 @@ def _outcome(morph: Morphology, setup: TrialSetup, cfg: TrialConfig, timing: Tim
     result = score(morph, setup.masses, setup.build, measured, seed, wall_s, extras)
     path = np.array(w.com_path)
     return TrialOutcome(result, w.trajectory, path, np.arange(len(path)) * timing.check_every * dt)
-
-
-def run_trial(morphology: Morphology | str | Mapping, params: np.ndarray | Mapping[str, float] | list,
-              config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None,
-              setup: TrialSetup | SetupCache | None = None) -> TrialResult:
-    """One trial -> TrialResult. `params`: unit-cube vector of the controller space, or a mapping of
-    named physical values. Divergence is a failed result, never an exception; bad parameters raise
-    ParameterError."""
-    return simulate_batch(morphology, [params], config, [seed], controller=controller, setup=setup)[0].result
 
 
 def random_unit_params(morph: Morphology, seed: int, controller: str | None = None) -> np.ndarray:
