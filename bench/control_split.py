@@ -6,12 +6,11 @@ looks, the COM path, the set-up and result), per built-in.
     python bench/control_split.py [--spines all] [--seconds 3] [--repeats 3] [--controller NAME]
 
 The trial runs through worker.trial.simulation.simulate, with the loop's compiled run
-(worker.trial.loop.run_compiled) swapped for a copy that reads the CPU's time-stamp counter around each part (the same arithmetic, so the trial's bits are
-unchanged: `same_distance` checks it); the counter runs in wall time, so a step with a part longer than
-PREEMPTED_US (the law: plus twice a CPG update) had another process in it and is left out of the per-step means
-(`steps_preempted`). The CPG alone
-is timed
-apart in a compiled loop on a copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
+(worker.trial.loop.run_compiled) swapped for a copy that reads the CPU's time-stamp counter around each part
+(the same arithmetic, so the trial's bits are unchanged: `same_distance` checks it); the counter runs in wall
+time, so a step with a part longer than PREEMPTED_US (the law: plus twice a CPG update) had another process in
+it and is left out of the per-step means (`steps_preempted`). The CPG alone is timed apart in a compiled loop
+on a copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
 `law - cpg` is the string kernel's. Shares are of the whole step (CPU time of the whole trial over its steps):
 `control_share` = 1 - in-trial mj_step / whole (bench/trial_speed.py's figure uses a bare mj_step from the end
 state instead, which costs less than the in-trial one).

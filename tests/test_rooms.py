@@ -87,7 +87,6 @@ KNOWN_PASS_THROUGHS = {
     "spinefarm/api/deps.py:22 run_path only forwards its parameters",
     "spinefarm/coordinator/samplers/__init__.py: only re-exports",
     "spinefarm/storage/__init__.py: only re-exports",
-    "spinefarm/storage/schema.py:37 planned_evaluations only forwards its parameters",
 }
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from spinefarm.api.run_state import derive_state, live_figures, read_live
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
-from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, planned_evaluations
+from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord
 
 
 def _num(x: float) -> float | None:
@@ -88,7 +88,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     live, status_error = read_live(path)
     age = time.time() - live.get("updated_at_unix_s", 0.0)
     finished = counts["complete"] + counts["failed"]
-    planned = planned_evaluations(meta.trials_budget, meta.settings)
+    planned = meta.settings.planned_evaluations(meta.trials_budget)
     n_trials = storage.n_trials()
     state = derive_state(path, n_trials, finished, planned, live, age)
     cols = storage.columns() if n_trials else {}

@@ -36,12 +36,6 @@ SCORE_COLUMNS = SCORE_NAMES
 EXTRA_COLUMNS = tuple(e.name for e in RECORDED_EXTRAS)
 
 
-def planned_evaluations(trials_budget: int, settings: RunSettings) -> int:
-    """Evaluations a run expects: its budget of parameter sets, plus with successive halving about
-    budget / eta^r promotions to each rung r."""
-    return settings.planned_evaluations(trials_budget)
-
-
 @dataclass(frozen=True)
 class RunMeta:
     """Run-level metadata, stored as file attributes. JSON-able dicts stay dicts here."""
