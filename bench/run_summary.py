@@ -41,7 +41,7 @@ def summary(path: Path, paper_speed_cm_s: float, workers: int) -> dict:
     elapsed_s = float(df.finished_at_unix_s.max() - started)
     out["last_result_after_s"] = elapsed_s
     out["trials_share_of_worker_time"] = float(df.wall_time_s.sum()) / (workers * elapsed_s)
-    judged = df[df.verification.isin(["judged", "holds", "not_reproduced"])]
+    judged = df[df.verification.isin(["judged", "holds", "moved", "diverged", "not_reproduced"])]
     out["judged"] = [{"trial": int(t), "after_min": round((r.finished_at_unix_s - started) / 60, 2),
                       "screen_m": round(float(r.distance_m), 4), "judge_m": round(float(r.verify_distance_m), 4),
                       "ratio": round(float(r.judge_ratio), 3), "verdict": str(r.verification)}
@@ -55,7 +55,8 @@ def summary(path: Path, paper_speed_cm_s: float, workers: int) -> dict:
     past = judged[judged_speed > paper_speed_cm_s]
     if len(past):
         out["first_judged_past_paper"] = {"trial": int(past.index[0]), "judge_m": float(past.verify_distance_m.iloc[0])}
-    counted = judged[judged.verification != "not_reproduced"]  # a best not reproduced never counts
+    # a diverged judge run (older files: not reproduced) never counts; a moved set counts by its judged distance
+    counted = judged[~judged.verification.isin(["diverged", "not_reproduced"])]
     if len(counted):
         t = int(counted.verify_distance_m.idxmax())
         out["best_judged"] = {"trial": t, "screen_m": float(df.distance_m[t]),

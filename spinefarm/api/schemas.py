@@ -94,6 +94,8 @@ class RunStatus(BaseModel):
     trials_planned: int = Field(description="evaluations it expects: the budget, plus a multi-fidelity run's "
                                 "promotions to longer trials")
     parameter_sets_sampled: int
+    file_schema_version: int | None = Field(None, description="the schema the run file was written at")
+    file_note: str | None = Field(None, description="what an older run file lacks (null for a current one)")
     parameter_sets_done: int | None = Field(None, description="parameter sets whose first evaluation finished")
     evaluations_done: int | None = Field(None, description="every finished simulation of any set: screen rungs, "
                                          "judge runs, audits and referees")

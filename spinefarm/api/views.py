@@ -12,7 +12,7 @@ import numpy as np
 from spinefarm.api.run_state import derive_state, live_figures, read_live
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
-from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord
+from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, older_file_note
 
 
 def _num(x: float) -> float | None:
@@ -101,6 +101,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     tc = meta.trial_config
     return {
         "run_id": meta.run_id, "file": path.name, "morphology": meta.morphology,
+        "file_schema_version": storage.file_schema_version, "file_note": older_file_note(storage.file_schema_version),
         "objective": meta.objective, "state": state, "trials_budget": meta.trials_budget,
         "trials_planned": planned,
         "parameter_sets_sampled": storage.count_rung(0),

@@ -20,6 +20,7 @@ coordinator issues pending tasks again. In the lease scheduler a task is a negat
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import math
@@ -27,10 +28,12 @@ import math
 import numpy as np
 
 from spinefarm.coordinator.verdicts import holds_tolerance, judge_verdict, relative_change
+from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings, TaskFidelity
 from spinefarm.protocol.states import AuditState, Verification
 from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.evaluations import judge_wall_s, row_of
 
 log = logging.getLogger("spinefarm.coordinator")
 JUDGE, AUDIT, REFEREE = 1, 2, 3
@@ -64,7 +67,10 @@ class TaskBook:
         self.seed = seed
         self.judged = judged   # the run has a judge (test objectives only when one is named)
         self.pending: set[int] = set()   # task keys issued and not yet settled
-        self.judge_wall_s = 0.0   # the judge's runs settled since this coordinator started (pacing only)
+        # the time the judge's runs took, from the stored evaluation rows: a restart keeps the judge's share
+        self.judge_wall_s = 0.0
+        with contextlib.suppress(StorageError):  # a store whose run is not created yet has no rows
+            self.judge_wall_s = judge_wall_s(storage.evaluations())
 
     @functools.cached_property
     def holds(self) -> tuple[float, str]:
@@ -196,9 +202,17 @@ class TaskBook:
         return key
 
     # --- results --------------------------------------------------------------------------------------
+    def _record(self, tid: int, kind: str, r: TrialResult, worker_id: str = "") -> None:
+        """Every judge, audit and referee run is a row of the evaluations table, linked to the row it checked."""
+        f = self.task_fidelity(task_key({"judge": JUDGE, "audit": AUDIT, "referee": REFEREE}[kind], tid))
+        dt = r.extras.get("dt_s", f.dt_s)
+        self.storage.add_evaluation(row_of(tid, kind, r, str(r.extras.get("engine", f.engine or "")),
+                                           None if dt is None else float(dt), worker_id))
+
     def settle_judge(self, tid: int, r: TrialResult) -> None:
         if math.isfinite(r.wall_time_s):
             self.judge_wall_s += r.wall_time_s
+        self._record(tid, "judge", r)
         row = self.storage.trial(tid)
         engine = str(r.extras.get("engine", "")) or (self.judge_engine or "")
         cross = self.judge_engine is not None and self.judge_engine != (row.engine or self.run_engine)
@@ -236,6 +250,7 @@ class TaskBook:
         """Store an audit; (worker, agreed) for each worker it judged. exact: both ran the same code in the same
         environment, so only the same bits agree (else the tolerance). A disagreement is refereed by a third
         worker before anybody is blamed; the re-run of a quarantined worker's row needs no referee."""
+        self._record(tid, "audit", r, worker_id)
         row = self.storage.trial(tid)
         how = _comparison(exact, self.settings.audit.tolerance)
         tol = 0.0 if exact else self.settings.audit.tolerance
@@ -256,6 +271,7 @@ class TaskBook:
     def settle_referee(self, tid: int, r: TrialResult, exact: bool) -> list[tuple[str, bool]]:
         """The third worker's run decides a disputed audit: whoever it contradicts is wrong (the result's
         worker when it matches neither)."""
+        self._record(tid, "referee", r)
         row = self.storage.trial(tid)
         tol = 0.0 if exact else self.settings.audit.tolerance
         if _same(r, row.status == "complete", row.distance_m, tol):

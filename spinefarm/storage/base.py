@@ -14,7 +14,7 @@ from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import REFUTED_VERDICTS, STORED_STATUSES, AuditState, TrialStatus, Verification
 from spinefarm.storage import pareto
 from spinefarm.storage.ranking import ranked_values
-from spinefarm.storage.schema import RunMeta, TrialRecord
+from spinefarm.storage.schema import FILE_SCHEMA_VERSION, RunMeta, TrialRecord
 
 # A result whose audit found it wrong, or is still refereeing it, or whose worker was quarantined (until
 # another identity reproduces it), never counts as best.
@@ -32,6 +32,7 @@ class BaseStorage:
     """
 
     read_only = False
+    file_schema_version = FILE_SCHEMA_VERSION   # what the run file was written at (older ones still open)
 
     # --- primitives -------------------------------------------------------------------------------
     def create_run(self, meta: RunMeta) -> None:
@@ -94,6 +95,15 @@ class BaseStorage:
             self._add_episodes(trial_id, result.episodes)
         self._update_front(trial_id)
         return True
+
+    def add_evaluation(self, row: dict[str, Any]) -> None:
+        """Append one judge, audit or referee run (storage.evaluations.row_of)."""
+        raise StorageError("this storage keeps no evaluations", expected="a storage with an evaluations table")
+
+    def evaluations(self) -> dict[str, np.ndarray]:
+        """Every judge, audit and referee run (storage.evaluations), in the order they were stored."""
+        from spinefarm.storage.evaluations import empty_columns
+        return empty_columns()
 
     def _add_episodes(self, trial_id: int, episodes: tuple) -> None:
         raise StorageError("this storage keeps no episodes", expected="a storage with an episodes table")

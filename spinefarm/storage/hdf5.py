@@ -26,9 +26,10 @@ import numpy as np
 
 from spinefarm.protocol.errors import StorageError
 from spinefarm.storage import episodes as ep
+from spinefarm.storage import evaluations as ev
 from spinefarm.storage.file_ops import _fsync_dir, _quiet_failed_deallocs, _reason, _refuse_read_only, _trim
 from spinefarm.storage.hdf5_layout import write_run
-from spinefarm.storage.hdf5_reader import read_episodes, read_run
+from spinefarm.storage.hdf5_reader import read_episodes, read_evaluations, read_run, schema_version
 from spinefarm.storage.memory import InMemoryStorage
 from spinefarm.storage.probe import probe, stored_eof
 from spinefarm.storage.runlock import RunLock
@@ -50,13 +51,14 @@ RESERVE_LOW_B = 4 << 20  # topped up when less than this is left (one flush grow
 
 
 def _replace_with_copy(real: Path, suffix: str, meta: RunMeta, cols: dict[str, np.ndarray],
-                       episodes: dict[str, np.ndarray], live: bool, lock: RunLock | None) -> None:
+                       episodes: dict[str, np.ndarray], live: bool, lock: RunLock | None,
+                       evaluations: dict[str, np.ndarray]) -> None:
     """Write the run to `real` + suffix, sync it and rename it over `real`: atomic, so the old file stays
     intact until the new one is complete. The lock moves to the new file before it takes the name. A failed
     copy is removed and the error raised; the caller syncs the directory."""
     tmp = real.with_name(real.name + suffix)
     try:
-        write_run(tmp, meta, cols, episodes, live=live)
+        write_run(tmp, meta, cols, episodes, live=live, evaluations=evaluations)
         with open(tmp, "rb") as fh:
             os.fsync(fh.fileno())
         if lock is not None:
@@ -148,11 +150,12 @@ class Hdf5Storage(InMemoryStorage):
                                        expected=f"at least {max(n, 1)}")
                 meta = replace(meta, trials_budget=trials_budget)
             meta = meta.opened("resume")   # a copy resumed elsewhere gets its own instance too
-            episodes = read_episodes(path)
+            episodes, evaluations = read_episodes(path), read_evaluations(path)
             real = path.resolve()  # a symlink stays a symlink: its target is what gets replaced
             real.with_name(real.name + ".compress-tmp").unlink(missing_ok=True)  # a close cut short
             try:
-                _replace_with_copy(real, ".resume-tmp", meta, cols, episodes, live=True, lock=lock)
+                _replace_with_copy(real, ".resume-tmp", meta, cols, episodes, live=True, lock=lock,
+                                   evaluations=evaluations)
             except OSError as exc:
                 raise StorageError(f"cannot write the resumed copy of {path}: {_reason(exc)}",
                                    expected="room for a copy of the run file beside it") from exc
@@ -161,6 +164,7 @@ class Hdf5Storage(InMemoryStorage):
             table.load(cols)
             storage = cls._open_writer(path, meta, table, lock)
             storage._episodes.load(episodes)
+            storage._evaluations.load(evaluations)
             return storage
         except BaseException:
             lock.release()
@@ -198,6 +202,8 @@ class Hdf5Storage(InMemoryStorage):
         table.load(cols)
         storage = cls(Path(path), None, meta, table)
         storage._episodes.load(read_episodes(path))
+        storage._evaluations.load(read_evaluations(path))
+        storage.file_schema_version = schema_version(path)
         return storage
 
     def create_run(self, meta: RunMeta) -> None:
@@ -214,7 +220,8 @@ class Hdf5Storage(InMemoryStorage):
             raise StorageError(self.write_error, expected="a working, writable file system with free space")
         if self._file is None:
             return
-        if not self.table.dirty and self._datasets["trial_id"].shape[0] == self.table.n:
+        if not self.table.dirty and self._datasets["trial_id"].shape[0] == self.table.n and \
+                self._evaluations.n == self._evaluations.n_written:
             return
         try:
             self._write_dirty()
@@ -229,6 +236,7 @@ class Hdf5Storage(InMemoryStorage):
         rows = np.array(sorted(self.table.dirty), dtype=np.int64)
         self.table.dirty.clear()
         ep.write_new(self._file, self._episodes)  # a finished trial's episodes before its status
+        ev.write_new(self._file, self._evaluations)  # a judge's run before the verdict it gives
         # Fill rows before extending the status column, so a reader never sees a half-written row.
         for c in COLUMNS:
             ds = self._datasets[c.name]
@@ -282,7 +290,8 @@ class Hdf5Storage(InMemoryStorage):
         real = self.path.resolve()
         try:
             meta, cols = read_run(real)  # what the file holds, not what memory says it should
-            _replace_with_copy(real, ".compress-tmp", meta, cols, read_episodes(real), live=False, lock=self._lock)
+            _replace_with_copy(real, ".compress-tmp", meta, cols, read_episodes(real), live=False, lock=self._lock,
+                               evaluations=read_evaluations(real))
             _fsync_dir(real)
         except (OSError, StorageError, ValueError) as exc:
             self.close_warning = f"run file {self.path} left uncompressed ({_reason(exc)}): it is complete, only larger"

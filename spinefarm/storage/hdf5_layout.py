@@ -19,7 +19,8 @@ from spinefarm.protocol.envelope import SCHEMA_VERSION
 from spinefarm.protocol.errors import SpinefarmError, StorageError
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.storage import episodes as ep
-from spinefarm.storage.schema import COLUMNS, FILE_SCHEMA_VERSION, VECTOR_COLUMNS, RunMeta
+from spinefarm.storage import evaluations as ev
+from spinefarm.storage.schema import COLUMNS, FILE_SCHEMA_VERSION, OLDER_SCHEMA_VERSIONS, VECTOR_COLUMNS, RunMeta
 from spinefarm.storage.table import empty_value
 
 CHUNK_ROWS = 1024
@@ -54,9 +55,10 @@ def write_meta(f: h5py.File, meta: RunMeta) -> None:
 def meta_of(f: h5py.File, path: Path) -> RunMeta:
     """The run metadata, checked against the table it describes: a file edited by hand (or by another tool)
     gives one StorageError naming what does not fit, never a traceback further on."""
-    if f.attrs.get("file_schema_version") != FILE_SCHEMA_VERSION:
+    if f.attrs.get("file_schema_version") not in (FILE_SCHEMA_VERSION, *OLDER_SCHEMA_VERSIONS):
         raise StorageError(f"{path} is not a spinefarm run file of this version",
-                           received=f.attrs.get("file_schema_version"), expected=FILE_SCHEMA_VERSION)
+                           received=f.attrs.get("file_schema_version"),
+                           expected=f"{FILE_SCHEMA_VERSION} (or an older {OLDER_SCHEMA_VERSIONS})")
     try:
         meta = _parse_meta(f)
     except (KeyError, ValueError, TypeError, SpinefarmError) as exc:
@@ -130,9 +132,11 @@ def create_datasets(f: h5py.File, n_params: int, n_rows: int, compressed: bool =
 
 
 def write_run(path: str | Path, meta: RunMeta, cols: dict[str, np.ndarray],
-              episodes: dict[str, np.ndarray] | None = None, live: bool = False) -> None:
+              episodes: dict[str, np.ndarray] | None = None, live: bool = False,
+              evaluations: dict[str, np.ndarray] | None = None) -> None:
     """Write a complete, closed (non-SWMR) run file: used for snapshots, for a finished run and for resume.
-    episodes: the episodes table (storage.episodes; none: empty).
+    episodes, evaluations: the episodes and evaluations tables (storage.episodes, storage.evaluations; none:
+    empty). The file is written at the current schema version, whatever the version it was read from.
 
     live: the file a writer will go on appending to, in SWMR mode, whose chunks are not compressed. SWMR never
     reuses freed space, and a compressed chunk is written anew at each flush, so a live compressed file grew
@@ -145,4 +149,6 @@ def write_run(path: str | Path, meta: RunMeta, cols: dict[str, np.ndarray],
             if n:
                 ds[:] = cols[name]
         ep.create_datasets(f, ep.empty_columns() if episodes is None else episodes, {} if live else COMPRESSION)
+        ev.create_datasets(f, ev.empty_columns() if evaluations is None else evaluations,
+                           {} if live else COMPRESSION)
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from spinefarm.protocol.errors import StorageError
 from spinefarm.storage import episodes as ep
+from spinefarm.storage import evaluations as ev
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.hdf5_layout import meta_of, write_run
 from spinefarm.storage.probe import check_eof
@@ -91,10 +92,27 @@ def read_episodes(path: str | Path) -> dict[str, np.ndarray]:
     return ep.of_finished(episodes, cols["status"], b"waiting")
 
 
+def read_evaluations(path: str | Path) -> dict[str, np.ndarray]:
+    """The evaluations table of a run file (storage.evaluations); empty for a file of an older schema."""
+    path = Path(path)
+    try:
+        with _open(path) as f:
+            return ev.read_datasets(f)
+    except _DAMAGED as exc:
+        raise _damaged(path, exc, "the evaluations of ") from exc
+
+
+def schema_version(path: str | Path) -> int:
+    """The schema version a run file was written at (storage.schema.OLDER_SCHEMA_VERSIONS: older ones)."""
+    path = Path(path)
+    with _open(path) as f:
+        return int(f.attrs["file_schema_version"])
+
+
 def snapshot(src: str | Path, dst: str | Path) -> int:
     """Consistent copy of a (possibly live) run file; returns the number of rows copied."""
     meta, cols = read_run(src)
-    write_run(dst, meta, cols, read_episodes(src))
+    write_run(dst, meta, cols, read_episodes(src), evaluations=read_evaluations(src))
     return len(cols["trial_id"])
 
 
@@ -132,6 +150,7 @@ class Hdf5Reader(BaseStorage):
         self._file = _open(self.path)
         try:
             self._meta = meta_of(self._file, self.path)
+            self.file_schema_version = int(self._file.attrs["file_schema_version"])
             group = self._file["trials"]
             n = min(group[c.name].shape[0] for c in COLUMNS)
             status = group["status"][:n]
@@ -182,6 +201,9 @@ class Hdf5Reader(BaseStorage):
     def episodes(self, trial_id: int | None = None) -> dict[str, np.ndarray]:
         cols = ep.of_finished(ep.read_datasets(self._file), self._cols["status"], b"waiting")
         return cols if trial_id is None else ep.rows_of(cols, trial_id)
+
+    def evaluations(self) -> dict[str, np.ndarray]:
+        return ev.read_datasets(self._file)
 
     def close(self) -> None:
         if self._file is not None:

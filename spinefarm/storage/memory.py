@@ -12,6 +12,7 @@ from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.states import REFUTED_VERDICTS, TrialStatus
 from spinefarm.storage.base import DISQUALIFYING_AUDITS, BaseStorage
 from spinefarm.storage.episodes import EpisodeTable, rows_of
+from spinefarm.storage.evaluations import EvaluationTable
 from spinefarm.storage.ranking import ranked_value
 from spinefarm.storage.schema import RunMeta
 from spinefarm.storage.table import TrialTable
@@ -26,6 +27,7 @@ class InMemoryStorage(BaseStorage):
         self._ranking: list[tuple[int, float, int]] = []
         self._keys: dict[int, tuple[int, float, int]] = {}   # each ranked trial's entry in _ranking
         self._episodes = EpisodeTable()
+        self._evaluations = EvaluationTable()
 
     def create_run(self, meta: RunMeta) -> None:
         if self._meta is not None:
@@ -90,6 +92,14 @@ class InMemoryStorage(BaseStorage):
 
     def n_trials(self) -> int:
         return self.table.n
+
+    def add_evaluation(self, row: dict[str, Any]) -> None:
+        self._writable()
+        self._check_id(int(row["trial_id"]))
+        self._evaluations.append(row)
+
+    def evaluations(self) -> dict[str, np.ndarray]:
+        return self._evaluations.columns()
 
     def _add_episodes(self, trial_id: int, episodes: tuple) -> None:
         self._episodes.append(trial_id, episodes)

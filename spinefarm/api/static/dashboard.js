@@ -100,14 +100,15 @@ function runWarnings(status) {
 }
 
 function runNotice(status, r) {
-  return runWarnings(status) + runOutcome(status, r);
+  const older = status.file_note ? `<div class="notice" id="older-file">${esc(status.file_note)}.</div>` : "";
+  return older + runWarnings(status) + runOutcome(status, r);
 }
 
 function runOutcome(status, r) {
   const best = status.best;
   if (status.state === "stopped") {
-    return `<div class="notice" id="stopped">This run stopped before its budget (${status.trials_done} of
-      ${status.trials_planned} trials). Continue it with <code>${esc(status.resume_command)}</code>.</div>`;
+    return `<div class="notice" id="stopped">This run stopped before its budget (${status.parameter_sets_done} of
+      ${status.trials_budget} parameter sets). Continue it with <code>${esc(status.resume_command)}</code>.</div>`;
   }
   if (status.state === "stalled") {
     return `<div class="notice warn">Its coordinator holds the file but has not reported for

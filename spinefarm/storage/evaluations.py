@@ -1,0 +1,126 @@
+"""The evaluations table: every judge, audit and referee run of a parameter set, one row each.
+
+The trials table holds the search's own rows (each screen rung, each promotion) and, on a judged or audited
+row, the verdict that sums them up (verification, audit columns, which rank and filter the best). This table
+keeps each such run as it happened: which row it checked (`trial_id`, the link to the parameter set), its
+kind, the fidelity it ran at, what it measured and how long it took. Rows are appended, never changed; the
+writer writes `status` last. A file of an older schema (storage.schema.OLDER_SCHEMA_VERSIONS) has no
+/evaluations group: it reads as an empty table, and its runs are only the verdict columns.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from spinefarm.protocol.columns import column_group
+from spinefarm.protocol.results import TrialResult
+
+EVALUATION_COLUMNS = column_group("evaluation")
+NAMES = tuple(c.name for c in EVALUATION_COLUMNS)
+KINDS = ("judge", "audit", "referee")
+GROUP = "evaluations"
+
+
+def _empty(dtype: str) -> Any:
+    return b"" if dtype.startswith("S") else (-1 if dtype.startswith("i") else np.nan)
+
+
+def empty_columns(n: int = 0) -> dict[str, np.ndarray]:
+    out = {}
+    for c in EVALUATION_COLUMNS:
+        out[c.name] = np.empty(n, dtype=c.dtype)
+        out[c.name][...] = _empty(c.dtype)
+    return out
+
+
+def row_of(trial_id: int, kind: str, r: TrialResult, engine: str, dt_s: float | None,
+           worker_id: str = "") -> dict[str, Any]:
+    """The stored values of one run of `kind` on row `trial_id` (its result `r`, from `worker_id` or the one the
+    result names)."""
+    values = {"trial_id": trial_id, "kind": kind, "engine": engine, "dt_s": math.nan if dt_s is None else dt_s,
+              "reason": "" if r.ok else r.reason, "distance_m": r.distance_m,
+              "perturbed_distance_m": float(r.extras.get("perturbed_distance_m", math.nan)),
+              "wall_time_s": r.wall_time_s, "worker_id": worker_id or r.worker_id or "",
+              "finished_at_unix_s": time.time(), "status": str(r.status)}
+    return {c.name: _stored(values[c.name], c.dtype) for c in EVALUATION_COLUMNS}
+
+
+def _stored(v: Any, dtype: str) -> Any:
+    return v.encode("utf-8", "replace")[: int(dtype[1:])] if dtype[0] == "S" else v
+
+
+class EvaluationTable:
+    """Growable evaluation columns; rows [n_written, n) are not in the file yet."""
+
+    def __init__(self, capacity: int = 64) -> None:
+        self.n = self.n_written = 0
+        self._cols = empty_columns(capacity)
+
+    def append(self, row: dict[str, Any]) -> None:
+        cap = len(self._cols["trial_id"])
+        if self.n == cap:
+            grown = empty_columns(2 * cap)
+            for name, arr in self._cols.items():
+                grown[name][: self.n] = arr
+            self._cols = grown
+        for name, v in row.items():
+            self._cols[name][self.n] = v
+        self.n += 1
+
+    def columns(self) -> dict[str, np.ndarray]:
+        return {name: arr[: self.n] for name, arr in self._cols.items()}
+
+    def load(self, cols: dict[str, np.ndarray]) -> None:
+        n = len(cols["trial_id"])
+        self._cols = empty_columns(max(64, n))
+        for name in NAMES:
+            self._cols[name][:n] = cols[name]
+        self.n = self.n_written = n
+
+
+def judge_wall_s(cols: dict[str, np.ndarray]) -> float:
+    """The time the judge's runs took, from the stored rows (its share of the workers' time on resume)."""
+    wall = cols["wall_time_s"][cols["kind"] == b"judge"]
+    return float(np.sum(wall, where=np.isfinite(wall)))
+
+
+# --- HDF5 ------------------------------------------------------------------------------------------
+def create_datasets(f: Any, cols: dict[str, np.ndarray], compression: dict[str, Any]) -> None:
+    """The /evaluations group with `cols` written (before SWMR mode forbids new objects)."""
+    g = f.create_group(GROUP)
+    n = len(cols["trial_id"])
+    for c in EVALUATION_COLUMNS:
+        ds = g.create_dataset(c.name, shape=(n,), dtype=c.dtype, maxshape=(None,), chunks=(256,),
+                              fillvalue=_empty(c.dtype), **compression)
+        ds.attrs["unit"], ds.attrs["description"] = c.unit, c.description
+        if n:
+            ds[:] = cols[c.name]
+
+
+def read_datasets(f: Any) -> dict[str, np.ndarray]:
+    """Every fully written row (none for a file of an older schema)."""
+    if GROUP not in f:
+        return empty_columns()
+    g = f[GROUP]
+    n = min(g[name].shape[0] for name in NAMES)
+    cols = {name: g[name][:n] for name in NAMES}
+    empty = np.flatnonzero(cols["status"] == b"")  # extended, not yet filled: cut there
+    return {k: v[: int(empty[0])] for k, v in cols.items()} if empty.size else cols
+
+
+def write_new(f: Any, table: EvaluationTable) -> None:
+    """Append the rows not yet in the file (status last, so a half-written row is never read)."""
+    if table.n == table.n_written:
+        return
+    g = f[GROUP]
+    a, b = table.n_written, table.n
+    cols = table.columns()
+    for name in (*(n for n in NAMES if n != "status"), "status"):
+        if g[name].shape[0] < b:
+            g[name].resize(b, axis=0)
+        g[name][a:b] = cols[name][a:b]
+    table.n_written = b
