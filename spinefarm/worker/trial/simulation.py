@@ -51,7 +51,10 @@ def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mappin
              config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None,
              scene_factory: EngineFactory | None = None, setup: TrialSetup | SetupCache | None = None
              ) -> TrialOutcome:
-    """Run one trial and return its result with the recorded trajectory (if config asks for one).
+    """Run one trial and return its result (`.result`, a TrialResult) with the recorded trajectory (if config
+    asks for one). `morphology`: a built-in's name, a spec file's path, a spec mapping or a Morphology;
+    `params`: a unit-cube vector of the controller space, or a mapping of named physical values. Divergence is a
+    failed result, never an exception; bad parameters raise ParameterError.
     `scene_factory` replaces the configured engine's class (same constructor as BasePhysics).
     `setup`: a TrialSetup of this morphology and config, or a SetupCache, to reuse what earlier trials
     built (the result is the same bits either way)."""
