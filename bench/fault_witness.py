@@ -67,7 +67,8 @@ def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) ->
                 evaluators[g.config_hash] = build_evaluator(cfgs[0])
             for a in g.assignments:
                 r = evaluators[g.config_hash](a)
-                pending[a.trial_id] = SubmittedResult(a.lease_id, replace(r, trial_id=a.trial_id, worker_id=worker_id))
+                pending[a.trial_id] = SubmittedResult(a.lease_id, replace(r, trial_id=a.trial_id, worker_id=worker_id),
+                                                      coordinator=g.coordinator)
 
 
 def spawn(*args: str) -> subprocess.Popen:

@@ -159,7 +159,8 @@ def hostile_peer(tmp: Path, n: int = 500) -> dict:
             tid = rng.choice(leased)
             forged = TrialResult(TrialStatus.COMPLETE, "", 1237.0, 0, 0, 0, 0, 1, 1, 1,
                                  int(core.study.storage.columns()["seed"][tid]), trial_id=tid, worker_id="honest")
-            sub = ResultSubmission("honest", (SubmittedResult(rng.getrandbits(62), forged),))
+            # it names the run's instance (every grant says it): only the lease can give it away
+            sub = ResultSubmission("honest", (SubmittedResult(rng.getrandbits(62), forged, coordinator=core.holder),))
             list(s.get(keys.results("hostile"), payload=encode_message(sub), timeout=5.0))
         corpus = [b"[" * 50_000, b'{"schema":1,"kind":"work_request","body":{"worker_id":"w","capacity":' +
                   b"9" * 5000 + b"}}", b'{"schema":1,"kind":"work_request","body":{"worker_id":"w","capacity":1e400}}',

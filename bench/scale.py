@@ -56,8 +56,10 @@ def free_port() -> int:
 
 
 def host_workers(endpoint: str, first: int, count: int, out_dir: Path, stagger_s: float, duration_s: float,
-                 jitter: float) -> None:
-    """Child process: `count` workers, each in its own thread and Zenoh session, until the run says done."""
+                 jitter: float, join_step_s: float) -> None:
+    """Child process: `count` workers, each in its own thread and Zenoh session, until the run says done. Once all
+    its sessions are open it says so (ready-FIRST); once the bench says go, worker k asks for work k x join_step_s
+    later (join_step_s < 0: each asks as soon as its session is open)."""
     os.environ["SPINEFARM_ACK_LOG"] = str(out_dir / f"acks-{first}.log")
     import logging
 
@@ -68,6 +70,7 @@ def host_workers(endpoint: str, first: int, count: int, out_dir: Path, stagger_s
     grants = open(out_dir / f"grants-{first}.log", "a", buffering=1)  # noqa: SIM115 (lives with the process)
     lock = threading.Lock()
     work_key = keys.work(RUN_ID)
+    opened = [0]
 
     class TimedWorker(WorkerService):
         def _query(self, session, key, payload, cls):  # type: ignore[no-untyped-def]
@@ -77,6 +80,17 @@ def host_workers(endpoint: str, first: int, count: int, out_dir: Path, stagger_s
                 with lock:
                     grants.write(f"{time.time():.4f} {1000 * (time.perf_counter() - t0):.3f} {self.worker_id}\n")
             return out
+
+        def _loop(self, session):  # type: ignore[no-untyped-def]
+            if join_step_s >= 0:
+                with lock:
+                    opened[0] += 1
+                    if opened[0] == count:
+                        (out_dir / f"ready-{first}").touch()
+                while not (out_dir / "go").exists() and not self.stop.wait(0.05):
+                    pass
+                time.sleep(int(self.worker_id.split("-")[1]) * join_step_s)
+            return super()._loop(session)
 
         def _run_one(self, evaluate, a):  # type: ignore[no-untyped-def]
             # trials of one length would keep every worker in step, asking at the same moment: real trial
@@ -123,6 +137,16 @@ def _wait_serving(coord: subprocess.Popen, out: Path, timeout_s: float) -> None:
         if coord.poll() is not None or time.monotonic() > end:
             raise SystemExit(f"the coordinator did not start (rc {coord.poll()}); see {out.parent}/coordinator.log")
         time.sleep(0.2)
+
+
+def _wait_files(tmp: Path, pattern: str, n: int, timeout_s: float) -> None:
+    end = time.monotonic() + timeout_s
+    while len(list(tmp.glob(pattern))) < n:
+        if time.monotonic() > end:
+            print(f"only {len(list(tmp.glob(pattern)))} of {n} worker processes ready after {timeout_s} s; going on",
+                  file=sys.stderr)
+            return
+        time.sleep(0.5)
 
 
 def _status(out: Path) -> dict:
@@ -246,9 +270,14 @@ def run(args: argparse.Namespace) -> dict:
             procs.append(subprocess.Popen([sys.executable, __file__, "--host", endpoint, "--first", str(first),
                                            "--count", str(min(per, args.workers - first)), "--dir", str(tmp),
                                            "--stagger", str(args.stagger), "--duration", str(args.duration),
-                                           "--jitter", str(args.jitter)], cwd=ROOT, stdout=subprocess.DEVNULL,
+                                           "--jitter", str(args.jitter), "--join-step",
+                                           str(args.join_s / args.workers if args.join_s >= 0 else -1.0)],
+                                          cwd=ROOT, stdout=subprocess.DEVNULL,
                                           stderr=open(tmp / f"host-{first}.log", "w")))  # noqa: SIM115
             time.sleep(args.stagger)
+        if args.join_s >= 0:
+            _wait_files(tmp, "ready-*", len(procs), args.timeout_s)
+            (tmp / "go").touch()
         killed, rss, t0 = 0, 0.0, time.monotonic()
         n_kill = math.ceil(args.kill * len(procs))
         while coord.poll() is None:
@@ -281,6 +310,7 @@ def run(args: argparse.Namespace) -> dict:
                     min(per, args.workers - i * per) for i in range(len(procs) - killed, len(procs))),
                 "worker_processes": len(procs), "per_process": per, "duration_s": args.duration,
                 "processes_left_after_the_run": late, "routers": len(routers), "jitter": args.jitter,
+                "join_s": args.join_s,
                 "coordinator_rc": coord.returncode, "wall_s": round(wall_s, 1), "dir": str(tmp)}
         if result["exact_budget"] and not (result["lost"] or result["duplicated"]) and not args.keep:
             shutil.rmtree(tmp)   # a run that holds leaves nothing behind; one that does not keeps its files
@@ -310,12 +340,17 @@ def main() -> None:
     ap.add_argument("--stagger", type=float, default=0.1, help="seconds between two workers' starts in a process "
                     "and between two processes' (default 0.1)")
     ap.add_argument("--keep", action="store_true", help="keep the run's files even when it holds")
+    ap.add_argument("--join-s", type=float, default=10.0, help="once every worker process has started and opened "
+                    "its sessions, the workers start asking for work over this many seconds, evenly (default 10); "
+                    "-1: each asks as soon as its session is open, while the other processes start")
+    ap.add_argument("--join-step", type=float, default=-1.0, help=argparse.SUPPRESS)
     ap.add_argument("--host", help=argparse.SUPPRESS)
     ap.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--count", type=int, default=0, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.host:
-        host_workers(args.host, args.first, args.count, Path(args.dir), args.stagger, args.duration, args.jitter)
+        host_workers(args.host, args.first, args.count, Path(args.dir), args.stagger, args.duration, args.jitter,
+                     args.join_step)
         return
     print(json.dumps(run(args)))
 
