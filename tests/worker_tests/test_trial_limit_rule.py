@@ -34,6 +34,14 @@ def test_a_measured_kind_gets_8x_its_rate_and_never_less_than_the_minimum() -> N
     assert lim.limit_s(20.0, "screen") == pytest.approx(8 * 1.7 * 20.0)
 
 
+def test_a_fast_kinds_rate_follows_its_trials_down() -> None:
+    # 0.1 then 0.05 wall s per simulated s: 0.8 x 0.1 + 0.2 x 0.05 = 0.09, so 8 x 0.09 x 100 s = 72 s
+    lim = TrialLimit()
+    lim.observe(0.2, 2.0, kind="fast")
+    lim.observe(0.1, 2.0, kind="fast")
+    assert lim.limit_s(100.0, "fast") == pytest.approx(72.0)
+
+
 def test_an_unmeasured_kind_takes_10x_the_slowest_rate_scaled_to_its_finer_step() -> None:
     lim = TrialLimit()
     lim.observe(4.0, 2.0, kind="screen", dt_s=0.002)        # 2 s/s at 2 ms
