@@ -146,7 +146,8 @@ def scan_bench(args: argparse.Namespace) -> dict:
                 per = {p.name: window_error_cm(morph, cfg, [p]) for p in recs}
                 rows[v] = {**per, "all": window_error_cm(morph, cfg, recs)}
                 print(json.dumps({spine: {engine: {name: {v: rows[v]}}}}), file=sys.stderr, flush=True)
-            ratios = {p.name: _replay_ratio(morph, engine, {}, folder / p.name, None) for p in recs}
+            ratios = {} if args.no_replay else {p.name: _replay_ratio(morph, engine, {}, folder / p.name, None)
+                                                for p in recs}
             out["spines"][spine][engine] = {"constant": name, "window_error_cm": rows, "replay_ratio": ratios,
                                             "windows": {p.name: len(p.windows) for p in recs},
                                             "wall_s": time.time() - t0}
@@ -205,6 +206,7 @@ def main() -> None:
     ap.add_argument("--fit", default=None, help="with --ntrt: NAME[=LO:HI],... (default per engine: NTRT_FIT)")
     ap.add_argument("--scan", default=None, metavar="NAME=V1,V2,...",
                     help="with --ntrt: no fit; the window error at these values of one constant, and the replays")
+    ap.add_argument("--no-replay", action="store_true", help="with --scan: the window errors only")
     ap.add_argument("--span", type=float, default=10.0, help="with --ntrt: seconds of each recording fitted")
     ap.add_argument("--stride", type=float, default=1.0)
     ap.add_argument("--replay-duration", type=float, default=None)

@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from spinefarm.worker.fit.search import parse_fit
 from tests.coordinator_tests.procs import ROOT
@@ -50,3 +51,26 @@ def test_fitted_constants_have_plausible_ranges():
         bounds = parse_fit(names)  # refuses a name without a documented range
         assert {b.name for b in bounds} >= {"ground_friction", "string_damping_n_s_per_m"}
         assert all(not b.name.startswith(("mujoco.", "bullet.")) or b.name.startswith(engine) for b in bounds)
+
+
+def test_scan_reports_each_recording_and_their_rms():
+    """--scan: per value, every recording's window error and all of them together (the RMS over equal windows:
+    each recording here has one 0.2 s window); NTRT's friction 0.5 is the model's, so its row is the model's."""
+    import argparse
+
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.loss import window_error_cm
+
+    args = argparse.Namespace(spines=["tetraspine-ntrt2026"], engines=["mujoco"], recordings=str(NTRT),
+                              window=0.2, stride=1.0, span=0.4, scan="ground_friction=0.5,0.3", no_replay=True)
+    out = _bench().scan_bench(args)["spines"]["tetraspine-ntrt2026"]["mujoco"]
+    rows = out["window_error_cm"]
+    assert list(rows) == ["0.5", "0.3"] and out["replay_ratio"] == {}
+    for row in rows.values():
+        per = [v for k, v in row.items() if k != "all"]
+        assert len(per) == 5 and row["all"] == pytest.approx(np.sqrt(np.mean(np.square(per))), rel=1e-12)
+    assert rows["0.5"] != rows["0.3"]
+    recs = _bench().ntrt_recordings(NTRT / "TetraSpine", 0.2, 1.0, 0.4)
+    plain = window_error_cm(load_morphology("tetraspine-ntrt2026"), TrialConfig(engine="mujoco"), recs[:1])
+    assert rows["0.5"]["published"] == plain
