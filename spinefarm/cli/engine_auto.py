@@ -130,15 +130,26 @@ def screen_profile(choice: Any) -> dict[str, float]:
 
 def _profile_file(constants: dict[str, float]) -> str:
     """The constants as a profile file for the child (kept in the cache folder, named by their hash)."""
+    import tempfile
+    from pathlib import Path
+
     import yaml
 
+    from spinefarm.protocol.errors import ConfigError
     from spinefarm.robot.profile import profile_hash
     from spinefarm.worker.calibrate import cache_dir
 
-    path = cache_dir() / "profiles" / f"{profile_hash(constants)}.yaml"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(yaml.safe_dump({"constants": constants}))
-    return str(path)
+    text = yaml.safe_dump({"constants": constants})
+    for folder in (cache_dir() / "profiles", Path(tempfile.gettempdir())):  # a read-only cache: the temp folder
+        path = folder / f"spinefarm-profile-{profile_hash(constants)}.yaml"
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+            return str(path)
+        except OSError:
+            continue
+    raise ConfigError("cannot write the calibration's profile file", received=str(cache_dir()),
+                      expected="a writable SPINEFARM_CACHE_DIR or temp folder")
 
 
 def _relay(stream: Any, tail: bytearray) -> None:

@@ -101,3 +101,17 @@ def test_search_auto_fits_a_users_soft_screen_and_stores_what_it_did(tmp_path):
     with served(create_app([out])) as client:
         run_id = client.get("/runs").json()[0]["run_id"]
         assert client.get(f"/runs/{run_id}/meta").json()["engine_choice"]["screen_fit"] == fit
+
+
+def test_the_searchs_profile_reaches_its_calibration_child(tmp_path, monkeypatch):
+    """search --profile P --engine auto calibrates with P (the child gets it as a file), and falls back to the
+    temp folder when the cache folder cannot be written."""
+    from spinefarm.cli.engine_auto import _profile_file
+    from spinefarm.robot.profile import load_profile
+
+    monkeypatch.setenv("SPINEFARM_CACHE_DIR", str(tmp_path / "cache"))
+    assert load_profile(_profile_file(SOFT)) == SOFT
+    (tmp_path / "blocked").write_text("a file where a folder should be")
+    monkeypatch.setenv("SPINEFARM_CACHE_DIR", str(tmp_path / "blocked"))
+    path = _profile_file({"mujoco.solref_time_s": 0.03})
+    assert not path.startswith(str(tmp_path)) and load_profile(path) == {"mujoco.solref_time_s": 0.03}
