@@ -57,6 +57,10 @@ def choose_engine(args: argparse.Namespace) -> Any:
     from spinefarm.worker.shipped_calibration import shipped
 
     budget = FitBudget(evaluations=args.calibrate_fit_screen)  # a user's robot's screen is fitted within it
+    from spinefarm.robot.morphology.registry import builtin_names
+
+    # a built-in's failing screen is documented (docs/engines.md), not fitted by every search
+    fit_evaluations = 0 if args.morphology in builtin_names() else budget.evaluations
 
     hit = shipped(args.morphology, settings)  # a built-in's, made for this model: no child
     result, cached = (None, False) if hit is None else ({**hit, "shipped": True}, True)
@@ -64,7 +68,7 @@ def choose_engine(args: argparse.Namespace) -> Any:
         print(f"engine auto: calibrating the tiers on {args.morphology} against the judge (cached after the "
               "first time) ...", file=sys.stderr)
         try:
-            result, cached = calibrate_in_child(args.morphology, settings, budget.evaluations,
+            result, cached = calibrate_in_child(args.morphology, settings, fit_evaluations,
                                                 quiet=bool(getattr(args, "quiet", False)))
         except SpinefarmError as exc:  # e.g. a robot no default step can simulate: the run's own checks say it
             print(f"engine auto: the calibration could not run ({exc}); bullet", file=sys.stderr)
