@@ -57,6 +57,10 @@ def choose_engine(args: argparse.Namespace) -> Any:
     from spinefarm.worker.tools.shipped_calibration import shipped
 
     budget = FitBudget(evaluations=args.calibrate_fit_screen)  # a user's robot's screen is fitted within it
+    from spinefarm.robot.morphology.registry import builtin_names
+
+    # a built-in's failing screen is documented (docs/engines.md), not fitted by every search
+    fit_evaluations = 0 if args.morphology in builtin_names() else budget.evaluations
 
     hit = shipped(args.morphology, settings)  # a built-in's, made for this model: no child
     result, cached = (None, False) if hit is None else ({**hit, "shipped": True}, True)
@@ -64,7 +68,7 @@ def choose_engine(args: argparse.Namespace) -> Any:
         print(f"engine auto: calibrating the tiers on {args.morphology} against the judge (cached after the "
               "first time) ...", file=sys.stderr)
         try:
-            result, cached = calibrate_in_child(args.morphology, settings, budget.evaluations,
+            result, cached = calibrate_in_child(args.morphology, settings, fit_evaluations,
                                                 quiet=bool(getattr(args, "quiet", False)))
         except SpinefarmError as exc:  # e.g. a robot no default step can simulate: the run's own checks say it
             print(f"engine auto: the calibration could not run ({exc}); bullet", file=sys.stderr)
@@ -130,15 +134,26 @@ def screen_profile(choice: Any) -> dict[str, float]:
 
 def _profile_file(constants: dict[str, float]) -> str:
     """The constants as a profile file for the child (kept in the cache folder, named by their hash)."""
+    import tempfile
+    from pathlib import Path
+
     import yaml
 
+    from spinefarm.protocol.errors import ConfigError
     from spinefarm.robot.profile import profile_hash
     from spinefarm.worker.tools.calibrate import cache_dir
 
-    path = cache_dir() / "profiles" / f"{profile_hash(constants)}.yaml"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(yaml.safe_dump({"constants": constants}))
-    return str(path)
+    text = yaml.safe_dump({"constants": constants})
+    for folder in (cache_dir() / "profiles", Path(tempfile.gettempdir())):  # a read-only cache: the temp folder
+        path = folder / f"spinefarm-profile-{profile_hash(constants)}.yaml"
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+            return str(path)
+        except OSError:
+            continue
+    raise ConfigError("cannot write the calibration's profile file", received=str(cache_dir()),
+                      expected="a writable SPINEFARM_CACHE_DIR or temp folder")
 
 
 def _relay(stream: Any, tail: bytearray) -> None:

@@ -60,4 +60,6 @@ def test_search_engine_auto_takes_the_shipped_choice(tmp_path):
     d = json.loads((SHIPPED_DIR / "tetrahedral-complex.json").read_text())
     choice = read_run(out)[0].settings.engine_choice.to_dict()
     assert choice["engine"] == d["decision"] and choice["spec_hash"] == d["spec_hash"]
-    assert choice["spearman"] == d["spearman"] and choice["cached"] is True
+    assert choice["spearman"] == d["spearman"] and choice["cached"] is True and choice["shipped"] is True
+    assert "[shipped calibration]" in r.stderr and "[calibration cached]" not in r.stderr  # says where it came from
+    assert choice["screen_fit"] is None  # a built-in's shipped choice stands as made; nothing was fitted

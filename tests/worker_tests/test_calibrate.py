@@ -77,6 +77,7 @@ def test_search_engine_auto_stores_its_choice_and_resumes_with_it(tmp_path):
     assert (choice["rungs_added"] is not None) == (choice["engine"] == "mujoco")
     assert {e.decode() if isinstance(e, bytes) else e for e in cols["engine"]} == {choice["engine"]}
     assert f"engine auto chose {choice['engine']}" in r.stdout + r.stderr
+    assert choice["screen_fit"] is None and "screen fitted" not in r.stderr  # a built-in's screen is not fitted
     with served(create_app([out])) as client:  # the dashboard's meta carries the choice
         run_id = client.get("/runs").json()[0]["run_id"]
         assert client.get(f"/runs/{run_id}/meta").json()["engine_choice"] == choice

@@ -3,7 +3,6 @@ judge's recordings, MuJoCo's contact constants fitted to them within a stated bu
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 
@@ -67,21 +66,52 @@ def test_the_summary_says_what_it_did_and_what_it_decided():
 
 
 @pytest.mark.slow
-def test_calibrate_fits_a_users_soft_screen_and_stores_what_it_did(tmp_path):
-    """The whole path a user's robot takes: the unfitted calibration, the judge's recordings, the fit, the
-    calibration on the fitted screen; the JSON holds the figures before and after and the profile's hash."""
+def test_search_auto_fits_a_users_soft_screen_and_stores_what_it_did(tmp_path):
+    """The whole path a user's robot takes: its spec file, the unfitted calibration, the judge's recordings, the
+    fit, the calibration on the fitted screen; the choice with the figures before and after and the profile's
+    hash is stored with the run, printed, and served by /runs/ID/meta; a mujoco screen carries the fitted
+    constants in the run's trial config."""
     import os
 
+    from spinefarm.api.app import create_app
+    from spinefarm.storage.hdf5_reader import read_run
+    from tests.http_server import served
+
+    spec = tmp_path / "my-spine.yaml"
+    spec.write_text(spinefarm("spec", "tetraspine-ntrt", "--name", "my-spine").stdout)
     (tmp_path / "soft.yaml").write_text(yaml.safe_dump({"constants": SOFT}))
-    r = spinefarm("calibrate", "tetraspine-ntrt", "--profile", str(tmp_path / "soft.yaml"), "--gaits", "8",
-                  "--search-trials", "0", "--bests", "0", "--duration", "4", "--settle", "0.5", "--jobs", "1",
-                  "--fit-screen", "12", "--json", env={**os.environ, "SPINEFARM_CACHE_DIR": str(tmp_path / "c")})
+    out = tmp_path / "run.h5"
+    r = spinefarm("search", str(spec), "--profile", str(tmp_path / "soft.yaml"), "--trials", "2", "--workers", "1",
+                  "--duration", "0.5", "--out", str(out), "--api-port", "-1", "--no-verify",
+                  "--calibrate-gaits", "8", "--calibrate-search-trials", "0", "--calibrate-bests", "0",
+                  "--calibrate-duration", "4", "--calibrate-settle", "0.5", "--calibrate-fit-screen", "12",
+                  env={**os.environ, "SPINEFARM_CACHE_DIR": str(tmp_path / "cache")})
     assert r.returncode == 0, r.stderr[-2000:]
-    out = json.loads(r.stdout.strip().splitlines()[-1])
-    fit = out.get("screen_fit")
-    if fit is None:  # the soft screen passed unfitted: nothing to fit, and it says mujoco
-        assert out["decision"] == "mujoco"
+    meta, _ = read_run(out)
+    choice = meta.settings.engine_choice.to_dict()
+    fit = choice["screen_fit"]
+    if fit is None:  # the soft screen passed unfitted: nothing to fit
+        assert choice["engine"] == "mujoco"
         return
     assert fit["profile_hash"] == profile_hash(fit["profile"]) and set(fit["fitted"]) == set(SCREEN_CONSTANTS)
-    assert fit["before"]["decision"] == "bullet"
-    assert out["decision"] == fit["decision"] == fit["after"]["decision"]
+    assert fit["before"]["decision"] == "bullet" and choice["engine"] == fit["decision"] == fit["after"]["decision"]
+    assert "screen fitted to the judge" in r.stderr and fit["profile_hash"] in r.stderr
+    profile = meta.trial_config.get("profile") or {}
+    assert all(profile.get(n) == v for n, v in fit["fitted"].items()) == (choice["engine"] == "mujoco")
+    with served(create_app([out])) as client:
+        run_id = client.get("/runs").json()[0]["run_id"]
+        assert client.get(f"/runs/{run_id}/meta").json()["engine_choice"]["screen_fit"] == fit
+
+
+def test_the_searchs_profile_reaches_its_calibration_child(tmp_path, monkeypatch):
+    """search --profile P --engine auto calibrates with P (the child gets it as a file), and falls back to the
+    temp folder when the cache folder cannot be written."""
+    from spinefarm.cli.engine_auto import _profile_file
+    from spinefarm.robot.profile import load_profile
+
+    monkeypatch.setenv("SPINEFARM_CACHE_DIR", str(tmp_path / "cache"))
+    assert load_profile(_profile_file(SOFT)) == SOFT
+    (tmp_path / "blocked").write_text("a file where a folder should be")
+    monkeypatch.setenv("SPINEFARM_CACHE_DIR", str(tmp_path / "blocked"))
+    path = _profile_file({"mujoco.solref_time_s": 0.03})
+    assert not path.startswith(str(tmp_path)) and load_profile(path) == {"mujoco.solref_time_s": 0.03}
