@@ -8,9 +8,9 @@ looks, the COM path, the set-up and result), per built-in.
 The trial runs through worker.trial.simulation.simulate, with the loop's compiled run
 (worker.trial.loop.run_compiled) swapped for a copy that reads the CPU's time-stamp counter around each part
 (the same arithmetic, so the trial's bits are unchanged: `same_distance` checks it); the counter runs in wall
-time, so a step with a part longer than PREEMPTED_US (the law: plus twice a CPG update) had another process in
-it and is left out of the per-step means (`steps_preempted`). The CPG alone is timed apart in a compiled loop
-on a copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
+time, so a part of a step longer than PREEMPTED_US (the law: plus twice a CPG update) had another process in it
+and is left out of that part's mean (`parts_preempted`). The CPG alone is timed apart in a compiled loop on a
+copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
 `law - cpg` is the string kernel's. Shares are of the whole step (CPU time of the whole trial over its steps):
 `control_share` = 1 - in-trial mj_step / whole (bench/trial_speed.py's figure uses a bare mj_step from the end
 state instead, which costs less than the in-trial one).
@@ -60,9 +60,10 @@ def _ticks(typingctx):
 
 @njit
 def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, caps):
-    """worker.trial.loop.run_compiled with ticks[0..2] += copy-in + copy-out, law, mj_step over the steps whose parts
-    all took fewer ticks than caps (copies, law, mj_step), ticks[3] += 1 (calls), ticks[4] += steps kept,
-    ticks[5] += steps left out."""
+    """worker.trial.loop.run_compiled with, per part p (0: copy-in + copy-out, 1: law, 2: mj_step), ticks[p] += its
+    ticks and ticks[4 + p] += 1 where it took fewer ticks than caps[p] (else ticks[7] += 1: another process
+    ran in it); ticks[3] += 1 (calls). Each part is kept or left out on its own, so a long step (a CPG update)
+    is not left out more often for the other parts' preemptions."""
     step, m_addr, d_addr, state, columns, wrench = world
     force = strings[6][b]
     torque = strings[7][b]
@@ -85,13 +86,13 @@ def _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, caps):
         t3 = _ticks()
         loop._call_step(step, m_addr, d_addr)
         t4 = _ticks()
-        if (t1 - t0) + (t3 - t2) >= caps[0] or t2 - t1 >= caps[1] or t4 - t3 >= caps[2]:  # another process ran
-            ticks[5] += 1
-            continue
-        ticks[0] += (t1 - t0) + (t3 - t2)
-        ticks[1] += t2 - t1
-        ticks[2] += t4 - t3
-        ticks[4] += 1
+        parts = ((t1 - t0) + (t3 - t2), t2 - t1, t4 - t3)
+        for p in range(3):
+            if parts[p] < caps[p]:
+                ticks[p] += parts[p]
+                ticks[4 + p] += 1
+            else:
+                ticks[7] += 1
     return STATUS_OK, n_steps
 
 
@@ -133,7 +134,7 @@ def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controll
               caps: np.ndarray) -> dict:
     """One trial through the timed loop (caps: ticks per part beyond which a step counts as preempted)."""
     tpu = caps[3]
-    ticks = np.zeros(6, dtype=np.int64)
+    ticks = np.zeros(8, dtype=np.int64)
     plain = loop.run_compiled
 
     def timed(world, cpg, strings, clock, b, n_steps, poses):
@@ -147,11 +148,11 @@ def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controll
         loop.run_compiled = plain
     reference = simulate(morph, u, cfg, seed, controller=controller, setup=cache).result  # the plain loop
     steps = res.sim_time_s / res.extras["dt_s"] + round(cfg.settle_s / res.extras["dt_s"])
-    copies, law_us, mj = (ticks[:3] / tpu / ticks[4]).tolist()  # per step, over the steps not preempted
+    copies, law_us, mj = (ticks[:3] / tpu / ticks[4:7]).tolist()  # per step, over each part's kept steps
     whole = whole_s * 1e6 / steps
     return {"whole": whole, "mj_step": mj, "law": law_us, "copies": copies,
             "python": whole - mj - law_us - copies, "compiled_calls_per_step": ticks[3] / steps,
-            "steps_preempted": int(ticks[5]), "steps_timed": int(ticks[4]),
+            "parts_preempted": int(ticks[7]), "steps_timed": int(ticks[6]),
             "same_distance": res.distance_m == reference.distance_m, "distance_m": res.distance_m,
             "segment_contacts": res.extras.get("segment_contacts", "left out")}
 
