@@ -8,6 +8,7 @@ worker builds any body without the file, and a resumed run needs nothing but its
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -54,13 +55,16 @@ class BodySearch:
         return cls({k: v for k, v in plain(doc).items() if k != "search"}, found, Path(path).name)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"document": dict(self.document), "source": self.source,
+        # the document as JSON text: a spec's key order is meaning (node numbering, CPG order), and run configs
+        # are stored and hashed with their keys sorted
+        return {"document": json.dumps(self.document), "source": self.source,
                 "fields": [[f.path, f.low, f.high] for f in self.fields]}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> BodySearch:
         try:
-            return cls(dict(d["document"]), tuple(BodyField(str(p), float(lo), float(hi)) for p, lo, hi in d["fields"]),
+            return cls(json.loads(d["document"]),
+                       tuple(BodyField(str(p), float(lo), float(hi)) for p, lo, hi in d["fields"]),
                        str(d.get("source", "<run>")))
         except (KeyError, TypeError, ValueError) as exc:
             raise MorphologySpecError("run's body search is malformed", received=repr(exc)[:120],

@@ -15,7 +15,7 @@ from spinefarm.protocol.columns import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.protocol.states import STORED_STATUSES, AuditState, Verification
 
-FILE_SCHEMA_VERSION = 7
+FILE_SCHEMA_VERSION = 8
 
 # A sampler names its own phases: any short lower-case name is a valid phase (no list to extend here).
 PHASE_PATTERN = rb"^[a-z][a-z0-9_]{0,15}$"
@@ -111,6 +111,7 @@ class TrialRecord:
     duration_s: float = float("nan")
     settle_s: float = float("nan")
     time_limit_s: float = float("nan")
+    body_hash: str = ""
     pareto_front: int = 0
 
     @classmethod

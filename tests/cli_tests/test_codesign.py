@@ -65,6 +65,8 @@ def test_every_trial_is_complete_or_infeasible_with_its_reason(codesigned):
     ratio = complete["mass_kg"] / complete[BODY[2]]
     assert complete["mass_kg"].nunique() == len(complete)
     assert np.allclose(ratio, ratio.iloc[0], rtol=1e-9)
+    # each trial names the body it ran, failed ones too: 16 hex digits, one per distinct body
+    assert all(len(h) == 16 for h in df["body_hash"]) and df["body_hash"].nunique() == len(df)
 
 
 def test_the_exported_body_reruns_the_best_distance_bit_for_bit(codesigned):
@@ -75,7 +77,9 @@ def test_the_exported_body_reruns_the_best_distance_bit_for_bit(codesigned):
     gait = json.loads((folder / "gait.json").read_text())
     best = df.loc[gait["source"]["trial_id"]]
     assert not any(k.startswith("body.") for k in gait["params"])
-    body = load_morphology(str(folder / "best.yaml")).structure
+    robot = load_morphology(str(folder / "best.yaml"))
+    assert robot.spec_hash() == best["body_hash"]  # the very robot the trial ran
+    body = robot.structure
     assert body.string_material("outer").stiffness_n_per_m == best[BODY[1]]
     assert body.rod_material("rod").density_kg_per_cm3 == best[BODY[2]]
     r = run("trial", str(folder / "best.yaml"), "--params", str(folder / "gait.json"), "--seed", str(best["seed"]),
@@ -96,6 +100,7 @@ def test_a_fixed_body_run_refuses_spec_in_one_line(tmp_path):
 def test_a_resumed_codesigned_run_keeps_its_body_search(tmp_path):
     from spinefarm.coordinator.problem import build_run_config
     from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
+    from spinefarm.robot.codesign import BodySearch
     from spinefarm.worker.evaluators import build_evaluator
 
     spec = tmp_path / "co.yaml"
@@ -114,5 +119,10 @@ def test_a_resumed_codesigned_run_keeps_its_body_search(tmp_path):
         got = core2.study.sampler.propose(2, storage2)
         assert np.array_equal(expected.params_unit, got.params_unit)
         build_evaluator(core2.run_config)  # a worker rebuilds the run, its body search included
+        # and builds the same robots from it: a spec's key order (node numbering) survives the run file
+        values = {f.path: (f.low + f.high) / 2 for f in BodySearch.from_dict(config.body).fields}
+        before, after = (BodySearch.from_dict(c.body).body(values) for c in (config, core2.run_config))
+        assert before.spec_hash() == after.spec_hash()
+        assert before.structure.node_names[:4] == ("s0.right", "s0.left", "s0.top", "s0.front")  # the file's order
     finally:
         storage2.close()
