@@ -88,6 +88,33 @@ class BodySearch:
         return {f.path: float(v) for f, v in zip(self.fields, tail, strict=True)}
 
 
+def file_values(search: BodySearch) -> dict[str, float]:
+    """path -> the value the spec document itself gives each searched field (1 for an unset scale)."""
+    morph = search.body({})
+    out = {}
+    for f in search.fields:
+        section, *tag, name = f.path.split(".")
+        if section == "segments":
+            out[f.path] = float(search.document["segments"].get(name, 1.0))
+        else:
+            s = morph.structure
+            material = s.rod_material(tag[0]) if section == "rod_materials" else s.string_material(tag[0])
+            out[f.path] = float(getattr(material, name))
+    return out
+
+
+def with_file_body(search: BodySearch, gait_unit: np.ndarray) -> np.ndarray:
+    """A gait's unit vector followed by the file's own body, in the run's unit cube (an --enqueue'd start)."""
+    values = file_values(search)
+    body = []
+    for f in search.fields:
+        if not f.low <= values[f.path] <= f.high:
+            raise MorphologySpecError(f"the file's own {f.path} is outside its search range", received=values[f.path],
+                                      expected=f"a value in [{f.low:g}, {f.high:g}] to start an --enqueue'd gait on")
+        body.append((values[f.path] - f.low) / (f.high - f.low))
+    return np.concatenate([np.asarray(gait_unit, dtype=float), body])
+
+
 class Bodies:
     """A co-designed run's trial vectors split into (robot, gait's unit vector); robots built once per body and
     kept, the most recent `size`."""

@@ -126,3 +126,20 @@ def test_a_resumed_codesigned_run_keeps_its_body_search(tmp_path):
         assert before.structure.node_names[:4] == ("s0.right", "s0.left", "s0.top", "s0.front")  # the file's order
     finally:
         storage2.close()
+
+
+def test_an_enqueued_gait_starts_on_the_files_own_body(tmp_path):
+    from spinefarm.cli.run_setup import _with_file_body
+    from spinefarm.protocol.errors import MorphologySpecError
+
+    spec = tmp_path / "co.yaml"
+    spec.write_text(SPEC)
+    gait = (0.25, 0.75)
+    got = _with_file_body(str(spec), gait)
+    # the file's spacing 1 in [0.005, 1.2]; the paper's k = 1000 N/m and 4.2 / 300 kg/cm^3, mid-range of +-30 %
+    assert got[:2] == gait
+    assert got[2:] == pytest.approx(((1.0 - 0.005) / 1.195, 0.5, 0.5), abs=1e-12)
+    assert _with_file_body("tetraspine", gait) == gait  # a built-in has no search block
+    spec.write_text(SPEC.replace("[700, 1300]", "[1100, 1300]"))
+    with pytest.raises(MorphologySpecError, match="outside its search range; received 1000.0"):
+        _with_file_body(str(spec), gait)
