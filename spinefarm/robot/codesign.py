@@ -173,3 +173,17 @@ def body_of_trial(config: RunConfig, params_unit: np.ndarray) -> tuple[dict[str,
     bodies = Bodies(search, search.space(param_space(Morphology.from_dict(config.morphology_spec),
                                                      config.controller)))
     return search.values(bodies.space.from_unit(params_unit)), np.asarray(params_unit, dtype=float)[:bodies.n_gait]
+
+
+def job_robot(job: Mapping[str, Any]) -> tuple[Morphology, np.ndarray]:
+    """The robot and unit vector a re-simulation job (a picture, a motion: morphology, controller, params_unit and,
+    for a co-designed run, its `body` search) runs: in a co-designed run the trial's own body and its gait."""
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.spaces import param_space
+
+    morph = load_morphology(job["morphology"])
+    unit = np.asarray(job.get("params_unit", ()), dtype=float)
+    if not job.get("body"):
+        return morph, unit
+    search = BodySearch.from_dict(job["body"])
+    return Bodies(search, search.space(param_space(morph, job.get("controller"))), size=1).split(unit)

@@ -141,5 +141,27 @@ def test_an_enqueued_gait_starts_on_the_files_own_body(tmp_path):
     assert got[2:] == pytest.approx(((1.0 - 0.005) / 1.195, 0.5, 0.5), abs=1e-12)
     assert _with_file_body("tetraspine", gait) == gait  # a built-in has no search block
     spec.write_text(SPEC.replace("[700, 1300]", "[1100, 1300]"))
-    with pytest.raises(MorphologySpecError, match="outside its search range; received 1000.0"):
+    with pytest.raises(MorphologySpecError, match=r"outside its search range; received 1000\.0"):
         _with_file_body(str(spec), gait)
+
+
+def test_pictures_and_the_player_draw_the_trials_own_body(tmp_path):
+    from spinefarm.coordinator.problem import build_run_config
+    from spinefarm.robot.codesign import BodySearch
+    from spinefarm.worker.motion import simulate_motion
+
+    spec = tmp_path / "co.yaml"
+    spec.write_text(SPEC)
+    config = build_run_config("co-1", str(spec), duration_s=0.05)
+    unit = np.full(len(config.param_space), 0.5)
+    unit[-3] = 1.0  # spacing 1.2: the segments 1.2 x 28.575 cm apart along z
+    job = {"morphology": config.morphology_spec, "controller": config.controller, "trial_config": config.trial_config,
+           "params_unit": unit.tolist(), "seed": 1, "body": config.body}
+    motion = simulate_motion(job)
+    # by hand: rod masses go with their lengths (five 38.1 cm edges, the 33.0 cm top-front rod); the three rods
+    # to the front apex are centred 14.2875 cm forward, so a segment's centre of mass is 6.98 cm ahead of its
+    # frame; the frames sit at z = 71.425 - 1.2 * 28.575 * i, so the robot's at 71.425 - 1.2 * 28.575 (i = 1)
+    top_front_cm = np.hypot(32.99557 / 2, 28.575)
+    ahead_cm = 14.2875 * (2 * 38.1 + top_front_cm) / (5 * 38.1 + top_front_cm)
+    assert motion["com_cm"][0][2] == pytest.approx(ahead_cm + 71.425 - 1.2 * 28.575, abs=0.05)
+    assert BodySearch.from_dict(config.body).fields[0].path == "segments.spacing_scale"
