@@ -83,7 +83,8 @@ def trial_job(meta: RunMeta, rec: TrialRecord) -> dict[str, Any]:
                                    expected="the API on a machine with `pip install 'spinefarm[worker]'`")
     return {"morphology": meta.morphology_spec, "controller": meta.controller, "trial_config": trial_config,
             "params_unit": list(rec.params_unit), "seed": rec.seed, "frames": FRAMES,
-            "title": f"{meta.run_id} trial {rec.trial_id}"}
+            "title": f"{meta.run_id} trial {rec.trial_id}",
+            **({"body": meta.run["body"]} if meta.run.get("body") else {})}  # a co-designed trial: its own body
 
 
 class PictureCache:

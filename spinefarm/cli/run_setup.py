@@ -188,7 +188,19 @@ def enqueued(args: argparse.Namespace) -> tuple[tuple[float, ...], ...]:
             raise ConfigError(f"--enqueue {path} is a gait of another controller space", received=given,
                               expected=f"{controller} (the run's; --controller {given} searches that space)")
         units.append(tuple(space.to_unit(space.physical(params)).tolist()))
-    return tuple(units)
+    return tuple(_with_file_body(args.morphology, u) for u in units)
+
+
+def _with_file_body(morphology: str, unit: tuple[float, ...]) -> tuple[float, ...]:
+    """In a co-designed run (a spec file with a `search:` block) an enqueued gait starts on the file's own body."""
+    if not morphology.lower().endswith((".yaml", ".yml")):
+        return unit
+    import numpy as np
+
+    from spinefarm.robot.codesign import BodySearch, with_file_body
+
+    search = BodySearch.from_file(morphology)
+    return unit if search is None else tuple(with_file_body(search, np.asarray(unit)).tolist())
 
 
 def search_settings(args: argparse.Namespace, rungs: Any, lease_s: float, judge: Any, choice: Any,

@@ -8,6 +8,7 @@ worker builds any body without the file, and a resumed run needs nothing but its
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -54,13 +55,16 @@ class BodySearch:
         return cls({k: v for k, v in plain(doc).items() if k != "search"}, found, Path(path).name)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"document": dict(self.document), "source": self.source,
+        # the document as JSON text: a spec's key order is meaning (node numbering, CPG order), and run configs
+        # are stored and hashed with their keys sorted
+        return {"document": json.dumps(self.document), "source": self.source,
                 "fields": [[f.path, f.low, f.high] for f in self.fields]}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> BodySearch:
         try:
-            return cls(dict(d["document"]), tuple(BodyField(str(p), float(lo), float(hi)) for p, lo, hi in d["fields"]),
+            return cls(json.loads(d["document"]),
+                       tuple(BodyField(str(p), float(lo), float(hi)) for p, lo, hi in d["fields"]),
                        str(d.get("source", "<run>")))
         except (KeyError, TypeError, ValueError) as exc:
             raise MorphologySpecError("run's body search is malformed", received=repr(exc)[:120],
@@ -82,6 +86,33 @@ class BodySearch:
         """path -> value of the body part of a physical vector (the last len(fields) values)."""
         tail = np.asarray(physical, dtype=float)[len(physical) - len(self.fields):]
         return {f.path: float(v) for f, v in zip(self.fields, tail, strict=True)}
+
+
+def file_values(search: BodySearch) -> dict[str, float]:
+    """path -> the value the spec document itself gives each searched field (1 for an unset scale)."""
+    morph = search.body({})
+    out = {}
+    for f in search.fields:
+        section, *tag, name = f.path.split(".")
+        if section == "segments":
+            out[f.path] = float(search.document["segments"].get(name, 1.0))
+        else:
+            s = morph.structure
+            material = s.rod_material(tag[0]) if section == "rod_materials" else s.string_material(tag[0])
+            out[f.path] = float(getattr(material, name))
+    return out
+
+
+def with_file_body(search: BodySearch, gait_unit: np.ndarray) -> np.ndarray:
+    """A gait's unit vector followed by the file's own body, in the run's unit cube (an --enqueue'd start)."""
+    values = file_values(search)
+    body = []
+    for f in search.fields:
+        if not f.low <= values[f.path] <= f.high:
+            raise MorphologySpecError(f"the file's own {f.path} is outside its search range", received=values[f.path],
+                                      expected=f"a value in [{f.low:g}, {f.high:g}] to start an --enqueue'd gait on")
+        body.append((values[f.path] - f.low) / (f.high - f.low))
+    return np.concatenate([np.asarray(gait_unit, dtype=float), body])
 
 
 class Bodies:
@@ -142,3 +173,17 @@ def body_of_trial(config: RunConfig, params_unit: np.ndarray) -> tuple[dict[str,
     bodies = Bodies(search, search.space(param_space(Morphology.from_dict(config.morphology_spec),
                                                      config.controller)))
     return search.values(bodies.space.from_unit(params_unit)), np.asarray(params_unit, dtype=float)[:bodies.n_gait]
+
+
+def job_robot(job: Mapping[str, Any]) -> tuple[Morphology, np.ndarray]:
+    """The robot and unit vector a re-simulation job (a picture, a motion: morphology, controller, params_unit and,
+    for a co-designed run, its `body` search) runs: in a co-designed run the trial's own body and its gait."""
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.spaces import param_space
+
+    morph = load_morphology(job["morphology"])
+    unit = np.asarray(job.get("params_unit", ()), dtype=float)
+    if not job.get("body"):
+        return morph, unit
+    search = BodySearch.from_dict(job["body"])
+    return Bodies(search, search.space(param_space(morph, job.get("controller"))), size=1).split(unit)

@@ -132,6 +132,7 @@ class TrialRecord:
     duration_s: float = float("nan")
     settle_s: float = float("nan")
     time_limit_s: float = float("nan")
+    body_hash: str = ""
     pareto_front: int = 0
 
     @classmethod

@@ -133,12 +133,14 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
     def evaluate(a: TrialAssignment) -> TrialResult:
         cfg = task_config(trial_config, a)
         params = np.asarray(a.params_unit, dtype=float)
-        morphology = base
-        if bodies is not None:
-            morphology, params = bodies.split(params)
-            verdict = feasible.check(morphology, cfg.engine)
-            if not verdict.ok:
-                return infeasible_result(verdict, a.seed)
+        if bodies is None:
+            return _run(base, params, cfg, a)
+        morphology, params = bodies.split(params)
+        verdict = feasible.check(morphology, cfg.engine)
+        r = _run(morphology, params, cfg, a) if verdict.ok else infeasible_result(verdict, a.seed)
+        return dataclasses.replace(r, extras={**r.extras, "body_hash": morphology.spec_hash()})
+
+    def _run(morphology: Any, params: Any, cfg: Any, a: TrialAssignment) -> TrialResult:
         if spec.active:  # K randomised episodes of this parameter set, at this task's fidelity (worker.trial.robust)
             from spinefarm.worker.trial.robust import run_episodes
 

@@ -96,14 +96,14 @@ def motion_record(motion: dict[str, Any]) -> dict[str, np.ndarray]:
 
 def simulate_motion(job: dict[str, Any]) -> dict[str, Any]:
     """Re-simulate a stored trial with recording on and return its motion document."""
-    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.codesign import job_robot
     from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
-    morph = load_morphology(job["morphology"])
+    morph, unit = job_robot(job)  # a co-designed trial's own body
     base = dict(job["trial_config"])
     duration = float(base.get("duration_s") or morph.duration_s) + float(base.get("settle_s") or 0.0)
     base["record_every_s"] = record_every_s(duration)
-    outcome = simulate(morph, np.asarray(job["params_unit"], dtype=float), TrialConfig.from_dict(base),
+    outcome = simulate(morph, unit, TrialConfig.from_dict(base),
                        int(job["seed"]), controller=job.get("controller"))
     record = outcome.trajectory.arrays() if outcome.trajectory is not None else {}
     return motion_document(morph, record, outcome.result, str(job.get("title", morph.name)))

@@ -13,16 +13,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 
 def render_motion_file(job: dict[str, Any], out: str | Path) -> Path:
     """The strip drawn from an already recorded motion (worker/tools/motion.py's JSON): no simulation."""
-    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.codesign import job_robot
     from spinefarm.worker.tools.motion import motion_record
     from spinefarm.worker.tools.render import frames_from_record, render
 
-    morph = load_morphology(job["morphology"])
+    morph, _ = job_robot(job)  # a co-designed trial's own body
     motion = json.loads(Path(job["motion_file"]).read_text())
     frames = frames_from_record(motion_record(motion), int(job.get("frames", 6)), motion["n_bodies"],
                                 len(motion["strings"]))
@@ -34,17 +32,17 @@ def render_motion_file(job: dict[str, Any], out: str | Path) -> Path:
 
 
 def render_trial(job: dict[str, Any], out: str | Path) -> Path:
-    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.codesign import job_robot
     from spinefarm.worker.tools.render import frames_from_record, render
     from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
     if job.get("motion_file"):
         return render_motion_file(job, out)
-    morph = load_morphology(job["morphology"])
+    morph, unit = job_robot(job)  # a co-designed trial's own body
     base = dict(job["trial_config"])
     duration = float(base.get("duration_s") or morph.duration_s)
     base["record_every_s"] = max(0.01, duration / 200)
-    outcome = simulate(morph, np.asarray(job["params_unit"], dtype=float), TrialConfig.from_dict(base),
+    outcome = simulate(morph, unit, TrialConfig.from_dict(base),
                        int(job["seed"]), controller=job.get("controller"))
     record = outcome.trajectory.arrays() if outcome.trajectory is not None else {}
     frames = frames_from_record(record, int(job.get("frames", 6)), morph.structure.n_segments,
