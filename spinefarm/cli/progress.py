@@ -34,9 +34,9 @@ class ProgressLine:
             except (OSError, ValueError):
                 sized = False
             fallback = shutil.get_terminal_size((100, 24))
-            self._bar = tqdm(total=total, unit="trial", file=self.stream, leave=True, dynamic_ncols=sized,
+            self._bar = tqdm(total=total, unit="set", file=self.stream, leave=True, dynamic_ncols=sized,
                              ncols=None if sized else fallback.columns, nrows=None if sized else 24,
-                             bar_format="{l_bar}{bar}| {n}/{total} trials [{elapsed}<{remaining}{postfix}]")
+                             bar_format="{l_bar}{bar}| {n}/{total} parameter sets [{elapsed}<{remaining}{postfix}]")
 
     def logging_redirect(self) -> AbstractContextManager:
         """Route log records above the bar while it is shown."""

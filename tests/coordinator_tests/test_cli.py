@@ -44,12 +44,12 @@ def test_a_short_search_then_export(tmp_path):
     r = run("search", "sphere:3", "--trials", "50", "--workers", "1", "--out", str(out), "--api-port", "-1",
             "--seed", "5")
     assert r.returncode == 0, r.stderr
-    assert "best trial" in r.stdout and str(out) in r.stdout and "50/50 trials" in r.stderr
+    assert "best trial" in r.stdout and str(out) in r.stdout and "50/50 parameter sets" in r.stderr
     again = run("search", "sphere:3", "--trials", "50", "--workers", "1", "--out", str(out), "--api-port", "-1")
     assert again.returncode == 2 and "already exists" in again.stderr and "--overwrite" in again.stderr
     replaced = run("search", "sphere:3", "--trials", "20", "--workers", "1", "--out", str(out), "--api-port", "-1",
                    "--overwrite")
-    assert replaced.returncode == 0 and "20/20 trials" in replaced.stderr
+    assert replaced.returncode == 0 and "20/20 parameter sets" in replaced.stderr
     assert run("search", "sphere:3", "--trials", "50", "--workers", "1", "--out", str(out), "--api-port", "-1",
                "--overwrite", "--seed", "5").returncode == 0
     csv_path = tmp_path / "run.csv"

@@ -159,7 +159,7 @@ def test_a_search_started_beside_its_own_cli_and_worker_packages_completes(tmp_p
                         "2", "--out", str(tmp_path / "run.h5"), "--api-port", "-1"], cwd=tmp_path, capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "4/4 trials" in r.stderr
+    assert "4/4 parameter sets" in r.stderr
 
 
 @pytest.mark.parametrize("name", ["tetraspine", "tetrahedral-complex", "octahedral-complex", "ribbed",
