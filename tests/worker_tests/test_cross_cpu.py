@@ -18,8 +18,9 @@ PACKAGE = ROOT / "spinefarm"
 # every module a trial's numbers pass through (drawing, the morphology contract and the accuracy sweeps only read
 # results and are left out)
 MODEL_PATH = [*sorted((PACKAGE / "robot").rglob("*.py")),
-              *[PACKAGE / "worker" / f for f in ("trial.py", "episode.py", "setup.py", "scoring.py", "verify.py",
-                                              "replay.py", "loop.py", "batch.py")],
+              *[PACKAGE / "worker" / f for f in ("trial/simulation.py", "trial/episode.py", "trial/setup.py",
+                                              "trial/scoring.py", "tools/verify.py", "tools/replay.py",
+                                              "trial/loop.py", "trial/batch.py")],
               *(p for sub in ("engines", "sim", "control") for p in sorted((PACKAGE / "worker" / sub).glob("*.py")))]
 BLAS_CALLS = {"dot", "matmul", "einsum", "inner", "vdot", "tensordot", "outer", "kron"}
 # LAPACK's eigenvalues give the stable-step estimate; their result is rounded (fixedmath.round_significant)
