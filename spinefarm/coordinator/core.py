@@ -77,7 +77,7 @@ class CoordinatorCore(TaskDispatch):
         self.audit_comparisons = {"exact": 0, "tolerance": 0}   # what audits were held to (tasks.settle_audit)
         self.unaudited: dict[int, str] = {}   # rows whose audit stays pending, and why (dispatch)
         self.code_digest: str | None = None   # the run's simulating code: workers of another are left out
-        self.holder = ""   # this coordinator's session (start time and Zenoh id), told to workers in grants
+        self.holder = ""   # the run instance serving (the file's, see service.start), named in grants and results
         self.claims: dict[str, str] = {}   # other coordinators that claimed this run -> what was done
         self._judge_best()
 

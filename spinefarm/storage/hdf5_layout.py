@@ -89,11 +89,11 @@ def _parse_meta(f: h5py.File) -> RunMeta:
             continue  # written before runs recorded them
         raw = f.attrs[fld.name]
         if fld.name == "settings":
-            kw[fld.name] = RunSettings.from_dict(json.loads(raw))
+            kw[fld.name] = RunSettings.from_dict(_json(raw, fld.name))
         elif fld.name == "instances":
-            kw[fld.name] = _instances(json.loads(raw))
+            kw[fld.name] = _instances(_json(raw, fld.name))
         elif fld.name in _JSON_FIELDS:
-            kw[fld.name] = json.loads(raw)
+            kw[fld.name] = _json(raw, fld.name)
         elif fld.name in ("param_names", "param_units"):
             kw[fld.name] = tuple(x.decode("utf-8", "replace") if isinstance(x, bytes) else str(x) for x in raw)
         elif fld.name in ("param_lows", "param_highs"):
@@ -107,6 +107,13 @@ def _parse_meta(f: h5py.File) -> RunMeta:
         else:
             kw[fld.name] = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else str(raw)
     return RunMeta(**kw)
+
+
+def _json(raw: Any, name: str) -> Any:
+    try:
+        return json.loads(raw)
+    except ValueError as exc:   # say which attribute: the JSON error alone names none
+        raise ValueError(f"attribute {name} is not JSON ({exc})") from exc
 
 
 def _instances(raw: Any) -> tuple[dict[str, Any], ...]:

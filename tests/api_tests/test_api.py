@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import re
 import subprocess
 import sys
 import time
@@ -57,6 +58,12 @@ def test_runs_list_and_status(client):
     assert st["best"]["trial_id"] == 2 and st["workers"][0]["worker_id"] == "w-1"
     # one evaluation per parameter set: all three counts speak of the same trials
     assert (st["trials_budget"], st["trials_planned"], st["parameter_sets_sampled"]) == (100, 100, 6)
+
+
+def test_meta_shows_the_run_instance_history(client):
+    [created] = client.get("/runs/run-a/meta").json()["instances"]   # written once, never resumed
+    assert created["how"] == "create" and re.fullmatch(r"\d{13}-[0-9a-f]{16}", created["instance"])
+    assert abs(created["opened_at_unix_s"] - time.time()) < 600
 
 
 def test_best_trials_have_named_parameters_and_every_score_part(client):

@@ -101,3 +101,14 @@ def test_runs_answers_for_the_others_and_names_what_it_set_aside(runs: Path):
         one = client.get("/runs/sampler")
         assert one.status_code == 409 and "cannot show run file" in one.json()["detail"]["message"]
         assert client.get("/runs/fewer").status_code == 404
+
+
+@pytest.mark.parametrize("instances", ['"not a list"', "[1, 2]", '[{"how": "create"}]', "{"])
+def test_a_tampered_instance_history_is_a_one_line_error(tmp_path: Path, instances: str):
+    finished_run(tmp_path / "src.h5", n=3)
+    with h5py.File(tmp_path / "src.h5", "r+") as f:
+        assert json.loads(f.attrs["instances"])[0]["how"] == "create"   # the history the file was written with
+        f.attrs["instances"] = instances
+    with pytest.raises(StorageError, match="unreadable metadata") as exc:
+        spinefarm.load_run(tmp_path / "src.h5")
+    assert "\n" not in str(exc.value) and "instances" in str(exc.value)

@@ -274,3 +274,38 @@ def test_a_verdict_settles_a_result_only_from_the_instance_that_leased_it_or_the
     w._holder_grant("r1", [WorkGrant("r1", "ab12cd34", (), 0.5, False, coordinator="300-ccc")])   # a restart
     w._apply("r1", ((5, Verdict.STALE),), "300-ccc")
     assert sorted(w._pending["r1"]) == [7]
+
+
+def test_results_whose_query_times_out_are_kept_and_sent_again_not_dropped():
+    """A coordinator busy past the worker's query timeout answers nothing: Zenoh's "Timeout" error reply is no
+    refusal, so the results stay pending and go again (before, the worker dropped them as refused)."""
+    import zenoh
+
+    from spinefarm.protocol import keys
+    from spinefarm.protocol.envelope import encode_message
+    from spinefarm.protocol.results import TrialResult
+    from spinefarm.protocol.submissions import SubmittedResult
+    from spinefarm.protocol.work import WorkGrant, WorkRequest
+
+    endpoint = free_endpoint()
+    core, storage, _ = sphere_core(trials=4, clock=time.monotonic, lease_s=3600)
+    service = CoordinatorService(core, storage, listen=[endpoint]).start()
+    w = WorkerService(ZenohAccess([endpoint]), run_id=core.run_id, worker_id="w1", isolate=False,
+                      timings=WorkerTimings(query_timeout_s=0.5))
+    session = zenoh.open(w.access.config())
+    try:
+        ask = encode_message(WorkRequest("w1", 2, code_digest=w.code_digest))
+        [grant] = wait_for(lambda: w._query(session, keys.work(core.run_id), ask, WorkGrant)[0], poll_s=0.2,
+                           what="a grant")
+        w._holder_grant(core.run_id, [grant])
+        w._pending[core.run_id] = {a.trial_id: SubmittedResult(a.lease_id, TrialResult(
+            TrialStatus.COMPLETE, "", 1.0 + a.trial_id, 0, 0, 0, 0, 1, 0, 1, a.seed, trial_id=a.trial_id,
+            worker_id="w1"), coordinator=grant.coordinator) for a in grant.assignments}
+        with core.lock:   # the coordinator is busy for longer than the worker's 0.5 s query timeout
+            assert w._submit(session) is False
+        assert sorted(w._pending[core.run_id]) == sorted(a.trial_id for a in grant.assignments)
+        wait_for(lambda: w._submit(session), poll_s=0.2, what="the results acknowledged once it answers")
+        assert storage.counts()["complete"] == 2
+    finally:
+        session.close()
+        service.close()

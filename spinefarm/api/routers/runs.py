@@ -81,6 +81,8 @@ def get_meta(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> dict[str, 
             "software_version": m.software_version, "created_at_unix_s": m.created_at_unix_s,
             "physical": bool(m.morphology_spec), "settings": m.settings.to_dict(),
             "robust": m.run.get("robust") or {},
+            # each time a coordinator created or resumed the run, oldest first: the last one serves it
+            "instances": list(m.instances),
             # how `search --engine auto` chose the tier, with its calibration's figures (None: engine given)
             "engine_choice": None if m.settings.engine_choice is None else m.settings.engine_choice.to_dict()}
 

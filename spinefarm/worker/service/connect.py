@@ -10,7 +10,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 from spinefarm.worker.service.pacing import EXIT_REFUSED, Backoff, listening_endpoints
 
@@ -18,6 +18,13 @@ log = logging.getLogger("spinefarm.worker")
 # A worker still without its coordinator after this long says so (then keeps trying).
 UNREACHABLE_WARN_S = 3.0
 Session = TypeVar("Session")
+
+
+def timed_out(reply: Any) -> bool:
+    """A Zenoh error reply that only says the query's time ran out (a busy coordinator): no refusal, so what the
+    query carried is sent again, not dropped."""
+    err = getattr(reply, "err", None)
+    return err is not None and err.payload.to_string() == "Timeout"
 
 
 class Connector(Generic[Session]):

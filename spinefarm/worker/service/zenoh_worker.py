@@ -30,7 +30,7 @@ from spinefarm.protocol.run import RunConfig, WorkerProblem
 from spinefarm.protocol.submissions import ResultAck, ResultSubmission, SubmittedResult
 from spinefarm.protocol.work import RunInfo, TrialAssignment, WorkGrant, WorkRequest
 from spinefarm.worker.service.assignment import available_engines, environment
-from spinefarm.worker.service.connect import Connector
+from spinefarm.worker.service.connect import Connector, timed_out
 from spinefarm.worker.service.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
 from spinefarm.worker.service.pacing import Backoff, BatchSizer, default_worker_id, mark_ready
 from spinefarm.worker.service.sandbox import MIN_LIMIT_S, SandboxStopped, TrialLimit, TrialSandbox
@@ -158,8 +158,8 @@ class WorkerService:
         out, refused = [], 0
         for reply in session.get(key, payload=payload, timeout=self.timings.query_timeout_s):
             if reply.ok is None:
-                log.warning("error reply on %s", key)
-                refused += 1
+                log.warning("error reply on %s: %s", key, reply.err.payload.to_string()[:200])
+                refused += not timed_out(reply)
                 continue
             try:
                 out.append(decode_message(reply.ok.payload.to_bytes(), cls))
