@@ -17,6 +17,7 @@ import signal
 import sqlite3
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -37,18 +38,55 @@ def copy_tree(dest: Path) -> None:
             shutil.copy2(src, dest / name)
 
 
-def run_module(tree: Path, module: str, tests: tuple[str, ...], functions: tuple[str, ...] = ()) -> int:
+def mutmut_run(tree: Path, cmd: list[str]) -> bool:
+    """Run one `mutmut run`; False when it failed to find a mutant in its cache (mutmut 2.5.1: `Mutant.line is
+    required`), after which it waits for its dead checking process for ever: then it is ended."""
+    env = dict(os.environ, PYTHONPATH=str(tree), SPINEFARM_MUTATION="1")
+    with tempfile.TemporaryFile() as log:
+        proc = subprocess.Popen(cmd, cwd=tree, env=env, stdout=log, stderr=subprocess.STDOUT)
+        while proc.poll() is None:
+            time.sleep(1.0)
+            log.seek(0)
+            if b"Mutant.line is required" in log.read():
+                proc.kill()
+                proc.wait()
+                return False
+        log.seek(0)
+        sys.stderr.buffer.write(log.read()[-2000:])
+    return True
+
+
+def run_module(tree: Path, module: str, tests: tuple[str, ...], functions: tuple[str, ...] = ()) -> None:
+    """mutmut over the module; if it stops at a mutant it cannot look up, the mutants it did not reach are
+    run one by one (that one is left untested)."""
     # mutmut 2 counts only exit code 1 as killed: a mutant that breaks an import (pytest's exit code 2, a
     # collection error) would count as survived, so pytest_exit makes every failure 1
     runner = " ".join([sys.executable, "-m", "tests.mutation.pytest_exit", "-x", "-q", "-p", "no:randomly", "-p",
                        "no:cacheprovider", *tests])
-    env = dict(os.environ, PYTHONPATH=str(tree), SPINEFARM_MUTATION="1")
+    args = ["--paths-to-mutate", module, "--runner", runner, "--tests-dir", "tests", "--disable-mutation-types",
+            "string,fstring,decorator", "--test-time-base", "20", "--simple-output", "--no-progress", "--CI"]
     # restricted to some functions: mutmut started through tests.mutation.lines, which hands it their lines
     tool = ["tests.mutation.lines", module, ",".join(functions), "--"] if functions else ["mutmut"]
-    cmd = [sys.executable, "-m", *tool, "run", "--paths-to-mutate", module, "--runner", runner,
-           "--tests-dir", "tests", "--disable-mutation-types", "string,fstring,decorator",
-           "--test-time-base", "20", "--simple-output", "--no-progress", "--CI"]
-    return subprocess.run(cmd, cwd=tree, env=env, stdout=sys.stderr).returncode
+    if mutmut_run(tree, [sys.executable, "-m", *tool, "run", *args]):
+        return
+    for mutant_id in untested(tree, module):
+        restore(tree, module)
+        mutmut_run(tree, [sys.executable, "-m", "mutmut", "run", str(mutant_id), *args])
+    restore(tree, module)
+
+
+def restore(tree: Path, module: str) -> None:
+    """The module as tracked, over a mutant an ended mutmut left in the copy."""
+    shutil.copy2(ROOT / module, tree / module)
+    (tree / f"{module}.bak").unlink(missing_ok=True)
+
+
+def untested(tree: Path, module: str) -> list[int]:
+    db = sqlite3.connect(tree / ".mutmut-cache")
+    rows = db.execute("SELECT m.id FROM Mutant m JOIN Line l ON m.line = l.id JOIN SourceFile f "
+                      "ON l.sourcefile = f.id WHERE f.filename = ? AND m.status = 'untested'", (module,)).fetchall()
+    db.close()
+    return [i for (i,) in rows]
 
 
 def end_leftovers(tree: Path) -> int:
