@@ -12,7 +12,9 @@ until it is done.
 
 Checked from the run file and the workers' acknowledgement logs (SPINEFARM_ACK_LOG): every parameter set
 of the budget evaluated, no row left waiting, 0 lost (acknowledged as stored, absent or different in
-the file), 0 duplicated (acknowledged as stored twice), 0 forged rows stored as complete, no process
+the file), 0 duplicated (acknowledged as stored twice), 0 forged rows stored as complete, every audit
+(a quarter of the results, every new best) run and none left pending across the coordinator kills
+(`tasks_pending_at_end`), no process
 left running once the run is over, no exit the schedule did not cause, and how the workers left: each
 frozen one is woken when the run is done and the coordinator waits for it, so none should have to wait
 out its --coordinator-timeout (`workers_timed_out`; `workers_exit_s`: from the coordinator's exit to the
@@ -42,12 +44,16 @@ sys.path.insert(0, str(ROOT))
 
 from spinefarm.coordinator.problem import build_run_config  # noqa: E402
 from spinefarm.coordinator.setup import SearchSettings, new_run  # noqa: E402
-from spinefarm.storage.hdf5_reader import read_run  # noqa: E402
+from spinefarm.protocol.settings import AuditPolicy  # noqa: E402
+from spinefarm.storage.hdf5_reader import read_evaluations, read_run  # noqa: E402
 
 POISON = {"hang": [0.0, 0.015], "crash": [0.015, 0.03]}   # on the first unit parameter
 FORGED_M = 1234.5
 RUNGS_S = (0.1, 0.3)        # test-objective trials take their duration in wall time
 PARTITION_S = 10.0
+# a share of the results (and every new best) is audited by another worker, so coordinator kills find audits
+# (and their referees) pending: each must be issued again and none left pending when the run ends
+AUDIT_FRACTION = 0.25
 N_WORKERS = 4
 COORDINATOR_TIMEOUT_S = 60   # a restarted coordinator validates and rewrites its file: slow under load
 
@@ -55,8 +61,8 @@ COORDINATOR_TIMEOUT_S = 60   # a restarted coordinator validates and rewrites it
 def make_run(path: Path, run_id: str, trials: int, seed: int) -> None:
     cfg = build_run_config(run_id, "sphere:4", seed=seed, duration_s=RUNGS_S[-1])
     cfg = replace(cfg, trial_config={"duration_s": RUNGS_S[-1], "poison": POISON})
-    _, storage = new_run(cfg, SearchSettings(trials=trials, sampler="random", lease_s=20.0,
-                                             rungs=RUNGS_S), path)
+    _, storage = new_run(cfg, SearchSettings(trials=trials, sampler="random", lease_s=20.0, rungs=RUNGS_S,
+                                             audit=AuditPolicy(fraction=AUDIT_FRACTION)), path)
     storage.close()
 
 
@@ -324,6 +330,7 @@ def audit(path: Path, tmp: Path, budget: int) -> dict:
                 float(dist) == cols["distance_m"][t] or (math.isnan(float(dist)) and math.isnan(cols["distance_m"][t])))
             lost += not same
     reasons = [r.decode("utf-8", "replace") for r in cols["reason"]]
+    checks = Counter(int(t) for t in read_evaluations(path)["trial_id"])
     forged = sum(1 for i, s in enumerate(status) if s == "complete" and (
         cols["distance_m"][i] == FORGED_M or cols["worker_id"][i] == b"forger"))
     return {"budget": budget, "parameter_sets": int((cols["rung"] == 0).sum()), "rows": len(status),
@@ -335,8 +342,19 @@ def audit(path: Path, tmp: Path, budget: int) -> dict:
             "failed_outside_bands": sum(1 for i, s in enumerate(status)
                                         if s == "failed" and cols["params_unit"][i, 0] >= POISON["crash"][1]),
             "acknowledged": sum(stored.values()), "lost": lost,
-            "duplicated": sum(c - 1 for c in stored.values() if c > 1), "forged_complete": forged,
-            "exact_budget": int((cols["rung"] == 0).sum()) == budget and "waiting" not in status}
+            # an audit's or a referee's result is acknowledged under the row it checked: one more "stored" each
+            "duplicated": sum(max(0, c - 1 - checks[t]) for t, c in stored.items()), "forged_complete": forged,
+            "exact_budget": int((cols["rung"] == 0).sum()) == budget and "waiting" not in status,
+            **tasks_at_end(path, cols)}
+
+
+def tasks_at_end(path: Path, cols: dict) -> dict:
+    """Audits and referees: how many ran (evaluation rows) and how many were left pending (should be 0)."""
+    kinds = Counter(k.decode() for k in read_evaluations(path)["kind"])
+    states = Counter(a.decode() for a in cols["audit"] if a)
+    return {"audit_runs": kinds.get("audit", 0), "referee_runs": kinds.get("referee", 0), "audit_states": dict(states),
+            "tasks_pending_at_end": states.get("pending", 0) + states.get("disputed", 0)
+            + int((cols["verification"] == b"pending").sum())}
 
 
 def distinct_workers(reasons: list[str]) -> dict[str, int]:
