@@ -345,8 +345,8 @@ class CoordinatorCore(TaskDispatch):
                 return
             self.claims[other] = "refused: this coordinator holds the run" if other > self.holder else \
                 "claims to have held it first (a partition that healed?)"
-            log.error("another coordinator (session %s) claims run %s, held here by %s: %s; workers serve this one",
-                      other, self.run_id, self.holder, self.claims[other])
+            log.error("another coordinator (run instance %s) claims run %s, held here by %s: %s; workers serve this "
+                      "one", other, self.run_id, self.holder, self.claims[other])
 
     def run_info(self) -> bytes:
         return encode_message(RunInfo(self.run_id, self.config_hash, self.study.budget, self.study.done))

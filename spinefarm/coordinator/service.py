@@ -159,7 +159,7 @@ class CoordinatorService:
             self._entities = []
             s.close()
             self._session = None
-            raise ConfigError(f"run {run} is already held by another coordinator on this network (session "
+            raise ConfigError(f"run {run} is already held by another coordinator on this network (run instance "
                               f"{earlier[0]}): a copy of its file cannot serve it while that one runs",
                               expected="the original coordinator stopped, or the copy resumed on another network")
         self._entities.append(s.liveliness().declare_subscriber(keys.all_holder_tokens(run), self._on_holder))
