@@ -28,8 +28,9 @@ def test_a_second_taker_is_refused_with_the_holders_pid_and_may_take_it_after_re
     assert not first.held
     assert first.acquire() is first and first.held
     assert (tmp_path / "sub" / "run.h5.lock").read_text() == f"{os.getpid()}\n"
-    with pytest.raises(StorageError, match=f"another coordinator.*pid {os.getpid()}"):
+    with pytest.raises(StorageError, match=f"another coordinator.*pid {os.getpid()}") as refused:
         RunLock(run).acquire()
+    assert str(run) in str(refused.value)      # names the file it was asked for
     first.release()
     assert not first.held
     first.release()                             # twice is harmless
@@ -45,8 +46,9 @@ def test_a_hard_link_to_a_held_file_is_refused_by_its_inode(tmp_path: Path) -> N
     os.link(run, hard)
     held = RunLock(run).acquire()
     try:
-        with pytest.raises(StorageError, match=f"inode {os.stat(run).st_ino}"):
+        with pytest.raises(StorageError, match=f"inode {os.stat(run).st_ino}") as refused:
             RunLock(hard).acquire()
+        assert str(hard) in str(refused.value)
         # the refused taker dropped its name lock: the link's sidecar is free again
         assert held.held
     finally:
