@@ -37,8 +37,9 @@ def test_the_drawn_friction_scales_the_scenes_else_the_configs_else_the_robots(m
 
 def test_the_drawn_mass_scales_every_rods_density_and_one_keeps_the_robot(morph) -> None:
     cfg = TrialConfig(duration_s=1.0)
-    heavy = episode_world(morph, cfg, EpisodeDraw(0, 11, mass_scale=1.25))
-    assert densities(heavy.morph) == pytest.approx([d * 1.25 for d in densities(morph)])
+    for scale in (1.25, 2.0, 0.5):
+        heavy = episode_world(morph, cfg, EpisodeDraw(0, 11, mass_scale=scale))
+        assert densities(heavy.morph) == pytest.approx([d * scale for d in densities(morph)])
     same = episode_world(morph, cfg, EpisodeDraw(1, 12))
     assert densities(same.morph) == densities(morph)
     assert same.config.ground_friction == pytest.approx(0.8) and same.draw == EpisodeDraw(1, 12)
