@@ -4,6 +4,7 @@ finite pairs or for a constant side), the top-k overlap and failures, the distan
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -94,3 +95,11 @@ def test_settings_outside_their_ranges_are_refused(field: dict) -> None:
 def test_settings_at_their_range_ends_are_taken() -> None:
     CalibrationSettings(gaits=100_000, search_trials=100_000, bests=100_000, duration_s=3600.0)
     CalibrationSettings(gaits=3, search_trials=0, bests=0, duration_s=0.001)
+
+
+def test_settings_are_fixed_once_made() -> None:
+    # the key is taken from them and the cache is found by it: a changed field would file a result wrongly
+    s = CalibrationSettings()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.gaits = 41  # type: ignore[misc]
+    assert hash(s) == hash(CalibrationSettings())
