@@ -6,6 +6,7 @@ description, so two opens in one process contend as two coordinators would."""
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
 import pytest
@@ -23,13 +24,18 @@ def test_the_name_lock_sits_beside_the_resolved_file(tmp_path: Path) -> None:
 
 
 def test_a_second_taker_is_refused_with_the_holders_pid_and_may_take_it_after_release(tmp_path: Path) -> None:
-    run = tmp_path / "sub" / "run.h5"          # a file (and a directory) that does not exist yet: --overwrite
+    run = tmp_path / "a" / "b" / "run.h5"      # a file (and directories) that do not exist yet: --overwrite
     first = RunLock(run)
     assert not first.held
     assert first.acquire() is first and first.held
-    assert (tmp_path / "sub" / "run.h5.lock").read_text() == f"{os.getpid()}\n"
-    with pytest.raises(StorageError, match=f"another coordinator.*pid {os.getpid()}"):
+    sidecar = tmp_path / "a" / "b" / "run.h5.lock"
+    assert sidecar.read_text() == f"{os.getpid()}\n"
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(sidecar.stat().st_mode) == 0o644 & ~umask   # readable by all, written by its owner
+    with pytest.raises(StorageError, match=f"another coordinator.*pid {os.getpid()}") as refused:
         RunLock(run).acquire()
+    assert str(run) in str(refused.value)      # names the file it was asked for
     first.release()
     assert not first.held
     first.release()                             # twice is harmless
@@ -45,8 +51,9 @@ def test_a_hard_link_to_a_held_file_is_refused_by_its_inode(tmp_path: Path) -> N
     os.link(run, hard)
     held = RunLock(run).acquire()
     try:
-        with pytest.raises(StorageError, match=f"inode {os.stat(run).st_ino}"):
+        with pytest.raises(StorageError, match=f"inode {os.stat(run).st_ino}") as refused:
             RunLock(hard).acquire()
+        assert str(hard) in str(refused.value)
         # the refused taker dropped its name lock: the link's sidecar is free again
         assert held.held
     finally:

@@ -4,6 +4,7 @@ finite pairs or for a constant side), the top-k overlap and failures, the distan
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -82,3 +83,23 @@ def test_more_bests_than_search_trials_are_refused() -> None:
     CalibrationSettings(search_trials=5, bests=5)
     with pytest.raises(ConfigError, match="bests"):
         CalibrationSettings(search_trials=5, bests=6)
+
+
+@pytest.mark.parametrize("field", [dict(gaits=100_001), dict(gaits=2), dict(search_trials=100_001),
+                                   dict(bests=100_001), dict(duration_s=0.0), dict(duration_s=3600.5)])
+def test_settings_outside_their_ranges_are_refused(field: dict) -> None:
+    with pytest.raises(ConfigError):
+        CalibrationSettings(**field)
+
+
+def test_settings_at_their_range_ends_are_taken() -> None:
+    CalibrationSettings(gaits=100_000, search_trials=100_000, bests=100_000, duration_s=3600.0)
+    CalibrationSettings(gaits=3, search_trials=0, bests=0, duration_s=0.001)
+
+
+def test_settings_are_fixed_once_made() -> None:
+    # the key is taken from them and the cache is found by it: a changed field would file a result wrongly
+    s = CalibrationSettings()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.gaits = 41  # type: ignore[misc]
+    assert hash(s) == hash(CalibrationSettings())

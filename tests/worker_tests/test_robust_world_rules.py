@@ -8,7 +8,7 @@ import dataclasses
 
 import pytest
 
-from spinefarm.protocol.robust import EpisodeDraw
+from spinefarm.protocol.robust import EpisodeDraw, RobustSpec, draw_episode
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig
 from spinefarm.worker.trial.robust import episode_world, first_episode
@@ -37,8 +37,9 @@ def test_the_drawn_friction_scales_the_scenes_else_the_configs_else_the_robots(m
 
 def test_the_drawn_mass_scales_every_rods_density_and_one_keeps_the_robot(morph) -> None:
     cfg = TrialConfig(duration_s=1.0)
-    heavy = episode_world(morph, cfg, EpisodeDraw(0, 11, mass_scale=1.25))
-    assert densities(heavy.morph) == pytest.approx([d * 1.25 for d in densities(morph)])
+    for scale in (1.25, 2.0, 0.5):
+        heavy = episode_world(morph, cfg, EpisodeDraw(0, 11, mass_scale=scale))
+        assert densities(heavy.morph) == pytest.approx([d * scale for d in densities(morph)])
     same = episode_world(morph, cfg, EpisodeDraw(1, 12))
     assert densities(same.morph) == densities(morph)
     assert same.config.ground_friction == pytest.approx(0.8) and same.draw == EpisodeDraw(1, 12)
@@ -65,6 +66,8 @@ def test_episode_zero_of_a_stored_robust_block_is_its_first_draw(morph) -> None:
     m, c, seed = first_episode(morph.to_dict(), cfg, 42, robust)
     again = first_episode(morph, cfg, 42, robust)
     assert (c, seed) == (again[1], again[2]) and densities(m) == densities(again[0])
+    zero = draw_episode(RobustSpec.from_dict(robust), 42, 0)          # episode 0 of protocol.robust's draws
+    assert seed == zero.seed and c.ground_friction == pytest.approx(zero.friction_scale)
     # drawn, not the run's own: friction within 1 +- 0.5 of 1.0, masses within 1 +- 0.2, and not both unchanged
     assert 0.5 <= c.ground_friction <= 1.5
     ratio = densities(m)[0] / densities(morph)[0]
