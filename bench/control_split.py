@@ -38,9 +38,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology  # noqa: E402
-from spinefarm.worker import loop  # noqa: E402
 from spinefarm.worker.control.cpg import rk4_advance  # noqa: E402
 from spinefarm.worker.control.law import STATUS_OK, law_step_world  # noqa: E402
+from spinefarm.worker.trial import loop  # noqa: E402
 from spinefarm.worker.trial.setup import SetupCache  # noqa: E402
 from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate  # noqa: E402
 

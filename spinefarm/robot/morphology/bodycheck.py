@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from spinefarm.robot.fixedmath import norm
 from spinefarm.robot.morphology.structure import StructureSpec
 
 
@@ -49,7 +50,7 @@ def short_strings(structure: StructureSpec) -> str | None:
     pts = structure.node_array()
     for k, s in enumerate(structure.strings):
         mat = structure.string_material(s.tag)
-        start_cm = float(np.linalg.norm(pts[s.a] - pts[s.b]))
+        start_cm = float(norm(pts[s.a] - pts[s.b]))  # fixed arithmetic, the same bits on every CPU
         # pretension in N over stiffness in N/m is metres: x 100 for cm
         rest_cm = start_cm - 100.0 * mat.pretension_n / mat.stiffness_n_per_m
         if rest_cm < mat.min_rest_length_cm:
