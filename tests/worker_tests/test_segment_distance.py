@@ -51,6 +51,9 @@ def test_segment_distance_against_brute_force() -> None:
     ((math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)), (1, 0, 0), (0, 1, 0)),   # 90 degrees about z
     ((math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0), (0, 1, 0), (0, 0, 1)),   # 90 degrees about x
     ((math.cos(math.pi / 4), 0, math.sin(math.pi / 4), 0), (0, 0, 1), (1, 0, 0)),   # 90 degrees about y
+    ((math.cos(math.pi / 4), 0, math.sin(math.pi / 4), 0), (1, 0, 0), (0, 0, -1)),
+    ((math.cos(math.pi / 4), 0, 0, math.sin(math.pi / 4)), (0, 1, 0), (-1, 0, 0)),
+    ((math.cos(math.pi / 4), math.sin(math.pi / 4), 0, 0), (0, 0, 1), (0, -1, 0)),
     ((0, 1, 0, 0), (0, 1, 2), (0, -1, -2)),                                          # 180 degrees about x
     ((1, 0, 0, 0), (3, -2, 5), (3, -2, 5)),                                          # none
 ])
