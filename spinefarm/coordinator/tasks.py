@@ -1,7 +1,7 @@
 """Tasks beside the search's own trials, run by workers like any trial: the judge and the audit.
 
 - The judge re-simulates every new full-length best at the judge's rung before it counts (a finer
-  step in the same engine, or another engine); its verdicts are coordinator.verdicts' ("holds" within
+  step in the same engine, or another engine); its verdicts are protocol.verdicts' ("holds" within
   the robot's chaos floor, "moved X % at the finer step", "judged", "diverged"). A judged set ranks by
   its judged distance (storage.ranking); a diverged one never counts as best and the next best is judged.
 - The audit re-simulates a fraction of the results (and every new best) on another worker at the same
@@ -27,11 +27,12 @@ import math
 
 import numpy as np
 
-from spinefarm.coordinator.verdicts import holds_tolerance, judge_verdict, relative_change
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings, TaskFidelity
 from spinefarm.protocol.states import AuditState, Verification
+from spinefarm.protocol.verdicts import judge_verdict, relative_change
+from spinefarm.robot.chaos_floors import holds_tolerance
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.evaluations import judge_wall_s, row_of
 

@@ -67,7 +67,7 @@ class JudgePolicy(_JsonRecord):
     """The judge: re-simulate every new full-length best at `rung` before it counts.
 
     Same engine as the screen: the result holds when the distance changes by at most `tolerance`
-    (relative; None: the robot's chaos floor, coordinator.verdicts), else it "moved" and ranks by the
+    (relative; None: the robot's chaos floor, robot.chaos_floors), else it "moved" and ranks by the
     judge's distance. Another engine (two models, whose distances differ by more than any step error): the
     judge's distance is the one reported, the screen-to-judge ratio is stored, and the result fails
     only if the judge's run fails. perturb: also re-simulate with a jittered start pose and 10 % more

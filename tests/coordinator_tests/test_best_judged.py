@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from spinefarm.coordinator.tasks import TaskBook
-from spinefarm.coordinator.verdicts import holds_tolerance, judge_verdict
 from spinefarm.protocol.settings import JudgePolicy
 from spinefarm.protocol.states import TrialStatus, Verification
+from spinefarm.protocol.verdicts import judge_verdict
+from spinefarm.robot.chaos_floors import holds_tolerance
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import Hdf5Reader

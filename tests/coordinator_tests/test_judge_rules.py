@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from spinefarm.coordinator.tasks import TaskBook, split_key
-from spinefarm.coordinator.verdicts import judge_verdict
 from spinefarm.protocol.settings import JudgePolicy, Rung, RunSettings, TaskFidelity
 from spinefarm.protocol.states import AuditState, TrialStatus, Verification
+from spinefarm.protocol.verdicts import judge_verdict
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import Hdf5Reader
 from spinefarm.storage.memory import InMemoryStorage

@@ -232,7 +232,7 @@ def _r(distance: float, ok: bool = True) -> TrialResult:
 
 
 def test_a_verdict_says_holds_only_within_tolerance_at_the_same_engine():
-    from spinefarm.coordinator.verdicts import judge_verdict
+    from spinefarm.protocol.verdicts import judge_verdict
 
     assert judge_verdict(1.0, False, "bullet", _r(1.04), 0.05)[0] == "holds"
     verdict, reason = judge_verdict(1.0, False, "bullet", _r(0.5), 0.05)

@@ -97,9 +97,9 @@ def test_the_judge_runs_and_counts_its_perturbed_half():
     """--verify-perturb: a judge task with perturb runs the perturbed trial (start pose jittered 0.01 cm, friction
     +10 %), returns its distance, and the verdict counts it. The stored distance is the judge's own, so only the
     perturbed half can fail it."""
-    from spinefarm.coordinator.verdicts import judge_verdict
     from spinefarm.protocol.settings import TaskFidelity
     from spinefarm.protocol.states import Verification
+    from spinefarm.protocol.verdicts import judge_verdict
     from spinefarm.protocol.work import TrialAssignment
     from spinefarm.worker.service.assignment import physics_evaluator
 
