@@ -31,7 +31,9 @@ def check(gait_file: Path) -> dict:
     return {"distance_m": base.distance_m, "fine_distance_m": v.fine_distance_m, "fine_dt_s": v.fine_dt_s,
             "perturbed_distance_m": v.perturbed_distance_m,
             "fine_change": v.fine_distance_m / base.distance_m - 1,
-            "perturbed_change": v.perturbed_distance_m / base.distance_m - 1, "verdict": v.verdict}
+            "perturbed_change": v.perturbed_distance_m / base.distance_m - 1,
+            "verdict": str(v.verdict), "reason": v.reason, "tolerance": v.tolerance,
+            "tolerance_source": v.tolerance_source}
 
 
 def main() -> None:
