@@ -19,8 +19,8 @@ from spinefarm.storage import evaluations as ev
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.hdf5_layout import meta_of, write_run
 from spinefarm.storage.probe import check_eof
-from spinefarm.storage.schema import COLUMNS, RunMeta, TrialRecord
-from spinefarm.storage.table import EMPTY_STATUS
+from spinefarm.storage.schema import COLUMN_BY_NAME, COLUMNS, RunMeta, TrialRecord
+from spinefarm.storage.table import EMPTY_STATUS, empty_value
 
 # what damaged attributes or data raise from h5py
 _DAMAGED = (KeyError, ValueError, TypeError, OSError, RuntimeError)
@@ -48,6 +48,18 @@ def _must_exist(path: Path) -> None:
         raise StorageError(message, received=str(path), expected="an existing .h5 file")
 
 
+def _rows(group: h5py.Group) -> int:
+    return min(group[c.name].shape[0] for c in COLUMNS if c.name in group)
+
+
+def _column(group: h5py.Group, name: str, sel: slice | list[int]) -> np.ndarray:
+    """A column's rows `sel`; a column an older schema did not have (e.g. body_hash before schema 8) reads as
+    its empty value, so older files open everywhere."""
+    if name in group:
+        return group[name][sel]
+    return np.full(group["status"].shape[0], empty_value(name), dtype=COLUMN_BY_NAME[name].dtype)[sel]
+
+
 def read_run(path: str | Path, swmr: bool = True) -> tuple[RunMeta, dict[str, np.ndarray]]:
     """Metadata and every complete row of a run file, also while (or after) a writer had it open.
     swmr=False: a file no writer has open (storage.probe), read once, so damage fails at once."""
@@ -59,8 +71,8 @@ def read_run(path: str | Path, swmr: bool = True) -> tuple[RunMeta, dict[str, np
             if "trials" not in f:
                 raise StorageError(f"{path} has no /trials group", expected="a spinefarm run file")
             g = f["trials"]
-            n = min(g[c.name].shape[0] for c in COLUMNS)
-            cols = {c.name: g[c.name][:n] for c in COLUMNS}
+            n = _rows(g)
+            cols = {c.name: _column(g, c.name, slice(0, n)) for c in COLUMNS}
         except _DAMAGED as exc:
             raise _damaged(path, exc) from exc
     # A row the writer extended but had not filled yet has an empty status: cut the table there.
@@ -124,7 +136,7 @@ class _LazyColumns(Mapping):
 
     def __getitem__(self, name: str) -> np.ndarray:
         if name not in self._cache:
-            self._cache[name] = self._group[name][: self._n]
+            self._cache[name] = _column(self._group, name, slice(0, self._n))
         return self._cache[name]
 
     def __iter__(self) -> Iterator[str]:
@@ -152,7 +164,7 @@ class Hdf5Reader(BaseStorage):
             self._meta = meta_of(self._file, self.path)
             self.file_schema_version = int(self._file.attrs["file_schema_version"])
             group = self._file["trials"]
-            n = min(group[c.name].shape[0] for c in COLUMNS)
+            n = _rows(group)
             status = group["status"][:n]
             empty = np.flatnonzero(status == EMPTY_STATUS)  # rows extended but not yet filled by the writer
             self._n = int(empty[0]) if empty.size else n
@@ -192,9 +204,9 @@ class Hdf5Reader(BaseStorage):
                                expected=f"0 <= id < {self._n}")
         group = self._file["trials"]
         if rows[-1] - rows[0] + 1 == len(rows):  # a run of ids: one slice
-            cols = {c.name: group[c.name][rows[0] : rows[-1] + 1] for c in COLUMNS}
+            cols = {c.name: _column(group, c.name, slice(rows[0], rows[-1] + 1)) for c in COLUMNS}
         else:  # h5py point selection needs increasing indices
-            cols = {c.name: group[c.name][rows] for c in COLUMNS}
+            cols = {c.name: _column(group, c.name, rows) for c in COLUMNS}
         at = {tid: j for j, tid in enumerate(rows)}
         return [TrialRecord.from_columns(cols, at[int(tid)]) for tid in ids]
 
