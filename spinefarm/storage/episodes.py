@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from spinefarm.protocol.columns import SCORE_PARTS, Column, column_group
+from spinefarm.storage import side_table
 
 # an episode's score parts, said of an episode where the trial's words do not fit
 _EPISODE_WORDS = {"ntrt_distance_cm": "displacement of the segment NTRT scores",
@@ -30,19 +31,8 @@ EPISODE_NAMES = tuple(c.name for c in EPISODE_COLUMNS)
 GROUP = "episodes"
 
 
-def _empty(c: Column) -> Any:
-    if c.dtype.startswith("S"):
-        return b""
-    return -1 if c.dtype.startswith("i") else np.nan
-
-
 def empty_columns(n: int = 0) -> dict[str, np.ndarray]:
-    out = {}
-    for c in EPISODE_COLUMNS:
-        arr = np.empty(n, dtype=c.dtype)
-        arr[...] = _empty(c)
-        out[c.name] = arr
-    return out
+    return side_table.empty_columns(EPISODE_COLUMNS, n)
 
 
 class EpisodeTable:
@@ -100,41 +90,17 @@ def of_finished(cols: dict[str, np.ndarray], status: np.ndarray, waiting: bytes)
 
 # --- HDF5 ------------------------------------------------------------------------------------------
 def create_datasets(f: Any, cols: dict[str, np.ndarray], compression: dict[str, Any]) -> None:
-    """The /episodes group with `cols` written (datasets exist before SWMR mode forbids new objects)."""
-    g = f.create_group(GROUP)
-    n = len(cols["trial_id"])
-    for c in EPISODE_COLUMNS:
-        ds = g.create_dataset(c.name, shape=(n,), dtype=c.dtype, maxshape=(None,), chunks=(1024,),
-                              fillvalue=_empty(c), **compression)
-        ds.attrs["unit"] = c.unit
-        ds.attrs["description"] = c.description
-        if n:
-            ds[:] = cols[c.name]
+    side_table.create_group(f, GROUP, EPISODE_COLUMNS, cols, compression, chunk_rows=1024)
 
 
 def read_datasets(f: Any) -> dict[str, np.ndarray]:
     """Every fully written episode row of an open file (none for a file from before episodes)."""
-    if GROUP not in f:
-        return empty_columns()
-    g = f[GROUP]
-    n = min(g[name].shape[0] for name in EPISODE_NAMES)
-    cols = {name: g[name][:n] for name in EPISODE_NAMES}
-    empty = np.flatnonzero(cols["status"] == b"")  # extended, not yet filled: cut there
-    if empty.size:
-        cols = {k: v[: int(empty[0])] for k, v in cols.items()}
-    return cols
+    return side_table.read_group(f, GROUP, EPISODE_COLUMNS)
 
 
 def write_new(f: Any, table: EpisodeTable) -> None:
     """Append the rows not yet in the file (status last, so a half-written row is never read)."""
     if table.n == table.n_written:
         return
-    g = f[GROUP]
-    a, b = table.n_written, table.n
-    cols = table.columns()
-    for name in (*EPISODE_NAMES[:3], *EPISODE_NAMES[4:], "status"):
-        ds = g[name]
-        if ds.shape[0] < b:
-            ds.resize(b, axis=0)
-        ds[a:b] = cols[name][a:b]
-    table.n_written = b
+    side_table.append_rows(f, GROUP, table.columns(), table.n_written, table.n)
+    table.n_written = table.n

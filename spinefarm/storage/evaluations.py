@@ -18,6 +18,7 @@ import numpy as np
 
 from spinefarm.protocol.columns import column_group
 from spinefarm.protocol.results import TrialResult
+from spinefarm.storage import side_table
 
 EVALUATION_COLUMNS = column_group("evaluation")
 NAMES = tuple(c.name for c in EVALUATION_COLUMNS)
@@ -25,16 +26,8 @@ KINDS = ("judge", "audit", "referee")
 GROUP = "evaluations"
 
 
-def _empty(dtype: str) -> Any:
-    return b"" if dtype.startswith("S") else (-1 if dtype.startswith("i") else np.nan)
-
-
 def empty_columns(n: int = 0) -> dict[str, np.ndarray]:
-    out = {}
-    for c in EVALUATION_COLUMNS:
-        out[c.name] = np.empty(n, dtype=c.dtype)
-        out[c.name][...] = _empty(c.dtype)
-    return out
+    return side_table.empty_columns(EVALUATION_COLUMNS, n)
 
 
 def row_of(trial_id: int, kind: str, r: TrialResult, engine: str, dt_s: float | None,
@@ -90,37 +83,17 @@ def judge_wall_s(cols: dict[str, np.ndarray]) -> float:
 
 # --- HDF5 ------------------------------------------------------------------------------------------
 def create_datasets(f: Any, cols: dict[str, np.ndarray], compression: dict[str, Any]) -> None:
-    """The /evaluations group with `cols` written (before SWMR mode forbids new objects)."""
-    g = f.create_group(GROUP)
-    n = len(cols["trial_id"])
-    for c in EVALUATION_COLUMNS:
-        ds = g.create_dataset(c.name, shape=(n,), dtype=c.dtype, maxshape=(None,), chunks=(256,),
-                              fillvalue=_empty(c.dtype), **compression)
-        ds.attrs["unit"], ds.attrs["description"] = c.unit, c.description
-        if n:
-            ds[:] = cols[c.name]
+    side_table.create_group(f, GROUP, EVALUATION_COLUMNS, cols, compression, chunk_rows=256)
 
 
 def read_datasets(f: Any) -> dict[str, np.ndarray]:
     """Every fully written row (none for a file of an older schema)."""
-    if GROUP not in f:
-        return empty_columns()
-    g = f[GROUP]
-    n = min(g[name].shape[0] for name in NAMES)
-    cols = {name: g[name][:n] for name in NAMES}
-    empty = np.flatnonzero(cols["status"] == b"")  # extended, not yet filled: cut there
-    return {k: v[: int(empty[0])] for k, v in cols.items()} if empty.size else cols
+    return side_table.read_group(f, GROUP, EVALUATION_COLUMNS)
 
 
 def write_new(f: Any, table: EvaluationTable) -> None:
     """Append the rows not yet in the file (status last, so a half-written row is never read)."""
     if table.n == table.n_written:
         return
-    g = f[GROUP]
-    a, b = table.n_written, table.n
-    cols = table.columns()
-    for name in (*(n for n in NAMES if n != "status"), "status"):
-        if g[name].shape[0] < b:
-            g[name].resize(b, axis=0)
-        g[name][a:b] = cols[name][a:b]
-    table.n_written = b
+    side_table.append_rows(f, GROUP, table.columns(), table.n_written, table.n)
+    table.n_written = table.n
