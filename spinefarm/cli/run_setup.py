@@ -227,4 +227,18 @@ def judge_policy(args: argparse.Namespace, config: Any) -> Any:
     rung = Rung(engine, args.verify_dt) if engine and engine != screen else Rung()
     return JudgePolicy(enabled=not args.no_verify, rung=rung, tolerance=args.verify_tolerance,
                        perturb=args.verify_perturb, drift=args.judge_drift,
-                       share=args.judge_share)
+                       share=args.judge_share, opinion=opinion_rung(args, rung.engine or screen or "bullet"))
+
+
+def opinion_rung(args: argparse.Namespace, judge_engine: str) -> Any:
+    """--opinion: the engine the judge does not run, at its converged step (None: no opinion). By default on
+    when both engines are installed here (the workers announce theirs; one nobody runs is dropped at the end)."""
+    import importlib.util
+
+    from spinefarm.protocol.settings import OPINION_DT_S, Rung
+
+    other = next((e for e in OPINION_DT_S if e != judge_engine), None)
+    wanted = args.opinion
+    if wanted is None:
+        wanted = all(importlib.util.find_spec(m) is not None for m in ("pybullet", "mujoco"))
+    return Rung(other, OPINION_DT_S[other]) if wanted and other is not None and not args.no_verify else None

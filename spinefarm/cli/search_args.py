@@ -118,6 +118,10 @@ def _judge_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--judge-share", type=float, default=0.25, metavar="FRACTION",
                    help="the most of the workers' time the judge's re-simulations take while the search runs "
                         "(default 0.25; 1: judge every new best at once); the final best is always judged")
+    p.add_argument("--opinion", action=argparse.BooleanOptionalAction, default=None,
+                   help="run each judged best once more in the other engine at its converged step (Bullet 0.25 ms, "
+                        "MuJoCo 1 ms), stored as an \"opinion\" evaluation: the spread between the models "
+                        "(default: on when both engines are installed)")
     p.add_argument("--verify-perturb", action="store_true",
                    help="also re-simulate with a jittered start pose and 10 %% more friction")
     g = p.add_argument_group("audit: results re-simulated by another worker")

@@ -27,7 +27,7 @@ from spinefarm.coordinator.dispatch import TaskDispatch
 from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
-from spinefarm.coordinator.tasks import AUDIT, JUDGE, REFEREE, TaskBook, split_key, task_key
+from spinefarm.coordinator.tasks import AUDIT, JUDGE, OPINION, REFEREE, TaskBook, split_key, task_key
 from spinefarm.protocol.envelope import decode_message, encode, encode_message
 from spinefarm.protocol.errors import MessageError
 from spinefarm.protocol.results import TrialResult
@@ -98,7 +98,7 @@ class CoordinatorCore(TaskDispatch):
             return self.study.done and not self.tasks.pending
 
     def pending_task_kinds(self) -> set[str]:
-        """What still runs after the search: "judge", "audit", "referee" (empty: nothing)."""
+        """What still runs after the search: "judge", "audit", "referee", "opinion" (empty: nothing)."""
         with self.lock:
             return {split_key(k)[0] for k in self.tasks.pending}
 
@@ -225,7 +225,7 @@ class CoordinatorCore(TaskDispatch):
             return Verdict.INVALID
         if unreadable:  # a failed stand-in (protocol.submissions): it answers the trial's own seed
             result = replace(result, seed=int(storage.columns()["seed"][tid]))
-        for kind in (JUDGE, AUDIT, REFEREE):  # a task's result quotes the task's lease and the row it checks
+        for kind in (JUDGE, AUDIT, REFEREE, OPINION):  # a task's result quotes the task's lease and the row it checks
             key = task_key(kind, tid)
             if self.scheduler.is_current(key, lease_id, worker_id):
                 return self._settle_task(key, worker_id, result)

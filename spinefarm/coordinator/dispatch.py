@@ -54,14 +54,16 @@ class TaskDispatch:
         audit = self.tasks.best_audit_due()
         if audit is not None:
             self.scheduler.push_front(audit)
-        key, stale = self.tasks.judge_due(self.study.trial_scheduler.top, self.study.done)
-        if key is None:
-            return
-        for old in stale:
-            if self.scheduler.queued(old):
-                self.scheduler.withdraw(old)
-                self.tasks.drop(old)
-        self.scheduler.push_front(key)
+        for key, stale in (self.tasks.judge_due(self.study.trial_scheduler.top, self.study.done),
+                           self.tasks.opinion_due(self.study.done)):
+            if key is None and not stale:
+                continue
+            for old in stale:
+                if self.scheduler.queued(old) or split_key(old)[0] == "opinion":
+                    self.scheduler.withdraw(old)
+                    self.tasks.drop(old)
+            if key is not None:
+                self.scheduler.push_front(key)
 
     def _drop_unservable_tasks(self) -> None:
         """Once the search is over: judges of overtaken bests are stopped (a worker still running one
@@ -73,7 +75,7 @@ class TaskDispatch:
         alive = [w.worker_id for w in self.scheduler.workers.values() if w.alive]
         for key in list(self.tasks.pending):
             kind, tid = split_key(key)
-            overtaken = kind == "judge" and (not best or best[0] != tid)
+            overtaken = kind in ("judge", "opinion") and (not best or best[0] != tid)
             # a live worker whose identity is still being asked may be the one that can run it
             if overtaken or not (reconnecting or any(self._eligible(key, w) or self.peers.identity(w) is None
                                                      for w in alive)):
@@ -84,6 +86,8 @@ class TaskDispatch:
                     log.warning("no other worker identity can audit trial %d: it stays %s", tid, UNAUDITED)
                 elif not overtaken:
                     log.warning("no worker can run the %s task of trial %d: dropped", kind, tid)
+                    if kind == "opinion":
+                        self.tasks.unservable.add(key)
                 self.scheduler.withdraw(key)
                 self.tasks.drop(key, keep_pending=unaudited)
         self._judge_best()
@@ -133,6 +137,8 @@ class TaskDispatch:
             if drift and not self.drift:
                 log.warning("the judge no longer trusts the screen (%s): raising the screen's fidelity", drift)
             self.drift = drift
+        elif kind == "opinion":
+            self.tasks.settle_opinion(tid, result)
         else:
             row = self.study.storage.trial(tid)
             exact = self.peers.same_environment(row.worker_id, worker_id)

@@ -30,16 +30,16 @@ import numpy as np
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings, TaskFidelity
-from spinefarm.protocol.states import AuditState, Verification
+from spinefarm.protocol.states import JUDGED_VERDICTS, AuditState, Verification
 from spinefarm.protocol.verdicts import judge_verdict, relative_change
 from spinefarm.robot.chaos_floors import holds_tolerance
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.evaluations import judge_wall_s, row_of
 
 log = logging.getLogger("spinefarm.coordinator")
-JUDGE, AUDIT, REFEREE = 1, 2, 3
-_KINDS = {JUDGE: "judge", AUDIT: "audit", REFEREE: "referee"}
-_KEY_STRIDE = 4
+JUDGE, AUDIT, REFEREE, OPINION = 1, 2, 3, 4
+_KINDS = {JUDGE: "judge", AUDIT: "audit", REFEREE: "referee", OPINION: "opinion"}
+_KEY_STRIDE = 8
 _DRIFT_WINDOW = 3
 # a best that barely moves says nothing of the screen: a few millimetres of step error are a factor of 4 on the
 # first bests of a search, which move a few centimetres, and once halved the step stays halved all run
@@ -51,7 +51,7 @@ def task_key(kind: int, trial_id: int) -> int:
 
 
 def split_key(key: int) -> tuple[str, int]:
-    """("trial", id) for a row, ("judge" | "audit" | "referee", id of the row it checks) for a task."""
+    """("trial", id) for a row, ("judge" | "audit" | "referee" | "opinion", id of the row it checks) for a task."""
     if key >= 0:
         return "trial", key
     return _KINDS[-key % _KEY_STRIDE], -key // _KEY_STRIDE
@@ -68,6 +68,7 @@ class TaskBook:
         self.seed = seed
         self.judged = judged   # the run has a judge (test objectives only when one is named)
         self.pending: set[int] = set()   # task keys issued and not yet settled
+        self.unservable: set[int] = set()   # opinions no live worker could run (tried again on a restart)
         # the time the judge's runs took, from the stored evaluation rows: a restart keeps the judge's share
         self.judge_wall_s = 0.0
         with contextlib.suppress(StorageError):  # a store whose run is not created yet has no rows
@@ -111,6 +112,8 @@ class TaskBook:
         kind, tid = split_key(key)
         if kind == "judge":
             return TaskFidelity.of("judge", self.settings.judge.rung, self.settings.judge.perturb)
+        if kind == "opinion" and self.settings.judge.opinion is not None:
+            return TaskFidelity.of("opinion", self.settings.judge.opinion)
         row = self.storage.trial(tid)  # an audit (and its referee) re-runs the row exactly as it ran
         dt = row.dt_s if math.isfinite(row.dt_s) else None
         settle = row.settle_s if math.isfinite(row.settle_s) else None
@@ -155,6 +158,27 @@ class TaskBook:
         self.pending.add(key)
         return key, [k for k in self.pending if k != key and split_key(k)[0] == "judge"]
 
+    def opinion_due(self, search_over: bool = False) -> tuple[int | None, list[int]]:
+        """(the current best's opinion task key if it is due, pending opinion keys of overtaken bests to drop).
+        Due once the best is judged (holds, moved, judged) and has no opinion row: decided from storage alone,
+        so a restart issues it again; while the search runs only within the judge's share of the time."""
+        opinion = self.settings.judge.opinion
+        best = self.storage.best_ids(1)
+        if opinion is None or not (self.judged and self.settings.judge.enabled and best):
+            return None, []
+        tid, key = best[0], task_key(OPINION, best[0])
+        stale = [k for k in self.pending if k != key and split_key(k)[0] == "opinion"]
+        cols = self.storage.columns()
+        if key in self.pending or key in self.unservable or cols["verification"][tid] not in JUDGED_VERDICTS:
+            return None, stale
+        ev = self.storage.evaluations()
+        if np.any((ev["trial_id"] == tid) & (ev["kind"] == b"opinion")):
+            return None, stale
+        if not search_over and self.over_share(cols["wall_time_s"]):
+            return None, stale
+        self.pending.add(key)
+        return key, stale
+
     def over_share(self, trial_wall_s: np.ndarray) -> bool:
         """Has the judge taken more than its share of the time spent in its runs and the trials'?"""
         share = self.settings.judge.share
@@ -166,7 +190,7 @@ class TaskBook:
         audit stays pending in the file (re-issued on resume, when another identity may be there)."""
         self.pending.discard(key)
         kind, tid = split_key(key)
-        if keep_pending:
+        if keep_pending or kind == "opinion":   # an opinion is due from storage alone: nothing stored to undo
             return
         if kind == "judge":
             self.storage.set_verification(tid, Verification.NOT_CHECKED)
@@ -205,7 +229,7 @@ class TaskBook:
     # --- results --------------------------------------------------------------------------------------
     def _record(self, tid: int, kind: str, r: TrialResult, worker_id: str = "") -> None:
         """Every judge, audit and referee run is a row of the evaluations table, linked to the row it checked."""
-        f = self.task_fidelity(task_key({"judge": JUDGE, "audit": AUDIT, "referee": REFEREE}[kind], tid))
+        f = self.task_fidelity(task_key({v: k for k, v in _KINDS.items()}[kind], tid))
         dt = r.extras.get("dt_s", f.dt_s)
         self.storage.add_evaluation(row_of(tid, kind, r, str(r.extras.get("engine", f.engine or "")),
                                            None if dt is None else float(dt), worker_id))
@@ -224,6 +248,15 @@ class TaskBook:
             log.warning("best trial %d diverged in the judge's run (never best): %s", tid, reason)
         elif verdict == Verification.MOVED:
             log.info("best trial %d %s (%s); it ranks by its judged distance", tid, reason, self.holds[1])
+
+    def settle_opinion(self, tid: int, r: TrialResult) -> None:
+        """The other engine's run of a judged best: a row of its own, counted in the judge's share; it never ranks."""
+        if math.isfinite(r.wall_time_s):
+            self.judge_wall_s += r.wall_time_s
+        self._record(tid, "opinion", r)
+        row = self.storage.trial(tid)
+        log.info("best trial %d in the other engine (%s): %.4g m against its judged %.4g m", tid,
+                 r.extras.get("engine", ""), r.distance_m, row.verify_distance_m)
 
     def mark_quarantined(self, worker_ids: list[str]) -> tuple[list[int], list[int]]:
         """Every complete row of quarantined workers is marked and re-run by another identity (an audit); a row

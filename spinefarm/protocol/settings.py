@@ -73,7 +73,9 @@ class JudgePolicy(_JsonRecord):
     only if the judge's run fails. perturb: also re-simulate with a jittered start pose and 10 % more
     friction. drift: a run whose judged ratios leave [1 - drift, 1 + drift] raises its fidelity. share: the
     most of the workers' time the judge takes while the search runs (its runs cost tens of trials each, and
-    early bests are overtaken within seconds); the best at the search's end is always judged."""
+    early bests are overtaken within seconds); the best at the search's end is always judged. opinion: the
+    other engine's rung (at its converged step, OPINION_DT_S) each judged best is run once in, stored as an
+    "opinion" evaluation (the models' spread; it never ranks); None: none."""
 
     WHAT: ClassVar[str] = "judge"
 
@@ -83,11 +85,16 @@ class JudgePolicy(_JsonRecord):
     perturb: bool = False
     drift: float = bounded(0.2, 0.0, 10.0, low_inclusive=False)
     share: float = bounded(0.25, 0.0, 1.0, low_inclusive=False)
+    opinion: Rung | None = None
 
     def __post_init__(self) -> None:
         check_fields(self, "judge ")
-        if isinstance(self.rung, dict):
-            object.__setattr__(self, "rung", Rung.from_dict(self.rung))
+        for name in ("rung", "opinion"):
+            if isinstance(getattr(self, name), dict):
+                object.__setattr__(self, name, Rung.from_dict(getattr(self, name)))
+        if self.opinion is not None and (not isinstance(self.opinion, Rung) or self.opinion.engine is None):
+            raise ConfigError("judge opinion is not a rung naming its engine", received=self.opinion,
+                              expected="null or {engine, dt_s, ...}, e.g. {\"engine\": \"mujoco\", \"dt_s\": 0.001}")
 
 
 @dataclass(frozen=True)
@@ -117,6 +124,9 @@ DEFAULT_ETA = 4
 # docs/accuracy.md); `search --verify-dt` defaults to it and the calibration takes it as its reference.
 JUDGE_ENGINE = "bullet"
 JUDGE_DT_S = 2.5e-4
+# Each engine's converged step, where a judged best's second-engine opinion runs (docs/accuracy.md): Bullet
+# ~1.5 % from a finer step at 0.25 ms; MuJoCo 0.46 % (median) at its 1 ms default, within max(1 %, chaos floor)
+OPINION_DT_S = {"bullet": JUDGE_DT_S, "mujoco": 1e-3}
 
 
 @dataclass(frozen=True)
@@ -141,7 +151,7 @@ class RunSettings:
         "ladder": "list of rungs {engine, dt_s, duration_s, settle_s, episodes} (null: the run's), "
                   "increasing durations, the last the full trial",
         "eta": "integer >= 2: the halving scheduler keeps 1/eta of each rung",
-        "judge": "{enabled, rung, tolerance, perturb, drift, share in (0, 1]}",
+        "judge": "{enabled, rung, tolerance, perturb, drift, share in (0, 1], opinion (null or a rung)}",
         "audit": "{fraction in [0, 1], tolerance >= 0, quarantine}",
         "lease_s": "seconds > 0",
         "engine_choice": "null, or how --engine auto chose the tier: {engine, mode, cached, rungs_added, spearman, "
@@ -243,12 +253,12 @@ def _known(d: Any, cls: type, what: str) -> dict[str, Any]:
 
 PROMOTED = "promoted"   # the phase of a row that re-runs its parent at the next rung
 ENQUEUED = "enqueued"   # the phase of a parameter set the user gave (--enqueue)
-TASKS = ("trial", "judge", "audit")
+TASKS = ("trial", "judge", "audit", "opinion")
 
 
 @dataclass(frozen=True)
 class TaskFidelity(_JsonRecord):
-    """How a worker runs one leased task, beyond the run's trial config: task (trial, judge, audit),
+    """How a worker runs one leased task, beyond the run's trial config: task (trial, judge, audit, opinion),
     engine / dt_s / settle_s (None: the run's), perturb (a jittered start pose and 10 % more friction,
     run besides the plain one: its distance comes back as the extra `perturbed_distance_m`)."""
 

@@ -1,4 +1,4 @@
-"""The evaluations table: every judge, audit and referee run of a parameter set, one row each.
+"""The evaluations table: every judge, audit, referee and opinion run of a parameter set, one row each.
 
 The trials table holds the search's own rows (each screen rung, each promotion) and, on a judged or audited
 row, the verdict that sums them up (verification, audit columns, which rank and filter the best). This table
@@ -22,7 +22,7 @@ from spinefarm.storage import side_table
 
 EVALUATION_COLUMNS = column_group("evaluation")
 NAMES = tuple(c.name for c in EVALUATION_COLUMNS)
-KINDS = ("judge", "audit", "referee")
+KINDS = ("judge", "audit", "referee", "opinion")
 GROUP = "evaluations"
 
 
@@ -76,8 +76,9 @@ class EvaluationTable:
 
 
 def judge_wall_s(cols: dict[str, np.ndarray]) -> float:
-    """The time the judge's runs took, from the stored rows (its share of the workers' time on resume)."""
-    wall = cols["wall_time_s"][cols["kind"] == b"judge"]
+    """The time the judge's runs and the opinions took, from the stored rows (its share of the workers' time on
+    resume)."""
+    wall = cols["wall_time_s"][np.isin(cols["kind"], (b"judge", b"opinion"))]
     return float(np.sum(wall, where=np.isfinite(wall)))
 
 
