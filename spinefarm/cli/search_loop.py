@@ -139,6 +139,7 @@ class SearchSession:
             if kinds:  # only when a judge or an audit is still running: with --no-verify there is none
                 judging = True
                 what = ("the judge re-simulates the best before it is reported" if "judge" in kinds
+                        else "the best runs in the other engine for a second opinion" if kinds == {"opinion"}
                         else "the last audits run")
                 self.progress.write(f"the search is done; {what} (Ctrl-C skips) ...")
             self.progress.update(*progress(core))
