@@ -5,6 +5,9 @@ distance, a speed or either over (1 + COT), the screen's objective times judged 
 simulated time and, for the COT ones, the screen's COT, which the judge does not record); `cot:S` keeps the
 screen's value. Any other set ranks by its screen objective. A diverged (or, in older files,
 not-reproduced) judgement and a disputed or failed audit keep a set from being best (base.best_ids).
+
+With auditing on, the best a run reports is the best set another identity's audit agreed with (reported_best):
+a better one still waiting for that audit is shown apart as "pending audit", never as the best.
 """
 
 from __future__ import annotations
@@ -44,6 +47,15 @@ def ranked_values(cols: Mapping[str, np.ndarray], objective_name: str) -> np.nda
     judged &= np.abs(d) > _TINY_M
     ratio = np.divide(cols["verify_distance_m"], d, out=np.ones_like(obj), where=judged)
     return np.where(judged, obj * ratio, obj)
+
+
+# another identity reproduced the result (or a referee upheld it against its auditor): it may be reported best
+AGREEING_AUDITS = (AuditState.AGREES.stored, AuditState.OVERRULED.stored)
+
+
+def agreeing(audit: np.ndarray) -> np.ndarray:
+    """Which rows another identity's audit agreed with (or whose referee upheld them against the auditor)."""
+    return np.isin(audit, AGREEING_AUDITS)
 
 
 def counted_distance_m(verification: str | bytes, distance_m: float, verify_distance_m: float) -> float:
