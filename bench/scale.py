@@ -19,9 +19,12 @@ the coordinator serves (its first status file). With SPINEFARM_GRANT_LOG the coo
 arrival at its handler and the handler's time; `first_grant_split_ms` and `later_grants_split_ms` cut each grant's
 wait in three on that one clock: `to_handler_ms` (the worker process, the routers, the coordinator's transport
 thread and its queue), `in_handler_ms` (the core: its lock and work), `back_ms` (the reply to the worker's thread).
+With --restart, once half the budget is stored the coordinator is SIGKILLed and resumed at once (`--resume`), every
+worker still there: `restart_burst_ms` is each worker's wait for its first grant from the resumed coordinator (the
+burst of simultaneous first requests a restart meets), `restart_in_handler_ms` the handler's time over them.
 
 usage: python bench/scale.py --workers 500 [--per-process 10] [--trials N] [--duration 10] [--jitter 0.5]
-       [--kill 0.1] [--stagger 0.1] [--keep]
+       [--kill 0.1] [--stagger 0.1] [--keep] [--restart]
 prints one JSON object.
 """
 
@@ -225,6 +228,29 @@ def _split(tmp: Path) -> dict:
             "later_grants_split_ms": {k: _percentiles(np.array(v)) for k, v in parts.items()}}
 
 
+def _restart(coord: subprocess.Popen, out: Path, endpoint: str, tmp: Path) -> subprocess.Popen:
+    """--restart: SIGKILL the coordinator and resume its run file at once, every worker still waiting."""
+    coord.send_signal(signal.SIGKILL)
+    coord.wait(30)
+    return _spinefarm("coordinator", "--resume", str(out), "--connect", endpoint, "--api-port", "-1", "--quiet",
+                      log=tmp / "coordinator-resumed.log",
+                      env={**os.environ, "SPINEFARM_GRANT_LOG": str(tmp / "coordinator-grants.log")})
+
+
+def _burst(tmp: Path, killed_at: float) -> dict:
+    """The restart's burst: each worker's first grant from the resumed coordinator (its wait at the worker), and
+    the resumed coordinator's handler time over its first requests (one per worker that came back)."""
+    first: dict[str, float] = {}
+    for line in sorted(x for p in tmp.glob("grants-*.log") for x in p.read_text().splitlines()):
+        t, ms, wid = line.split()
+        if float(t) > killed_at and wid not in first:
+            first[wid] = float(ms)
+    handled = sorted((float(t), float(ms)) for t, ms, _ in (
+        line.split() for line in (tmp / "coordinator-grants.log").read_text().splitlines()) if float(t) > killed_at)
+    return {"restart_workers_granted": len(first), "restart_burst_ms": _percentiles(np.array(list(first.values()))),
+            "restart_in_handler_ms": _percentiles(np.array([ms for _, ms in handled[:len(first)]]))}
+
+
 def _spinefarm(*args: str, log: Path, env: dict | None = None) -> subprocess.Popen:
     with open(log, "w") as fh:
         return subprocess.Popen([sys.executable, "-m", "spinefarm", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
@@ -278,7 +304,7 @@ def run(args: argparse.Namespace) -> dict:
         if args.join_s >= 0:
             _wait_files(tmp, "ready-*", len(procs), args.timeout_s)
             (tmp / "go").touch()
-        killed, rss, t0 = 0, 0.0, time.monotonic()
+        killed, rss, t0, restarted_at = 0, 0.0, time.monotonic(), None
         n_kill = math.ceil(args.kill * len(procs))
         while coord.poll() is None:
             if time.monotonic() - t0 > args.timeout_s:
@@ -291,7 +317,10 @@ def run(args: argparse.Namespace) -> dict:
                     seen >= args.workers or st.get("trials_complete", 0) >= trials // 2):
                 for p in procs[-n_kill:] if n_kill else []:
                     p.send_signal(signal.SIGKILL)
-                killed = n_kill
+                killed = n_kill or -1
+            if args.restart and killed and restarted_at is None and st.get("trials_complete", 0) >= trials // 2:
+                restarted_at = time.time()
+                coord = _restart(coord, out, endpoints[0], tmp)
             time.sleep(0.5)
         wall_s = time.monotonic() - t0
         late = 0
@@ -304,10 +333,11 @@ def run(args: argparse.Namespace) -> dict:
         checked = _check(out, tmp)
         result = {"workers": args.workers, "trials": trials, "stored": checked["stored"], "lost": checked["lost"],
                 "duplicated": checked["duplicated"], **_latencies(tmp), **_split(tmp),
+                **({} if restarted_at is None else _burst(tmp, restarted_at)),
                 "coordinator_rss_mb": round(rss, 1),
                 "exact_budget": checked["rows"] == trials and checked["stored"] == trials,
                 "acknowledged": checked["acknowledged"], "workers_killed": sum(
-                    min(per, args.workers - i * per) for i in range(len(procs) - killed, len(procs))),
+                    min(per, args.workers - i * per) for i in range(len(procs) - max(killed, 0), len(procs))),
                 "worker_processes": len(procs), "per_process": per, "duration_s": args.duration,
                 "processes_left_after_the_run": late, "routers": len(routers), "jitter": args.jitter,
                 "join_s": args.join_s,
@@ -343,6 +373,9 @@ def main() -> None:
     ap.add_argument("--join-s", type=float, default=10.0, help="once every worker process has started and opened "
                     "its sessions, the workers start asking for work over this many seconds, evenly (default 10); "
                     "-1: each asks as soon as its session is open, while the other processes start")
+    ap.add_argument("--restart", action="store_true", help="once half the budget is stored (after the workers' "
+                    "kill), SIGKILL the coordinator and resume its run with every worker waiting; prints the burst "
+                    "of first grants from the resumed one (restart_burst_ms)")
     ap.add_argument("--join-step", type=float, default=-1.0, help=argparse.SUPPRESS)
     ap.add_argument("--host", help=argparse.SUPPRESS)
     ap.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)

@@ -108,7 +108,10 @@ class RunStatus(BaseModel):
     trials_queued: int | None
     rate_trials_s: float | None
     eta_s: float | None
-    best: Trial | None
+    best: Trial | None = Field(description="the best set; with auditing on, the best one another worker identity's "
+                               "audit agreed with")
+    pending_audit: Trial | None = Field(None, description="with auditing on: a set better than the best whose "
+                                        "audit has not agreed yet (not the best until it does)")
     workers: list[Worker]
     status_age_s: float | None
     status_file_error: str | None = Field(None, description="why the run's status file (RUN.h5.status.json) "

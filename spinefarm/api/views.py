@@ -95,7 +95,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     finished_at = np.asarray(cols.get("finished_at_unix_s", []), dtype=float)
     steps = np.asarray(cols.get("dt_s", []), dtype=float)
     steps = steps[np.isfinite(steps)]
-    best = storage.best(1)
+    best, pending = storage.reported_best(1)   # with auditing on: the best another identity's audit agreed with
     unaudited = (live.get("audit") or {}).get("unaudited") or {}
     shown = str(path)
     tc = meta.trial_config
@@ -113,6 +113,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "trials_queued": live.get("trials_queued") if state == "running" else None,
         **live_figures(state, live, age, finished_at, max(0, planned - finished)),
         "best": _noted(trial_view(storage, best[0]), unaudited) if best else None,
+        "pending_audit": _noted(trial_view(storage, pending), unaudited) if pending is not None else None,
         # a finished run keeps the last the coordinator knew (who ran, who was quarantined); a stopped one shows none
         "workers": live.get("workers", []) if state in ("running", "stalled", "done") else [],
         "audit": {**storage.audit_counts(), "fraction": meta.settings.audit.fraction,

@@ -24,7 +24,7 @@ def progress(core: Any) -> tuple[int, int, str, str]:
     evaluations are counted apart: a multi-fidelity run evaluates a set more than once."""
     with core.lock:  # the transport threads write the table concurrently
         st = core.status()
-        best = core.study.storage.best(1)
+        best, pending = core.study.storage.reported_best(1)
     done, budget, evaluations = st["parameter_sets_done"], st["trials_budget"], st["evaluations_done"]
     width = 24
     fill = int(width * done / max(budget, 1))
@@ -35,6 +35,8 @@ def progress(core: Any) -> tuple[int, int, str, str]:
             " judged" if b.verification in ("holds", "moved", "judged") else "")
         if core.study.storage.run_meta().objective not in DISTANCE_OBJECTIVES:
             best_s += f" ({_g(b.speed_cm_s, 3)} cm/s, COT {_g(b.cot, 3)})"  # what a COT objective trades
+    if pending is not None:   # better, but no other identity has reproduced it yet: not the best
+        best_s += f" ({_counted(pending):.3f} m pending audit)"
     eta = "-" if st["eta_s"] is None else f"{st['eta_s']:.0f}s"
     text = f"{evaluations} evaluations, {st['trials_failed']} failed, {st['rate_trials_s']:.1f}/s, best {best_s}"
     return done, budget, text, (f"[{'#' * fill}{'.' * (width - fill)}] {done}/{budget} parameter sets, "
@@ -57,6 +59,10 @@ def verdict_text(b: Any, judge_engine: str | None) -> str:
     if b.verification == "diverged":
         return f"diverged in the judge's run ({b.verify_reason})"
     return {"pending": "verification pending", "": "not verified"}.get(b.verification, b.verification)
+
+
+def _counted(b: Any) -> float:
+    return counted_distance_m(b.verification, b.distance_m, b.verify_distance_m)
 
 
 def _g(x: float, digits: int = 4) -> str:
@@ -85,10 +91,10 @@ def describe_best(core: Any, path: Path, verbose: bool = False) -> str:
     audit = core.status()["audit"]
     if any(v for k, v in audit.items() if k.startswith("audits_")):
         notes.append("audits: " + ", ".join(f"{k[7:]} {v}" for k, v in audit.items() if k.startswith("audits_")))
-    best = storage.best(1)
-    if best and best[0].trial_id in core.unaudited:
-        notes.append(f"the best, trial {best[0].trial_id}: {core.unaudited[best[0].trial_id]}; its audit stays pending "
-                     "(a resume with another worker identity runs it)")
+    best, pending = storage.reported_best(1)
+    if pending is not None and pending.trial_id in core.unaudited:
+        notes.append(f"trial {pending.trial_id}, better than the best: {core.unaudited[pending.trial_id]}; its audit "
+                     "stays pending (a resume with another worker identity runs it)")
     verdict = verdict_text(best[0], storage.run_meta().settings.judge.rung.engine) if best else ""
     return final_report(storage, path, verdict=verdict, done=core.done, verbose=verbose, notes=tuple(notes))
 
@@ -118,9 +124,12 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
     lines += list(notes)
     if meta.settings.engine_choice is not None:  # how --engine auto chose the tier
         lines.append(meta.settings.engine_choice.describe())
-    best = storage.best(1)
+    best, pending = storage.reported_best(1)
+    if pending is not None:
+        lines.append(f"pending audit: trial {pending.trial_id}, distance {_g(_counted(pending))} m, is better than "
+                     "any audited set; it is reported best once another worker identity's audit agrees")
     if not best:
-        lines.append("no complete trial yet")
+        lines.append("no audited best yet" if pending is not None else "no complete trial yet")
     else:
         b = best[0]
         engine = f" in {b.engine} at {b.dt_s * 1e3:g} ms" if b.engine and math.isfinite(b.dt_s) else ""

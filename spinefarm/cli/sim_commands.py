@@ -284,7 +284,7 @@ def _stored_trial(path: Path, trial_id: int | None
     try:
         meta = store.run_meta()
         if trial_id is None:
-            best = store.best(1)
+            best = store.reported_best(1)[0]   # the best the report names
             if not best:
                 raise ParameterError("run file has no finished trial", received=str(path),
                                      expected="a run with results, or --trial-id")

@@ -8,11 +8,12 @@ from collections.abc import Callable
 import numpy as np
 
 from spinefarm.coordinator.fidelity import BaseTrialScheduler, PlainTrialScheduler
-from spinefarm.coordinator.samplers.base import BaseSampler, Proposal
+from spinefarm.coordinator.samplers.base import BaseSampler, LearnedView, Proposal
 from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import ENQUEUED, PROMOTED, RunSettings
 from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.ranking import learned_revision
 
 
 def trial_seed(run_seed: int, trial_id: int | np.ndarray) -> int | np.ndarray:
@@ -42,6 +43,7 @@ class Study:
         self.seed = seed
         self.enqueued = enqueued
         self._n_finished = sum(v for k, v in storage.counts().items() if k != "waiting")
+        self._learned = b""   # which rows' figures the sampler learnt amended (storage.ranking.learned_revision)
 
     @property
     def n_asked(self) -> int:
@@ -83,13 +85,23 @@ class Study:
             return tid
         if sampling_done:
             return None
-        view = ts.sampler_view(self.storage)  # with rungs: proposal k is the k-th parameter set
+        self._relearn_if_amended()
+        # with rungs: proposal k is the k-th parameter set
+        view = LearnedView(ts.sampler_view(self.storage), self.storage.run_meta().objective)
         k = view.n_trials()
         p = Proposal(np.asarray(self.enqueued[k]), ENQUEUED, -1) if k < len(self.enqueued) \
             else self.sampler.propose(k, view)
         self.storage.add_trial(tid, p.params_unit, self.space.from_unit(p.params_unit), p.phase,
                                ts.parent_id(view, p.parent), self.trial_seed(tid), 0, ts.duration_s(0))
         return tid
+
+    def _relearn_if_amended(self) -> None:
+        """A row's figure a sampler learnt was found forged (its worker quarantined) or re-run since: the sampler
+        starts over and learns every row again as it now reads (model-based samplers learn a row once)."""
+        revision = learned_revision(self.storage.columns()["audit"])
+        if revision != self._learned:
+            self._learned = revision
+            self.sampler = type(self.sampler).from_dict(self.sampler.describe(), self.sampler.n_params)
 
     def tell(self, result: TrialResult) -> bool:
         """Store `result` for result.trial_id; False if that trial was already finished."""

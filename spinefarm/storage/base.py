@@ -13,13 +13,16 @@ from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import REFUTED_VERDICTS, STORED_STATUSES, AuditState, TrialStatus, Verification
 from spinefarm.storage import pareto
-from spinefarm.storage.ranking import ranked_values
+from spinefarm.storage.ranking import agreeing, ranked_values
 from spinefarm.storage.schema import FILE_SCHEMA_VERSION, RunMeta, TrialRecord
 
 # A result whose audit found it wrong, or is still refereeing it, or whose worker was quarantined (until
 # another identity reproduces it), never counts as best.
 DISQUALIFYING_AUDITS = (AuditState.DISAGREES.stored, AuditState.DISPUTED.stored,
                         AuditState.QUARANTINED.stored)
+
+
+_RANKED_BY = ("objective", "verification", "verify_distance_m", "distance_m")   # what ranked_values reads
 
 
 class BaseStorage:
@@ -180,18 +183,44 @@ class BaseStorage:
         """Ids of the k complete trials with the highest ranked value (storage.ranking: the judged figure of
         a judged set), best first (ties: lower id). In a multi-fidelity run a trial of a higher rung (a longer
         trial) ranks before any of a lower one."""
+        return self._ranked_ids(k, agreed_only=False)
+
+    def _ranked_ids(self, k: int, agreed_only: bool) -> list[int]:
         cols = self.columns()
         obj = cols["objective"]
         # a set whose judge run diverged never counts as best
         valid = (cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(obj) & \
             ~np.isin(cols["verification"], REFUTED_VERDICTS) & \
             ~np.isin(cols["audit"], DISQUALIFYING_AUDITS)  # nor one other workers did not reproduce (or dispute)
+        if agreed_only:
+            valid &= agreeing(cols["audit"])
         ids = np.flatnonzero(valid)
         if k <= 0 or ids.size == 0:
             return []
-        value = ranked_values(cols, self.run_meta().objective)
-        order = np.lexsort((ids, -value[ids], -cols["rung"][ids]))
+        value = ranked_values({c: cols[c][ids] for c in _RANKED_BY}, self.run_meta().objective)
+        order = np.lexsort((ids, -value, -cols["rung"][ids]))
         return [int(i) for i in ids[order[:k]]]
+
+    def reported_best_ids(self, k: int) -> tuple[list[int], int | None]:
+        """(the k best sets the run reports, best first; the better set still pending its audit, or None).
+        With auditing on a set is reported best only once another identity's audit agreed with it
+        (storage.ranking); the best-ranked set whose audit has not agreed yet is the pending one. Without
+        auditing these are best_ids(k) and None."""
+        if not self.run_meta().settings.audit.enabled:
+            return self.best_ids(k), None
+        top = self.best_ids(1)
+        pending = top[0] if top and not agreeing(self.columns()["audit"][top[0]: top[0] + 1])[0] else None
+        return self._ranked_ids(k, agreed_only=True), pending
+
+    def reported_best(self, k: int) -> tuple[list[TrialRecord], TrialRecord | None]:
+        """reported_best_ids as records."""
+        ids, pending = self.reported_best_ids(k)
+        return self.records(ids), None if pending is None else self.trial(pending)
+
+    def records(self, ids: list[int]) -> list[TrialRecord]:
+        """The trials `ids`, in that order."""
+        cols = self.columns()
+        return [TrialRecord.from_columns(cols, i) for i in ids]
 
     def best(self, k: int) -> list[TrialRecord]:
         cols = self.columns()

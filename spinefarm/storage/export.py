@@ -29,7 +29,7 @@ def best_table(storage: BaseStorage, k: int) -> str:
     meta = storage.run_meta()
     lines = [f"{'rank':>4} {'trial':>6} {'phase':<11} {'objective':>10} {'distance_m':>10} {'speed_cm_s':>10} "
              f"{'work_j':>9} {'cot':>8}"]
-    best = storage.best(k)
+    best = storage.reported_best(k)[0]   # with auditing on, only sets another identity's audit agreed with
     for rank, r in enumerate(best, 1):
         lines.append(f"{rank:>4} {r.trial_id:>6} {r.phase:<11} {r.objective:>10.4g} {r.distance_m:>10.4g} "
                      f"{r.speed_cm_s:>10.4g} {r.work_j:>9.4g} {r.cot:>8.4g}")
@@ -48,7 +48,7 @@ def gait_params(storage: BaseStorage, trial_id: int | None = None) -> dict[str, 
     physical values, and where it came from (run, trial, scores, trial length) for the record."""
     from spinefarm.protocol.errors import StorageError
 
-    best = storage.best(1) if trial_id is None else [storage.trial(trial_id)]
+    best = storage.reported_best(1)[0] if trial_id is None else [storage.trial(trial_id)]
     if not best or best[0].status != "complete":
         raise StorageError("no complete trial to export", received=trial_id if trial_id is not None
                            else str(storage.run_meta().run_id), expected="a complete trial")

@@ -5,6 +5,9 @@ distance, a speed or either over (1 + COT), the screen's objective times judged 
 simulated time and, for the COT ones, the screen's COT, which the judge does not record); `cot:S` keeps the
 screen's value. Any other set ranks by its screen objective. A diverged (or, in older files,
 not-reproduced) judgement and a disputed or failed audit keep a set from being best (base.best_ids).
+
+With auditing on, the best a run reports is the best set another identity's audit agreed with (reported_best):
+a better one still waiting for that audit is shown apart as "pending audit", never as the best.
 """
 
 from __future__ import annotations
@@ -44,6 +47,52 @@ def ranked_values(cols: Mapping[str, np.ndarray], objective_name: str) -> np.nda
     judged &= np.abs(d) > _TINY_M
     ratio = np.divide(cols["verify_distance_m"], d, out=np.ones_like(obj), where=judged)
     return np.where(judged, obj * ratio, obj)
+
+
+# another identity reproduced the result (or a referee upheld it against its auditor): it may be reported best
+AGREEING_AUDITS = (AuditState.AGREES.stored, AuditState.OVERRULED.stored)
+
+
+def agreeing(audit: np.ndarray) -> np.ndarray:
+    """Which rows another identity's audit agreed with (or whose referee upheld them against the auditor)."""
+    return np.isin(audit, AGREEING_AUDITS)
+
+
+# a row whose figure is being checked again (its worker quarantined, or its audit disputed): not learnt yet
+_RECHECKED = (AuditState.QUARANTINED.stored, AuditState.DISPUTED.stored)
+_AMENDED = (*_RECHECKED, AuditState.DISAGREES.stored)
+
+
+def learned_columns(cols: Mapping[str, np.ndarray], objective_name: str) -> dict[str, np.ndarray]:
+    """The objective (and speed) a sampler learns from each row, where they differ from the stored ones (empty
+    when none does), so a model-based sampler never keeps learning a forged figure: a row being checked again
+    reads NaN (unknown: a sampler takes it as it takes a failed row) until its re-run comes back; a row another
+    identity did not reproduce (disagrees) reads that identity's distance (objectives proportional to the
+    distance scale with it; any other objective reads NaN, its honest value unmeasured)."""
+    audit = cols["audit"]
+    rechecked, wrong = np.isin(audit, _RECHECKED), audit == AuditState.DISAGREES.stored
+    if not (rechecked.any() or wrong.any()):
+        return {}
+    d = np.asarray(cols["distance_m"], dtype=float)
+    ratio = np.divide(cols["audit_distance_m"], d, out=np.full(d.shape, math.nan), where=np.abs(d) > _TINY_M)
+    out = {}
+    for name in ("objective", "speed_cm_s"):
+        value = np.array(cols[name], dtype=float)
+        if name == "objective" and objective_name == "distance":
+            value[wrong] = cols["audit_distance_m"][wrong]
+        elif name == "speed_cm_s" or objective_name in SCALED_OBJECTIVES:
+            value[wrong] *= ratio[wrong]
+        else:
+            value[wrong] = math.nan
+        value[rechecked] = math.nan
+        out[name] = value
+    return out
+
+
+def learned_revision(audit: np.ndarray) -> bytes:
+    """Which rows learned_columns amends, and how: when it changes, what a sampler learnt from them is stale."""
+    ids = np.flatnonzero(np.isin(audit, _AMENDED))
+    return ids.tobytes() + audit[ids].tobytes()
 
 
 def counted_distance_m(verification: str | bytes, distance_m: float, verify_distance_m: float) -> float:

@@ -42,8 +42,10 @@ def test_a_best_no_other_identity_can_audit_stays_pending_and_is_said_unaudited(
 
     with Hdf5Storage.open_read(out) as s:
         view = run_view(s, out)
-    assert view["best"]["trial_id"] == best and view["best"]["audit"]["state"] == "pending"
-    assert view["best"]["audit"]["note"] == SAID and view["audit"]["unaudited"] == {str(best): SAID}
+    # no other identity agreed with it: it is not the best, it is shown apart as pending its audit
+    assert view["best"] is None and view["pending_audit"]["trial_id"] == best
+    assert view["pending_audit"]["audit"]["state"] == "pending"
+    assert view["pending_audit"]["audit"]["note"] == SAID and view["audit"]["unaudited"] == {str(best): SAID}
 
     # resumed with another identity, the pending audit runs and settles
     clock = FakeClock()

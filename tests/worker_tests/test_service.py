@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import random
 import threading
 import time
 
@@ -54,9 +55,20 @@ def test_bad_vector_becomes_a_failed_result_naming_the_problem():
 
 def test_backoff_doubles_up_to_a_cap_and_resets():
     b = Backoff(0.1, 0.5)
-    assert [b.next() for _ in range(5)] == [0.1, 0.2, 0.4, 0.5, 0.5]
+    steps = (0.1, 0.2, 0.4, 0.5, 0.5)   # each wait is drawn from the upper half of its step
+    assert all(s / 2 <= b.next() <= s for s in steps)
     b.reset()
-    assert b.next() == 0.1
+    assert 0.05 <= b.next() <= 0.1
+
+
+def test_workers_failing_at_the_same_moment_do_not_ask_again_in_step():
+    """500 workers whose queries all failed at once (a dead coordinator's session dropped by the router): by
+    their 10th retry (~11 s on) no 100 ms holds more than 100 of them (in step, all 500 would share one; the
+    draws' spread is about 0.64 s, so about 31 share the busiest 100 ms)."""
+    asks = np.array([sum(b.next() for _ in range(10)) for b in (Backoff(rng=random.Random(i)) for i in range(500))])
+    asks.sort()
+    busiest = max(int(np.searchsorted(asks, t + 0.1) - i) for i, t in enumerate(asks))
+    assert busiest <= 100
 
 
 def test_default_worker_ids_are_valid_and_distinct():

@@ -20,10 +20,11 @@ from spinefarm.storage.schema import TrialRecord
 router = APIRouter(prefix="/runs/{run_id}", tags=["trials"])
 
 
-@router.get("/best", response_model=list[Trial], summary="The k best complete trials, best first")
+@router.get("/best", response_model=list[Trial], summary="The k best complete trials, best first (with auditing on, "
+            "only those another worker identity's audit agreed with; /runs shows a better one pending its audit)")
 def best(storage: Annotated[Hdf5Reader, Depends(run_storage)],
          k: Annotated[int, Query(ge=1, le=1000, description="how many trials")] = 10) -> list[dict[str, Any]]:
-    return [trial_view(storage, rec) for rec in storage.best(k)]
+    return [trial_view(storage, rec) for rec in storage.reported_best(k)[0]]
 
 
 @router.get("/pareto", response_model=list[Trial],

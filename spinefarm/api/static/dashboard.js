@@ -184,6 +184,9 @@ async function showRun(runId, gen, first) {
       ? ' <span class="muted">judged</span>' : ""}` : "–"),
     card("best speed (cm/s)", best ? fmt(best.scores.speed_cm_s) : "–"), card("best COT", best ? fmt(best.scores.cot) : "–"),
     card("best verified", best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.label || best.verification.verdict)}</span>` : "–"),
+    // better than the best, but no other identity's audit has agreed yet: shown apart, never as the best
+    ...(status.pending_audit ? [card("pending audit", `<a href="#/run/${r}/trial/${status.pending_audit.trial_id}">trial ${
+      status.pending_audit.trial_id}</a>: ${fmt(status.pending_audit.verification.counted_distance_m)} m`)] : []),
     ...(status.audit && status.audit.fraction > 0 ? [card("audits agree / disagree",
       `${status.audit.audits_agrees} / ${status.audit.audits_disagrees}`)] : []),
     meta.physical ? card("engine, step", `${esc(status.engine || "bullet")}, ${step ? fmt(step * 1000) + " ms" : "not run yet"}`) : "",

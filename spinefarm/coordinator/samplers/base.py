@@ -9,6 +9,7 @@ import numpy as np
 
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.ranking import learned_columns
 
 MONTE_CARLO = "monte_carlo"
 GAUSSIAN = "gaussian"
@@ -86,3 +87,19 @@ class FinishedPrefix:
         status = storage.columns()["status"][start:limit]
         waiting = np.flatnonzero(status == TrialStatus.WAITING.stored)
         return start + int(waiting[0]) if waiting.size else limit
+
+
+class LearnedView:
+    """What a sampler reads: the study's view of storage, with each row's figure as a sampler should learn it
+    (storage.ranking.learned_columns: a quarantined worker's forged value is not learnt, its re-run's is)."""
+
+    def __init__(self, view: Any, objective_name: str) -> None:
+        self._view, self._objective_name = view, objective_name
+
+    def columns(self) -> dict[str, np.ndarray]:
+        cols = self._view.columns()
+        amended = learned_columns(cols, self._objective_name)
+        return {**cols, **amended} if amended else cols
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._view, name)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import os
+import random
 import re
 import socket
 import uuid
@@ -49,14 +50,18 @@ def default_worker_id() -> str:
 
 
 class Backoff:
-    """Exponential wait between retries while the coordinator is absent."""
+    """Exponential wait between retries while the coordinator is absent, each wait drawn at random from the
+    upper half of its step. Without the draw, workers whose queries a dead coordinator's session held all fail
+    at the moment the router drops that session and then ask in step: a restarted coordinator met hundreds of
+    first requests at once (bench/scale.py --restart)."""
 
-    def __init__(self, first_s: float = 0.05, max_s: float = 2.0) -> None:
+    def __init__(self, first_s: float = 0.05, max_s: float = 2.0, rng: random.Random | None = None) -> None:
         self.first_s, self.max_s, self._next = first_s, max_s, first_s
+        self._rng = rng or random.Random()
 
     def next(self) -> float:
         wait, self._next = self._next, min(self._next * 2, self.max_s)
-        return wait
+        return wait * self._rng.uniform(0.5, 1.0)
 
     def reset(self) -> None:
         self._next = self.first_s
