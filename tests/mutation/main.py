@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from tests.mutation.targets import FUNCTIONS, TARGETS
+from tests.mutation.targets import FUNCTIONS, NO_JIT, TARGETS, TEST_TIME_BASE_S
 
 ROOT = Path(__file__).resolve().parents[2]
 STATUSES = {"ok_killed": "killed", "bad_survived": "survived", "bad_timeout": "timed_out",
@@ -56,15 +56,22 @@ def mutmut_run(tree: Path, cmd: list[str]) -> bool:
     return True
 
 
-def run_module(tree: Path, module: str, tests: tuple[str, ...], functions: tuple[str, ...] = ()) -> None:
+def runner(tests: tuple[str, ...], no_jit: tuple[str, ...] = ()) -> str:
+    """The test command of one mutant. mutmut 2 counts only exit code 1 as killed: a mutant that breaks an
+    import (pytest's exit code 2, a collection error) would count as survived, so pytest_exit makes every
+    failure 1; the no_jit files run first with numba's compiler off (tests/mutation/pytest_exit.py)."""
+    opts = ["-x", "-q", "-p", "no:randomly", "-p", "no:cacheprovider"]
+    first = ["--no-jit", *opts, *no_jit, "--then"] if no_jit else []
+    return " ".join([sys.executable, "-m", "tests.mutation.pytest_exit", *first, *opts, *tests])
+
+
+def run_module(tree: Path, module: str, tests: tuple[str, ...], functions: tuple[str, ...] = (),
+               no_jit: tuple[str, ...] = (), time_base_s: float = 20.0) -> None:
     """mutmut over the module; if it stops at a mutant it cannot look up, the mutants it did not reach are
     run one by one (that one is left untested)."""
-    # mutmut 2 counts only exit code 1 as killed: a mutant that breaks an import (pytest's exit code 2, a
-    # collection error) would count as survived, so pytest_exit makes every failure 1
-    runner = " ".join([sys.executable, "-m", "tests.mutation.pytest_exit", "-x", "-q", "-p", "no:randomly", "-p",
-                       "no:cacheprovider", *tests])
-    args = ["--paths-to-mutate", module, "--runner", runner, "--tests-dir", "tests", "--disable-mutation-types",
-            "string,fstring,decorator", "--test-time-base", "20", "--simple-output", "--no-progress", "--CI"]
+    args = ["--paths-to-mutate", module, "--runner", runner(tests, no_jit), "--tests-dir", "tests",
+            "--disable-mutation-types", "string,fstring,decorator", "--test-time-base", str(time_base_s),
+            "--simple-output", "--no-progress", "--CI"]
     # restricted to some functions: mutmut started through tests.mutation.lines, which hands it their lines
     tool = ["tests.mutation.lines", module, ",".join(functions), "--"] if functions else ["mutmut"]
     if mutmut_run(tree, [sys.executable, "-m", *tool, "run", *args]):
@@ -143,12 +150,15 @@ def main(argv: list[str] | None = None) -> int:
         module, tests = TARGETS[name]
         started = time.monotonic()
         if not args.report_only:
-            run_module(tree, module, tests, FUNCTIONS.get(name, ()))
+            run_module(tree, module, tests, FUNCTIONS.get(name, ()), NO_JIT.get(name, ()),
+                       TEST_TIME_BASE_S.get(name, 20.0))
             end_leftovers(tree)
         report[name], ids = counts(tree, module)
         report[name].update(module=module, tests=list(tests), seconds=round(time.monotonic() - started))
         if name in FUNCTIONS:
             report[name]["functions"] = list(FUNCTIONS[name])
+        if name in NO_JIT:
+            report[name]["tests_without_jit_first"] = list(NO_JIT[name])
         lived += [f"## {name} mutant {i}\n{diff(tree, i)}" for i in ids]
     total = {k: sum(r[k] for r in report.values()) for k in STATUSES.values()}
     tested = total["killed"] + total["survived"] + total["timed_out"] + total["suspicious"]

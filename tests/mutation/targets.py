@@ -27,7 +27,7 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
                      f"{W}/test_calibrate_judge.py")),
     "engine-auto": ("spinefarm/cli/engine_auto.py", ("tests/cli_tests/test_engine_auto.py", f"{W}/test_calibrate.py")),
     "contact-guard": ("spinefarm/worker/engines/contact_guard.py",
-                      (f"{W}/test_segment_distance.py", f"{W}/test_contact_guard.py", f"{W}/test_mujoco.py")),
+                      (f"{W}/test_mujoco.py::test_auto_segment_contacts_give_the_bits_of_modelled_ones",)),
     "sandbox": ("spinefarm/worker/service/sandbox.py",
                 (f"{W}/test_trial_limit_rule.py",
                  f"{W}/test_trial_limit.py::test_a_trial_process_dies_with_its_worker_even_mid_trial")),
@@ -46,3 +46,18 @@ FUNCTIONS: dict[str, tuple[str, ...]] = {
     # the wall-clock limit's rule (docs/reliability.md), the death signal, the name of a trial process's end
     "sandbox": ("TrialLimit", "_die_with_parent", "_exit_text"),
 }
+
+# Test files run first with numba's compiler off (NUMBA_DISABLE_JIT=1): a mutant of a numba kernel would
+# otherwise be compiled again for every mutant (half a minute or more here). Only if they all pass do the
+# module's files above run, compiled (tests/mutation/pytest_exit.py).
+NO_JIT: dict[str, tuple[str, ...]] = {
+    "contact-guard": (f"{W}/test_segment_distance.py", f"{W}/test_contact_guard.py",
+                      f"{W}/test_mujoco.py::test_segment_distance_agrees_with_dense_sampling",
+                      f"{W}/test_mujoco.py::test_the_contact_guard_is_silent_while_segments_are_apart",
+                      f"{W}/test_mujoco.py::test_filtered_pairs_pass_through_each_other"),
+}
+
+# mutmut's allowance per mutant beyond twice the unmutated tests' time (its --test-time-base), in seconds:
+# past it a mutant counts as timed out. A compiled stage that compiles its mutated kernel again needs minutes
+# on two busy cores, which must not pass for an endless loop.
+TEST_TIME_BASE_S: dict[str, float] = {"contact-guard": 240.0}
