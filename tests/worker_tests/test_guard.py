@@ -76,3 +76,27 @@ def test_a_trial_has_the_bits_and_reason_of_the_exact_check_alone(monkeypatch, s
         assert np.array_equal(a.com_path_cm, b.com_path_cm)
     if speed_guard_m_s < 1:
         assert any(o.result.reason for o in exact)
+
+
+def test_a_sane_check_keeps_the_com_bits_of_scoring_and_an_unclear_one_writes_nothing():
+    from spinefarm.worker.trial import scoring
+
+    rng = np.random.default_rng(11)
+    boxes = np.array([[0.0, 0.0, 1e6, 1e6, 0.0]])  # one level ground box, top at 0 cm
+    limits = guard.limits(TrialConfig())
+    for nb in (3, 12, 17, 40):  # below and above numpy's 8-wide pairwise blocks
+        for _ in range(50):
+            masses = rng.uniform(0.05, 3.0, nb)
+            poses = np.column_stack([rng.uniform(-500, 500, nb), rng.uniform(5, 10, nb), rng.uniform(-500, 500, nb),
+                                     np.zeros((nb, 3)), np.ones(nb)])
+            strings = np.ones((4, 3))  # string state, column 1 the lengths: a stretch of 1 (limit 2)
+            last, good, com = poses[:, :3] + 1e-4, np.zeros((nb, 7)), np.full(3, np.nan)
+            assert guard.check_clear(poses, last, good, masses, float(masses.sum()), strings, 1, np.ones(4), 0.01,
+                                     boxes, limits, com)
+            assert np.array_equal(com, scoring.robot_com_cm(poses, masses))
+            assert np.array_equal(last, poses[:, :3]) and np.array_equal(good, poses)
+    poses[0, 1] = -50.0  # a segment below the ground: not clearly sane, the exact check decides
+    last, good, com = poses[:, :3] + 1e-4, np.zeros((nb, 7)), np.full(3, np.nan)
+    assert not guard.check_clear(poses, last, good, masses, float(masses.sum()), strings, 1, np.ones(4), 0.01, boxes,
+                                 limits, com)
+    assert np.isnan(com).all() and not good.any() and np.array_equal(last, poses[:, :3] + 1e-4)

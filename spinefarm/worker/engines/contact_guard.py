@@ -160,12 +160,13 @@ class SegmentContactGuard:
         self.pair_b = np.array([b for _, b in pairs], dtype=np.int64)
         self._w0 = np.zeros_like(self.cap_p0)
         self._w1 = np.zeros_like(self.cap_p1)
+        # the compiled call's arguments, built once (a look comes every check of every world)
+        self._kernel_args = ((self.cap_start, self.cap_p0, self.cap_p1, self.cap_radius, self.cap_reach,
+                              self.body_radius), (self.pair_a, self.pair_b), (self._w0, self._w1))
 
     def free_time_s(self, qpos: np.ndarray, qvel: np.ndarray, horizon_s: float) -> tuple[float, float]:
         """(seconds, at most horizon_s, during which no two segments can touch; the gap in cm of the pair
         that limits it, inf if none does): see contact_free_time."""
         if self.pair_a.size == 0:
             return horizon_s, math.inf
-        return contact_free_time(qpos, qvel, horizon_s, (self.cap_start, self.cap_p0, self.cap_p1, self.cap_radius,
-                                                         self.cap_reach, self.body_radius),
-                                 (self.pair_a, self.pair_b), (self._w0, self._w1))
+        return contact_free_time(qpos, qvel, horizon_s, *self._kernel_args)

@@ -153,22 +153,26 @@ class MujocoPhysics(BasePhysics):
         again from its start with segment_contacts "scene")."""
         if self.guard is None:
             return n_steps
-        for b, data in enumerate(self.data):
-            self._steps[b] = round(data.time / self.model.opt.timestep)
-        self._look(active, horizon_steps)
-        live = [b for b in range(self.n_worlds) if active[b]]
-        return min(n_steps, *(self._safe_until[b] - self._steps[b] for b in live)) if live else 0
-
-    def _look(self, active: np.ndarray, horizon_steps: int) -> None:
-        for b in range(self.n_worlds):
-            if not active[b] or self._steps[b] != self._safe_until[b]:
+        timestep = self.model.opt.timestep
+        steps, safe_until = self._steps, self._safe_until
+        ahead = n_steps
+        for b, data in enumerate(self.data):  # per world, not per body: a few attribute reads
+            if not active[b]:
                 continue
-            steps, why = self.contact_free_steps(horizon_steps, b)
-            if steps == 0:
-                why = f"{why}, t={self._steps[b] * self.dt_s:.3f} s"
-                self.retries[b] = ({"segment_contacts": "scene"}, {"segment_contacts": f"modelled: {why}"})
-                active[b] = False
-            self._safe_until[b] = self._steps[b] + steps
+            steps[b] = round(data.time / timestep)
+            if steps[b] == safe_until[b]:
+                self._look(b, active, horizon_steps)
+            if active[b]:
+                ahead = min(ahead, safe_until[b] - steps[b])
+        return ahead if active.any() else 0
+
+    def _look(self, b: int, active: np.ndarray, horizon_steps: int) -> None:
+        steps, why = self.contact_free_steps(horizon_steps, b)
+        if steps == 0:
+            why = f"{why}, t={self._steps[b] * self.dt_s:.3f} s"
+            self.retries[b] = ({"segment_contacts": "scene"}, {"segment_contacts": f"modelled: {why}"})
+            active[b] = False
+        self._safe_until[b] = self._steps[b] + steps
 
     def contact_free_steps(self, max_steps: int, world: int = 0) -> tuple[int, str]:
         """(steps, at most max_steps, before which none of the segment-segment contacts this model leaves

@@ -107,6 +107,8 @@ class Batch:
         self._boxes = guard.level_boxes(terrain)
         self._limits = guard.limits(cfg)
         self._base_len = np.maximum(start_length_cm, STRETCH_BASE_MIN_CM).astype(np.float64)
+        self._mass_total = float(np.asarray(masses, dtype=float).sum())  # the divisor of scoring.robot_com_cm
+        self._com = np.zeros(3)
 
     def run(self, settled: Settled | None = None, keep_settled: bool = False) -> list[WorldLog]:
         """Both phases, or with `settled` (every world's start pose and string tables those of its key,
@@ -171,13 +173,17 @@ class Batch:
     def _check(self) -> None:
         poses = self.engine.read_poses()
         dt_check = self.timing.check_every * self.timing.dt_s
+        state = self.law.state
         for b in np.flatnonzero(self.active):
             w = self.worlds[b]
-            clear = self._boxes is not None and guard.clearly_sane(
-                poses[b], w.last_check, self.masses, self.law.state[b, :, sk.S_LPREV], self._base_len, dt_check,
-                self._boxes, self._limits)
-            reason = "" if clear else check_state(poses[b], w.last_check, self.masses, self.law.state[b],
-                                                  self.start_length_cm, dt_check, self.cfg, self.terrain)
+            if self._boxes is not None and guard.check_clear(
+                    poses[b], w.last_check, w.last_good, self.masses, self._mass_total, state[b], sk.S_LPREV,
+                    self._base_len, dt_check, self._boxes, self._limits, self._com):
+                w.com_path.append(self._com.copy())
+                w.last_good_step, w.last_good_work = self.done, self.law.work_internal(b)
+                continue
+            reason = check_state(poses[b], w.last_check, self.masses, state[b], self.start_length_cm, dt_check,
+                                 self.cfg, self.terrain)
             w.last_check = poses[b, :, :3].copy()
             if reason:
                 w.reason = f"{reason} at t={self.done * self.timing.dt_s:.3f} s"

@@ -56,6 +56,31 @@ def clearly_sane(poses: np.ndarray, last: np.ndarray, masses: np.ndarray, lprev:
     return worst < limits[4] * (1.0 - MARGIN)
 
 
+@njit(cache=True)
+def check_clear(poses: np.ndarray, last: np.ndarray, last_good: np.ndarray, masses: np.ndarray, mass_total: float,
+                string_state: np.ndarray, lprev_column: int, base_len_cm: np.ndarray, interval_s: float,
+                boxes: np.ndarray, limits: np.ndarray, com_out: np.ndarray) -> bool:
+    """clearly_sane on string_state[:, lprev_column], and where it holds the check's bookkeeping in the same
+    call, so a sane check runs no Python per body: com_out = the robot's COM (the bits of
+    scoring.robot_com_cm: rows summed in order, then over mass_total = masses.sum()), last = the positions,
+    last_good = poses. Where it does not hold nothing is written and the exact check decides."""
+    if not clearly_sane(poses, last, masses, string_state[:, lprev_column], base_len_cm, interval_s, boxes, limits):
+        return False
+    for c in range(3):
+        com_out[c] = poses[0, c] * masses[0]
+    for b in range(1, poses.shape[0]):
+        for c in range(3):
+            com_out[c] += poses[b, c] * masses[b]
+    for c in range(3):
+        com_out[c] /= mass_total
+    for b in range(poses.shape[0]):
+        for c in range(3):
+            last[b, c] = poses[b, c]
+        for c in range(7):
+            last_good[b, c] = poses[b, c]
+    return True
+
+
 def level_boxes(terrain: Terrain) -> np.ndarray | None:
     """The terrain's boxes as clearly_sane takes them, or None when it has a heightfield or a tilted box (the
     exact check then runs every time)."""
