@@ -35,6 +35,30 @@ class Audit(BaseModel):
                              "identity)\" when the run ended with no worker of another identity to run it")
 
 
+class SpreadSide(BaseModel):
+    """One engine's run of a judged best (an evaluation row)."""
+
+    engine: str
+    dt_s: float | None = Field(None, description="the step it ran at (s)")
+    distance_m: float | None
+    status: str | None = Field(None, description="complete or failed (null: from the verdict's columns)")
+    reason: str | None = None
+    wall_time_s: float | None = None
+    worker_id: str | None = None
+
+
+class ModelSpread(BaseModel):
+    """A judged best in both engines (storage.model_spread): the judge's run and the other engine's second
+    opinion (an evaluation of kind "opinion"), their ratio beside each engine's step error."""
+
+    judge: SpreadSide
+    other: SpreadSide = Field(description="the engine that does not judge, at a converged step")
+    ratio: float | None = Field(description="other / judge distance (null when either is missing or failed)")
+    step_error: dict[str, float | None] = Field(description="per engine, the median relative change of a "
+                                                "gait's distance at half the step, from the run's calibration "
+                                                "(empty: the run was not calibrated)")
+
+
 class Trial(BaseModel):
     trial_id: int
     status: str
@@ -56,6 +80,8 @@ class Trial(BaseModel):
     settle_s: float | None = None
     rung: int = 0                    # multi-fidelity rung (0: the screen)
     duration_s: float | None = None  # simulated duration asked for (null: the run's)
+    model_spread: ModelSpread | None = Field(None, description="a judged best's distance in the other engine "
+                                             "too (/best and /trials/ID only; null: no second opinion stored)")
 
 
 

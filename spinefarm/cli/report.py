@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from spinefarm.storage.model_spread import model_spread, spread_text
 from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
 
 DISTANCE_OBJECTIVES = ("distance", "speed")  # an objective that is a score part already, shown as that part
@@ -140,6 +141,8 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
                   + f" · speed {_g(b.speed_cm_s)} cm/s · COT {_g(b.cot)} · "
                   f"work {_g(b.work_j)} J",
                   f"  verdict: {verdict}"]
+        if (spread := model_spread(storage, b)) is not None:  # the judged best in the other engine too
+            lines.append("  " + spread_text(spread))
         if verbose:
             lines.append(f"  parameters ({meta.n_params}):")
             width = max(len(n) for n in meta.param_names) if meta.param_names else 0

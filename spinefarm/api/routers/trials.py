@@ -15,6 +15,7 @@ from spinefarm.api.schemas import Trial, TrialPage
 from spinefarm.api.views import trial_view
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.hdf5_reader import Hdf5Reader
+from spinefarm.storage.model_spread import model_spread
 from spinefarm.storage.schema import TrialRecord
 
 router = APIRouter(prefix="/runs/{run_id}", tags=["trials"])
@@ -24,7 +25,8 @@ router = APIRouter(prefix="/runs/{run_id}", tags=["trials"])
             "only those another worker identity's audit agreed with; /runs shows a better one pending its audit)")
 def best(storage: Annotated[Hdf5Reader, Depends(run_storage)],
          k: Annotated[int, Query(ge=1, le=1000, description="how many trials")] = 10) -> list[dict[str, Any]]:
-    return [trial_view(storage, rec) for rec in storage.reported_best(k)[0]]
+    cols = storage.evaluations()
+    return [{**trial_view(storage, rec), "model_spread": model_spread(storage, rec, cols)} for rec in storage.reported_best(k)[0]]
 
 
 @router.get("/pareto", response_model=list[Trial],
@@ -49,7 +51,8 @@ def trials_page(storage: Annotated[Hdf5Reader, Depends(run_storage)],
 @router.get("/trials/{trial_id}", response_model=Trial, summary="One trial")
 def trial(storage: Annotated[Hdf5Reader, Depends(run_storage)],
           trial_id: Annotated[int, Path(ge=0, le=2**62, description="trial number")]) -> dict[str, Any]:
-    return trial_view(storage, _record(storage, trial_id))
+    rec = _record(storage, trial_id)
+    return {**trial_view(storage, rec), "model_spread": model_spread(storage, rec)}
 
 
 TrialId = Annotated[int, Path(ge=0, le=2**62, description="trial number")]

@@ -225,6 +225,19 @@ function engineChoiceCard(c) {
 }
 
 // ---------------------------------------------------------------- one trial
+// a judged best in both engines: the judge's and the other engine's distance, their ratio, the step errors
+function spreadRows(m) {
+  if (!m) return "";
+  const side = (s) => `${esc(s.engine)}${s.dt_s ? " at " + fmt(s.dt_s * 1000) + " ms" : ""}`;
+  const dist = (s) => s.status && s.status !== "complete" ? `failed (${esc(s.reason || "no distance")})` : fmt(s.distance_m, 6);
+  const errs = Object.entries(m.step_error).filter(([, e]) => e != null)
+    .map(([t, e]) => `${esc(t)} ${fmt(100 * e, 2)} %`).join(", ");
+  return `<tr><td class="l">model spread: judge, ${side(m.judge)} (m)</td><td id="spread-judge">${dist(m.judge)}</td></tr>
+    <tr><td class="l">other engine, ${side(m.other)} (m)</td><td id="spread-other">${dist(m.other)}</td></tr>
+    <tr><td class="l">other / judge ratio</td><td id="spread-ratio">${fmt(m.ratio, 4)}</td></tr>
+    <tr><td class="l">step error (calibration)</td><td class="l" id="spread-step-error">${errs || "unknown (not calibrated)"}</td></tr>`;
+}
+
 async function showTrial(runId, trialId, gen) {
   const r = enc(runId);
   setCrumbs([["#/", "runs"], [`#/run/${r}`, runId], [`#/run/${r}/trial/${trialId}`, `trial ${trialId}`]]);
@@ -253,6 +266,7 @@ async function showTrial(runId, trialId, gen) {
         <tr><td class="l">distance at the search's step (m)</td><td>${fmt(t.scores.distance_m, 6)}</td></tr>
         <tr><td class="l">distance re-simulated in ${esc(v.judge || "a finer step")} (m)</td><td>${fmt(v.fine_step_distance_m, 6)}</td></tr>
         ${v.verdict === "judged" && v.screen_to_judge_ratio != null ? `<tr><td class="l">screen / judge ratio</td><td>${fmt(v.screen_to_judge_ratio, 4)}</td></tr>` : ""}
+        ${spreadRows(t.model_spread)}
         ${t.audit && t.audit.state !== "not_audited" ? `<tr><td class="l">audit by ${esc(t.audit.worker_id || "another worker")}</td>
           <td class="l">${esc(t.audit.state)} (${fmt(t.audit.distance_m, 6)} m)</td></tr>` : ""}
         ${v.reason ? `<tr><td class="l">reason</td><td class="l">${esc(v.reason)}</td></tr>` : ""}</tbody></table>
