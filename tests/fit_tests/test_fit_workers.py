@@ -63,3 +63,23 @@ def test_workers_over_a_router_give_the_fit_of_one_process(recordings, capsys, t
     assert local["loss"]["after"] < local["loss"]["before"]
     counts = dict(item.rsplit(" ", 1) for item in err.split("fit losses by worker: ")[1].splitlines()[0].split(", "))
     assert set(counts) == {"w0", "w1"} and sum(int(n) for n in counts.values()) == 12, err
+
+
+@pytest.mark.slow  # ~30 s: two worker processes start, each builds the run in its trial process
+def test_local_workers_give_the_fit_of_one_process(recordings, capsys):
+    """--workers 2: the fit starts its own two `spinefarm worker` processes on a loopback port and stops them."""
+    remote, err = _fit(recordings, capsys, "--workers", "2")
+    local, _ = _fit(recordings, capsys)
+    for key in ("restarts", "constants", "loss", "recordings"):
+        assert remote[key] == local[key], key
+    counts = err.split("fit losses by worker: ")[1].splitlines()[0].split(", ")
+    assert 1 <= len(counts) <= 2 and sum(int(c.rsplit(" ", 1)[1]) for c in counts) == 12, err
+
+
+def test_workers_and_jobs_are_refused_together(recordings, capsys):
+    capsys.readouterr()
+    assert main(["fit", "tetraspine-ntrt", str(recordings / "r1.npz"), "--fit", "ground_friction", "--jobs", "2",
+                 "--workers", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--jobs and --workers/--connect/--listen both say where" in err and "received '--jobs 2'" in err
+    assert "\n" not in err
