@@ -24,10 +24,16 @@ plausible range are fitted (NTRT_FIT, per engine). Prints
     python bench/fit.py --ntrt [--spines tetraspine-ntrt2026 ...] [--engines mujoco bullet] [--fit NAME,...]
                         [--evaluations N] [--restarts N] [--span 10] [--stride 1] [--replay-duration S] [--jobs N]
 
---ntrt --scan NAME=V1,V2,...: no fit (for a budget a leave-one-out fit exceeds): per spine and engine the window
+--ntrt --scan NAME=V1,V2,... (or xF: F times the model's own value, each string or rod tag's): no fit (for a budget
+a leave-one-out fit exceeds): per spine and engine the window
 error of each recording at these values of one constant, and each recording's gait replayed against NTRT's
 distance in the same time ({"spines": {SPINE: {ENGINE: {"window_error_cm": {V: {RECORDING: e, "all": e}},
 "replay_ratio": {RECORDING: r}}}}}).
+
+--ntrt --terms [--early 1]: no fit; at the model's own constants, every window's error split into its terms
+(horizontal and vertical position, rotation, tension: worker.fit.terms) and each pose term's share of the squared
+error over all windows, the early ones (starting before --early s: the start-up) and the later ones
+({"spines": {SPINE: {ENGINE: {"shares", "shares_early", "shares_late", "windows": {RECORDING: [...]}}}}}).
 """
 
 from __future__ import annotations
@@ -142,7 +148,7 @@ def scan_bench(args: argparse.Namespace) -> dict:
         for engine in args.engines:
             t0, rows = time.time(), {}
             for v in values.split(","):
-                cfg = TrialConfig(engine=engine, profile=check_constants({name: float(v)}))
+                cfg = TrialConfig(engine=engine, profile=check_constants(_scan_values(morph, engine, name, v)))
                 per = {p.name: window_error_cm(morph, cfg, [p]) for p in recs}
                 rows[v] = {**per, "all": window_error_cm(morph, cfg, recs)}
                 print(json.dumps({spine: {engine: {name: {v: rows[v]}}}}), file=sys.stderr, flush=True)
@@ -151,6 +157,42 @@ def scan_bench(args: argparse.Namespace) -> dict:
             out["spines"][spine][engine] = {"constant": name, "window_error_cm": rows, "replay_ratio": ratios,
                                             "windows": {p.name: len(p.windows) for p in recs},
                                             "wall_s": time.time() - t0}
+    return out
+
+
+def _scan_values(morph: object, engine: str, name: str, value: str) -> dict[str, float]:
+    """A scan's profile: NAME=V sets V; NAME=xF multiplies the model's own value by F (a material's: each tag's
+    own, so a spine whose strings differ by tag keeps their ratios)."""
+    from spinefarm.robot.profile import MATERIALS, constant, current_value
+
+    if not value.startswith("x"):
+        return {name: float(value)}
+    c, tag = constant(name)
+    if c.where not in MATERIALS or tag is not None:
+        return {name: current_value(morph, name, engine, {}) * float(value[1:])}
+    tags = morph.to_dict()["structure"][MATERIALS[c.where]]
+    return {f"{name}.{t}": current_value(morph, f"{name}.{t}", engine, {}) * float(value[1:]) for t in tags}
+
+
+def terms_bench(args: argparse.Namespace) -> dict:
+    """--ntrt --terms: at the model's own constants, each recording's window error split into its terms per window
+    (worker.fit.terms), and each term's share over all windows of the spine: which term dominates, and when."""
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.terms import term_shares, window_terms
+
+    out: dict = {"spines": {}, "command": "python bench/fit.py --ntrt " + " ".join(sys.argv[2:])}
+    for spine in args.spines:
+        morph = load_morphology(spine)
+        recs = ntrt_recordings(Path(args.recordings) / NTRT_FOLDERS[spine], args.window, args.stride, args.span)
+        out["spines"][spine] = {}
+        for engine in args.engines:
+            per = {p.name: window_terms(morph, TrialConfig(engine=engine), p) for p in recs}
+            rows = [r for v in per.values() for r in v]
+            early = [r for r in rows if r["start_s"] < args.early]
+            late = [r for r in rows if r["start_s"] >= args.early]
+            out["spines"][spine][engine] = {"shares": term_shares(rows), "shares_early": term_shares(early),
+                                            "shares_late": term_shares(late), "windows": per}
     return out
 
 
@@ -207,6 +249,8 @@ def main() -> None:
     ap.add_argument("--scan", default=None, metavar="NAME=V1,V2,...",
                     help="with --ntrt: no fit; the window error at these values of one constant, and the replays")
     ap.add_argument("--no-replay", action="store_true", help="with --scan: the window errors only")
+    ap.add_argument("--terms", action="store_true", help="with --ntrt: the window error's terms per window")
+    ap.add_argument("--early", type=float, default=1.0, help="with --terms: windows starting before this are early")
     ap.add_argument("--span", type=float, default=10.0, help="with --ntrt: seconds of each recording fitted")
     ap.add_argument("--stride", type=float, default=1.0)
     ap.add_argument("--replay-duration", type=float, default=None)
@@ -222,7 +266,7 @@ def main() -> None:
     if args.identify + args.windows + args.ntrt != 1:
         ap.error("say what to measure: --identify, --windows or --ntrt")
     bench = identify_bench if args.identify else windows_bench if args.windows else \
-        scan_bench if args.scan else ntrt_bench
+        scan_bench if args.scan else terms_bench if args.terms else ntrt_bench
     print(json.dumps(bench(args)))
 
 

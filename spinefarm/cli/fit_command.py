@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from spinefarm.cli import checks
+from spinefarm.cli.fit_workers import add_worker_arguments, losses_maker
 from spinefarm.cli.profile_argument import add_profile_argument, profile_from
 from spinefarm.cli.robot_argument import add_robot_argument
 from spinefarm.cli.sim_commands import (
@@ -45,6 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--evaluations", type=int, default=120, help="losses per start (default 120)")
     p.add_argument("--seed", type=checks.seed, default=0)
     p.add_argument("--jobs", type=int, default=1, help="processes computing a generation's losses (default 1)")
+    add_worker_arguments(p)
     p.add_argument("--out", type=Path, default=None, help="write the profile here (.yaml)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=cmd_fit)
@@ -65,6 +67,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
     checks.at_least("--evaluations", args.evaluations, 6, "losses per start")
     checks.at_least("--jobs", args.jobs, 1, "processes")
     bounds = parse_fit(args.fit)
+    maker = losses_maker(args, bounds)
     morph = load_morphology(args.morphology)
     cfg = TrialConfig(engine=args.engine or "bullet", engine_options=parse_engine_options(args.engine_option),
                       profile=profile_from(args))
@@ -84,7 +87,7 @@ def cmd_fit(args: argparse.Namespace) -> int:
 
     with Waiting("fit", "losses") as wait:
         result = fit_constants(morph, cfg, fitted, held, bounds, args.restarts, args.evaluations, args.seed, wait,
-                               args.jobs)
+                               maker or args.jobs)
     result = {"robot": morph.name, "engine": cfg.engine, "window_s": args.window, "stride_s": stride, **result}
     if args.out is not None:
         write_profile(args.out, morph.name, result, " ".join(["spinefarm", *sys.argv[1:]]))

@@ -37,6 +37,8 @@ class RunConfig:
     set), empty otherwise (and then left out of to_dict, so a plain run's hash is as before).
     body: robot.codesign.BodySearch.to_dict() of a run that searches the body with the gait (the param space
     then ends with the body's constants), empty otherwise (and left out of to_dict as robust is).
+    fit: a model fit's task (worker.fit.task: its recordings and windows; a trial is one candidate's loss),
+    empty otherwise (and left out of to_dict as robust is).
     """
 
     KIND = "run_config"
@@ -53,11 +55,12 @@ class RunConfig:
     trial_config_hash: str = ""
     robust: dict[str, Any] = field(default_factory=dict)
     body: dict[str, Any] = field(default_factory=dict)
+    fit: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["param_space"] = [dict(p) for p in self.param_space]
-        for key in ("robust", "body"):
+        for key in ("robust", "body", "fit"):
             if not d[key]:
                 del d[key]
         return d
@@ -102,10 +105,15 @@ class RunConfig:
         if not isinstance(body, dict):
             raise MessageError("run config field 'body' has the wrong type", received=type(body).__name__,
                                expected="a mapping (a co-designed run's body search) or nothing")
+        fit = data.get("fit") or {}
+        if not isinstance(fit, dict) or (fit and not isinstance(fit.get("recordings"), list)):
+            raise MessageError("run config field 'fit' is malformed", received=str(fit)[:80],
+                               expected="a model fit's task {recordings: [...]} or nothing")
         return cls(get_field(data, "run_id", str, what), get_field(data, "morphology", str, what),
                    get_field(data, "morphology_spec", dict, what), controller, tuple(space),
                    get_field(data, "trial_config", dict, what), get_field(data, "objective", str, what),
-                   get_field(data, "seed", int, what), **hashes, robust=robust, body=body)
+                   get_field(data, "seed", int, what), **hashes, robust=robust, body=body,
+                   fit=fit)
 
 
 @dataclass(frozen=True)

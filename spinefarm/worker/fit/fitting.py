@@ -14,6 +14,9 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.fit.loss import Prepared, candidate_loss, fit_loss, report, window_error_cm
 from spinefarm.worker.fit.search import Bound, minimise
 
+# makes a generation's losses for one fit (its robot, trial config and recordings): callable on a list of
+# candidates, with close()
+LossesMaker = Callable[[Morphology, TrialConfig, Sequence[Prepared]], Any]
 AT_BOUND = 0.01  # a fitted value this near its bounds (in the unit cube) may want to lie beyond them
 
 
@@ -23,8 +26,8 @@ def with_values(cfg: TrialConfig, values: Mapping[str, float]) -> TrialConfig:
 
 class Losses:
     """A generation's candidate losses (search.minimise's `losses`): in this process one after another, or with
-    jobs > 1 in that many processes, each holding the robot and the recordings once. The seam where the
-    windows could instead go to the workers over Zenoh, as trials do."""
+    jobs > 1 in that many processes, each holding the robot and the recordings once. The project's workers over
+    Zenoh are the other way (worker.fit.remote.RemoteLosses, made by a LossesMaker)."""
 
     def __init__(self, morph: Morphology, cfg: TrialConfig, fitted: Sequence[Prepared], jobs: int = 1) -> None:
         self.task = (morph, cfg, list(fitted))
@@ -59,14 +62,14 @@ def _loss(task: tuple, values: dict[str, float]) -> float:
 
 def fit_constants(morph: Morphology, cfg: TrialConfig, fitted: Sequence[Prepared], held_out: Sequence[Prepared],
                   bounds: Sequence[Bound], restarts: int = 3, evaluations: int = 120, seed: int = 0,
-                  progress: Callable[[int, int], None] | None = None, jobs: int = 1) -> dict[str, Any]:
+                  progress: Callable[[int, int], None] | None = None, jobs: int | LossesMaker = 1) -> dict[str, Any]:
     """Fit `bounds`' constants to the `fitted` recordings, starting from the model's values under cfg's profile
-    (the candidates' losses in `jobs` processes); the figures per recording (fitted and held out) before and
-    after."""
+    (the candidates' losses in `jobs` processes, or by what the LossesMaker `jobs` makes: the workers over
+    Zenoh); the figures per recording (fitted and held out) before and after."""
     start = {b.name: min(max(current_value(apply_profile(morph, cfg.profile), b.name, cfg.engine,
                                            {**cfg.engine_options, **_engine_part(cfg)}), b.low), b.high)
              for b in bounds}
-    losses = Losses(morph, cfg, fitted, jobs)
+    losses = jobs(morph, cfg, fitted) if callable(jobs) else Losses(morph, cfg, fitted, jobs)
     try:
         found = minimise(losses, bounds, start, restarts, evaluations, seed, progress)
     finally:

@@ -10,13 +10,14 @@ import numpy as np
 
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.trial_config import TrialConfig
-from spinefarm.worker.fit.fitting import fit_constants
+from spinefarm.worker.fit.fitting import LossesMaker, fit_constants
 from spinefarm.worker.fit.loss import Prepared
 from spinefarm.worker.fit.search import Bound
 
 
 def leave_one_out(morph: Morphology, cfg: TrialConfig, recordings: Sequence[Prepared], bounds: Sequence[Bound],
-                  restarts: int = 2, evaluations: int = 60, seed: int = 0, jobs: int = 1) -> dict[str, Any]:
+                  restarts: int = 2, evaluations: int = 60, seed: int = 0,
+                  jobs: int | LossesMaker = 1) -> dict[str, Any]:
     """{"folds": [{held_out, before, after, constants}], "window_error_before", "window_error_after"}: the
     held-out window errors (cm) per fold and their medians."""
     folds = []

@@ -78,6 +78,10 @@ def build_evaluator(config: RunConfig) -> Evaluator:
             return with_fault(sphere_result(space, a, delay_s if a.duration_s is None else a.duration_s))
 
         return sphere
+    if config.fit:  # a model fit's run: a trial is one candidate's loss over its recordings
+        from spinefarm.worker.fit.task import fit_evaluator
+
+        return fit_evaluator(config)
     from spinefarm.robot.morphology.model import Morphology
     from spinefarm.worker.trial.simulation import TrialConfig
 

@@ -1,0 +1,85 @@
+"""A fit's generations computed by the project's workers over real Zenoh: a router, two `spinefarm worker`
+processes that find the fit's run as they find a search's, and the same fit to the bit as in one process."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from spinefarm.cli.local_workers import READY_ENV
+from spinefarm.cli.main import main
+from tests.coordinator_tests.helpers import free_endpoint, wait_for
+from tests.coordinator_tests.procs import ROOT, stop
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    """Two short recordings of the 3-segment Tetraspine, made at two ground frictions (distinct motions)."""
+    folder = tmp_path_factory.mktemp("recs")
+    for seed, friction in ((1, 0.65), (2, 0.4)):
+        (folder / f"p{seed}.yaml").write_text(f"constants: {{ground_friction: {friction}}}\n")
+        assert main(["trial", "tetraspine-ntrt", "--random-seed", str(seed), "--duration", "0.3", "--engine",
+                     "mujoco", "--record", str(folder / f"r{seed}.npz"), "--record-every", "0.001",
+                     "--profile", str(folder / f"p{seed}.yaml"), "--json"]) in (0, 1)
+    return folder
+
+
+def _spinefarm(*args: str, ready: Path | None = None) -> subprocess.Popen:
+    env = dict(os.environ, **({READY_ENV: str(ready)} if ready else {}))
+    return subprocess.Popen([sys.executable, "-P", "-m", "spinefarm", *args], cwd=ROOT, text=True, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL if ready else subprocess.PIPE)
+
+
+def _fit(folder, capsys, *extra: str) -> tuple[dict, str]:
+    capsys.readouterr()
+    assert main(["fit", "tetraspine-ntrt", str(folder / "r1.npz"), str(folder / "r2.npz"), "--engine", "mujoco",
+                 "--fit", "ground_friction=0.3:1.3,string_damping_n_s_per_m=5:20", "--window", "0.1",
+                 "--restarts", "1", "--evaluations", "12", "--json", *extra]) == 0
+    out = capsys.readouterr()
+    return json.loads(out.out), out.err
+
+
+def test_workers_over_a_router_give_the_fit_of_one_process(recordings, capsys, tmp_path):
+    ep = free_endpoint()
+    router = _spinefarm("router", "--listen", ep)
+    workers = []
+    try:
+        assert router.stdout.readline().startswith("router "), router.stderr.read()
+        workers = [_spinefarm("worker", "--connect", ep, "--worker-id", f"w{i}", ready=tmp_path / f"w{i}")
+                   for i in range(2)]
+        wait_for(lambda: all((tmp_path / f"w{i}").exists() for i in range(2)), 60.0, 0.1, "both workers up")
+        remote, err = _fit(recordings, capsys, "--connect", ep)
+    finally:
+        stop(*workers, router)
+    local, _ = _fit(recordings, capsys)
+    for key in ("restarts", "constants", "loss", "window_error_cm", "recordings"):
+        assert remote[key] == local[key], key
+    # the search moved (distinct losses), and both workers computed some of its 12 losses
+    assert local["loss"]["after"] < local["loss"]["before"]
+    counts = dict(item.rsplit(" ", 1) for item in err.split("fit losses by worker: ")[1].splitlines()[0].split(", "))
+    assert set(counts) == {"w0", "w1"} and sum(int(n) for n in counts.values()) == 12, err
+
+
+@pytest.mark.slow  # ~30 s: two worker processes start, each builds the run in its trial process
+def test_local_workers_give_the_fit_of_one_process(recordings, capsys):
+    """--workers 2: the fit starts its own two `spinefarm worker` processes on a loopback port and stops them."""
+    remote, err = _fit(recordings, capsys, "--workers", "2")
+    local, _ = _fit(recordings, capsys)
+    for key in ("restarts", "constants", "loss", "recordings"):
+        assert remote[key] == local[key], key
+    counts = err.split("fit losses by worker: ")[1].splitlines()[0].split(", ")
+    assert 1 <= len(counts) <= 2 and sum(int(c.rsplit(" ", 1)[1]) for c in counts) == 12, err
+
+
+def test_workers_and_jobs_are_refused_together(recordings, capsys):
+    capsys.readouterr()
+    assert main(["fit", "tetraspine-ntrt", str(recordings / "r1.npz"), "--fit", "ground_friction", "--jobs", "2",
+                 "--workers", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--jobs and --workers/--connect/--listen both say where" in err and "received '--jobs 2'" in err
+    assert "\n" not in err
