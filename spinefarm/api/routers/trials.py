@@ -26,7 +26,8 @@ router = APIRouter(prefix="/runs/{run_id}", tags=["trials"])
 def best(storage: Annotated[Hdf5Reader, Depends(run_storage)],
          k: Annotated[int, Query(ge=1, le=1000, description="how many trials")] = 10) -> list[dict[str, Any]]:
     cols = storage.evaluations()
-    return [{**trial_view(storage, rec), "model_spread": model_spread(storage, rec, cols)} for rec in storage.reported_best(k)[0]]
+    return [{**trial_view(storage, rec), "model_spread": model_spread(storage, rec, cols)}
+            for rec in storage.reported_best(k)[0]]
 
 
 @router.get("/pareto", response_model=list[Trial],
