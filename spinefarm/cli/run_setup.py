@@ -117,7 +117,7 @@ def run_config(args: argparse.Namespace, run_id: str) -> tuple[Any, Any]:
     """The RunConfig and SearchSettings of a new run (--engine auto resolved first)."""
     from spinefarm.cli.engine_auto import choose_engine, screen_profile
     from spinefarm.cli.sim_commands import trial_overrides
-    from spinefarm.coordinator.fidelity import parse_rungs
+    from spinefarm.coordinator.ladder.rungs import parse_rungs
     from spinefarm.coordinator.problem import build_run_config
     from spinefarm.protocol.settings import JudgePolicy
 

@@ -23,11 +23,12 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-from spinefarm.coordinator.dispatch import TaskDispatch
+from spinefarm.coordinator.ladder.checks import Checks
+from spinefarm.coordinator.ladder.keys import KINDS, split_key, task_key
+from spinefarm.coordinator.ladder.ladder import Ladder
 from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
-from spinefarm.coordinator.tasks import AUDIT, JUDGE, OPINION, REFEREE, TaskBook, split_key, task_key
 from spinefarm.protocol.envelope import decode_message, encode, encode_message
 from spinefarm.protocol.errors import MessageError
 from spinefarm.protocol.results import TrialResult
@@ -45,10 +46,10 @@ _RATE_WINDOW_S = 30.0
 IDLE_ASKS_PER_S = 100.0
 
 
-class CoordinatorCore(TaskDispatch):
+class CoordinatorCore:
     def __init__(self, study: Study, scheduler: Scheduler, run_config: RunConfig,
                  clock: Callable[[], float] = time.monotonic, idle_retry_s: float = 0.5,
-                 tasks: TaskBook | None = None, peers: PeerBook | None = None) -> None:
+                 checks: Checks | None = None, peers: PeerBook | None = None) -> None:
         self.study = study
         self.scheduler = scheduler
         self.run_config = run_config
@@ -65,21 +66,31 @@ class CoordinatorCore(TaskDispatch):
         self.write_failure: str | None = None  # why the run file can no longer be written
         self.started_s = clock()
         self._config_payload = encode_message(run_config)
-        self.tasks = tasks or TaskBook(study.storage, study.trial_scheduler.settings, None, study.seed, False)
         self.peers = peers or PeerBook(quarantine=False)
         self.peers.rebuild(study.storage)
-        # Trials sampled but never finished before a restart are issued again first, after the tasks
-        # (judge, audit) a restart cut short.
-        scheduler.enqueue(self.tasks.restart() + study.storage.waiting_ids())
+        # every evaluation is the ladder's: a restart issues again whatever the file says is pending
+        self.ladder = Ladder(study, scheduler, checks or Checks(study.storage, study.trial_scheduler.settings, None,
+                                                                study.seed, False), self.peers, clock)
         self.failure: str | None = None  # why the run cannot go on (a worker cannot build it)
         self.unservable_workers: dict[str, str] = {}  # worker -> why it cannot serve this run (others do)
-        self.drift = self.tasks.drift()  # why the screen's fidelity was raised (None: it was not)
-        self.audit_comparisons = {"exact": 0, "tolerance": 0}   # what audits were held to (tasks.settle_audit)
-        self.unaudited: dict[int, str] = {}   # rows whose audit stays pending, and why (dispatch)
         self.code_digest: str | None = None   # the run's simulating code: workers of another are left out
         self.holder = ""   # the run instance serving (the file's, see service.start), named in grants and results
         self.claims: dict[str, str] = {}   # other coordinators that claimed this run -> what was done
-        self._judge_best()
+
+    @property
+    def drift(self) -> str | None:
+        """Why the ladder raised the screen's fidelity (None: it did not)."""
+        return self.ladder.drift
+
+    @property
+    def unaudited(self) -> dict[int, str]:
+        """Rows whose audit stays pending, and why."""
+        return self.ladder.unaudited
+
+    def identified(self, worker_id: str, sessions: set[str]) -> None:
+        """The Zenoh sessions that answered for `worker_id` (the service's probe)."""
+        with self.lock:
+            self.ladder.quarantine(self.peers.identified(worker_id, sessions), "its session's other worker was")
 
     @property
     def run_id(self) -> str:
@@ -95,12 +106,12 @@ class CoordinatorCore(TaskDispatch):
     def done(self) -> bool:
         """The search is done and so are its judge's and audits' tasks."""
         with self.lock:
-            return self.study.done and not self.tasks.pending
+            return self.ladder.done
 
     def pending_task_kinds(self) -> set[str]:
         """What still runs after the search: "judge", "audit", "referee", "opinion" (empty: nothing)."""
         with self.lock:
-            return {split_key(k)[0] for k in self.tasks.pending}
+            return {split_key(k)[0] for k in self.ladder.checks.pending}
 
     # --- handlers (transport calls these) ---------------------------------------------------------
     def _error(self, what: str, exc: MessageError) -> bytes:
@@ -135,7 +146,7 @@ class CoordinatorCore(TaskDispatch):
                 return None
             self._take_back_unreported(req.worker_id)
             if self.study.done:
-                self._drop_unservable_tasks()
+                self.ladder.drop_unservable()
             if self.done:
                 self.told_done.add(req.worker_id)
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self._idle_retry(), True,
@@ -143,9 +154,9 @@ class CoordinatorCore(TaskDispatch):
             if self.peers.is_quarantined(req.worker_id) or req.worker_id in self.unservable_workers:
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self._idle_retry(), False,
                                                 verdicts, self.holder))
-            leases = self.scheduler.grant(req.worker_id, req.capacity, self._ask, self._eligible)
+            leases = self.scheduler.grant(req.worker_id, req.capacity, self.study.ask, self.ladder.eligible)
             self._store_given_up()
-            assignments = tuple(self._assignment(ls) for ls in leases)
+            assignments = tuple(self.ladder.assignment(ls, self.clock()) for ls in leases)
             retry = 0.0 if assignments else self._idle_retry()
         return encode_message(WorkGrant(self.run_id, self.config_hash, assignments, retry, False, verdicts,
                                         self.holder))
@@ -225,10 +236,10 @@ class CoordinatorCore(TaskDispatch):
             return Verdict.INVALID
         if unreadable:  # a failed stand-in (protocol.submissions): it answers the trial's own seed
             result = replace(result, seed=int(storage.columns()["seed"][tid]))
-        for kind in (JUDGE, AUDIT, REFEREE, OPINION):  # a task's result quotes the task's lease and the row it checks
+        for kind in KINDS:  # a check's result quotes the check's lease and the row it checks
             key = task_key(kind, tid)
             if self.scheduler.is_current(key, lease_id, worker_id):
-                return self._settle_task(key, worker_id, result)
+                return self.ladder.settle_check(key, worker_id, self._finite_or_failed(result))
             if self.scheduler.was_issued(key, lease_id, worker_id):
                 return Verdict.STALE
         if storage.columns()["status"][tid] != TrialStatus.WAITING.stored:
@@ -239,7 +250,7 @@ class CoordinatorCore(TaskDispatch):
                 log.warning("result for trial %d from %s quotes a lease it was never given: dropped", tid,
                             worker_id)
             return Verdict.STALE
-        refused = self._refuse_quarantined(tid, worker_id)
+        refused = self.ladder.refuse_quarantined(tid, worker_id)
         if refused is not None:
             return refused
         if unreadable:
@@ -259,11 +270,7 @@ class CoordinatorCore(TaskDispatch):
         self.study.tell(result)
         self.scheduler.release(tid)
         self.scheduler.observe_trial(result.wall_time_s)
-        if result.ok:
-            audit = self.tasks.audit_due(tid)
-            if audit is not None:
-                self.scheduler.push_front(audit)
-            self._judge_best()
+        self.ladder.after_trial(result)
         return Verdict.STORED
 
     def _finite_or_failed(self, result: TrialResult) -> TrialResult:
@@ -284,7 +291,7 @@ class CoordinatorCore(TaskDispatch):
             tid, reason = self.scheduler.given_up.pop(0)
             if tid < 0:  # a task: the best goes unchecked rather than holding up the run
                 log.warning("%s task of trial %d %s: dropped", *split_key(tid), reason)
-                self.tasks.drop(tid)
+                self.ladder.checks.drop(tid)
                 continue
             seed = int(self.study.storage.columns()["seed"][tid])
             log.warning("trial %d %s: stored as failed", tid, reason)

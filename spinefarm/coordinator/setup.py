@@ -8,13 +8,13 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from spinefarm.coordinator.core import CoordinatorCore
-from spinefarm.coordinator.fidelity import trial_scheduler
+from spinefarm.coordinator.ladder.checks import Checks
+from spinefarm.coordinator.ladder.rungs import trial_scheduler
 from spinefarm.coordinator.objectives import objective_fn, robust_objective
 from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.samplers import DEFAULT_SAMPLER, make_sampler, sampler_class, sampler_from_dict
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
-from spinefarm.coordinator.tasks import TaskBook
 from spinefarm.protocol.engine_choice import EngineChoice
 from spinefarm.protocol.environment import environment_record
 from spinefarm.protocol.errors import ConfigError, check_range
@@ -128,9 +128,9 @@ def build_core(storage: BaseStorage, clock: Clock = time.monotonic, trusted_peer
                   trial_scheduler(settings), enqueued=settings.enqueued)
     scheduler = Scheduler(clock, settings.lease_s)
     judged = settings.judge.enabled and (not config.is_test_objective or settings.judge.rung.engine is not None)
-    tasks = TaskBook(storage, settings, config.trial_config.get("engine"), meta.seed, judged)
+    checks = Checks(storage, settings, config.trial_config.get("engine"), meta.seed, judged)
     peers = PeerBook(quarantine=settings.audit.quarantine and not trusted_peers)
-    return CoordinatorCore(study, scheduler, config, clock, tasks=tasks, peers=peers)
+    return CoordinatorCore(study, scheduler, config, clock, checks=checks, peers=peers)
 
 
 def new_run(config: RunConfig, settings: SearchSettings, out: str | Path | None,

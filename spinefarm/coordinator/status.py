@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from spinefarm.coordinator.ladder.keys import split_key
 from spinefarm.storage.ranking import evaluation_counts
 
 
@@ -29,10 +30,11 @@ def live_status(core: Any) -> dict[str, Any]:
         "trials_leased": scheduler.n_leased,
         "trials_queued": scheduler.n_queued + max(0, study.planned - study.n_asked),
         "trials_reissued": scheduler.reissued,
-        "tasks_pending": len(core.tasks.pending),
+        "tasks_pending": len(core.ladder.checks.pending),
+        "checks_pending": _kinds(core.ladder.checks.pending),
         "fidelity_raised": core.drift,
         "audit": {**study.storage.audit_counts(), "environments": core.peers.environments(),
-                  "comparisons": dict(core.audit_comparisons),
+                  "comparisons": dict(core.ladder.audit_comparisons),
                   "unaudited": {str(t): why for t, why in core.unaudited.items()}},
         "coordinator": core.holder,
         "claimed_by": dict(core.claims),
@@ -49,3 +51,12 @@ def live_status(core: Any) -> dict[str, Any]:
                     for w in scheduler.workers.values()],
         "updated_at_unix_s": wall,
     }
+
+
+def _kinds(keys: set[int]) -> dict[str, int]:
+    """How many pending checks of each kind (judge, audit, referee, opinion)."""
+    out: dict[str, int] = {}
+    for key in keys:
+        kind = split_key(key)[0]
+        out[kind] = out.get(kind, 0) + 1
+    return out

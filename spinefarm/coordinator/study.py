@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from spinefarm.coordinator.fidelity import BaseTrialScheduler, PlainTrialScheduler
+from spinefarm.coordinator.ladder.rungs import BaseTrialScheduler, PlainTrialScheduler
 from spinefarm.coordinator.samplers.base import BaseSampler, LearnedView, Proposal
 from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.results import TrialResult
@@ -25,7 +25,7 @@ class Study:
     """`ask` samples and records the next trial; `tell` stores a result once.
 
     Trial ids are dense row numbers; the seed of trial n is derived from the run seed and n. Which
-    evaluation comes next on the fidelity ladder is the trial scheduler's (coordinator.fidelity).
+    evaluation comes next on the fidelity ladder is the trial scheduler's (coordinator.ladder.rungs).
     """
 
     def __init__(self, storage: BaseStorage, sampler: BaseSampler, space: ParamSpace, budget: int,

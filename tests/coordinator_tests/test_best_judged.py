@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from spinefarm.coordinator.tasks import TaskBook
+from spinefarm.coordinator.ladder.checks import Checks
 from spinefarm.protocol.settings import JudgePolicy
 from spinefarm.protocol.states import TrialStatus, Verification
 from spinefarm.protocol.verdicts import judge_verdict
@@ -35,7 +35,7 @@ def _run_file(path, meta, distances_m):
     for tid, d in enumerate(distances_m):
         storage.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, tid)
         storage.finish_trial(tid, result(tid, d), d if meta.objective == "distance" else 100 * d / 2.0)
-    return storage, TaskBook(storage, meta.settings, None, 7, judged=True)
+    return storage, Checks(storage, meta.settings, None, 7, judged=True)
 
 
 def test_holds_tolerance_is_the_robots_measured_chaos_floor():
@@ -108,7 +108,7 @@ def test_a_same_engine_row_in_a_cross_engine_run_is_judged_against_the_floor(tmp
     for tid, (d, engine) in enumerate([(0.3, "mujoco"), (0.213, "bullet"), (0.2, "bullet")]):
         storage.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, tid)
         storage.finish_trial(tid, dataclasses.replace(result(tid, d), extras={"engine": engine}), d)
-    book = TaskBook(storage, meta.settings, "mujoco", 7, judged=True)
+    book = Checks(storage, meta.settings, "mujoco", 7, judged=True)
     book.settle_judge(0, result(0, 0.15))     # another engine: its distance counts, whatever the change
     book.settle_judge(1, result(1, 0.202))    # the same engine: 5.2 % > 1 %
     book.settle_judge(2, result(2, 0.199))    # the same engine: 0.5 % <= 1 %

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from spinefarm.coordinator.fidelity import HalvingTrialScheduler, parse_rungs
+from spinefarm.coordinator.ladder.rungs import HalvingTrialScheduler, parse_rungs
 from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import TrialStatus

@@ -1,5 +1,5 @@
 """The judge, the audit and the drift rule as the docs state them (docs/stability.md, docs/accuracy.md,
-coordinator.tasks' contract), with distinct figures where a wrong rule would show: the judge's labels and its
+coordinator.ladder.checks' contract), with distinct figures where a wrong rule would show: the judge's labels and its
 tolerance, a disputed or disagreeing audit never best, three judged ratios in a row whose *median* leaves
 [0.8, 1.2], the raised fidelity, and pending tasks issued again by a restarted coordinator (a real run file
 reopened)."""
@@ -12,7 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from spinefarm.coordinator.tasks import TaskBook, split_key
+from spinefarm.coordinator.ladder.checks import Checks
+from spinefarm.coordinator.ladder.keys import split_key
 from spinefarm.protocol.settings import JudgePolicy, Rung, RunSettings, TaskFidelity
 from spinefarm.protocol.states import AuditState, TrialStatus, Verification
 from spinefarm.protocol.verdicts import judge_verdict
@@ -77,7 +78,7 @@ def _judged(ratios, distances_m=None):
     _stored(s, distances_m)
     for tid, ratio in enumerate(ratios):  # ratio = screen / judge
         s.set_verification(tid, Verification.JUDGED, distances_m[tid] / ratio, "", ratio)
-    return TaskBook(s, RunSettings(), "bullet", 7, judged=True)
+    return Checks(s, RunSettings(), "bullet", 7, judged=True)
 
 
 @pytest.mark.parametrize(("ratios", "drifts"), [
@@ -100,12 +101,12 @@ def test_bests_that_barely_move_say_nothing_of_drift():
 
 def test_a_raised_fidelity_halves_the_step_or_moves_to_the_judges_engine():
     ladder = (Rung(dt_s=0.004, duration_s=2.0), Rung(duration_s=10.0))
-    same = TaskBook(InMemoryStorage(), RunSettings(scheduler="halving", ladder=ladder,
+    same = Checks(InMemoryStorage(), RunSettings(scheduler="halving", ladder=ladder,
                                                    judge=JudgePolicy(rung=Rung(dt_s=0.0005))), "mujoco", 7, True)
     assert same.trial_fidelity(0, raised=False).dt_s == 0.004
     assert same.trial_fidelity(0, raised=True).dt_s == 0.002      # half the rung's step
     assert same.trial_fidelity(1, raised=True).dt_s == 0.001      # half of 4 x the judge's step
-    other = TaskBook(InMemoryStorage(), RunSettings(judge=JudgePolicy(rung=Rung("bullet", 0.0005))), "mujoco", 7,
+    other = Checks(InMemoryStorage(), RunSettings(judge=JudgePolicy(rung=Rung("bullet", 0.0005))), "mujoco", 7,
                      True)
     assert other.trial_fidelity(0, raised=True) == TaskFidelity("trial", "bullet", 0.002, None)
 
@@ -121,7 +122,7 @@ def test_a_restarted_coordinator_issues_pending_judge_and_audit_tasks_again(tmp_
     s.set_audit(4, AuditState.DISPUTED, 0.3, "w-2")
     s.close()
     again = Hdf5Storage.resume(path)
-    book = TaskBook(again, RunSettings(), "bullet", 7, judged=True)
+    book = Checks(again, RunSettings(), "bullet", 7, judged=True)
     keys = book.restart()
     assert sorted(split_key(k) for k in keys) == [("audit", 2), ("judge", 0), ("judge", 3), ("referee", 4)]
     assert book.pending == set(keys)

@@ -62,7 +62,7 @@ def test_a_judged_best_gets_one_opinion_row_in_the_other_engine_issued_again_aft
         storage.close()
     core, storage = resume_run(out, FakeClock())
     try:   # the judge's share, read back from the file, counts both of its kinds of run
-        assert math.isclose(core.tasks.judge_wall_s, float(np.sum(ev["wall_time_s"])))
+        assert math.isclose(core.ladder.checks.judge_wall_s, float(np.sum(ev["wall_time_s"])))
         assert core.done and _grant(core, "w2", 4).assignments == ()   # no second opinion
     finally:
         storage.close()

@@ -24,7 +24,7 @@ def test_a_quarantined_workers_rows_are_marked_re_run_elsewhere_and_kept_across_
         assert set(submit(core, items, worker=worker).values()) == {"stored"}
         theirs[worker] = {a.trial_id: d for a, d in pairs}
     with core.lock:
-        core._quarantine(core.peers.quarantine_identity("w1"), "found wrong")
+        core.ladder.quarantine(core.peers.quarantine_identity("w1"), "found wrong")
     cols = storage.columns()
     assert [cols["audit"][t] for t in sorted(theirs["w1"])] == [b"quarantined"] * 3
     assert storage.best(1)[0].worker_id == "w2"  # none of w1's rows counts until another identity re-runs it

@@ -113,7 +113,7 @@ def test_drifting_judged_ratios_raise_the_screens_fidelity_and_a_resumed_run_kee
     core, storage = resume_run(tmp_path / "r.h5", FakeClock())
     try:
         assert core.drift is not None  # decided from the stored ratios
-        f = core.tasks.trial_fidelity(0, core.drift is not None)
+        f = core.ladder.checks.trial_fidelity(0, core.drift is not None)
         assert (f.engine, f.dt_s) == ("bullet", pytest.approx(1e-3)) and not math.isnan(f.dt_s)
     finally:
         storage.close()
@@ -164,7 +164,7 @@ def test_judge_drift_from_the_command_line_is_stored_and_a_wider_band_keeps_the_
     assert read_meta(tmp_path / "r.h5").settings.judge.drift == 1.5
     core, storage = resume_run(tmp_path / "r.h5", FakeClock())
     try:
-        assert core.tasks.settings.judge.drift == 1.5 and core.drift is None
+        assert core.ladder.checks.settings.judge.drift == 1.5 and core.drift is None
     finally:
         storage.close()
 

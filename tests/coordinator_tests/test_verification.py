@@ -75,7 +75,7 @@ def test_a_bogus_best_moved_at_the_finer_step_and_ranks_by_its_judged_distance(t
 
 def test_test_objectives_and_disabled_policies_have_no_judge():
     core, _ = new_run(build_run_config("s", "sphere:3"), SearchSettings(trials=2), None, FakeClock())
-    assert not core.tasks.judged or not core.study.storage.run_meta().settings.judge.enabled
+    assert not core.ladder.checks.judged or not core.study.storage.run_meta().settings.judge.enabled
     config = build_run_config("v", "tetraspine-ntrt", duration_s=0.1)
     core, storage = new_run(config, SearchSettings(trials=1, judge=JudgePolicy(enabled=False)), None, FakeClock())
     evaluate = build_evaluator(config)

@@ -14,7 +14,7 @@ import h5py
 import numpy as np
 
 from spinefarm.api.app import create_app
-from spinefarm.coordinator.tasks import TaskBook
+from spinefarm.coordinator.ladder.checks import Checks
 from spinefarm.protocol.states import AuditState
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import Hdf5Reader
@@ -30,7 +30,7 @@ def _run(path):
     for tid, d in enumerate([0.5, 2.0, 1.0]):
         s.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, tid)
         s.finish_trial(tid, result(tid, d), d)
-    return s, TaskBook(s, s.run_meta().settings, "bullet", 7, judged=True)
+    return s, Checks(s, s.run_meta().settings, "bullet", 7, judged=True)
 
 
 def _ran(trial_id, distance_m, wall_s, worker):
@@ -55,8 +55,8 @@ def test_judge_audit_and_referee_runs_are_rows_linked_to_the_row_they_checked(tm
     try:
         assert resumed.evaluations()["kind"].tolist() == expected["kind"]
         # the judge's share after a restart counts its two runs (3 s + 5 s), not the audit's or the referee's
-        assert TaskBook(resumed, resumed.run_meta().settings, "bullet", 7, judged=True).judge_wall_s == 8.0
-        book = TaskBook(resumed, resumed.run_meta().settings, "bullet", 7, judged=True)
+        assert Checks(resumed, resumed.run_meta().settings, "bullet", 7, judged=True).judge_wall_s == 8.0
+        book = Checks(resumed, resumed.run_meta().settings, "bullet", 7, judged=True)
         book.settle_judge(0, _ran(0, 0.5, 2.0, "w-3"))
     finally:
         resumed.close()

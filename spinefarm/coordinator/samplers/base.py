@@ -41,7 +41,7 @@ class BaseSampler:
 
     `propose(trial_id, storage)` may read the storage (finished trials, best so far) but keeps no
     state of its own that storage cannot rebuild, so a resumed run samples as it would have.
-    In a multi-fidelity run `storage` is the first rung's view (coordinator.fidelity.FirstRungView):
+    In a multi-fidelity run `storage` is the first rung's view (coordinator.ladder.rungs.FirstRungView):
     trial n is then the n-th parameter set, and every row has the same duration.
     `name` is the registry name (`--sampler NAME`); `from_dict(describe())` rebuilds the sampler.
     """

@@ -1,14 +1,17 @@
-"""Trials: `simulate` runs one (the one way to run a trial from Python: `simulate(...).result` is its
-TrialResult), simulate_batch B worlds at once (its world axis: robust episodes, and simulate itself).
+"""Trials: `simulate` runs one, the one way to run a trial from Python (`simulate(...).result` is its
+TrialResult); everything that runs trials (the worker, `spinefarm trial`, the tools) calls it.
 
-simulate_batch(morphology, params, config, seeds, ...) is the world axis: B parameter sets (or one repeated,
-e.g. the episodes of a robust evaluation) with one seed each (the seed jitters world b's start pose by
-config.pose_jitter_cm); it returns one TrialOutcome per world, the same bits as B calls of simulate. A world
-that diverges stops alone; a world its engine asks to run again in other settings (MuJoCo's contact guard:
-BasePhysics.retries) is run again from its start, alone, and says so in its result's extras.
+simulate_batch is an internal detail of the trial core, not a second way in (left out of __all__): the world
+axis simulate and a robust trial's episodes (worker.trial.robust) run on, imported elsewhere only by the tests
+and the benchmark of that axis (bench/batch_worlds.py). simulate_batch(morphology, params, config, seeds, ...):
+B parameter sets (or one repeated, e.g. the episodes of a robust evaluation) with one seed each (the seed
+jitters world b's start pose by config.pose_jitter_cm); it returns one TrialOutcome per world, the same bits
+as B calls of simulate. A world that diverges stops alone; a world its engine asks to run again in other
+settings (MuJoCo's contact guard: BasePhysics.retries) is run again from its start, alone, and says so in its
+result's extras.
 
-The loop itself is worker.trial.loop (control law -> engine); phases and checks are worker.trial.batch; the start pose,
-step, guards and score are worker.trial.episode.
+The loop itself is worker.trial.loop (control law -> engine); phases and checks are worker.trial.batch; the
+start pose, step, guards and score are worker.trial.episode.
 """
 
 from __future__ import annotations
@@ -36,7 +39,7 @@ from spinefarm.worker.trial.settled import settle_key
 from spinefarm.worker.trial.setup import SetupCache, TrialSetup, setup_key
 
 __all__ = ["Trajectory", "TrialConfig", "TrialOutcome", "choose_step", "random_unit_params", "simulate",
-           "simulate_batch", "string_tables"]
+           "string_tables"]
 
 
 @dataclasses.dataclass

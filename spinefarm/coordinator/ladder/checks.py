@@ -1,21 +1,25 @@
-"""Tasks beside the search's own trials, run by workers like any trial: the judge and the audit.
+"""The ladder's checks beside the screen's rows, run by workers like any trial: the judge, audits, referees
+and the second engine's opinion. Checks (one per run, under the core's lock) says which is due, at which
+fidelity, and stores what each found.
 
 - The judge re-simulates every new full-length best at the judge's rung before it counts (a finer
   step in the same engine, or another engine); its verdicts are protocol.verdicts' ("holds" within
   the robot's chaos floor, "moved X % at the finer step", "judged", "diverged"). A judged set ranks by
   its judged distance (storage.ranking); a diverged one never counts as best and the next best is judged.
+- The opinion runs a judged best once in the engine the judge does not use, at its converged step; it
+  never ranks (the models' spread, docs/distributed.md).
 - The audit re-simulates a fraction of the results (and every new best) on another worker at the same
-  fidelity; a disagreement marks the result (it never counts as best), and its worker (PeerBook).
-- The judge takes at most its share of the workers' time while the search runs (JudgePolicy.share): a new
-  best's judge waits while the judge's runs so far took more than that share of the time spent in the
-  judge's runs and the trials together; once the search is over the best is judged whatever it cost.
+  fidelity; a disagreement is refereed by a third worker; a disputed result never counts as best.
+- The judge (its runs and the opinions) takes at most its share of the workers' time while the search
+  runs (JudgePolicy.share), counted from the stored evaluation rows; once the search is over the best is
+  judged whatever it cost.
 - The judge watches the screen: once three judged ratios in a row (trial-id order; bests that move 10 cm or
   more in either run) have a median outside [1 - drift, 1 + drift], the ladder's fidelity is raised for every
   trial leased from then on (the judge's engine at 4x the judge's step when the judge is another engine, else
   half the step).
 
-Task state lives in storage (verification and audit columns: pending, then the verdict), so a restarted
-coordinator issues pending tasks again. In the lease scheduler a task is a negative key, never a row id.
+What is pending lives in storage (verification and audit columns: pending, then the verdict; an opinion is
+due while the judged best has no opinion row), so a restarted coordinator issues every pending check again.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import math
 
 import numpy as np
 
+from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, KIND_CODES, OPINION, REFEREE, split_key, task_key
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings, TaskFidelity
@@ -37,28 +42,14 @@ from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.evaluations import judge_wall_s, row_of
 
 log = logging.getLogger("spinefarm.coordinator")
-JUDGE, AUDIT, REFEREE, OPINION = 1, 2, 3, 4
-_KINDS = {JUDGE: "judge", AUDIT: "audit", REFEREE: "referee", OPINION: "opinion"}
-_KEY_STRIDE = 8
 _DRIFT_WINDOW = 3
 # a best that barely moves says nothing of the screen: a few millimetres of step error are a factor of 4 on the
 # first bests of a search, which move a few centimetres, and once halved the step stays halved all run
 _DRIFT_MIN_DISTANCE_M = 0.1
 
 
-def task_key(kind: int, trial_id: int) -> int:
-    return -(_KEY_STRIDE * trial_id + kind)
-
-
-def split_key(key: int) -> tuple[str, int]:
-    """("trial", id) for a row, ("judge" | "audit" | "referee" | "opinion", id of the row it checks) for a task."""
-    if key >= 0:
-        return "trial", key
-    return _KINDS[-key % _KEY_STRIDE], -key // _KEY_STRIDE
-
-
-class TaskBook:
-    """Issues judge and audit tasks through the lease scheduler and stores what they find (lock held)."""
+class Checks:
+    """Which check is due (judge, audit, referee, opinion), at which fidelity, and what each found (lock held)."""
 
     def __init__(self, storage: BaseStorage, settings: RunSettings, run_engine: str | None, seed: int,
                  judged: bool) -> None:
@@ -229,7 +220,7 @@ class TaskBook:
     # --- results --------------------------------------------------------------------------------------
     def _record(self, tid: int, kind: str, r: TrialResult, worker_id: str = "") -> None:
         """Every judge, audit and referee run is a row of the evaluations table, linked to the row it checked."""
-        f = self.task_fidelity(task_key({v: k for k, v in _KINDS.items()}[kind], tid))
+        f = self.task_fidelity(task_key(KIND_CODES[kind], tid))
         dt = r.extras.get("dt_s", f.dt_s)
         self.storage.add_evaluation(row_of(tid, kind, r, str(r.extras.get("engine", f.engine or "")),
                                            None if dt is None else float(dt), worker_id))

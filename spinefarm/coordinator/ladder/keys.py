@@ -1,0 +1,21 @@
+"""Lease keys of the ladder's checks: a screen row leases under its row id (>= 0), a check (judge, audit,
+referee, opinion) under a negative key naming its kind and the row it checks. Keys live only in the lease
+scheduler: what is pending is stored in the run file (verdict columns, evaluation rows)."""
+
+from __future__ import annotations
+
+JUDGE, AUDIT, REFEREE, OPINION = 1, 2, 3, 4
+KINDS = {JUDGE: "judge", AUDIT: "audit", REFEREE: "referee", OPINION: "opinion"}
+KIND_CODES = {name: code for code, name in KINDS.items()}
+_KEY_STRIDE = 8   # more than the kinds: a key's kind is its remainder
+
+
+def task_key(kind: int, trial_id: int) -> int:
+    return -(_KEY_STRIDE * trial_id + kind)
+
+
+def split_key(key: int) -> tuple[str, int]:
+    """("trial", id) for a row, ("judge" | "audit" | "referee" | "opinion", id of the row it checks) for a check."""
+    if key >= 0:
+        return "trial", key
+    return KINDS[-key % _KEY_STRIDE], -key // _KEY_STRIDE
