@@ -9,11 +9,12 @@ W, C, P, S = "tests/worker_tests", "tests/coordinator_tests", "tests/protocol_te
 TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     # fast, pure tests first: with -x a mutant they kill costs seconds; modules whose tests start processes or
     # compile kernels last
-    "scoring": ("spinefarm/worker/trial/scoring.py", (f"{W}/test_scoring.py",)),
+    "scoring": ("spinefarm/worker/trial/scoring.py", (f"{W}/test_scoring.py", f"{W}/test_score_units.py")),
     "sampler-paper": ("spinefarm/coordinator/samplers/hill_climb.py", (f"{C}/test_samplers.py",)),
     "sampler-registry": ("spinefarm/coordinator/samplers/registry.py", (f"{C}/test_samplers.py",)),
     "environment": ("spinefarm/protocol/environment.py", (f"{P}/test_environment.py",)),
-    "scheduler": ("spinefarm/coordinator/scheduler.py", (f"{C}/test_scheduler.py",)),
+    "scheduler": ("spinefarm/coordinator/scheduler.py",
+                  (f"{C}/test_scheduler.py", f"{C}/test_scheduler_liveness.py")),
     "judge-audit": ("spinefarm/coordinator/tasks.py", (f"{C}/test_judge_rules.py", f"{C}/test_ladder.py")),
     "runlock": ("spinefarm/storage/runlock.py",
                 (f"{S}/test_runlock_rules.py", f"{S}/test_runlock_links.py", f"{S}/test_no_locks.py")),
