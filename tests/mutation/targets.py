@@ -9,16 +9,18 @@ W, C, P, S = "tests/worker_tests", "tests/coordinator_tests", "tests/protocol_te
 TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     # fast, pure tests first: with -x a mutant they kill costs seconds; modules whose tests start processes or
     # compile kernels last
-    "scoring": ("spinefarm/worker/trial/scoring.py", (f"{W}/test_scoring.py",)),
+    "scoring": ("spinefarm/worker/trial/scoring.py", (f"{W}/test_scoring.py", f"{W}/test_score_units.py")),
     "sampler-paper": ("spinefarm/coordinator/samplers/hill_climb.py", (f"{C}/test_samplers.py",)),
     "sampler-registry": ("spinefarm/coordinator/samplers/registry.py", (f"{C}/test_samplers.py",)),
     "environment": ("spinefarm/protocol/environment.py", (f"{P}/test_environment.py",)),
-    "scheduler": ("spinefarm/coordinator/scheduler.py", (f"{C}/test_scheduler.py",)),
+    "scheduler": ("spinefarm/coordinator/scheduler.py",
+                  (f"{C}/test_scheduler.py", f"{C}/test_scheduler_liveness.py")),
     "judge-audit": ("spinefarm/coordinator/ladder/checks.py", (f"{C}/test_judge_rules.py", f"{C}/test_ladder.py")),
     "runlock": ("spinefarm/storage/runlock.py",
                 (f"{S}/test_runlock_rules.py", f"{S}/test_runlock_links.py", f"{S}/test_no_locks.py")),
     "robust-scoring": ("spinefarm/protocol/robust.py",
-                       (f"{P}/test_robust.py", f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
+                       (f"{P}/test_robust.py", f"{P}/test_robust_draws.py", f"{W}/test_robust_scoring.py",
+                        f"{W}/test_robust_worlds.py")),
     "robust-worlds": ("spinefarm/worker/trial/robust.py",
                       (f"{W}/test_robust_world_rules.py", f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
     "ladder": ("spinefarm/coordinator/ladder/rungs.py", (f"{C}/test_fidelity.py", f"{C}/test_ladder.py")),
