@@ -10,7 +10,8 @@ buffer carry a leading world axis, so the worlds of a batch may hold different p
 couplings), each with its own state and CPG step; the string geometry is the robot's and shared.
 
 Compiled structures are plain tuples of arrays (numba types them once):
-  cpg     (state (B, n, 3), omega (B, n), amp (B, n), indptr (B, n+1), source (B, e), wc (B, e) complex,
+  cpg     (state (B, n, 3), omega (B, n), amp (B, n), indptr (B, n+1), source (B, e), wc (B, 2e) complex
+           weights as re, im pairs,
            rate (B,), h (B,), n_sub (B,), scratch (B, 9, n, 3), output (B, n) cm/s (the setpoints the strings
            read), ahead and behind (B, n): the outputs at the next and the last update when interpolating)
   strings (body_a (s,), body_b (s,), anchor_a (s, 3), anchor_b (s, 3) cm, params (B, s, N_PARAM),
@@ -164,7 +165,7 @@ class ControlLaw:
                            _stack([n.amplitude_cm_s.astype(np.float64) for n in networks], np.float64),
                            _stack([n.indptr.astype(np.int64) for n in networks], np.int64),
                            _stack([n.source.astype(np.int64) for n in networks], np.int64),
-                           _stack([n.complex_weights() for n in networks], np.complex128),
+                           _stack([n.complex_weights() for n in networks], np.complex128).view(np.float64),
                            np.array([float(n.amplitude_rate_per_s) for n in networks]))
         self._scratch = np.zeros((n_worlds, 9, n_nodes, 3))
         self._ahead = np.zeros((n_worlds, n_nodes))
