@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from spinefarm.storage.codesign_coverage import run_coverage
 from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
 
 DISTANCE_OBJECTIVES = ("distance", "speed")  # an objective that is a score part already, shown as that part
@@ -118,6 +119,9 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
     lines += list(notes)
     if meta.settings.engine_choice is not None:  # how --engine auto chose the tier
         lines.append(meta.settings.engine_choice.describe())
+    coverage = run_coverage(meta, storage.columns()) if meta.run.get("body") else None
+    if coverage is not None:  # a co-designed run: the calibration covers its base body, the judge the rest
+        lines.append(coverage["statement"])
     best = storage.best(1)
     if not best:
         lines.append("no complete trial yet")
