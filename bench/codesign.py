@@ -1,19 +1,19 @@
 """Co-designed search (body and gait) against gait-only search at the same budget, on the paper's Tetraspine.
 
-For each seed the bench runs two searches of the 12-segment Tetraspine with the NTRT controller space and the
-`speed` objective: the built-in's fixed body, and the same robot with a `search:` block freeing its rod
-lengths, each string tag's stiffness and its rod density (the segment mass) within +-`--spread` of the paper's
-values. Trials run in a pool of processes through the worker's own evaluator (each co-designed trial builds and
-checks its body; an infeasible one counts as failed), screened in `--engine` (with `--dt` and
+For each seed the bench runs two searches of the 12-segment Tetraspine with a controller space (`--controller`,
+default NTRT's) and the `speed` objective: the built-in's fixed body, and the same robot with a `search:` block
+freeing its rod lengths, each string tag's stiffness and its rod density (the segment mass) within +-`--spread`
+of the paper's values. Trials run in a pool of processes through the worker's own evaluator (each co-designed
+trial builds and checks its body; an infeasible one counts as failed), screened in `--engine` (with `--dt` and
 `--engine-option`, e.g. MuJoCo at 2 ms without segment contacts, the cheap tier). Reported per mode and seed:
 trials complete and infeasible, the speed-COT front of the complete trials, and the judge: the `--judged` front
-trials nearest the paper's point (least max(9.46 / speed, COT / 3.2)) re-run in `--judge-engine` at its own
-step as `--episodes` perturbed episodes (`--randomize`), their median speed and COT with their range, and
-whether one reaches the paper's speed (>= 9.46 cm/s) at the paper's COT (<= 3.2) at those medians.
+trials nearest the paper's point (least max(9.46 / speed, COT / 3.2)) re-run in `--judge-engine` at its own step
+as `--episodes` perturbed episodes (`--randomize`), their median speed and COT with their range, and whether one
+reaches the paper's speed (>= 9.46 cm/s) at the paper's COT (<= 3.2) at those medians.
 
-Measured run (docs/results.md):
-    nice -n 10 python bench/codesign.py --budget 150 --seeds 3 --duration 10 --engine mujoco --dt 0.002 \
-        --engine-option segment_contacts=off --judged 2 --episodes 16
+Measured run (docs/results.md; sized for ~50 min on a shared 2-core machine):
+    nice -n 10 python bench/codesign.py --budget 40 --seeds 3 --duration 5 --controller sidewinding \
+        --engine mujoco --dt 0.002 --engine-option segment_contacts=off --judged 1 --episodes 16
 Smoke run:  python bench/codesign.py --budget 10 --seeds 3 --duration 2 --episodes 4 --judged 2
 
 Prints one JSON object (last line).
@@ -90,7 +90,7 @@ def run_config(source: str, seed: int, args: argparse.Namespace, engine: str, sc
     if screen:
         overrides |= {"dt_s": args.dt, "engine_options": parse_engine_options(args.engine_option)}
     return build_run_config(f"bench-{seed}", source, objective="speed", seed=seed, duration_s=args.duration,
-                            trial_overrides=overrides)
+                            controller=args.controller, trial_overrides=overrides)
 
 
 def run_search(pool: ProcessPoolExecutor, source: str, seed: int, args: argparse.Namespace) -> dict:
@@ -162,6 +162,7 @@ def main() -> int:
     p.add_argument("--workers", type=int, default=2, help="trials in flight (pool processes)")
     p.add_argument("--spread", type=float, default=0.3, help="body constants free within +-spread")
     p.add_argument("--sampler", default="cmaes")
+    p.add_argument("--controller", default=None, help="controller space (default: the robot's, NTRT's 116)")
     p.add_argument("--engine", default="bullet", help="engine of the search's trials (the screen)")
     p.add_argument("--dt", type=float, default=None, help="the screen's physics step (default: the engine's)")
     p.add_argument("--engine-option", action="append", default=None, metavar="KEY=VALUE",
@@ -177,16 +178,17 @@ def main() -> int:
         spec.write_text(search_block(args.spread))
         out: dict = {"command": " ".join(["python", "bench/codesign.py", *sys.argv[1:]]), "budget": args.budget,
                      "duration_s": args.duration, "spread": args.spread, "sampler": args.sampler,
-                     "engine": args.engine, "dt_s": args.dt, "engine_options": args.engine_option or [],
+                     "controller": args.controller, "engine": args.engine, "dt_s": args.dt,
+                     "engine_options": args.engine_option or [],
                      "judge_engine": args.judge_engine,
                      "episodes": args.episodes, "randomize": args.randomize,
                      "paper": {"speed_cm_s": PAPER_SPEED_CM_S, "cot": PAPER_COT}, "gait_only": [], "codesign": []}
         with ProcessPoolExecutor(args.workers) as pool:
             for seed in range(args.seeds):
-                out["gait_only"].append(run_search(pool, "tetraspine", seed, args))
-                out["codesign"].append(run_search(pool, str(spec), seed, args))
-                print(json.dumps({"seed": seed, **{m: {"front": out[m][-1]["front"][:3], "judged": out[m][-1]["judged"]}
-                                                   for m in ("gait_only", "codesign")}}), file=sys.stderr, flush=True)
+                for mode, source in (("gait_only", "tetraspine"), ("codesign", str(spec))):
+                    out[mode].append(run_search(pool, source, seed, args))
+                    # each search as it ends: a run cut short keeps what it measured
+                    print(json.dumps({"seed": seed, "mode": mode, **out[mode][-1]}), file=sys.stderr, flush=True)
     print(json.dumps(out))
     return 0
 

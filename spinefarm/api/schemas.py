@@ -157,6 +157,8 @@ class RunStatus(BaseModel):
     claimed_by: dict[str, str] = Field(default_factory=dict, description="other coordinators that claimed this "
                                        "run while it ran (their session: what was done)")
     fidelity_raised: str | None = Field(None, description="why the judge raised the screen's fidelity")
+    codesign: dict[str, Any] | None = Field(None, description="a co-designed run: what the calibration covers (the "
+                                            "base body), the judge's ratios on sampled bodies, and `statement`")
     unservable_workers: dict[str, str] = Field(default_factory=dict, description="workers left out of this run "
                                                "(worker id: why it cannot serve it); the others go on with it")
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from spinefarm.api.run_state import derive_state, live_figures, read_live
 from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.codesign_coverage import run_coverage
 from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
 from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, older_file_note
 
@@ -122,6 +123,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
                   "comparisons": (live.get("audit") or {}).get("comparisons", {}), "unaudited": unaudited},
         "claimed_by": live.get("claimed_by") or {},
         "fidelity_raised": live.get("fidelity_raised"),
+        "codesign": run_coverage(meta, cols) if n_trials and meta.run.get("body") else None,
         "unservable_workers": (live.get("unservable_workers") or {}) if state in ("running", "stalled", "done") else {},
         "status_age_s": age if live else None,
         "status_file_error": status_error,

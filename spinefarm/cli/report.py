@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from spinefarm.storage.codesign_coverage import run_coverage
 from spinefarm.storage.model_spread import model_spread, spread_text
 from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
 
@@ -125,6 +126,9 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
     lines += list(notes)
     if meta.settings.engine_choice is not None:  # how --engine auto chose the tier
         lines.append(meta.settings.engine_choice.describe())
+    coverage = run_coverage(meta, storage.columns()) if meta.run.get("body") else None
+    if coverage is not None:  # a co-designed run: the calibration covers its base body, the judge the rest
+        lines.append(coverage["statement"])
     best, pending = storage.reported_best(1)
     if pending is not None:
         lines.append(f"pending audit: trial {pending.trial_id}, distance {_g(_counted(pending))} m, is better than "

@@ -15,6 +15,7 @@ from spinefarm.api.registry import RunRegistry
 from spinefarm.api.schemas import RunStatus
 from spinefarm.api.views import run_view
 from spinefarm.protocol.errors import SpinefarmError, StorageError
+from spinefarm.storage.codesign_coverage import run_coverage
 from spinefarm.storage.hdf5_reader import Hdf5Reader
 
 router = APIRouter(prefix="/runs", tags=["runs"])
@@ -84,7 +85,9 @@ def get_meta(storage: Annotated[Hdf5Reader, Depends(run_storage)]) -> dict[str, 
             # each time a coordinator created or resumed the run, oldest first: the last one serves it
             "instances": list(m.instances),
             # how `search --engine auto` chose the tier, with its calibration's figures (None: engine given)
-            "engine_choice": None if m.settings.engine_choice is None else m.settings.engine_choice.to_dict()}
+            "engine_choice": None if m.settings.engine_choice is None else m.settings.engine_choice.to_dict(),
+            # a co-designed run: the calibration covers the base body; the judge's ratios on sampled bodies
+            "codesign": run_coverage(m, storage.columns()) if m.run.get("body") else None}
 
 
 @router.get("/{run_id}/contour",

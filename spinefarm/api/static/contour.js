@@ -14,10 +14,14 @@ function contourChoice(cols, analysis) {
   const names = cols.param_names;
   const st = runState.contour || {};
   if (!names.includes(st.x) || !names.includes(st.y) || st.x === st.y) {
-    const imp = names.map((nm) => (analysis.importance && analysis.importance[nm]) || 0);
-    const order = names.map((_, j) => j).sort((a, b) => imp[b] - imp[a] || a - b);
-    st.x = names[order[0]];
-    st.y = names[order[1]];
+    // the two most important parameters; in a co-designed run the strongest body constant against the
+    // strongest gait parameter (body against gait), or two body constants when the body is all it searches
+    const order = byImportance(names, analysis);
+    const body = order.filter((j) => isBody(names[j]));
+    const gait = order.filter((j) => !isBody(names[j]));
+    const pair = body.length ? [body[0], gait.length ? gait[0] : body[1]] : order;
+    st.x = names[pair[0]];
+    st.y = names[pair[1]];
   }
   runState.contour = st;
   return st;

@@ -16,11 +16,21 @@ function svgEl(tag, attrs, parent) {
   return el;
 }
 
-/** The axes shown by default: the most important parameters (the first ones when importance is flat). */
-function pcDefaultAxes(names, analysis) {
+/** A co-designed run's body constant (docs/codesign.md): the parameters a `search:` block frees. */
+function isBody(name) { return name.startsWith("body."); }
+
+/** Parameter indices, most important first (the first ones when importance is flat). */
+function byImportance(names, analysis) {
   const imp = names.map((nm) => (analysis.importance && analysis.importance[nm]) || 0);
-  const order = names.map((_, j) => j).sort((a, b) => imp[b] - imp[a] || a - b);
-  return order.slice(0, PC_DEFAULT_AXES).sort((a, b) => a - b).map((j) => names[j]);
+  return names.map((_, j) => j).sort((a, b) => imp[b] - imp[a] || a - b);
+}
+
+/** The axes shown by default: a co-designed run's body constants, then the most important other parameters. */
+function pcDefaultAxes(names, analysis) {
+  const order = byImportance(names, analysis);
+  const body = order.filter((j) => isBody(names[j])).slice(0, PC_DEFAULT_AXES);
+  const rest = order.filter((j) => !isBody(names[j])).slice(0, PC_DEFAULT_AXES - body.length);
+  return body.concat(rest).sort((a, b) => a - b).map((j) => names[j]);
 }
 
 function pcAxes(cols, ok) {

@@ -105,14 +105,20 @@ function drawParamPlots(runId, cols, analysis, ok) {
   const names = cols.param_names;
   const imp = names.map((nm) => analysis.importance[nm] || 0);
   const order = names.map((_, j) => j).sort((a, b) => imp[b] - imp[a]);
-  // importance: every parameter when few, the 30 strongest when many
-  const top = order.slice(0, 30).reverse();
+  // importance: every parameter when few, the 30 strongest when many, and every body constant of a co-designed
+  // run however weak (its bars in orange)
+  const shown = order.slice(0, 30);
+  const top = shown.concat(order.filter((j) => isBody(names[j]) && !shown.includes(j)))
+    .sort((a, b) => imp[b] - imp[a]).reverse();
+  const nBody = names.filter(isBody).length;
   plot("plot-importance", [{type: "bar", orientation: "h", x: top.map((j) => imp[j]), y: top.map((j) => names[j]),
-    marker: {color: "#3461c1"}, name: "|rank correlation| with the objective"}],
+    marker: {color: top.map((j) => isBody(names[j]) ? "#d35400" : "#3461c1")},
+    name: "|rank correlation| with the objective"}],
   {margin: {l: 220, r: 20, t: 10, b: 45}, xaxis: {title: {text: "|Spearman ρ| with the objective"}, range: [0, 1]},
     showlegend: false, height: Math.max(320, 18 * top.length + 60)}, top.length);
-  document.getElementById("importance-note").textContent = names.length > 30
-    ? `the 30 strongest of ${names.length} parameters` : `all ${names.length} parameters`;
+  document.getElementById("importance-note").textContent = (names.length > 30
+    ? `the 30 strongest of ${names.length} parameters` : `all ${names.length} parameters`)
+    + (nBody ? `; the ${nBody} body constants in orange, all shown` : "");
   const warn = document.getElementById("importance-warning");
   const nUsed = analysis.importance_trials;
   warn.hidden = nUsed >= analysis.importance_min_trials;
