@@ -9,6 +9,7 @@ to NTRT's own figures. Prints one JSON object.
 
     python bench/tier_agreement.py                  # >= 100 sets per spine, 10 s trials (hours on 2 cores)
     python bench/tier_agreement.py --quick          # 12 sets per spine, 3 s trials, no converged steps
+    python bench/tier_agreement.py --spines all     # every built-in, not only the four paper spines
     python bench/tier_agreement.py --sets 40 --duration 5 --best-of tetraspine=runs/x.h5 --jobs 2
     python bench/tier_agreement.py --controller tetraspine=sidewinding --duration 5 --settle 1 \
         --best-of tetraspine=runs/tetraspine.h5      # the Tetraspine in the paper's 9-parameter space
@@ -114,7 +115,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--sets", type=int, default=None, help="random parameter sets per spine (default 100)")
     ap.add_argument("--duration", type=float, default=None, help="simulated seconds per trial (default 10)")
     ap.add_argument("--settle", type=float, default=0.0, help="settle phase before scoring (s)")
-    ap.add_argument("--spines", default=",".join(SPINES))
+    ap.add_argument("--spines", default=",".join(SPINES),
+                    help="comma-separated robots, or 'all': every built-in (`spinefarm morphologies`)")
     ap.add_argument("--no-converged", action="store_true", help="only each engine's default step")
     ap.add_argument("--no-replays", action="store_true")
     ap.add_argument("--best-of", action="append", default=[], metavar="SPINE=RUN.h5",
@@ -152,6 +154,13 @@ def _tiers(args: argparse.Namespace) -> tuple[dict, dict]:
     return tiers, extra
 
 
+def spines_of(text: str) -> list[str]:
+    """The robots a --spines value names: 'all' is every built-in, with each one's shipped constants."""
+    from spinefarm.robot.morphology.registry import builtin_names
+
+    return builtin_names() if text == "all" else text.split(",")
+
+
 def _jobs(args: argparse.Namespace, tiers: dict, extra: dict, sets: int, duration: float, controllers: dict,
           best_of: dict) -> list[tuple]:
     """One job per spine, tier, engine and parameter set: (spine, tier, engine, index, _trial's arguments)."""
@@ -159,7 +168,7 @@ def _jobs(args: argparse.Namespace, tiers: dict, extra: dict, sets: int, duratio
     from spinefarm.worker.trial.simulation import random_unit_params
 
     jobs: list[tuple] = []
-    for spine in args.spines.split(","):
+    for spine in spines_of(args.spines):
         morph = load_morphology(spine)
         controller = controllers.get(spine)
         cases = [(tuple(random_unit_params(morph, s, controller=controller)), s) for s in range(1, sets + 1)]
