@@ -121,3 +121,27 @@ def test_a_cut_recording_gives_the_losses_of_the_whole(engine, turn):
     here = squared_errors(morph, cfg, p, True)
     there = squared_errors(morph, cfg, _prepared(json.loads(json.dumps(_recording(p)))), True)
     assert here.tobytes() == there.tobytes() and here.max() > 0
+
+
+def test_a_fit_run_config_round_trips_and_a_bad_one_is_refused(recordings):
+    """The run's config carries the fit through JSON with its hash; a plain run's config has no `fit` key (its hash
+    as before); a malformed `fit` is refused in one line naming it."""
+    from spinefarm.protocol.errors import MessageError
+    from spinefarm.protocol.run import RunConfig
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.loss import prepare
+    from spinefarm.worker.fit.readers import read_recording
+    from spinefarm.worker.fit.search import parse_fit
+    from spinefarm.worker.fit.task import fit_run_config
+
+    p = prepare("r1", read_recording(recordings / "r1.npz"), 0.1, 0.1)
+    config = fit_run_config("fit-x", load_morphology("tetraspine-ntrt"), TrialConfig(engine="mujoco"), [p],
+                            parse_fit("ground_friction"))
+    back = RunConfig.from_dict(json.loads(json.dumps(config.to_dict())))
+    assert back == config and back.config_hash() == config.config_hash()
+    plain = RunConfig.from_dict({k: v for k, v in config.to_dict().items() if k != "fit"})
+    assert "fit" not in plain.to_dict() and plain.config_hash() != config.config_hash()
+    with pytest.raises(MessageError) as bad:
+        RunConfig.from_dict({**config.to_dict(), "fit": {"recordings": "r1.npz"}})
+    assert "run config field 'fit' is malformed" in str(bad.value) and "\n" not in str(bad.value)
