@@ -23,6 +23,7 @@ plausible range are fitted (NTRT_FIT, per engine). Prints
 
     python bench/fit.py --ntrt [--spines tetraspine-ntrt2026 ...] [--engines mujoco bullet] [--fit NAME,...]
                         [--evaluations N] [--restarts N] [--span 10] [--stride 1] [--replay-duration S] [--jobs N]
+                        [--workers N | --connect ENDPOINT]   # the losses on the project's workers over Zenoh
 
 --ntrt --scan NAME=V1,V2,... (or xF: F times the model's own value, each string or rod tag's): no fit (for a budget
 a leave-one-out fit exceeds): per spine and engine the window
@@ -115,8 +116,9 @@ def ntrt_bench(args: argparse.Namespace) -> dict:
         for engine in args.engines:
             t0 = time.time()
             cfg, bounds = TrialConfig(engine=engine), parse_fit(args.fit or NTRT_FIT[engine])
-            loo = leave_one_out(morph, cfg, recs, bounds, args.restarts, args.evaluations, jobs=args.jobs)
-            fitted = fit_constants(morph, cfg, recs, [], bounds, args.restarts, args.evaluations, jobs=args.jobs)
+            jobs = _where(args, bounds)
+            loo = leave_one_out(morph, cfg, recs, bounds, args.restarts, args.evaluations, jobs=jobs)
+            fitted = fit_constants(morph, cfg, recs, [], bounds, args.restarts, args.evaluations, jobs=jobs)
             before, after = (_replay_ratio(morph, engine, profile, folder / "published", args.replay_duration)
                              for profile in ({}, fitted["profile"]))
             inside = not any(c["at_bound"] for c in fitted["constants"].values())
@@ -128,6 +130,15 @@ def ntrt_bench(args: argparse.Namespace) -> dict:
                 "inside_ranges": inside, "profile": fitted["profile"], "constants": fitted["constants"],
                 "wall_s": time.time() - t0}
     return out
+
+
+def _where(args: argparse.Namespace, bounds: list) -> object:
+    """Where the losses are computed: --jobs processes here, or with --workers / --connect the project's workers
+    over Zenoh (the same bits; spinefarm fit's own options)."""
+    from spinefarm.cli.fit_workers import losses_maker
+
+    return losses_maker(argparse.Namespace(workers=args.workers, connect=args.connect, listen=None, jobs=args.jobs),
+                        bounds) or args.jobs
 
 
 def scan_bench(args: argparse.Namespace) -> dict:
@@ -262,6 +273,8 @@ def main() -> None:
     ap.add_argument("--restarts", type=int, default=3)
     ap.add_argument("--evaluations", type=int, default=400)
     ap.add_argument("--jobs", type=int, default=1, help="with --ntrt: processes computing a generation's losses")
+    ap.add_argument("--workers", type=int, default=None, help="with --ntrt: N local workers over Zenoh compute them")
+    ap.add_argument("--connect", nargs="+", default=None, help="with --ntrt: the workers at this router compute them")
     args = ap.parse_args()
     if args.identify + args.windows + args.ntrt != 1:
         ap.error("say what to measure: --identify, --windows or --ntrt")

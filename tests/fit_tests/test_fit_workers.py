@@ -3,12 +3,14 @@ processes that find the fit's run as they find a search's, and the same fit to t
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from spinefarm.cli.local_workers import READY_ENV
@@ -83,3 +85,63 @@ def test_workers_and_jobs_are_refused_together(recordings, capsys):
     err = capsys.readouterr().err.strip()
     assert "--jobs and --workers/--connect/--listen both say where" in err and "received '--jobs 2'" in err
     assert "\n" not in err
+
+
+def _turned(quat_wxyz: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """The orientations turned about Y by an angle growing from 0 at row `start` to 270 degrees at `stop` (and
+    kept after): a quaternion path whose two ends across that stretch point opposite ways (dot < 0)."""
+    angle = np.clip((np.arange(len(quat_wxyz)) - start) / (stop - start), 0.0, 1.0) * 1.5 * np.pi
+    w, y = np.cos(angle / 2)[:, None], np.sin(angle / 2)[:, None]
+    q = quat_wxyz
+    return np.stack([w * q[..., 0] - y * q[..., 2], w * q[..., 1] + y * q[..., 3], w * q[..., 2] + y * q[..., 0],
+                     w * q[..., 3] - y * q[..., 1]], axis=-1)
+
+
+@pytest.mark.parametrize(("engine", "turn"), [("mujoco", False), ("bullet", False), ("mujoco", True)])
+def test_a_cut_recording_gives_the_losses_of_the_whole(engine, turn):
+    """What a fit run sends of NTRT's published Tetraspine run (2 s, a 0.2 s window a second): the rows no window
+    reads replaced by copies (far smaller), and the windows' errors, tensions included, the same to the bit; also
+    when the segments turn by 270 degrees between two windows (the quaternions' signs across the cut disagree)."""
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.loss import prepare, squared_errors
+    from spinefarm.worker.fit.readers import read_recording
+    from spinefarm.worker.fit.task import _array, _prepared, _recording, _sent
+
+    rec = read_recording(Path("/work/shared/ntrt-recordings/TetraSpine/published"))
+    n = int(np.searchsorted(rec.time_s, rec.time_s[0] + 2.0 + 1e-9))
+    cut = {f: getattr(rec, f)[:n] for f in ("time_s", "position_m", "quat_wxyz", "string_length_m",
+                                            "rest_length_m", "tension_n")}
+    if turn:
+        cut["quat_wxyz"] = _turned(cut["quat_wxyz"], 30, 90)
+    p = prepare("published", dataclasses.replace(rec, **cut), 0.2, 1.0)
+    sent = _sent(p.rec, p.windows)
+    assert sent is not p.rec and len(_array(sent.position_m)["f8z"]) < len(_array(p.rec.position_m)["f8z"]) / 3
+    morph, cfg = load_morphology("tetraspine-ntrt2026"), TrialConfig(engine=engine)
+    here = squared_errors(morph, cfg, p, True)
+    there = squared_errors(morph, cfg, _prepared(json.loads(json.dumps(_recording(p)))), True)
+    assert here.tobytes() == there.tobytes() and here.max() > 0
+
+
+def test_a_fit_run_config_round_trips_and_a_bad_one_is_refused(recordings):
+    """The run's config carries the fit through JSON with its hash; a plain run's config has no `fit` key (its hash
+    as before); a malformed `fit` is refused in one line naming it."""
+    from spinefarm.protocol.errors import MessageError
+    from spinefarm.protocol.run import RunConfig
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.loss import prepare
+    from spinefarm.worker.fit.readers import read_recording
+    from spinefarm.worker.fit.search import parse_fit
+    from spinefarm.worker.fit.task import fit_run_config
+
+    p = prepare("r1", read_recording(recordings / "r1.npz"), 0.1, 0.1)
+    config = fit_run_config("fit-x", load_morphology("tetraspine-ntrt"), TrialConfig(engine="mujoco"), [p],
+                            parse_fit("ground_friction"))
+    back = RunConfig.from_dict(json.loads(json.dumps(config.to_dict())))
+    assert back == config and back.config_hash() == config.config_hash()
+    plain = RunConfig.from_dict({k: v for k, v in config.to_dict().items() if k != "fit"})
+    assert "fit" not in plain.to_dict() and plain.config_hash() != config.config_hash()
+    with pytest.raises(MessageError) as bad:
+        RunConfig.from_dict({**config.to_dict(), "fit": {"recordings": "r1.npz"}})
+    assert "run config field 'fit' is malformed" in str(bad.value) and "\n" not in str(bad.value)

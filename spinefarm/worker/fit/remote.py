@@ -36,6 +36,7 @@ log = logging.getLogger("spinefarm.fit")
 MAX_ATTEMPTS = 3     # a candidate whose loss failed this often (crash, timeout, error) stops the fit
 LEASE_S = 900.0      # a leased candidate not back by then is issued again (its worker vanished)
 RETRY_AFTER_S = 0.2  # an idle worker asks again this soon: the next generation follows within a loss's time
+DONE_WAIT_S = 5.0    # at the end, how long the fit waits for its workers to ask again and hear "done"
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,8 @@ class RemoteLosses:
         self._attempts: dict[int, int] = {}
         self._failure = ""
         self.by_worker: dict[str, int] = {}   # losses each worker computed (kept ones)
+        self._asked: set[str] = set()   # workers that asked for work, and those told the run is done
+        self._told: set[str] = set()
         self._next_trial = self._next_lease = 0
         self.done = False
         self.session = zenoh.open(network.config())
@@ -106,9 +109,13 @@ class RemoteLosses:
             return [self._losses.pop(i) for i in ids]
 
     def close(self) -> None:
+        """Every worker that served the run is told it is done (a roaming worker stays with a run until told; up
+        to DONE_WAIT_S), then the run's keys go."""
         with self._lock:
             self.done = True
-        time.sleep(2 * RETRY_AFTER_S)  # workers asking now hear that the run is done
+            end = time.monotonic() + DONE_WAIT_S
+            while not self._asked <= self._told and time.monotonic() < end:
+                self._lock.wait(RETRY_AFTER_S)
         for q in self._queryables:
             q.undeclare()
         self.session.close()
@@ -143,6 +150,10 @@ class RemoteLosses:
                 self._next_lease += 1
                 self._leases[i] = (self._next_lease, now + LEASE_S)
                 grant.append(TrialAssignment(i, self._next_lease, self._values[i], 0, LEASE_S, self.sim_s))
+            self._asked.add(req.worker_id)
+            if self.done and not grant:
+                self._told.add(req.worker_id)
+                self._lock.notify_all()
         return encode_message(WorkGrant(self.run_id, self.hash, tuple(grant), 0.0 if grant else RETRY_AFTER_S,
                                         self.done and not grant, verdicts, self.run_id))
 

@@ -1,8 +1,9 @@
 """A fit's losses as a run the project's workers serve: the fit's task in a RunConfig, and its evaluator.
 
 A fit run's RunConfig holds the robot (spec), the trial config (engine, options, the starting profile) and, in
-its `fit` field, the fitted recordings with their windows: every array as its float64 bytes (base64), so a
-worker's recordings are the fitting process's to the bit. A leased "trial" is one candidate: its
+its `fit` field, the fitted recordings with their windows: every array as its float64 bytes (zlib, base64),
+the rows no window reads replaced by copies (worker.fit.task._sent), so a worker's windows start and run from
+the fitting process's states to the bit. A leased "trial" is one candidate: its
 `params_unit` carries the candidate's values themselves, in the order of the run's parameter space (the fitted
 constants with their bounds); not unit-cube points, since mapping there and back would not give the same bits.
 The worker answers with the loss (worker.fit.loss.candidate_loss) in the result's extras, LOSS_KEY.
@@ -11,8 +12,10 @@ The worker answers with the loss (worker.fit.loss.candidate_loss) in the result'
 from __future__ import annotations
 
 import base64
+import dataclasses
 import math
 import time
+import zlib
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -29,7 +32,7 @@ from spinefarm.worker.fit.fitting import with_values
 from spinefarm.worker.fit.loss import Prepared, candidate_loss
 from spinefarm.worker.fit.recording import Recording
 from spinefarm.worker.fit.search import Bound
-from spinefarm.worker.fit.state import engine_poses
+from spinefarm.worker.fit.state import engine_poses, velocities
 from spinefarm.worker.fit.windows import Window
 
 OBJECTIVE = "fit_loss"
@@ -39,15 +42,51 @@ _ARRAYS = ("time_s", "position_m", "quat_wxyz", "string_length_m", "rest_length_
 
 def _array(a: np.ndarray) -> dict[str, Any]:
     a = np.ascontiguousarray(a, dtype="<f8")
-    return {"shape": list(a.shape), "f8": base64.b64encode(a.tobytes()).decode("ascii")}
+    return {"shape": list(a.shape), "f8z": base64.b64encode(zlib.compress(a.tobytes(), 6)).decode("ascii")}
 
 
 def _unarray(d: dict[str, Any]) -> np.ndarray:
-    return np.frombuffer(base64.b64decode(d["f8"]), dtype="<f8").reshape(d["shape"]).copy()
+    return np.frombuffer(zlib.decompress(base64.b64decode(d["f8z"])), dtype="<f8").reshape(d["shape"]).copy()
+
+
+def _kept_rows(rec: Recording, windows: Sequence[Window]) -> np.ndarray:
+    """The rows a window run reads: from the row before each start (its velocity, its strings' first rate) to two
+    rows past its last checked one (the rest lengths interpolated over its steps)."""
+    keep = np.zeros(len(rec.time_s), dtype=bool)
+    for w in windows:
+        keep[max(w.start - 1, 0):min(w.rows[-1] + 3, len(keep))] = True
+    return keep
+
+
+def _sent(rec: Recording, windows: Sequence[Window]) -> Recording:
+    """The recording as sent: the rows no window reads hold copies of their neighbours (so they compress to
+    nothing), quaternions with their signs already made continuous and, between kept stretches, one that agrees
+    in sign with both ends (so the worker's own continuity pass flips nothing). The full recording instead if
+    the kept rows' states would differ by a bit (checked here)."""
+    keep = _kept_rows(rec, windows)
+    if keep.all():
+        return rec
+    idx = np.maximum.accumulate(np.where(keep, np.arange(len(keep)), -1))
+    idx = np.where(idx < 0, int(np.argmax(keep)), idx)   # rows before the first kept one: its copy
+    q = engine_poses(rec)[..., [6, 3, 4, 5]]              # continuous signs, (w, x, y, z)
+    quat = q[idx]
+    for gap in np.flatnonzero(~keep[1:] & keep[:-1]) + 1:  # each gap after a kept stretch
+        nxt = gap + int(np.argmax(keep[gap:])) if keep[gap:].any() else len(keep)
+        if nxt < len(keep):
+            mid = q[gap - 1] + q[nxt]
+            quat[gap:nxt] = mid / np.linalg.norm(mid, axis=-1, keepdims=True)
+    arrays = {k: getattr(rec, k)[idx] for k in ("position_m", "rest_length_m", "tension_n")
+              if getattr(rec, k) is not None}
+    sent = dataclasses.replace(rec, quat_wxyz=quat, string_length_m=None, **arrays)
+    rows, starts = np.flatnonzero(keep), [w.start for w in windows]
+    same = all(np.array_equal(a, b) for a, b in (
+        (engine_poses(sent)[rows], engine_poses(rec)[rows]), (velocities(sent)[starts], velocities(rec)[starts]),
+        (sent.rest_length_m[rows], rec.rest_length_m[rows])))
+    return sent if same else rec
 
 
 def _recording(p: Prepared) -> dict[str, Any]:
-    rec = p.rec
+    rec = _sent(p.rec, p.windows)
     return {"name": p.name, "windows": [[w.start, list(w.rows)] for w in p.windows],
             "arrays": {k: _array(getattr(rec, k)) for k in _ARRAYS if getattr(rec, k) is not None},
             "drive": rec.drive, "scene": rec.scene, "source": rec.source, "morphology": rec.morphology}
