@@ -48,7 +48,7 @@ def test_a_quarantined_workers_forged_values_leave_the_sampler_and_its_re_runs_v
     assert sorted(learnt.values()) == sorted((*FORGED_M, *W2_M))
 
     with core.lock:   # w1 is found wrong: its rows are marked, and w3's audits are now their re-runs
-        core._quarantine(core.peers.quarantine_identity("w1"), "found wrong")
+        core.ladder.quarantine(core.peers.quarantine_identity("w1"), "found wrong")
     assert ask(core, "w2", n=1).assignments[0].fidelity.task == "trial"   # a new set is proposed
     learnt = _learnt(core)   # the forged rows are being re-run: nothing of them is learnt
     assert all(_row_params(storage, a.trial_id) not in learnt for a in forged)
