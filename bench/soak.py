@@ -13,7 +13,8 @@ until it is done.
 Checked from the run file and the workers' acknowledgement logs (SPINEFARM_ACK_LOG): every parameter set
 of the budget evaluated, no row left waiting, 0 lost (acknowledged as stored, absent or different in
 the file), 0 duplicated (acknowledged as stored twice), 0 forged rows stored as complete, every audit
-(a quarter of the results, every new best) run and none left pending across the coordinator kills
+(a quarter of the results, every new best) and every judge of a new best run and none left pending across
+the coordinator kills
 (`tasks_pending_at_end`), no process
 left running once the run is over, no exit the schedule did not cause, and how the workers left: each
 frozen one is woken when the run is done and the coordinator waits for it, so none should have to wait
@@ -44,15 +45,16 @@ sys.path.insert(0, str(ROOT))
 
 from spinefarm.coordinator.problem import build_run_config  # noqa: E402
 from spinefarm.coordinator.setup import SearchSettings, new_run  # noqa: E402
-from spinefarm.protocol.settings import AuditPolicy  # noqa: E402
+from spinefarm.protocol.settings import JUDGE_DT_S, AuditPolicy, JudgePolicy, Rung  # noqa: E402
 from spinefarm.storage.hdf5_reader import read_evaluations, read_run  # noqa: E402
 
 POISON = {"hang": [0.0, 0.015], "crash": [0.015, 0.03]}   # on the first unit parameter
 FORGED_M = 1234.5
 RUNGS_S = (0.1, 0.3)        # test-objective trials take their duration in wall time
 PARTITION_S = 10.0
-# a share of the results (and every new best) is audited by another worker, so coordinator kills find audits
-# (and their referees) pending: each must be issued again and none left pending when the run ends
+# a share of the results (and every new best) is audited by another worker, and every new best judged (the judge
+# named, so the test objective has one), so coordinator kills find audits and judges pending: each must be issued
+# again and none left pending when the run ends
 AUDIT_FRACTION = 0.25
 N_WORKERS = 4
 COORDINATOR_TIMEOUT_S = 60   # a restarted coordinator validates and rewrites its file: slow under load
@@ -62,7 +64,8 @@ def make_run(path: Path, run_id: str, trials: int, seed: int) -> None:
     cfg = build_run_config(run_id, "sphere:4", seed=seed, duration_s=RUNGS_S[-1])
     cfg = replace(cfg, trial_config={"duration_s": RUNGS_S[-1], "poison": POISON})
     _, storage = new_run(cfg, SearchSettings(trials=trials, sampler="random", lease_s=20.0, rungs=RUNGS_S,
-                                             audit=AuditPolicy(fraction=AUDIT_FRACTION)), path)
+                                             audit=AuditPolicy(fraction=AUDIT_FRACTION),
+                                             judge=JudgePolicy(rung=Rung("bullet", JUDGE_DT_S))), path)
     storage.close()
 
 
@@ -349,10 +352,11 @@ def audit(path: Path, tmp: Path, budget: int) -> dict:
 
 
 def tasks_at_end(path: Path, cols: dict) -> dict:
-    """Audits and referees: how many ran (evaluation rows) and how many were left pending (should be 0)."""
+    """Judges, audits and referees: how many ran (evaluation rows) and how many were left pending (should be 0)."""
     kinds = Counter(k.decode() for k in read_evaluations(path)["kind"])
     states = Counter(a.decode() for a in cols["audit"] if a)
-    return {"audit_runs": kinds.get("audit", 0), "referee_runs": kinds.get("referee", 0), "audit_states": dict(states),
+    return {"judge_runs": kinds.get("judge", 0), "audit_runs": kinds.get("audit", 0),
+            "referee_runs": kinds.get("referee", 0), "audit_states": dict(states),
             "tasks_pending_at_end": states.get("pending", 0) + states.get("disputed", 0)
             + int((cols["verification"] == b"pending").sum())}
 

@@ -227,7 +227,10 @@ def judge_policy(args: argparse.Namespace, config: Any) -> Any:
     rung = Rung(engine, args.verify_dt) if engine and engine != screen else Rung()
     return JudgePolicy(enabled=not args.no_verify, rung=rung, tolerance=args.verify_tolerance,
                        perturb=args.verify_perturb, drift=args.judge_drift,
-                       share=args.judge_share, opinion=opinion_rung(args, rung.engine or screen or "bullet"))
+                       share=args.judge_share,
+                       # a test objective has a judge only when one is named, and then an opinion too
+                       opinion=None if config.is_test_objective and rung.engine is None
+                       else opinion_rung(args, rung.engine or screen or "bullet"))
 
 
 def opinion_rung(args: argparse.Namespace, judge_engine: str) -> Any:

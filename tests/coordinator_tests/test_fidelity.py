@@ -137,6 +137,13 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
         assert best.judge_ratio == pytest.approx(best.distance_m / best.verify_distance_m)
         assert np.isfinite(best.verify_distance_m) and best.verify_distance_m != best.distance_m
         assert s.run_meta().settings.judge.rung.engine == "bullet"
+        # both engines are installed: the judged best's second opinion is MuJoCo at 1 ms, a row of its own, and
+        # that is where the screen ran this very row, so the opinion is its bits again, whatever the judge said
+        ev = s.evaluations()
+        opinion = ev["kind"] == b"opinion"
+        assert ev["trial_id"][opinion].tolist() == [best.trial_id]
+        assert (ev["engine"][opinion][0], ev["dt_s"][opinion][0]) == (b"mujoco", 0.001)
+        assert ev["distance_m"][opinion][0] == best.distance_m
         c = s.columns()  # a screened best is provisional: only full-length trials go to the judge
         assert set(c["verification"][c["rung"] == 0].tolist()) == {b""}
         from spinefarm.api.views import trial_view

@@ -89,3 +89,48 @@ def test_an_opinion_without_an_engine_is_refused_in_one_line():
 
     with pytest.raises(ConfigError, match="judge opinion is not a rung naming its engine"):
         JudgePolicy(opinion={"dt_s": 0.001})
+
+
+
+def _ask(core, worker: str, engines: tuple[str, ...], n: int = 1) -> tuple:
+    from spinefarm.protocol.envelope import decode_message
+    from spinefarm.protocol.envelope import encode_message as enc
+    from spinefarm.protocol.work import WorkRequest
+
+    grant = decode_message(core.handle_work(enc(WorkRequest(worker, n, engines=engines))), WorkGrant)
+    return grant.assignments
+
+
+def _do(core, evaluate, worker: str, assignments: tuple) -> None:
+    _submit(core, worker, _run(evaluate, WorkGrant("r", "h", assignments), worker))
+
+
+def test_an_opinion_no_worker_can_run_is_dropped_so_the_run_ends_and_an_overtaken_bests_is_withdrawn():
+    """Workers offering Bullet only: the judged best's MuJoCo opinion waits while workers may still be
+    reconnecting, then is dropped, so the run ends; a better set, judged, takes the opinion over."""
+    config = build_run_config("lone", "sphere:3", seed=2)
+    judge = JudgePolicy(rung=Rung("bullet", 2.5e-4), share=1.0, opinion=Rung("mujoco", MUJOCO_CONVERGED_DT_S))
+    clock = FakeClock()
+    core, storage = new_run(config, SearchSettings(trials=3, startup_trials=3, judge=judge), None, clock)
+    evaluate = build_evaluator(config)
+    bullet, both = ("bullet",), ("bullet", "mujoco")
+    _do(core, evaluate, "w1", _ask(core, "w1", bullet))            # trial 0: the best so far
+    [judged] = _ask(core, "w1", bullet)
+    assert judged.fidelity.task == "judge"
+    _do(core, evaluate, "w1", (judged,))
+    [opinion] = _ask(core, "w2", both)                             # out on w2, not yet back
+    assert (opinion.trial_id, opinion.fidelity.task) == (0, "opinion")
+    while not core.search_done:                                    # the other sets, and the judges they make due
+        _do(core, evaluate, "w1", _ask(core, "w1", bullet))
+    best = storage.best_ids(1)[0]
+    assert best != 0 and storage.columns()["verification"][best] == b"judged"   # seed 2: a later set is better
+    # trial 0's opinion was withdrawn: its late result is stale and stores nothing
+    late = _submit(core, "w2", _run(evaluate, WorkGrant("r", "h", (opinion,)), "w2"))
+    assert [v.value for _, v in late.verdicts] == ["stale"]
+    assert core.pending_task_kinds() == {"opinion"}                  # the new best's, in MuJoCo
+    core.worker_lost("w2")
+    assert _ask(core, "w1", bullet) == () and not core.done         # not in Bullet; workers may still reconnect
+    clock.advance(11.0)   # past the restart grace: no live worker runs MuJoCo
+    _ask(core, "w1", bullet)
+    assert core.done and core.pending_task_kinds() == set()
+    assert b"opinion" not in storage.evaluations()["kind"].tolist()
