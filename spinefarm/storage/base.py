@@ -187,14 +187,13 @@ class BaseStorage:
 
     def _ranked_ids(self, k: int, agreed_only: bool) -> list[int]:
         cols = self.columns()
-        obj = cols["objective"]
+        # agreed_only: the few rows another identity's audit agreed with, the only ones looked at further
+        ids = np.flatnonzero(agreeing(cols["audit"])) if agreed_only else slice(None)
         # a set whose judge run diverged never counts as best
-        valid = (cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(obj) & \
-            ~np.isin(cols["verification"], REFUTED_VERDICTS) & \
-            ~np.isin(cols["audit"], DISQUALIFYING_AUDITS)  # nor one other workers did not reproduce (or dispute)
-        if agreed_only:
-            valid &= agreeing(cols["audit"])
-        ids = np.flatnonzero(valid)
+        valid = (cols["status"][ids] == TrialStatus.COMPLETE.stored) & np.isfinite(cols["objective"][ids]) & \
+            ~np.isin(cols["verification"][ids], REFUTED_VERDICTS) & \
+            ~np.isin(cols["audit"][ids], DISQUALIFYING_AUDITS)  # nor one other workers did not reproduce (or dispute)
+        ids = ids[valid] if agreed_only else np.flatnonzero(valid)
         if k <= 0 or ids.size == 0:
             return []
         value = ranked_values({c: cols[c][ids] for c in _RANKED_BY}, self.run_meta().objective)
