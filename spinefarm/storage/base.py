@@ -36,6 +36,7 @@ class BaseStorage:
 
     read_only = False
     file_schema_version = FILE_SCHEMA_VERSION   # what the run file was written at (older ones still open)
+    audit_writes = 0   # set_audit calls since this storage was opened (a cheap "did any audit change" for the study)
 
     # --- primitives -------------------------------------------------------------------------------
     def create_run(self, meta: RunMeta) -> None:
@@ -155,6 +156,7 @@ class BaseStorage:
         self._check_id(trial_id)
         if state not in tuple(AuditState):
             raise StorageError("unknown audit state", received=state, expected=[str(a) for a in AuditState])
+        self.audit_writes += 1
         self._update(trial_id, {"audit": AuditState(state).stored, "audit_distance_m": distance_m,
                                 "audit_worker_id": worker_id.encode("utf-8", "replace")[:64]})
 
