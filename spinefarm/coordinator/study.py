@@ -44,6 +44,7 @@ class Study:
         self.enqueued = enqueued
         self._n_finished = sum(v for k, v in storage.counts().items() if k != "waiting")
         self._learned = b""   # which rows' figures the sampler learnt amended (storage.ranking.learned_revision)
+        self._audit_writes = -1   # storage.audit_writes when that was last looked at
 
     @property
     def n_asked(self) -> int:
@@ -86,8 +87,9 @@ class Study:
         if sampling_done:
             return None
         self._relearn_if_amended()
-        # with rungs: proposal k is the k-th parameter set
-        view = LearnedView(ts.sampler_view(self.storage), self.storage.run_meta().objective)
+        view = ts.sampler_view(self.storage)  # with rungs: proposal k is the k-th parameter set
+        if self._learned:
+            view = LearnedView(view, self.storage.run_meta().objective)
         k = view.n_trials()
         p = Proposal(np.asarray(self.enqueued[k]), ENQUEUED, -1) if k < len(self.enqueued) \
             else self.sampler.propose(k, view)
@@ -98,6 +100,9 @@ class Study:
     def _relearn_if_amended(self) -> None:
         """A row's figure a sampler learnt was found forged (its worker quarantined) or re-run since: the sampler
         starts over and learns every row again as it now reads (model-based samplers learn a row once)."""
+        if self.storage.audit_writes == self._audit_writes:
+            return   # no audit changed: no row was amended (the audit column is not scanned per proposal)
+        self._audit_writes = self.storage.audit_writes
         revision = learned_revision(self.storage.columns()["audit"])
         if revision != self._learned:
             self._learned = revision

@@ -36,6 +36,7 @@ class BaseStorage:
 
     read_only = False
     file_schema_version = FILE_SCHEMA_VERSION   # what the run file was written at (older ones still open)
+    audit_writes = 0   # set_audit calls since this storage was opened (a cheap "did any audit change" for the study)
 
     # --- primitives -------------------------------------------------------------------------------
     def create_run(self, meta: RunMeta) -> None:
@@ -155,6 +156,7 @@ class BaseStorage:
         self._check_id(trial_id)
         if state not in tuple(AuditState):
             raise StorageError("unknown audit state", received=state, expected=[str(a) for a in AuditState])
+        self.audit_writes += 1
         self._update(trial_id, {"audit": AuditState(state).stored, "audit_distance_m": distance_m,
                                 "audit_worker_id": worker_id.encode("utf-8", "replace")[:64]})
 
@@ -187,14 +189,13 @@ class BaseStorage:
 
     def _ranked_ids(self, k: int, agreed_only: bool) -> list[int]:
         cols = self.columns()
-        obj = cols["objective"]
+        # agreed_only: the few rows another identity's audit agreed with, the only ones looked at further
+        ids = np.flatnonzero(agreeing(cols["audit"])) if agreed_only else slice(None)
         # a set whose judge run diverged never counts as best
-        valid = (cols["status"] == TrialStatus.COMPLETE.stored) & np.isfinite(obj) & \
-            ~np.isin(cols["verification"], REFUTED_VERDICTS) & \
-            ~np.isin(cols["audit"], DISQUALIFYING_AUDITS)  # nor one other workers did not reproduce (or dispute)
-        if agreed_only:
-            valid &= agreeing(cols["audit"])
-        ids = np.flatnonzero(valid)
+        valid = (cols["status"][ids] == TrialStatus.COMPLETE.stored) & np.isfinite(cols["objective"][ids]) & \
+            ~np.isin(cols["verification"][ids], REFUTED_VERDICTS) & \
+            ~np.isin(cols["audit"][ids], DISQUALIFYING_AUDITS)  # nor one other workers did not reproduce (or dispute)
+        ids = ids[valid] if agreed_only else np.flatnonzero(valid)
         if k <= 0 or ids.size == 0:
             return []
         value = ranked_values({c: cols[c][ids] for c in _RANKED_BY}, self.run_meta().objective)
