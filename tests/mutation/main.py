@@ -29,13 +29,18 @@ STATUSES = {"ok_killed": "killed", "bad_survived": "survived", "bad_timeout": "t
 
 
 def copy_tree(dest: Path) -> None:
-    """The tracked files as they are in the work tree (edits included), over the last copy."""
+    """The tracked files as they are in the work tree (edits included), over the last copy; the copy is a
+    checkout of its own (the environment record's commit is read from the checkout the code runs in)."""
     names = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, check=True, capture_output=True).stdout
     for name in names.decode().split("\0"):
         src = ROOT / name
         if name and src.is_file():
             (dest / name).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(src, dest / name)
+    if not (dest / ".git").exists():
+        git = ["git", "-C", str(dest), "-c", "user.name=mutation", "-c", "user.email=mutation@localhost"]
+        for cmd in (["init", "-q"], ["add", "-A"], ["commit", "-qm", "the code under mutation"]):
+            subprocess.run(git + cmd, check=True, capture_output=True)
 
 
 def mutmut_run(tree: Path, cmd: list[str]) -> bool:
