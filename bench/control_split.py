@@ -5,9 +5,11 @@ looks, the COM path, the set-up and result), per built-in.
 
     python bench/control_split.py [--spines all] [--seconds 3] [--repeats 3] [--controller NAME]
 
-The trial runs through worker.trial.simulation.simulate, with the loop's compiled run
+The parts are timed in a twin of the trial: worker.trial.simulation.simulate through the piecewise loop (the
+one-call run of whole check intervals, worker.trial.loop.run_checked, switched off), with its compiled run
 (worker.trial.loop.run_compiled) swapped for a copy that reads the CPU's time-stamp counter around each part
-(the same arithmetic, so the trial's bits are unchanged: `same_distance` checks it); the counter runs in wall
+(the same arithmetic, so the trial's bits are unchanged: `same_distance` checks it against the production
+trial, whose CPU time is `whole`; `whole_piecewise_timed` is the twin's); the counter runs in wall
 time, so a part of a step longer than PREEMPTED_US (the law: plus twice a CPG update) had another process in it
 and is left out of that part's mean (`parts_preempted`). The CPG alone is timed apart in a compiled loop on a
 copy of the trial's network at the trial's CPG plan (`cpg_us_per_step`), so
@@ -40,7 +42,7 @@ sys.path.insert(0, str(ROOT))
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology  # noqa: E402
 from spinefarm.worker.control.cpg import rk4_advance  # noqa: E402
 from spinefarm.worker.control.law import STATUS_OK, law_step_world  # noqa: E402
-from spinefarm.worker.trial import loop  # noqa: E402
+from spinefarm.worker.trial import batch, loop  # noqa: E402
 from spinefarm.worker.trial.setup import SetupCache  # noqa: E402
 from spinefarm.worker.trial.simulation import TrialConfig, random_unit_params, simulate  # noqa: E402
 
@@ -139,18 +141,23 @@ def one_trial(morph, u, cfg: TrialConfig, seed: int, cache: SetupCache, controll
 
     def timed(world, cpg, strings, clock, b, n_steps, poses):
         return _run_timed(world, cpg, strings, clock, b, n_steps, poses, ticks, caps)
+    checked = batch.checked_runner
     loop.run_compiled = timed
+    batch.checked_runner = lambda engine, law: None  # the piecewise loop, whose compiled pieces are timed
     try:
         t0 = time.process_time()
         res = simulate(morph, u, cfg, seed, controller=controller, setup=cache).result
-        whole_s = time.process_time() - t0
+        timed_s = time.process_time() - t0
     finally:
-        loop.run_compiled = plain
-    reference = simulate(morph, u, cfg, seed, controller=controller, setup=cache).result  # the plain loop
+        loop.run_compiled, batch.checked_runner = plain, checked
+    t0 = time.process_time()
+    reference = simulate(morph, u, cfg, seed, controller=controller, setup=cache).result  # the production loop
+    whole_s = time.process_time() - t0
     steps = res.sim_time_s / res.extras["dt_s"] + round(cfg.settle_s / res.extras["dt_s"])
     copies, law_us, mj = (ticks[:3] / tpu / ticks[4:7]).tolist()  # per step, over each part's kept steps
     whole = whole_s * 1e6 / steps
-    return {"whole": whole, "mj_step": mj, "law": law_us, "copies": copies,
+    return {"whole": whole, "whole_piecewise_timed": timed_s * 1e6 / steps, "mj_step": mj, "law": law_us,
+            "copies": copies,
             "python": whole - mj - law_us - copies, "compiled_calls_per_step": ticks[3] / steps,
             "parts_preempted": int(ticks[7]), "steps_timed": int(ticks[6]),
             "same_distance": res.distance_m == reference.distance_m, "distance_m": res.distance_m,
@@ -188,7 +195,7 @@ def spine_split(name: str, seconds: float, repeats: int, controller: str | None,
         row["strings"] = row["law"] - row["cpg"]
         if r:
             rows.append(row)
-    parts = ("whole", "mj_step", "law", "cpg", "strings", "copies", "python")
+    parts = ("whole", "whole_piecewise_timed", "mj_step", "law", "cpg", "strings", "copies", "python")
     med = {k: float(np.median([row[k] for row in rows])) for k in parts}
     print(f"{name}: " + ", ".join(f"{k} {v:.1f}" for k, v in med.items()) + " µs per step", file=sys.stderr)
     return {"us_per_step": med, "control_share": 1.0 - med["mj_step"] / med["whole"],

@@ -35,7 +35,9 @@ Optional abilities, declared in the engine's registry entry (spinefarm.robot.eng
                                   velocity (nb, 6) cm/s and rad/s, world frame, one write per body
   compiled_worlds()               "compiled_step": per world (address of a C function void step(uint64 model,
                                   uint64 data), model address, data address, state (nb, k), pose_columns (7,)
-                                  int64, wrench (nb, 6)), for the compiled loop of worker.trial.loop
+                                  int64, wrench (nb, 6)), for the compiled loop of worker.trial.loop;
+                                  with compiled_look(world): its steps_ahead policy as data the compiled loop
+                                  applies between steps (None: it never shortens a run)
 
 Engine knobs (solver, contacts, friction combination, workarounds) live in each backend's settings
 dataclass, built from TrialConfig.engine_options by `settings_from_options`, never in morphology data.
@@ -127,6 +129,13 @@ class BasePhysics:
         """ability "compiled_step": each world's (step function address, model address, data address, state,
         pose_columns, wrench); see the module docstring."""
         raise NotImplementedError(f"engine {self.name} has no compiled step")
+
+    def compiled_look(self, world: int) -> tuple | None:
+        """ability "compiled_step": world `world`'s steps_ahead policy as data for the compiled loop, or None
+        when steps_ahead never shortens a run; an engine whose policy has no compiled form raises."""
+        if type(self).steps_ahead is not BasePhysics.steps_ahead:
+            raise NotImplementedError(f"engine {self.name} has a steps_ahead policy and no compiled_look")
+        return None
 
     def __enter__(self) -> BasePhysics:
         return self

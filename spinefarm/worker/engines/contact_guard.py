@@ -161,7 +161,7 @@ class SegmentContactGuard:
         self._w0 = np.zeros_like(self.cap_p0)
         self._w1 = np.zeros_like(self.cap_p1)
         # the compiled call's arguments, built once (a look comes every check of every world)
-        self._kernel_args = ((self.cap_start, self.cap_p0, self.cap_p1, self.cap_radius, self.cap_reach,
+        self.kernel_args = ((self.cap_start, self.cap_p0, self.cap_p1, self.cap_radius, self.cap_reach,
                               self.body_radius), (self.pair_a, self.pair_b), (self._w0, self._w1))
 
     def free_time_s(self, qpos: np.ndarray, qvel: np.ndarray, horizon_s: float) -> tuple[float, float]:
@@ -169,4 +169,4 @@ class SegmentContactGuard:
         that limits it, inf if none does): see contact_free_time."""
         if self.pair_a.size == 0:
             return horizon_s, math.inf
-        return contact_free_time(qpos, qvel, horizon_s, *self._kernel_args)
+        return contact_free_time(qpos, qvel, horizon_s, *self.kernel_args)

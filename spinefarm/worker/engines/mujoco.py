@@ -96,8 +96,8 @@ class MujocoPhysics(BasePhysics):
 
     def _start_trial(self) -> None:
         self.retries = {}
-        self._steps = [0] * self.n_worlds  # since the start, for the contact guard
-        self._safe_until = [0] * self.n_worlds
+        self._steps = np.zeros(self.n_worlds, dtype=np.int64)  # since the start, for the contact guard
+        self._safe_until = np.zeros(self.n_worlds, dtype=np.int64)
 
     def _place(self, b: int, offsets: np.ndarray | None) -> None:
         mujoco.mj_resetData(self.model, self.data[b])
@@ -163,8 +163,17 @@ class MujocoPhysics(BasePhysics):
             if steps[b] == safe_until[b]:
                 self._look(b, active, horizon_steps)
             if active[b]:
-                ahead = min(ahead, safe_until[b] - steps[b])
+                ahead = min(ahead, int(safe_until[b] - steps[b]))
         return ahead if active.any() else 0
+
+    def compiled_look(self, world: int) -> tuple | None:
+        """The contact guard's look as worker.trial.loop.run_checked runs it between compiled steps: (qvel
+        (nb, 6), the guard's kernel arguments, dt_s, step counts (B,), safe-until steps (B,)), the counts in
+        step with the world's clock; None without a guard (segment contacts modelled or off)."""
+        if self.guard is None:
+            return None
+        self._steps[world] = round(self.data[world].time / self.model.opt.timestep)
+        return (self.qvel[world], *self.guard.kernel_args, self.dt_s, self._steps, self._safe_until)
 
     def _look(self, b: int, active: np.ndarray, horizon_steps: int) -> None:
         steps, why = self.contact_free_steps(horizon_steps, b)

@@ -18,9 +18,9 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.control.law import ControlLaw
 from spinefarm.worker.engines.base import BasePhysics
 from spinefarm.worker.sim import strings as sk
-from spinefarm.worker.trial import guard, scoring
+from spinefarm.worker.trial import guard, loop, scoring
 from spinefarm.worker.trial.episode import STRETCH_BASE_MIN_CM, check_state
-from spinefarm.worker.trial.loop import advance, stepper
+from spinefarm.worker.trial.loop import advance, checked_runner, stepper
 from spinefarm.worker.trial.settled import Settled
 
 
@@ -103,12 +103,15 @@ class Batch:
         self.done = 0  # steps since the start, settle included, of every world still running
         self._recorded = self.done  # the index of the step the recorder sees next
         self.run_steps = stepper(engine, law, self._record if timing.record_every else None)
+        # one world, not recorded: whole check intervals in one compiled call (loop.run_checked), same bits
+        self._checked = None if timing.record_every or engine.n_worlds != 1 else checked_runner(engine, law)
         # the compiled fast path of the guard check (worker.trial.guard); None: the exact check every time
         self._boxes = guard.level_boxes(terrain)
         self._limits = guard.limits(cfg)
         self._base_len = np.maximum(start_length_cm, STRETCH_BASE_MIN_CM).astype(np.float64)
         self._mass_total = float(np.asarray(masses, dtype=float).sum())  # the divisor of scoring.robot_com_cm
         self._com = np.zeros(3)
+        self._work_at = np.zeros(1)
 
     def run(self, settled: Settled | None = None, keep_settled: bool = False) -> list[WorldLog]:
         """Both phases, or with `settled` (every world's start pose and string tables those of its key,
@@ -125,6 +128,10 @@ class Batch:
             start = self.done
             n = 0
             while n < phase_steps and self.active.any():
+                whole = (phase_steps - n) // t.check_every * t.check_every
+                if whole and self._checked is not None and self._boxes is not None and self.done % t.check_every == 0:
+                    n += self._run_checked(whole, start)
+                    continue
                 k = min(phase_steps - n, t.check_every - self.done % t.check_every)
                 running = self.active.copy()
                 self._recorded = self.done
@@ -145,6 +152,30 @@ class Batch:
                                            self.law.work_internal(0), copy.deepcopy(self.worlds[0]), self.done)
         self._finish()
         return self.worlds
+
+    def _run_checked(self, n_steps: int, phase_start: int) -> int:
+        """Up to n_steps (whole check intervals) of world 0 through loop.run_checked, with Batch's bookkeeping
+        for what it ran; where it stopped early, what the piecewise path would do there. Returns steps run."""
+        every = self.timing.check_every
+        w = self.worlds[0]
+        rows = np.empty((n_steps // every, 3))
+        check = (every, w.last_check, w.last_good, self.masses, self._mass_total, sk.S_LPREV, self._base_len,
+                 every * self.timing.dt_s, self._boxes, self._limits, np.empty_like(w.last_good), self._work_at)
+        code, ran, checks = self._checked(0, n_steps, check, rows)
+        w.com_path.extend(rows[i].copy() for i in range(checks))
+        if checks:
+            w.last_good_step, w.last_good_work = self.done + checks * every, float(self._work_at[0])
+        self.done += ran
+        if code == loop.RAN_LAW_FAILED:
+            self.active[0] = False
+            self._dropped(~self.active, phase_start)
+        elif code == loop.RAN_LOOK_FAILED:  # the engine's own look, at the same state, records the retry
+            self.engine.steps_ahead(self.active, 0, every)
+            if not self.active[0]:
+                self._dropped(~self.active, phase_start)
+        elif code == loop.RAN_CHECK_UNCLEAR:
+            self._check()
+        return ran
 
     def _start_settled(self, settled: Settled) -> None:
         for b in range(self.engine.n_worlds):

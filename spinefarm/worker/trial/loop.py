@@ -27,6 +27,8 @@ from numba.extending import intrinsic
 from spinefarm.robot.engines import engine_spec
 from spinefarm.worker.control.law import STATUS_OK, ControlLaw, law_step_world
 from spinefarm.worker.engines.base import BasePhysics
+from spinefarm.worker.engines.contact_guard import SegmentContactGuard, contact_free_time
+from spinefarm.worker.trial.guard import check_clear
 
 OnStep = Callable[[np.ndarray, np.ndarray], None]
 Run = Callable[[int, np.ndarray], None]  # run(k, active): k steps of the active worlds
@@ -68,6 +70,86 @@ def run_compiled(world, cpg, strings, clock, b, n_steps, poses):
                 wrench[i, 3 + c] = torque[i, c]
         _call_step(step, m_addr, d_addr)
     return STATUS_OK, n_steps
+
+
+# how run_checked stopped: every step run; a law step failed; the engine's look found no safe step (its own
+# steps_ahead then looks again and words why); a check the fast path could not call sane (the exact one decides)
+RAN_ALL, RAN_LAW_FAILED, RAN_LOOK_FAILED, RAN_CHECK_UNCLEAR = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def _look_ok(state, look, b, horizon_steps):
+    """MujocoPhysics.steps_ahead's look in compiled form (the same arithmetic): when world b has reached the end of
+    its safe steps, how many more are safe (at most horizon_steps); False when not one is."""
+    enabled, qvel, capsules, pairs, scratch, dt_s, steps, safe_until = look
+    if not enabled or steps[b] != safe_until[b]:
+        return True
+    t_free, _ = contact_free_time(state, qvel, horizon_steps * dt_s, capsules, pairs, scratch)
+    free = min(horizon_steps, int(t_free / dt_s * (1.0 + 1e-12)))
+    if free == 0:
+        return False
+    safe_until[b] = steps[b] + free
+    return True
+
+
+@njit(cache=True)
+def run_checked(world, cpg, strings, clock, b, n_steps, poses, look, check, com_rows):
+    """n_steps of world b from a check, in whole check intervals, as worker.trial.batch.Batch runs them through
+    `advance` and its checks, in one call: the engine's look when due (before the first piece and after each),
+    the steps (run_compiled), and at every check the guard's fast path (guard.check_clear: COM into com_rows,
+    the last sane pose). look = (enabled, qvel, contact guard arguments, dt_s, steps (B,), safe_until (B,));
+    check = (check_every, last, last_good, masses, mass_total, lprev column, base lengths, interval_s, boxes,
+    limits, pose buffer (nb, 7), work at the last sane check (1,)). Returns (RAN_*, steps taken, sane checks)."""
+    state, columns = world[3], world[4]
+    every, last, last_good, masses, mass_total, lprev, base_len, interval_s, boxes, limits, seen, work_at = check
+    enabled, steps = look[0], look[6]
+    sstate, work = strings[5][b], strings[9]
+    if not _look_ok(state, look, b, every):
+        return RAN_LOOK_FAILED, 0, 0
+    done = 0
+    checks = 0
+    while done < n_steps:
+        k = every - done % every
+        if enabled:
+            k = min(k, look[7][b] - steps[b])
+        status, ran = run_compiled(world, cpg, strings, clock, b, k, poses)
+        done += ran
+        steps[b] += ran
+        if status != STATUS_OK:
+            return RAN_LAW_FAILED, done, checks
+        if not _look_ok(state, look, b, every):
+            return RAN_LOOK_FAILED, done, checks
+        if done % every == 0:
+            for i in range(seen.shape[0]):
+                for c in range(7):
+                    seen[i, c] = state[i, columns[c]]
+            if not check_clear(seen, last, last_good, masses, mass_total, sstate, lprev, base_len, interval_s, boxes,
+                               limits, com_rows[checks]):
+                return RAN_CHECK_UNCLEAR, done, checks
+            work_at[0] = work[b, 0]
+            checks += 1
+    return RAN_ALL, done, checks
+
+
+def checked_runner(engine: BasePhysics, law: ControlLaw) -> Callable[..., tuple[int, int, int]] | None:
+    """run(b, n_steps, check, com_rows) -> run_checked's answer for world b, or None where the engine has no
+    compiled step or no compiled form of its steps_ahead policy (Batch then runs `stepper`'s pieces)."""
+    if not engine_spec(engine.name).can("compiled_step"):
+        return None
+    worlds = engine.compiled_worlds()
+    try:
+        engine.compiled_look(0)
+    except NotImplementedError:
+        return None
+    poses = np.zeros((engine.n_bodies, 7))
+    idle = np.zeros(len(worlds), dtype=np.int64)
+    no_look = (False, np.zeros((engine.n_bodies, 6)), *SegmentContactGuard([], []).kernel_args, 1.0, idle, idle)
+
+    def run(b: int, n_steps: int, check: tuple, com_rows: np.ndarray) -> tuple[int, int, int]:
+        look = engine.compiled_look(b)  # its step count in step with the world's clock
+        look = no_look if look is None else (True, *look)
+        return run_checked(worlds[b], law.cpg, law.strings, law.clock, b, n_steps, poses, look, check, com_rows)
+    return run
 
 
 def stepper(engine: BasePhysics, law: ControlLaw, on_step: OnStep | None = None) -> Run:
