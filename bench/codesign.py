@@ -12,7 +12,7 @@ as `--episodes` perturbed episodes (`--randomize`), their median speed and COT w
 reaches the paper's speed (>= 9.46 cm/s) at the paper's COT (<= 3.2) at those medians.
 
 Measured run (docs/results.md; sized for ~50 min on a shared 2-core machine):
-    nice -n 10 python bench/codesign.py --budget 40 --seeds 3 --duration 5 --controller sidewinding \
+    nice -n 10 python bench/codesign.py --budget 100 --seeds 3 --duration 5 --controller sidewinding \
         --engine mujoco --dt 0.002 --engine-option segment_contacts=off --judged 1 --episodes 16
 Smoke run:  python bench/codesign.py --budget 10 --seeds 3 --duration 2 --episodes 4 --judged 2
 
@@ -136,16 +136,22 @@ def body_of(config, cols: dict, tid: int) -> dict:
 
 
 def judge(pool: ProcessPoolExecutor, config, tids: list[int], cols: dict, args: argparse.Namespace) -> list[dict]:
-    """The trials' parameters in `--episodes` perturbed worlds (all submitted at once): median speed and COT."""
+    """The trials' parameters in `--episodes` perturbed worlds: median speed and COT with their range. Each
+    trial's episodes are split over the pool (chunk c draws its worlds from the trial's seed + c), all at once."""
     from spinefarm.protocol.robust import RobustSpec, parse_randomize
 
-    robust = RobustSpec(episodes=args.episodes, randomize=parse_randomize(args.randomize), statistic="mean")
-    perturbed = replace(config, robust=robust.to_dict()).to_dict()
-    futures = [pool.submit(_evaluate, perturbed, t, cols["params_unit"][t].tolist(), int(cols["seed"][t]))
-               for t in tids]
+    chunks = np.array_split(np.arange(args.episodes), min(args.workers, args.episodes))
+    futures = {}
+    for t in tids:
+        for c, part in enumerate(chunks):
+            robust = RobustSpec(episodes=len(part), randomize=parse_randomize(args.randomize), statistic="mean")
+            perturbed = replace(config, robust=robust.to_dict()).to_dict()
+            futures[t, c] = pool.submit(_evaluate, perturbed, t, cols["params_unit"][t].tolist(),
+                                        int(cols["seed"][t]) + c)
     out = []
-    for tid, fut in zip(tids, futures, strict=True):
-        eps = [e for e in fut.result().get("episodes", []) if e.get("status") == "complete"]
+    for tid in tids:
+        eps = [e for c in range(len(chunks)) for e in futures[tid, c].result().get("episodes", [])
+               if e.get("status") == "complete"]
         speed = np.array([e["speed_cm_s"] for e in eps]) if eps else np.array([np.nan])
         cot = np.array([e["cot"] for e in eps]) if eps else np.array([np.nan])
         out.append({"trial_id": tid, "episodes_complete": len(eps), "median_speed_cm_s": float(np.median(speed)),
