@@ -1,0 +1,51 @@
+"""The screen rungs' rules on storage alone, in-process (the searches of test_fidelity.py hold the same code
+end to end): a rung's duration, when a plain and a halving run are done, a proposal's parent, a one-row rung."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from spinefarm.coordinator.ladder.rungs import FirstRungView, HalvingTrialScheduler, PlainTrialScheduler
+from spinefarm.protocol.settings import Rung, RunSettings
+from tests.coordinator_tests.test_fidelity import _result, _storage_with
+
+
+def test_a_rung_without_a_duration_takes_the_runs_own_and_one_with_says_its_seconds():
+    assert math.isnan(PlainTrialScheduler(RunSettings()).duration_s(0))
+    assert PlainTrialScheduler(RunSettings(ladder=(Rung(duration_s=2.5),))).duration_s(0) == 2.5
+
+
+def test_a_plain_run_is_done_at_its_budget_exactly():
+    plain, st = PlainTrialScheduler(RunSettings()), _storage_with([0.3, 0.1, 0.2])
+    assert [plain.done(st, 3, n) for n in (2, 3, 4)] == [False, True, True]
+
+
+def test_a_halving_run_is_done_once_every_set_is_sampled_finished_and_nothing_is_left_to_promote():
+    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    st = _storage_with([0.1, 0.9, 0.5])
+    assert not rungs.done(st, 4, 3)     # a set of the budget not sampled yet
+    assert not rungs.done(st, 3, 3)     # all sampled and finished, but the best has not gone on
+    st.add_trial(3, np.full(3, 0.5), np.zeros(3), "promoted", 1, 0, 1, 3.0)
+    assert not rungs.done(st, 3, 3)     # its promotion sampled, not finished
+    st.finish_trial(3, _result(3, 0.95), 0.95)
+    assert rungs.done(st, 3, 4)
+    assert not rungs.done(st, 3, 3)     # one fewer finished than rows
+
+
+def test_a_proposals_parent_is_the_storage_row_of_its_view_row_and_none_stays_none():
+    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    st = _storage_with([0.1, 0.9, 0.5])
+    st.add_trial(3, np.full(3, 0.5), np.zeros(3), "promoted", 1, 0, 1, 3.0)
+    st.add_trial(4, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 0, 0, 1.0)
+    view = FirstRungView(st)
+    assert [rungs.parent_id(view, p) for p in (0, 3, -1)] == [0, 4, -1]   # view row 3 is storage row 4
+    assert PlainTrialScheduler(RunSettings()).parent_id(view, 3) == 3
+
+
+def test_a_rung_of_one_row_sends_it_on_once_sampling_is_done_and_an_empty_one_sends_nothing():
+    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    assert rungs.promotion(_storage_with([]), True) is None
+    one = _storage_with([0.4])
+    assert rungs.promotion(one) is None and rungs.promotion(one, True) == 0
