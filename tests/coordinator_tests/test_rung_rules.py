@@ -49,3 +49,16 @@ def test_a_rung_of_one_row_sends_it_on_once_sampling_is_done_and_an_empty_one_se
     assert rungs.promotion(_storage_with([]), True) is None
     one = _storage_with([0.4])
     assert rungs.promotion(one) is None and rungs.promotion(one, True) == 0
+
+
+def test_once_a_rungs_quota_is_used_a_new_best_waits_for_the_end_to_go_on():
+    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    st = _storage_with([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])   # 6 // 3: two of rung 0 go on
+    for expected in (5, 4):
+        assert rungs.promotion(st) == expected
+        st.add_trial(st.n_trials(), np.full(3, 0.5), np.zeros(3), "promoted", expected, 0, 1, 3.0)
+    new = st.n_trials()
+    st.add_trial(new, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 0, 0, 1.0)
+    st.finish_trial(new, _result(new, 0.9), 0.9)   # 7 rows: still two go on, and two have
+    assert rungs.promotion(st) is None
+    assert rungs.promotion(st, sampling_done=True) == new
