@@ -27,12 +27,12 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     # the rungs' rules on storage alone; the process tests of test_fidelity.py / test_ladder.py (minutes a mutant)
     # hold the same code end to end and are left out
     "ladder": ("spinefarm/coordinator/ladder/rungs.py",
-               tuple(f"{C}/test_fidelity.py::{t}" for t in (
+               (f"{C}/test_rung_rules.py", *(f"{C}/test_fidelity.py::{t}" for t in (
                    "test_the_best_third_of_a_rung_is_promoted_best_first_and_once",
                    "test_bad_rungs_are_refused_with_what_was_expected",
                    "test_at_the_end_the_best_goes_on_through_rungs_holding_fewer_rows_than_eta",
                    "test_a_search_that_keeps_improving_promotes_about_a_third_and_always_its_best",
-                   "test_samplers_see_the_first_rung_only_so_rungs_do_not_change_their_proposals"))),
+                   "test_samplers_see_the_first_rung_only_so_rungs_do_not_change_their_proposals")))),
     "ladder-seam": ("spinefarm/coordinator/ladder/ladder.py",
                     (f"{C}/test_core.py", f"{C}/test_unaudited.py", f"{C}/test_opinion.py")),
     "calibration": ("spinefarm/worker/tools/calibrate.py",

@@ -47,8 +47,6 @@ class BaseTrialScheduler:
     (before anything is sampled), `sampler_view` before each proposal, `done` whenever the run's state
     is asked for; nothing is kept between calls that storage cannot rebuild."""
 
-    name = ""
-
     def __init__(self, settings: RunSettings) -> None:
         self.settings = settings
 
@@ -90,13 +88,9 @@ class BaseTrialScheduler:
 class PlainTrialScheduler(BaseTrialScheduler):
     """Every parameter set evaluated once, at the ladder's last rung."""
 
-    name = "plain"
-
 
 class HalvingTrialScheduler(BaseTrialScheduler):
     """Asynchronous successive halving over the ladder, keeping 1/eta of each rung (see the module)."""
-
-    name = "halving"
 
     @classmethod
     def from_durations(cls, durations_s: tuple[float, ...], eta: int = DEFAULT_ETA) -> HalvingTrialScheduler:
