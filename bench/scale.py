@@ -19,13 +19,14 @@ the coordinator serves (its first status file). With SPINEFARM_GRANT_LOG the coo
 arrival at its handler and the handler's time; `first_grant_split_ms` and `later_grants_split_ms` cut each grant's
 wait in three on that one clock: `to_handler_ms` (the worker process, the routers, the coordinator's transport
 thread and its queue), `in_handler_ms` (the core: its lock and work), `back_ms` (the reply to the worker's thread).
-With --restart, once half the budget is stored the coordinator is SIGKILLed and resumed at once (`--resume`), every
-worker still there: `restart_burst_ms` is the workers' wait for every grant in the 20 s after the kill (the resumed
-coordinator's start, its grace for workers to come back, the requests that meet it at once), `restart_first_grant_ms`
-each worker's first grant from it, `restart_in_handler_ms` the handler's time over that window.
+With --restart, once half the budget is stored the coordinator is SIGKILLed and resumed (`--resume`) --down-s
+later, every worker still there: `restart_burst_ms` is the workers' wait for every grant in the --down-s + 20 s
+after the kill (the resumed coordinator's start, its grace for workers to come back, the requests that meet it at
+once), `restart_first_grant_ms` each worker's first grant from it, `restart_in_handler_ms` the handler's time over
+that window.
 
 usage: python bench/scale.py --workers 500 [--per-process 10] [--trials N] [--duration 10] [--jitter 0.5]
-       [--kill 0.1] [--stagger 0.1] [--keep] [--restart]
+       [--kill 0.1] [--stagger 0.1] [--keep] [--restart [--down-s 0]]
 prints one JSON object.
 """
 
@@ -229,17 +230,18 @@ def _split(tmp: Path) -> dict:
             "later_grants_split_ms": {k: _percentiles(np.array(v)) for k, v in parts.items()}}
 
 
-def _restart(coord: subprocess.Popen, out: Path, endpoint: str, tmp: Path) -> subprocess.Popen:
-    """--restart: SIGKILL the coordinator and resume its run file at once, every worker still waiting."""
+def _restart(coord: subprocess.Popen, out: Path, endpoint: str, tmp: Path, down_s: float) -> subprocess.Popen:
+    """--restart: SIGKILL the coordinator and resume its run file `down_s` later, every worker still waiting."""
     coord.send_signal(signal.SIGKILL)
     coord.wait(30)
+    time.sleep(down_s)
     return _spinefarm("coordinator", "--resume", str(out), "--connect", endpoint, "--api-port", "-1", "--quiet",
                       log=tmp / "coordinator-resumed.log",
                       env={**os.environ, "SPINEFARM_GRANT_LOG": str(tmp / "coordinator-grants.log")})
 
 
 def _burst(tmp: Path, killed_at: float, window_s: float = 20.0) -> dict:
-    """The restart's burst: every grant the workers got in the `window_s` after the kill (the resumed
+    """The restart's burst: every grant the workers got in the `window_s` after the kill (--down-s + 20 s: the resumed
     coordinator's start, its grace for workers to come back and the re-asks after it), each worker's first grant
     from it apart, and the handler's time over the same window."""
     rows = sorted(line.split() for p in tmp.glob("grants-*.log") for line in p.read_text().splitlines())
@@ -324,7 +326,7 @@ def run(args: argparse.Namespace) -> dict:
                 killed = n_kill or -1
             if args.restart and killed and restarted_at is None and st.get("trials_complete", 0) >= trials // 2:
                 restarted_at = time.time()
-                coord = _restart(coord, out, endpoints[0], tmp)
+                coord = _restart(coord, out, endpoints[0], tmp, args.down_s)
             time.sleep(0.5)
         wall_s = time.monotonic() - t0
         late = 0
@@ -337,7 +339,7 @@ def run(args: argparse.Namespace) -> dict:
         checked = _check(out, tmp)
         result = {"workers": args.workers, "trials": trials, "stored": checked["stored"], "lost": checked["lost"],
                 "duplicated": checked["duplicated"], **_latencies(tmp), **_split(tmp),
-                **({} if restarted_at is None else _burst(tmp, restarted_at)),
+                **({} if restarted_at is None else _burst(tmp, restarted_at, args.down_s + 20.0)),
                 "coordinator_rss_mb": round(rss, 1),
                 "exact_budget": checked["rows"] == trials and checked["stored"] == trials,
                 "acknowledged": checked["acknowledged"], "workers_killed": sum(
@@ -380,6 +382,8 @@ def main() -> None:
     ap.add_argument("--restart", action="store_true", help="once half the budget is stored (after the workers' "
                     "kill), SIGKILL the coordinator and resume its run with every worker waiting; prints the burst "
                     "of first grants from the resumed one (restart_burst_ms)")
+    ap.add_argument("--down-s", type=float, default=0.0, help="with --restart: seconds between the kill and the "
+                    "resume (default 0; 10 lets every waiting worker reach its longest back-off)")
     ap.add_argument("--join-step", type=float, default=-1.0, help=argparse.SUPPRESS)
     ap.add_argument("--host", help=argparse.SUPPRESS)
     ap.add_argument("--first", type=int, default=0, help=argparse.SUPPRESS)
