@@ -15,12 +15,12 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     # not test_environment.py's search and resume (the record's way into run files, not this module's code):
     # minutes per mutant on two busy cores
     "environment": ("spinefarm/protocol/environment.py",
-                    tuple(f"{P}/test_environment.py::{t}" for t in (
+                    (*(f"{P}/test_environment.py::{t}" for t in (
                         "test_the_record_names_python_packages_cpu_blas_and_commit",
                         "test_differences_name_what_changed_and_nothing_else",
                         "test_the_record_keeps_the_variables_that_steer_blas_and_numba",
-                        "test_without_a_checkout_of_its_own_the_commit_is_spinefarm_commit"))
-                    + (f"{P}/test_environment_blas.py",)),
+                        "test_without_a_checkout_of_its_own_the_commit_is_spinefarm_commit")),
+                     f"{P}/test_environment_blas.py")),
     "scheduler": ("spinefarm/coordinator/scheduler.py",
                   (f"{C}/test_scheduler.py", f"{C}/test_scheduler_liveness.py")),
     "judge-audit": ("spinefarm/coordinator/tasks.py", (f"{C}/test_judge_rules.py", f"{C}/test_ladder.py")),
