@@ -20,7 +20,7 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
                         "test_differences_name_what_changed_and_nothing_else",
                         "test_the_record_keeps_the_variables_that_steer_blas_and_numba",
                         "test_without_a_checkout_of_its_own_the_commit_is_spinefarm_commit")),
-                     f"{P}/test_environment_blas.py")),
+                     f"{P}/test_environment_sources.py", f"{P}/test_environment_blas.py")),
     "scheduler": ("spinefarm/coordinator/scheduler.py",
                   (f"{C}/test_scheduler.py", f"{C}/test_scheduler_liveness.py")),
     "judge-audit": ("spinefarm/coordinator/tasks.py", (f"{C}/test_judge_rules.py", f"{C}/test_ladder.py")),
