@@ -72,15 +72,16 @@ def runner(tests: tuple[str, ...], no_jit: tuple[str, ...] = ()) -> str:
 
 def run_module(tree: Path, module: str, tests: tuple[str, ...], functions: tuple[str, ...] = (),
                no_jit: tuple[str, ...] = (), time_base_s: float = 20.0) -> None:
-    """mutmut over the module; if it stops at a mutant it cannot look up, the mutants it did not reach are
-    run one by one (that one is left untested)."""
+    """mutmut over the module, then the mutants it left untested one by one: those after a mutant it could not
+    look up (that one stays untested), and those on a line whose text repeats an earlier line of the module
+    (mutmut 2.5.1 looks a cached status up by the line's text, so after an interrupted run such a mutant takes
+    the earlier line's status and is never queued)."""
     args = ["--paths-to-mutate", module, "--runner", runner(tests, no_jit), "--tests-dir", "tests",
             "--disable-mutation-types", "string,fstring,decorator", "--test-time-base", str(time_base_s),
             "--simple-output", "--no-progress", "--CI"]
     # restricted to some functions: mutmut started through tests.mutation.lines, which hands it their lines
     tool = ["tests.mutation.lines", module, ",".join(functions), "--"] if functions else ["mutmut"]
-    if mutmut_run(tree, [sys.executable, "-m", *tool, "run", *args]):
-        return
+    mutmut_run(tree, [sys.executable, "-m", *tool, "run", *args])
     for mutant_id in untested(tree, module):
         restore(tree, module)
         mutmut_run(tree, [sys.executable, "-m", "mutmut", "run", str(mutant_id), *args])

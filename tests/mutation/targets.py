@@ -12,13 +12,23 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     "scoring": ("spinefarm/worker/trial/scoring.py", (f"{W}/test_scoring.py", f"{W}/test_score_units.py")),
     "sampler-paper": ("spinefarm/coordinator/samplers/hill_climb.py", (f"{C}/test_samplers.py",)),
     "sampler-registry": ("spinefarm/coordinator/samplers/registry.py", (f"{C}/test_samplers.py",)),
-    "environment": ("spinefarm/protocol/environment.py", (f"{P}/test_environment.py",)),
+    # not test_environment.py's search and resume (the record's way into run files, not this module's code):
+    # minutes per mutant on two busy cores
+    "environment": ("spinefarm/protocol/environment.py",
+                    (*(f"{P}/test_environment.py::{t}" for t in (
+                        "test_the_record_names_python_packages_cpu_blas_and_commit",
+                        "test_differences_name_what_changed_and_nothing_else",
+                        "test_the_record_keeps_the_variables_that_steer_blas_and_numba",
+                        "test_without_a_checkout_of_its_own_the_commit_is_spinefarm_commit")),
+                     f"{P}/test_environment_sources.py", f"{P}/test_environment_blas.py")),
     "scheduler": ("spinefarm/coordinator/scheduler.py",
                   (f"{C}/test_scheduler.py", f"{C}/test_scheduler_liveness.py")),
     "judge-audit": ("spinefarm/coordinator/ladder/checks.py",
                     (f"{C}/test_judge_rules.py", f"{C}/test_best_judged.py", f"{C}/test_opinion.py")),
+    # not test_no_locks.py's searches on a file system without locks: minutes per mutant on two busy cores
     "runlock": ("spinefarm/storage/runlock.py",
-                (f"{S}/test_runlock_rules.py", f"{S}/test_runlock_links.py", f"{S}/test_no_locks.py")),
+                (f"{S}/test_runlock_rules.py", f"{S}/test_runlock_links.py",
+                 f"{S}/test_no_locks.py::test_the_waiver_reads_hdf5s_switch_as_hdf5_does")),
     "robust-scoring": ("spinefarm/protocol/robust.py",
                        (f"{P}/test_robust.py", f"{P}/test_robust_draws.py", f"{W}/test_robust_scoring.py",
                         f"{W}/test_robust_worlds.py")),
