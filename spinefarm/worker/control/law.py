@@ -165,7 +165,7 @@ class ControlLaw:
                            _stack([n.amplitude_cm_s.astype(np.float64) for n in networks], np.float64),
                            _stack([n.indptr.astype(np.int64) for n in networks], np.int64),
                            _stack([n.source.astype(np.int64) for n in networks], np.int64),
-                           _stack([n.complex_weights() for n in networks], np.complex128).view(np.float64),
+                           _stack([c.kernel_arrays()[4] for c in self._cpgs], np.float64),  # weights once
                            np.array([float(n.amplitude_rate_per_s) for n in networks]))
         self._scratch = np.zeros((n_worlds, 9, n_nodes, 3))
         self._ahead = np.zeros((n_worlds, n_nodes))
