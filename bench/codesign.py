@@ -164,6 +164,8 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--budget", type=int, default=200, help="trials per search")
     p.add_argument("--seeds", type=int, default=3)
+    p.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + seeds - 1 (several "
+                                                                 "processes may share the seeds)")
     p.add_argument("--duration", type=float, default=10.0, help="simulated seconds per trial")
     p.add_argument("--workers", type=int, default=2, help="trials in flight (pool processes)")
     p.add_argument("--spread", type=float, default=0.3, help="body constants free within +-spread")
@@ -190,7 +192,7 @@ def main() -> int:
                      "episodes": args.episodes, "randomize": args.randomize,
                      "paper": {"speed_cm_s": PAPER_SPEED_CM_S, "cot": PAPER_COT}, "gait_only": [], "codesign": []}
         with ProcessPoolExecutor(args.workers) as pool:
-            for seed in range(args.seeds):
+            for seed in range(args.first_seed, args.first_seed + args.seeds):
                 for mode, source in (("gait_only", "tetraspine"), ("codesign", str(spec))):
                     out[mode].append(run_search(pool, source, seed, args))
                     # each search as it ends: a run cut short keeps what it measured
