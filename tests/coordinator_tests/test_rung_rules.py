@@ -107,3 +107,19 @@ def test_a_promoted_row_walks_back_to_its_first_rung_row_through_every_parent():
     st.add_trial(4, np.full(3, 0.5), np.zeros(3), "gaussian", 1, 0, 0, 1.0)   # a hill climber's child of row 1
     view = FirstRungView(st)
     assert [view.first_rung_row(t) for t in (3, 2, 1, 0, 4)] == [0, 0, 1, 0, 4]   # a sampler's parent is no rung
+
+
+def test_a_samplers_best_sets_are_first_rung_rows_in_the_storages_order_each_once():
+    st = _storage_with([0.1, 0.9, 0.5, 0.7, 0.6])
+    st.add_trial(5, np.full(3, 0.5), np.zeros(3), "promoted", 2, 0, 1, 3.0)   # set 2 went on: it ranks first
+    st.finish_trial(5, _result(5, 0.3), 0.3)
+    st.add_trial(6, np.full(3, 0.5), np.zeros(3), "promoted", 4, 0, 1, 3.0)   # set 4 went on too
+    st.finish_trial(6, _result(6, 0.2), 0.2)
+    view = FirstRungView(st)   # view rows 0..4 are storage rows 0..4
+    assert view.best_ids(0) == []
+    assert view.best_ids(1) == [2]
+    # the longer rung's two sets first, then the first rung by objective, each set once although its first-rung
+    # row ranks again further down
+    assert view.best_ids(4) == [2, 4, 1, 3]
+    assert view.best_ids(5) == [2, 4, 1, 3, 0]   # the storage's best five repeat set 4: it asks for more
+    assert view.best_ids(9) == [2, 4, 1, 3, 0]
