@@ -118,10 +118,10 @@ def motor_kinematic(rest, tension, tau_cmd, omega, rho, inertia, friction, tmax,
     return rest, omega
 
 
-@njit(cache=True)
-def _quat_to_matrix(q):
+@njit(cache=True, inline="always")
+def _quat_to_matrix(q, r):
+    """r (3, 3) = the rotation of quaternion q (x, y, z, w)."""
     x, y, z, w = q[0], q[1], q[2], q[3]
-    r = np.empty((3, 3))
     r[0, 0] = 1 - 2 * (y * y + z * z)
     r[0, 1] = 2 * (x * y - z * w)
     r[0, 2] = 2 * (x * z + y * w)
@@ -131,21 +131,30 @@ def _quat_to_matrix(q):
     r[2, 0] = 2 * (x * z - y * w)
     r[2, 1] = 2 * (y * z + x * w)
     r[2, 2] = 1 - 2 * (x * x + y * y)
-    return r
 
 
 @njit(cache=True)
-def world_anchors(poses, body, anchors, out):
-    """out (n, 3) = world positions of body-frame anchors (n, 3) on bodies posed by poses (nb, 7)."""
-    nb = poses.shape[0]
-    rots = np.empty((nb, 3, 3))
-    for b in range(nb):
-        rots[b] = _quat_to_matrix(poses[b, 3:7])
+def body_rotations(poses, rots):
+    """rots (nb, 3, 3) = each body's rotation matrix from poses (nb, 7)."""
+    for b in range(poses.shape[0]):
+        _quat_to_matrix(poses[b, 3:7], rots[b])
+
+
+@njit(cache=True)
+def _anchors(poses, rots, body, anchors, out):
     for i in range(anchors.shape[0]):
         b = body[i]
         for r in range(3):
             out[i, r] = poses[b, r] + rots[b, r, 0] * anchors[i, 0] + rots[b, r, 1] * anchors[i, 1] \
                 + rots[b, r, 2] * anchors[i, 2]
+
+
+@njit(cache=True)
+def world_anchors(poses, body, anchors, out):
+    """out (n, 3) = world positions of body-frame anchors (n, 3) on bodies posed by poses (nb, 7)."""
+    rots = np.empty((poses.shape[0], 3, 3))
+    body_rotations(poses, rots)
+    _anchors(poses, rots, body, anchors, out)
 
 
 @njit(cache=True)
@@ -165,8 +174,10 @@ def string_step(poses, geometry, params, state, cpg_out, dt, motor_mode, outputs
     out_force, out_torque, out_tension, work, wa, wb, string_force = outputs
     nb = poses.shape[0]
     n = params.shape[0]
-    world_anchors(poses, body_a, anc_a, wa)
-    world_anchors(poses, body_b, anc_b, wb)
+    rots = np.empty((nb, 3, 3))  # one allocation per step, both ends' anchors from the same matrices
+    body_rotations(poses, rots)
+    _anchors(poses, rots, body_a, anc_a, wa)
+    _anchors(poses, rots, body_b, anc_b, wb)
     force = out_force
     torque = out_torque
     force[:] = 0.0
