@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml requirements.lock
 install: $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/spinefarm search tetraspine --trials 100 --workers 2 --duration 5 --out runs/tetraspine-demo.h5 --overwrite
+	$(VENV)/bin/spinefarm search tetrahedral-complex --trials 100 --workers 2 --duration 5 --out runs/tetrahedral-complex-demo.h5 --overwrite
 
 test: $(STAMP)
 	sh .ci/ensure-chromium
