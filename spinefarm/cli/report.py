@@ -138,12 +138,14 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
     else:
         b = best[0]
         engine = f" in {b.engine} at {b.dt_s * 1e3:g} ms" if b.engine and math.isfinite(b.dt_s) else ""
+        counted_m = counted_distance_m(b.verification, b.distance_m, b.verify_distance_m)
+        judged = b.verification in ("holds", "moved", "judged")
+        # the judge stores its distance only: speed follows from it, COT and work are the screen's
+        speed = f"speed {_g(100.0 * counted_m / b.sim_time_s)} cm/s (judged) · screen's COT" if judged \
+            else f"speed {_g(b.speed_cm_s)} cm/s · COT"
         lines += [f"best trial {b.trial_id} ({b.phase}, {b.sim_time_s:g} s{engine})",
-                  "  " + _objective_text(meta, b)
-                  + f"distance {_g(counted_distance_m(b.verification, b.distance_m, b.verify_distance_m))} m"
-                  + (" (judged)" if b.verification in ("holds", "moved", "judged") else "")
-                  + f" · speed {_g(b.speed_cm_s)} cm/s · COT {_g(b.cot)} · "
-                  f"work {_g(b.work_j)} J",
+                  "  " + _objective_text(meta, b) + f"distance {_g(counted_m)} m" + (" (judged)" if judged else "")
+                  + f" · {speed} {_g(b.cot)} · work {_g(b.work_j)} J",
                   f"  verdict: {verdict}"]
         if (spread := model_spread(storage, b)) is not None:  # the judged best in the other engine too
             lines.append("  " + spread_text(spread))
