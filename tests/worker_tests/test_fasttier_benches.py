@@ -59,7 +59,8 @@ def test_the_in_trial_split_keeps_the_trials_bits():
     assert row["same_distance"]  # the timed copy of the loop computes what the production loop does
     us = row["us_per_step"]
     assert all(us[k] > 0 for k in ("whole", "mj_step", "law", "cpg"))
-    assert us["cpg"] < us["law"] and us["mj_step"] + us["law"] < us["whole"]
+    # parts and whole are timed on different runs (the whole on the production trial): their sum is a benchmark's
+    # figure, not a test's, so only the definition of the share is held here
     assert abs(row["control_share"] - (1 - us["mj_step"] / us["whole"])) < 1e-12
 
 
