@@ -151,3 +151,11 @@ def test_the_audited_share_follows_the_fraction_and_the_draw_follows_the_runs_se
     assert seven == _audited(7, 0.25)       # a restarted coordinator draws the same rows
     assert seven != eight                   # another run's seed draws others
     assert len(_audited(7, 0.0)) == 0 and len(_audited(7, 1.0)) == 399
+
+
+def test_the_drift_band_and_the_moving_threshold_include_their_ends():
+    assert _judged((1.2, 1.2, 1.2)).drift() is None           # 1 + 0.2: inside
+    assert _judged((0.8, 0.8, 0.8)).drift() is None           # 1 - 0.2: inside
+    assert "[0.8, 1.2]" in _judged((1.5, 1.5, 1.5), [0.3] * 3).drift()
+    # the screen moved exactly 0.1 m (the judge 0.1 / 1.5 m): it counts
+    assert _judged((1.5, 1.5, 1.5), [0.1] * 3).drift() is not None
