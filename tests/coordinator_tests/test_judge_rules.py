@@ -14,7 +14,7 @@ import pytest
 
 from spinefarm.coordinator.ladder.checks import Checks
 from spinefarm.coordinator.ladder.keys import split_key
-from spinefarm.protocol.settings import JudgePolicy, Rung, RunSettings, TaskFidelity
+from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung, RunSettings, TaskFidelity
 from spinefarm.protocol.states import AuditState, TrialStatus, Verification
 from spinefarm.protocol.verdicts import judge_verdict
 from spinefarm.storage.hdf5 import Hdf5Storage
@@ -127,3 +127,35 @@ def test_a_restarted_coordinator_issues_pending_judge_and_audit_tasks_again(tmp_
     assert sorted(split_key(k) for k in keys) == [("audit", 2), ("judge", 0), ("judge", 3), ("referee", 4)]
     assert book.pending == set(keys)
     again.close()
+
+
+def test_a_judge_in_the_runs_own_engine_named_outright_is_the_same_engine_and_halves_the_step():
+    # the run screens in Bullet and the judge's rung names Bullet: not another engine, so the raised screen
+    # stays in the run's engine at half of 4 x the judge's step (a run engine forgotten would move it to Bullet)
+    named = Checks(InMemoryStorage(), RunSettings(judge=JudgePolicy(rung=Rung("bullet", 0.0005))), "bullet", 7, True)
+    assert named.trial_fidelity(0, raised=True) == TaskFidelity("trial", None, 0.001, None)
+
+
+def _audited(seed: int, fraction: float, n: int = 400) -> set[int]:
+    s = InMemoryStorage()
+    s.create_run(make_meta())
+    _stored(s, [1.0 + 1e-3 * t for t in range(n)])   # each new row is the best: its audit is due anyway
+    book = Checks(s, RunSettings(audit=AuditPolicy(fraction=fraction)), "bullet", seed, judged=True)
+    return {t for t in range(n - 1) if book.audit_due(t) is not None}   # the last row, the best, left out
+
+
+def test_the_audited_share_follows_the_fraction_and_the_draw_follows_the_runs_seed():
+    seven, eight = _audited(7, 0.25), _audited(8, 0.25)
+    # 399 draws of 0.25: mean 99.75, sd 8.6; 5 sd either way
+    assert all(57 <= len(a) <= 143 for a in (seven, eight))
+    assert seven == _audited(7, 0.25)       # a restarted coordinator draws the same rows
+    assert seven != eight                   # another run's seed draws others
+    assert len(_audited(7, 0.0)) == 0 and len(_audited(7, 1.0)) == 399
+
+
+def test_the_drift_band_and_the_moving_threshold_include_their_ends():
+    assert _judged((1.2, 1.2, 1.2)).drift() is None           # 1 + 0.2: inside
+    assert _judged((0.8, 0.8, 0.8)).drift() is None           # 1 - 0.2: inside
+    assert "[0.8, 1.2]" in _judged((1.5, 1.5, 1.5), [0.3] * 3).drift()
+    # the screen moved exactly 0.1 m (the judge 0.1 / 1.5 m): it counts
+    assert _judged((1.5, 1.5, 1.5), [0.1] * 3).drift() is not None
