@@ -106,7 +106,8 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "objective": meta.objective, "state": state, "trials_budget": meta.trials_budget,
         "trials_planned": planned,
         "parameter_sets_sampled": storage.count_rung(0),
-        **(evaluation_counts(cols) if n_trials else {"parameter_sets_done": 0, "evaluations_done": 0}),
+        **(evaluation_counts(cols, storage.evaluations()) if n_trials
+           else {"parameter_sets_done": 0, "evaluations_done": 0}),
         "best_distance_m": _num(counted_distance_m(best[0].verification, best[0].distance_m,
                                                    best[0].verify_distance_m)) if best else None,
         "trials_done": finished, "trials_complete": counts["complete"], "trials_failed": counts["failed"],

@@ -119,7 +119,7 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
     on how the search went (drift, audits)."""
     meta = storage.run_meta()
     counts = storage.counts()
-    n = evaluation_counts(storage.columns())
+    n = evaluation_counts(storage.columns(), storage.evaluations())
     physical = bool(meta.morphology_spec)
     lines = [f"{'search done' if done else 'search stopped'}: {n['parameter_sets_done']} parameter sets, "
              f"{n['evaluations_done']} evaluations of {meta.morphology} ({counts['failed']} failed), run {meta.run_id}"]

@@ -23,7 +23,7 @@ def live_status(core: Any) -> dict[str, Any]:
         "failure": core.failure,
         "trials_budget": study.budget,
         "trials_planned": study.planned,
-        **evaluation_counts(study.storage.columns()),
+        **evaluation_counts(study.storage.columns(), study.storage.evaluations()),
         "trials_sampled": study.n_asked,
         "trials_complete": counts["complete"],
         "trials_failed": counts["failed"],

@@ -101,16 +101,25 @@ def counted_distance_m(verification: str | bytes, distance_m: float, verify_dist
     return verify_distance_m if v in JUDGED_VERDICTS and math.isfinite(verify_distance_m) else distance_m
 
 
-def evaluation_counts(cols: Mapping[str, np.ndarray]) -> dict[str, int]:
+def evaluation_counts(cols: Mapping[str, np.ndarray],
+                      evaluations: Mapping[str, np.ndarray] | None = None) -> dict[str, int]:
     """parameter_sets_done: sets whose first rung finished; evaluations_done: every finished simulation of any
-    set (screen rungs, judge runs, audits and referees; a judge's perturbed twin runs inside its task)."""
+    set (screen rungs, judge runs, audits and referees; a judge's perturbed twin runs inside its task), and the
+    second engine's opinions, which only the evaluations table (`evaluations`) records."""
     finished = np.isin(cols["status"], (TrialStatus.COMPLETE.stored, TrialStatus.FAILED.stored))
     judged = np.isin(cols["verification"], (*JUDGED_VERDICTS, *REFUTED_VERDICTS))
     audited = np.isin(cols["audit"], _AUDITED)
     refereed = np.isin(cols["audit"], _REFEREED)
     return {"parameter_sets_done": int(np.count_nonzero(finished & (cols["rung"] == 0))),
             "evaluations_done": int(np.count_nonzero(finished) + np.count_nonzero(judged)
-                                    + np.count_nonzero(audited) + np.count_nonzero(refereed))}
+                                    + np.count_nonzero(audited) + np.count_nonzero(refereed)
+                                    + _opinions(evaluations))}
+
+
+def _opinions(evaluations: Mapping[str, np.ndarray] | None) -> int:
+    if evaluations is None or "kind" not in evaluations:
+        return 0
+    return int(np.count_nonzero(evaluations["kind"] == b"opinion"))
 
 
 _AUDITED = tuple(a.stored for a in (AuditState.AGREES, AuditState.DISPUTED, AuditState.DISAGREES,

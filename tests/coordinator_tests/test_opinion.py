@@ -15,6 +15,7 @@ from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run, resume_run
 from spinefarm.protocol.settings import JudgePolicy, Rung, RunSettings, TaskFidelity
 from spinefarm.protocol.work import WorkGrant
+from spinefarm.storage.ranking import evaluation_counts
 from spinefarm.worker.service.zenoh_worker import build_evaluator
 from tests.coordinator_tests.helpers import FakeClock
 from tests.coordinator_tests.test_verification import _grant, _run, _submit
@@ -50,6 +51,9 @@ def test_a_judged_best_gets_one_opinion_row_in_the_other_engine_issued_again_aft
         assert core.done and _grant(core, "w2", 4).assignments == ()
         ev = storage.evaluations()
         assert ev["kind"].tolist() == [b"judge", b"opinion"]
+        # the counts shown: every finished trial row, its judge's run and the opinion, one evaluation each
+        rows = int(np.count_nonzero(storage.columns()["status"] == b"complete"))
+        assert evaluation_counts(storage.columns(), ev)["evaluations_done"] == rows + 2
         row = {name: col[1] for name, col in ev.items()}
         assert (row["trial_id"], row["engine"], row["dt_s"], row["worker_id"], row["status"]) == (
             best, b"mujoco", MUJOCO_CONVERGED_DT_S, b"w2", b"complete")
