@@ -25,9 +25,10 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     "scheduler": ("spinefarm/coordinator/scheduler.py",
                   (f"{C}/test_scheduler.py", f"{C}/test_scheduler_liveness.py")),
     "judge-audit": ("spinefarm/coordinator/tasks.py", (f"{C}/test_judge_rules.py", f"{C}/test_ladder.py")),
-    # not test_no_locks.py's searches on a file system without locks: minutes per mutant on two busy cores
+    # not test_no_locks.py's searches on a file system without locks (minutes per mutant on two busy cores):
+    # test_runlock_no_locks.py takes the lock there in one process
     "runlock": ("spinefarm/storage/runlock.py",
-                (f"{S}/test_runlock_rules.py", f"{S}/test_runlock_links.py",
+                (f"{S}/test_runlock_rules.py", f"{S}/test_runlock_no_locks.py", f"{S}/test_runlock_links.py",
                  f"{S}/test_no_locks.py::test_the_waiver_reads_hdf5s_switch_as_hdf5_does")),
     "robust-scoring": ("spinefarm/protocol/robust.py",
                        (f"{P}/test_robust.py", f"{P}/test_robust_draws.py", f"{W}/test_robust_scoring.py",
