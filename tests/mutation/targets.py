@@ -40,7 +40,8 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
                     (f"{W}/test_calibration_figures.py", f"{W}/test_calibration_thresholds.py",
                      f"{W}/test_calibrate_judge.py")),
     # not test_calibrate.py's calibrations and searches: minutes per mutant on two busy cores
-    "engine-auto": ("spinefarm/cli/engine_auto.py", ("tests/cli_tests/test_engine_auto.py",)),
+    "engine-auto": ("spinefarm/cli/engine_auto.py",
+                    ("tests/cli_tests/test_engine_auto.py", "tests/cli_tests/test_engine_auto_request.py")),
     "contact-guard": ("spinefarm/worker/engines/contact_guard.py",
                       (f"{W}/test_mujoco.py::test_auto_segment_contacts_give_the_bits_of_modelled_ones",)),
     "sandbox": ("spinefarm/worker/service/sandbox.py",
