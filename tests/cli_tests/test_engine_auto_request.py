@@ -48,3 +48,19 @@ def test_a_builtin_is_never_fitted_and_a_users_robot_within_its_budget(asked, tm
 def test_the_calibration_runs_on_a_process_per_local_worker_at_most_two(asked, workers, processes) -> None:
     _choose("tetraspine", "--workers", workers)
     assert asked == [("tetraspine", processes, 0)]
+
+
+def test_a_calibration_that_cannot_run_falls_back_to_the_default_engine_and_says_why(tmp_path, monkeypatch,
+                                                                                      capsys) -> None:
+    from spinefarm.protocol.errors import ConfigError
+
+    monkeypatch.setattr(shipped_calibration, "SHIPPED_DIR", tmp_path / "none-shipped")
+
+    def cannot(*_args, **_kw):
+        raise ConfigError("no default step simulates this robot")
+
+    monkeypatch.setattr(engine_auto, "calibrate_in_child", cannot)
+    args = build_parser().parse_args(["search", "tetraspine"])
+    assert engine_auto.choose_engine(args) is None
+    assert args.engine is None  # not given: the run's default engine, Bullet
+    assert "the calibration could not run (no default step simulates this robot); bullet" in capsys.readouterr().err
