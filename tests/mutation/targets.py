@@ -31,8 +31,8 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
                 (f"{S}/test_runlock_rules.py", f"{S}/test_runlock_no_locks.py", f"{S}/test_runlock_links.py",
                  f"{S}/test_no_locks.py::test_the_waiver_reads_hdf5s_switch_as_hdf5_does")),
     "robust-scoring": ("spinefarm/protocol/robust.py",
-                       (f"{P}/test_robust.py", f"{P}/test_robust_draws.py", f"{W}/test_robust_scoring.py",
-                        f"{W}/test_robust_worlds.py")),
+                       (f"{P}/test_robust.py", f"{P}/test_robust_draws.py", f"{P}/test_robust_episode_seeds.py",
+                        f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
     "robust-worlds": ("spinefarm/worker/trial/robust.py",
                       (f"{W}/test_robust_world_rules.py", f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
     "ladder": ("spinefarm/coordinator/fidelity.py", (f"{C}/test_fidelity.py", f"{C}/test_ladder.py")),
@@ -67,7 +67,7 @@ FUNCTIONS: dict[str, tuple[str, ...]] = {
 # otherwise be compiled again for every mutant (half a minute or more here). Only if they all pass do the
 # module's files above run, compiled (tests/mutation/pytest_exit.py).
 NO_JIT: dict[str, tuple[str, ...]] = {
-    "contact-guard": (f"{W}/test_segment_distance.py", f"{W}/test_contact_guard.py",
+    "contact-guard": (f"{W}/test_segment_distance.py", f"{W}/test_contact_guard.py", f"{W}/test_contact_guard_spin.py",
                       f"{W}/test_mujoco.py::test_segment_distance_agrees_with_dense_sampling",
                       f"{W}/test_mujoco.py::test_the_contact_guard_is_silent_while_segments_are_apart",
                       f"{W}/test_mujoco.py::test_filtered_pairs_pass_through_each_other"),
