@@ -64,3 +64,11 @@ def test_a_calibration_that_cannot_run_falls_back_to_the_default_engine_and_says
     assert engine_auto.choose_engine(args) is None
     assert args.engine is None  # not given: the run's default engine, Bullet
     assert "the calibration could not run (no default step simulates this robot); bullet" in capsys.readouterr().err
+
+
+def test_a_shipped_calibration_is_stored_as_shipped_and_a_fresh_one_is_not(asked, tmp_path, monkeypatch) -> None:
+    fresh = engine_auto.choose_engine(build_parser().parse_args(["search", "tetraspine"]))
+    assert (fresh.cached, fresh.shipped) == (False, False)
+    monkeypatch.undo()  # the package's shipped calibrations again
+    found = engine_auto.choose_engine(build_parser().parse_args(["search", "tetraspine"]))
+    assert (found.cached, found.shipped) == (True, True) and "[shipped calibration]" in found.describe()
