@@ -32,6 +32,7 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
                  f"{S}/test_no_locks.py::test_the_waiver_reads_hdf5s_switch_as_hdf5_does")),
     "robust-scoring": ("spinefarm/protocol/robust.py",
                        (f"{P}/test_robust.py", f"{P}/test_robust_draws.py", f"{P}/test_robust_episode_seeds.py",
+                        f"{P}/test_robust_statistic.py",
                         f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
     "robust-worlds": ("spinefarm/worker/trial/robust.py",
                       (f"{W}/test_robust_world_rules.py", f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
