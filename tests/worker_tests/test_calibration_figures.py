@@ -106,3 +106,13 @@ def test_settings_are_fixed_once_made() -> None:
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.gaits = 41  # type: ignore[misc]
     assert hash(s) == hash(CalibrationSettings())
+
+
+def test_a_gait_moving_exactly_one_cm_counts_and_none_moving_is_said() -> None:
+    # docs/engines.md: the ratio is taken over gaits that move >= 1 cm in Bullet
+    bullet = np.array([0.01, 0.009, 0.5, 0.2])
+    agree = agreement(bullet, bullet * 1.0)
+    assert agree["n_moving"] == 3 and agree["median_distance_ratio"] == 1.0
+    still = agreement(np.array([0.001, 0.002, 0.003]), np.array([0.001, 0.002, 0.003]))
+    assert still["median_distance_ratio"] is None
+    assert "distance ratio none (no gait moves) outside [0.9, 1.1]" in decide(still)[1]
