@@ -20,20 +20,24 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
                         "test_differences_name_what_changed_and_nothing_else",
                         "test_the_record_keeps_the_variables_that_steer_blas_and_numba",
                         "test_without_a_checkout_of_its_own_the_commit_is_spinefarm_commit")),
-                     f"{P}/test_environment_sources.py", f"{P}/test_environment_blas.py")),
+                     f"{P}/test_environment_differences.py", f"{P}/test_environment_sources.py",
+                     f"{P}/test_environment_blas.py")),
     "scheduler": ("spinefarm/coordinator/scheduler.py",
                   (f"{C}/test_scheduler.py", f"{C}/test_scheduler_liveness.py")),
     "judge-audit": ("spinefarm/coordinator/ladder/checks.py",
                     (f"{C}/test_judge_rules.py", f"{C}/test_best_judged.py", f"{C}/test_opinion.py")),
-    # not test_no_locks.py's searches on a file system without locks: minutes per mutant on two busy cores
+    # not test_no_locks.py's searches on a file system without locks (minutes per mutant on two busy cores):
+    # test_runlock_no_locks.py takes the lock there in one process
     "runlock": ("spinefarm/storage/runlock.py",
-                (f"{S}/test_runlock_rules.py", f"{S}/test_runlock_links.py",
+                (f"{S}/test_runlock_rules.py", f"{S}/test_runlock_no_locks.py", f"{S}/test_runlock_links.py",
                  f"{S}/test_no_locks.py::test_the_waiver_reads_hdf5s_switch_as_hdf5_does")),
     "robust-scoring": ("spinefarm/protocol/robust.py",
-                       (f"{P}/test_robust.py", f"{P}/test_robust_draws.py", f"{W}/test_robust_scoring.py",
-                        f"{W}/test_robust_worlds.py")),
+                       (f"{P}/test_robust.py", f"{P}/test_robust_draws.py", f"{P}/test_robust_episode_seeds.py",
+                        f"{P}/test_robust_statistic.py",
+                        f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
     "robust-worlds": ("spinefarm/worker/trial/robust.py",
-                      (f"{W}/test_robust_world_rules.py", f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
+                      (f"{W}/test_robust_world_rules.py", f"{W}/test_robust_one_episode.py",
+                       f"{W}/test_robust_scoring.py", f"{W}/test_robust_worlds.py")),
     # the rungs' rules on storage alone; the process tests of test_fidelity.py / test_ladder.py (minutes a mutant)
     # hold the same code end to end and are left out
     "ladder": ("spinefarm/coordinator/ladder/rungs.py",
@@ -48,7 +52,9 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     "calibration": ("spinefarm/worker/tools/calibrate.py",
                     (f"{W}/test_calibration_figures.py", f"{W}/test_calibration_thresholds.py",
                      f"{W}/test_calibrate_judge.py")),
-    "engine-auto": ("spinefarm/cli/engine_auto.py", ("tests/cli_tests/test_engine_auto.py", f"{W}/test_calibrate.py")),
+    # not test_calibrate.py's calibrations and searches: minutes per mutant on two busy cores
+    "engine-auto": ("spinefarm/cli/engine_auto.py",
+                    ("tests/cli_tests/test_engine_auto.py", "tests/cli_tests/test_engine_auto_request.py")),
     "contact-guard": ("spinefarm/worker/engines/contact_guard.py",
                       (f"{W}/test_mujoco.py::test_auto_segment_contacts_give_the_bits_of_modelled_ones",)),
     "sandbox": ("spinefarm/worker/service/sandbox.py",
@@ -74,7 +80,7 @@ FUNCTIONS: dict[str, tuple[str, ...]] = {
 # otherwise be compiled again for every mutant (half a minute or more here). Only if they all pass do the
 # module's files above run, compiled (tests/mutation/pytest_exit.py).
 NO_JIT: dict[str, tuple[str, ...]] = {
-    "contact-guard": (f"{W}/test_segment_distance.py", f"{W}/test_contact_guard.py",
+    "contact-guard": (f"{W}/test_segment_distance.py", f"{W}/test_contact_guard.py", f"{W}/test_contact_guard_spin.py",
                       f"{W}/test_mujoco.py::test_segment_distance_agrees_with_dense_sampling",
                       f"{W}/test_mujoco.py::test_the_contact_guard_is_silent_while_segments_are_apart",
                       f"{W}/test_mujoco.py::test_filtered_pairs_pass_through_each_other"),

@@ -17,3 +17,16 @@ def test_an_episodes_draw_is_a_fixed_value() -> None:
     assert draws == again and len(set(draws + again)) == 3  # three distinct worlds, each drawn the same twice
     with pytest.raises(dataclasses.FrozenInstanceError):
         draws[0].friction_scale = 1.0  # a world drawn for episode 0 is the one it runs in
+
+
+def test_only_what_is_asked_for_varies_and_each_factor_has_its_own_draw() -> None:
+    """docs/results.md's --randomize: a factor not named stays at its neutral value (friction and mass 1, no
+    jitter, the run's own scene: rough seed -1); adding one never changes the others; friction and mass are
+    drawn apart (the same bound gives different factors)."""
+    mass_only = [draw_episode(RobustSpec(3, {"mass": 0.2}), 5, k) for k in range(3)]
+    assert [(d.friction_scale, d.start_jitter_cm, d.rough_seed) for d in mass_only] == [(1.0, 0.0, -1)] * 3
+    both = [draw_episode(RobustSpec(3, {"mass": 0.2, "friction": 0.2}), 5, k) for k in range(3)]
+    assert [d.mass_scale for d in both] == [d.mass_scale for d in mass_only]
+    assert all(d.friction_scale != d.mass_scale for d in both)
+    rough = [draw_episode(RobustSpec(3, {"scene": "rough"}), 5, k) for k in range(3)]
+    assert [d.rough_seed for d in rough] == [d.seed for d in rough] and len({d.seed for d in rough}) == 3

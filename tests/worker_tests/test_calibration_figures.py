@@ -86,15 +86,18 @@ def test_more_bests_than_search_trials_are_refused() -> None:
 
 
 @pytest.mark.parametrize("field", [dict(gaits=100_001), dict(gaits=2), dict(search_trials=100_001),
-                                   dict(bests=100_001), dict(duration_s=0.0), dict(duration_s=3600.5)])
+                                   dict(bests=100_001), dict(duration_s=0.0), dict(duration_s=3600.5),
+                                   dict(settle_s=-0.5), dict(settle_s=60.5), dict(jobs=0), dict(jobs=100_001),
+                                   dict(dt_s=5e-7), dict(dt_s=0.03)])
 def test_settings_outside_their_ranges_are_refused(field: dict) -> None:
     with pytest.raises(ConfigError):
         CalibrationSettings(**field)
 
 
 def test_settings_at_their_range_ends_are_taken() -> None:
-    CalibrationSettings(gaits=100_000, search_trials=100_000, bests=100_000, duration_s=3600.0)
-    CalibrationSettings(gaits=3, search_trials=0, bests=0, duration_s=0.001)
+    CalibrationSettings(gaits=100_000, search_trials=100_000, bests=100_000, duration_s=3600.0, settle_s=60.0,
+                        jobs=100_000, dt_s=0.02)
+    CalibrationSettings(gaits=3, search_trials=0, bests=0, duration_s=0.001, settle_s=0.0, jobs=1, dt_s=1e-6)
 
 
 def test_settings_are_fixed_once_made() -> None:
@@ -103,3 +106,13 @@ def test_settings_are_fixed_once_made() -> None:
     with pytest.raises(dataclasses.FrozenInstanceError):
         s.gaits = 41  # type: ignore[misc]
     assert hash(s) == hash(CalibrationSettings())
+
+
+def test_a_gait_moving_exactly_one_cm_counts_and_none_moving_is_said() -> None:
+    # docs/engines.md: the ratio is taken over gaits that move >= 1 cm in Bullet
+    bullet = np.array([0.01, 0.009, 0.5, 0.2])
+    agree = agreement(bullet, bullet * 1.0)
+    assert agree["n_moving"] == 3 and agree["median_distance_ratio"] == 1.0
+    still = agreement(np.array([0.001, 0.002, 0.003]), np.array([0.001, 0.002, 0.003]))
+    assert still["median_distance_ratio"] is None
+    assert "distance ratio none (no gait moves) outside [0.9, 1.1]" in decide(still)[1]
