@@ -164,6 +164,7 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--budget", type=int, default=200, help="trials per search")
     p.add_argument("--seeds", type=int, default=3)
+    p.add_argument("--modes", default="gait_only,codesign", help="the searches per seed (comma-separated)")
     p.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + seeds - 1 (several "
                                                                  "processes may share the seeds)")
     p.add_argument("--duration", type=float, default=10.0, help="simulated seconds per trial")
@@ -194,6 +195,8 @@ def main() -> int:
         with ProcessPoolExecutor(args.workers) as pool:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 for mode, source in (("gait_only", "tetraspine"), ("codesign", str(spec))):
+                    if mode not in args.modes.split(","):
+                        continue
                     out[mode].append(run_search(pool, source, seed, args))
                     # each search as it ends: a run cut short keeps what it measured
                     print(json.dumps({"seed": seed, "mode": mode, **out[mode][-1]}), file=sys.stderr, flush=True)
