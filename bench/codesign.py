@@ -12,7 +12,7 @@ as `--episodes` perturbed episodes (`--randomize`), their median speed and COT w
 reaches the paper's speed (>= 9.46 cm/s) at the paper's COT (<= 3.2) at those medians.
 
 Measured run (docs/results.md; sized for ~50 min on a shared 2-core machine):
-    nice -n 10 python bench/codesign.py --budget 100 --seeds 3 --duration 5 --controller sidewinding \
+    nice -n 10 python bench/codesign.py --budget 100 --seeds 2 --duration 5 --controller sidewinding \
         --engine mujoco --dt 0.002 --engine-option segment_contacts=off --judged 1 --episodes 16
 Smoke run:  python bench/codesign.py --budget 10 --seeds 3 --duration 2 --episodes 4 --judged 2
 
