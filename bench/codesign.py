@@ -12,7 +12,7 @@ as `--episodes` perturbed episodes (`--randomize`), their median speed and COT w
 reaches the paper's speed (>= 9.46 cm/s) at the paper's COT (<= 3.2) at those medians.
 
 Measured run (docs/results.md; sized for ~50 min on a shared 2-core machine):
-    nice -n 10 python bench/codesign.py --budget 100 --seeds 3 --duration 5 --controller sidewinding \
+    nice -n 10 python bench/codesign.py --budget 100 --seeds 2 --duration 5 --controller sidewinding \
         --engine mujoco --dt 0.002 --engine-option segment_contacts=off --judged 1 --episodes 16
 Smoke run:  python bench/codesign.py --budget 10 --seeds 3 --duration 2 --episodes 4 --judged 2
 
@@ -164,6 +164,7 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--budget", type=int, default=200, help="trials per search")
     p.add_argument("--seeds", type=int, default=3)
+    p.add_argument("--modes", default="gait_only,codesign", help="the searches per seed (comma-separated)")
     p.add_argument("--first-seed", type=int, default=0, help="seeds first-seed .. first-seed + seeds - 1 (several "
                                                                  "processes may share the seeds)")
     p.add_argument("--duration", type=float, default=10.0, help="simulated seconds per trial")
@@ -194,6 +195,8 @@ def main() -> int:
         with ProcessPoolExecutor(args.workers) as pool:
             for seed in range(args.first_seed, args.first_seed + args.seeds):
                 for mode, source in (("gait_only", "tetraspine"), ("codesign", str(spec))):
+                    if mode not in args.modes.split(","):
+                        continue
                     out[mode].append(run_search(pool, source, seed, args))
                     # each search as it ends: a run cut short keeps what it measured
                     print(json.dumps({"seed": seed, "mode": mode, **out[mode][-1]}), file=sys.stderr, flush=True)
