@@ -104,7 +104,7 @@ class CoordinatorCore:
 
     @property
     def done(self) -> bool:
-        """The search is done and so are its judge's and audits' tasks."""
+        """The search is done and so are its checks (judge, audits, referees, opinion)."""
         with self.lock:
             return self.ladder.done
 

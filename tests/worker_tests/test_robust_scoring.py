@@ -1,5 +1,5 @@
-"""A robust trial's figures (docs/robust.md's promise, worker.trial.robust): the parts are the medians of the
-episodes (not their mean), the statistics are worked by hand, and a drawn friction reaches the simulator."""
+"""A robust trial's figures (docs/results.md's robust scoring, worker.trial.robust): the parts are the medians of
+the episodes (not their mean), the statistics are worked by hand, and a drawn friction reaches the simulator."""
 
 from __future__ import annotations
 

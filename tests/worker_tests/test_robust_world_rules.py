@@ -1,6 +1,6 @@
-"""One robust episode's world as docs/robust.md draws it, checked field by field without a simulator: friction
-x friction_scale of the scene's, else the config's, else the robot's; rod density x mass_scale; the draw's start
-jitter; rough ground seeded by the draw when it has a rough seed (0 included)."""
+"""One robust episode's world as docs/results.md's robust scoring draws it, checked field by field without a
+simulator: friction x friction_scale of the scene's, else the config's, else the robot's; rod density x
+mass_scale; the draw's start jitter; rough ground seeded by the draw when it has a rough seed (0 included)."""
 
 from __future__ import annotations
 

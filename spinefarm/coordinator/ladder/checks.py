@@ -121,7 +121,8 @@ class Checks:
 
     # --- issuing ------------------------------------------------------------------------------------
     def restart(self) -> list[int]:
-        """Task keys to issue again after a restart: every pending verification and audit."""
+        """Task keys to issue again after a restart: every pending verification, audit and referee (opinions are
+        due from storage alone: issue_due finds them)."""
         cols = self.storage.columns()
         keys = [task_key(JUDGE, int(t)) for t in np.flatnonzero(cols["verification"] == Verification.PENDING.stored)]
         rerun = np.isin(cols["audit"], (AuditState.PENDING.stored, AuditState.QUARANTINED.stored))
@@ -219,7 +220,8 @@ class Checks:
 
     # --- results --------------------------------------------------------------------------------------
     def _record(self, tid: int, kind: str, r: TrialResult, worker_id: str = "") -> None:
-        """Every judge, audit and referee run is a row of the evaluations table, linked to the row it checked."""
+        """Every judge, audit, referee and opinion run is a row of the evaluations table, linked to the row it
+        checked."""
         f = self.task_fidelity(task_key(KIND_CODES[kind], tid))
         dt = r.extras.get("dt_s", f.dt_s)
         self.storage.add_evaluation(row_of(tid, kind, r, str(r.extras.get("engine", f.engine or "")),
