@@ -32,7 +32,7 @@ SPEC = textwrap.dedent("""\
     """)
 
 
-RATIOS = (1.5, 2.0, 2.5)  # screen / judge of the first three judged bests: median 2, outside [0.8, 1.2]
+RATIOS = (1.5, 2.0, 3.0)  # screen / judge of the first three judged bests: median 2 (mean 2.17), outside [0.8, 1.2]
 
 
 def _answer(core, n: int, judged: int) -> WorkGrant:
@@ -85,7 +85,7 @@ def both(tmp_path_factory):
 
 def test_the_drift_rule_fires_in_a_codesigned_run_as_in_a_fixed_body_one(both):
     fixed, codesign = both["fixed"], both["codesign"]
-    # the judge measures 1/1.5, 1/2, 1/2.5 of the screen's distance: median ratio 2, outside [0.8, 1.2]
+    # the judge measures 1/1.5, 1/2, 1/3 of the screen's distance: median ratio 2, outside [0.8, 1.2]
     assert fixed[0] is not None and "ratio 2" in fixed[0]
     assert codesign[0] == fixed[0]
     # from then on new trials leave the MuJoCo screen for Bullet at 4x the judge's step, in both
@@ -98,13 +98,13 @@ def test_the_run_says_what_its_calibration_covers_and_what_the_judge_saw(both):
     line = next(x for x in report.splitlines() if x.startswith("co-designed"))
     # no --engine auto here: no calibration chose the screen; three judged bests on three sampled bodies
     assert "the calibration covers none: the engine was given (mujoco)" in line
-    assert "3 judged, median screen-to-judge ratio 2 (1.5-2.5)" in line and "band [0.8, 1.2]" in line
+    assert "3 judged, median screen-to-judge ratio 2 (1.5-3)" in line and "band [0.8, 1.2]" in line
     out = both["codesign"][3]
     with served(create_app(runs_dir=out.parent)) as client:
         meta = client.get("/runs/drift/meta").json()["codesign"]
         status = client.get("/runs/drift").json()["codesign"]
     assert meta == status and meta["statement"] == line
-    assert meta["judge_ratios_on_sampled_bodies"] == {"judged": 3, "median": 2.0, "min": 1.5, "max": 2.5}
+    assert meta["judge_ratios_on_sampled_bodies"] == {"judged": 3, "median": 2.0, "min": 1.5, "max": 3.0}
     assert meta["sampled_bodies"] >= 3 and len(meta["base_body_hash"]) == 16
     with served(create_app(runs_dir=both["fixed"][3].parent)) as client:
         assert client.get("/runs/drift/meta").json()["codesign"] is None
