@@ -4,7 +4,8 @@ Same engine: "holds" when the finer step (and the perturbed run) changed the dis
 robot's chaos floor (robot/chaos_floors.py answers it): a chaotic gait's change up to its floor is no
 evidence of an artefact. Beyond it the verdict is "moved X % at the finer step": the set is kept and ranks
 by its judged distance, the figure that counts either way. Another engine: "judged" (its distance counts).
-A judge run that fails or gives no finite distance: "diverged", never best. The search's judge and
+A judge run that fails or gives no finite distance: "diverged", never best (the ladder first issues a run
+stopped by its wall-clock limit again, coordinator/ladder/checks.py). The search's judge and
 `spinefarm.worker.tools.verify` both decide here.
 """
 

@@ -115,3 +115,18 @@ def test_a_same_engine_row_in_a_cross_engine_run_is_judged_against_the_floor(tmp
     assert [storage.trial(t).verification for t in range(3)] == ["judged", "moved", "holds"]
     assert storage.best_ids(3) == [1, 2, 0]   # by judged distance: 0.202, 0.199, 0.15 m
     storage.close()
+
+
+def test_a_judge_run_stopped_by_its_wall_clock_limit_is_issued_again_twice_then_counts_as_diverged(tmp_path):
+    # a timeout on a busy machine is no physics: the set keeps its place and its judge is due again (2 retries)
+    storage, book = _run_file(tmp_path / "r.h5", _robot_meta("tetraspine"), [0.111, 0.213, 0.05])
+    timeout = result(1, 0.0, status=TrialStatus.FAILED, reason="timeout: no result within its 55.8 s limit")
+    for _ in range(2):
+        assert book.judge_due(0, search_over=True)[0] is not None     # the best (set 1) gets its judge
+        book.settle_judge(1, timeout)
+        assert storage.trial(1).verification == "" and storage.best_ids(1) == [1]
+    assert book.judge_due(0, search_over=True)[0] is not None
+    book.settle_judge(1, timeout)                   # the third timeout in a row: never best
+    assert storage.trial(1).verification == "diverged" and storage.best_ids(3) == [0, 2]
+    assert storage.evaluations()["kind"].tolist() == [b"judge"] * 3
+    storage.close()

@@ -42,6 +42,8 @@ from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.evaluations import judge_wall_s, row_of
 
 log = logging.getLogger("spinefarm.coordinator")
+# a judge run stopped by its wall-clock limit is issued again this many times before it counts as diverged
+_JUDGE_TIMEOUT_RETRIES = 2
 _DRIFT_WINDOW = 3
 # a best that barely moves says nothing of the screen: a few millimetres of step error are a factor of 4 on the
 # first bests of a search, which move a few centimetres, and once halved the step stays halved all run
@@ -231,6 +233,11 @@ class Checks:
         if math.isfinite(r.wall_time_s):
             self.judge_wall_s += r.wall_time_s
         self._record(tid, "judge", r)
+        if _timed_out(r) and self._judge_timeouts(tid) <= _JUDGE_TIMEOUT_RETRIES:
+            # a wall-clock limit hit on a busy machine says nothing of the physics: the judge is due again
+            self.storage.set_verification(tid, Verification.NOT_CHECKED)
+            log.warning("the judge's run of trial %d timed out (%s): it is issued again", tid, r.reason)
+            return
         row = self.storage.trial(tid)
         engine = str(r.extras.get("engine", "")) or (self.judge_engine or "")
         cross = self.judge_engine is not None and self.judge_engine != (row.engine or self.run_engine)
@@ -241,6 +248,11 @@ class Checks:
             log.warning("best trial %d diverged in the judge's run (never best): %s", tid, reason)
         elif verdict == Verification.MOVED:
             log.info("best trial %d %s (%s); it ranks by its judged distance", tid, reason, self.holds[1])
+
+    def _judge_timeouts(self, tid: int) -> int:
+        ev = self.storage.evaluations()
+        return int(np.count_nonzero((ev["trial_id"] == tid) & (ev["kind"] == b"judge")
+                                    & np.char.startswith(ev["reason"], b"timeout:")))
 
     def settle_opinion(self, tid: int, r: TrialResult) -> None:
         """The other engine's run of a judged best: a row of its own, counted in the judge's share; it never ranks."""
@@ -319,3 +331,7 @@ def _comparison(exact: bool, tolerance: float) -> str:
 def _same(r: TrialResult, ok: bool, distance_m: float, tolerance: float) -> bool:
     """`r` reproduces a stored outcome (both failed, or both complete within the relative tolerance)."""
     return r.ok == ok and (not ok or relative_change(r.distance_m, distance_m) <= tolerance)
+
+
+def _timed_out(r: TrialResult) -> bool:
+    return not r.ok and r.reason.startswith("timeout:")
