@@ -224,8 +224,7 @@ class BaseStorage:
         return [TrialRecord.from_columns(cols, i) for i in ids]
 
     def best(self, k: int) -> list[TrialRecord]:
-        cols = self.columns()
-        return [TrialRecord.from_columns(cols, i) for i in self.best_ids(k)]
+        return self.records(self.best_ids(k))
 
     def count_rung(self, rung: int) -> int:
         return int(np.count_nonzero(self.columns()["rung"] == rung))

@@ -189,9 +189,6 @@ class Hdf5Reader(BaseStorage):
     def trial(self, trial_id: int) -> TrialRecord:
         return self.records([trial_id])[0]
 
-    def best(self, k: int) -> list[TrialRecord]:
-        return self.records(self.best_ids(k))
-
     def records(self, ids: Sequence[int]) -> list[TrialRecord]:
         """The trials `ids`, in that order, with one read per column (a row at a time is one per column and
         trial: seconds for a page of a thousand)."""

@@ -122,10 +122,10 @@ def test_a_restarted_coordinator_issues_pending_judge_and_audit_tasks_again(tmp_
     s.set_audit(4, AuditState.DISPUTED, 0.3, "w-2")
     s.close()
     again = Hdf5Storage.resume(path)
-    book = Checks(again, RunSettings(), "bullet", 7, judged=True)
-    keys = book.restart()
+    checks = Checks(again, RunSettings(), "bullet", 7, judged=True)
+    keys = checks.restart()
     assert sorted(split_key(k) for k in keys) == [("audit", 2), ("judge", 0), ("judge", 3), ("referee", 4)]
-    assert book.pending == set(keys)
+    assert checks.pending == set(keys)
     again.close()
 
 

@@ -38,11 +38,11 @@ def _ran(trial_id, distance_m, wall_s, worker):
 
 
 def test_judge_audit_and_referee_runs_are_rows_linked_to_the_row_they_checked(tmp_path):
-    s, book = _run(tmp_path / "e.h5")
-    book.settle_judge(1, _ran(1, 1.98, 3.0, "w-3"))
-    book.settle_audit(2, _ran(2, 1.3, 7.0, ""), "w-2", exact=False)   # 30 % off: disputed, refereed
-    book.settle_referee(2, _ran(2, 1.0, 11.0, "w-4"), exact=False)    # the referee sides with the result
-    book.settle_judge(2, _ran(2, 1.01, 5.0, "w-3"))
+    s, checks = _run(tmp_path / "e.h5")
+    checks.settle_judge(1, _ran(1, 1.98, 3.0, "w-3"))
+    checks.settle_audit(2, _ran(2, 1.3, 7.0, ""), "w-2", exact=False)   # 30 % off: disputed, refereed
+    checks.settle_referee(2, _ran(2, 1.0, 11.0, "w-4"), exact=False)    # the referee sides with the result
+    checks.settle_judge(2, _ran(2, 1.01, 5.0, "w-3"))
     s.close()
     expected = {"trial_id": [1, 2, 2, 2], "kind": [b"judge", b"audit", b"referee", b"judge"],
                 "distance_m": [1.98, 1.3, 1.0, 1.01], "wall_time_s": [3.0, 7.0, 11.0, 5.0],
@@ -56,8 +56,8 @@ def test_judge_audit_and_referee_runs_are_rows_linked_to_the_row_they_checked(tm
         assert resumed.evaluations()["kind"].tolist() == expected["kind"]
         # the judge's share after a restart counts its two runs (3 s + 5 s), not the audit's or the referee's
         assert Checks(resumed, resumed.run_meta().settings, "bullet", 7, judged=True).judge_wall_s == 8.0
-        book = Checks(resumed, resumed.run_meta().settings, "bullet", 7, judged=True)
-        book.settle_judge(0, _ran(0, 0.5, 2.0, "w-3"))
+        checks = Checks(resumed, resumed.run_meta().settings, "bullet", 7, judged=True)
+        checks.settle_judge(0, _ran(0, 0.5, 2.0, "w-3"))
     finally:
         resumed.close()
     with Hdf5Storage.open_read(tmp_path / "e.h5") as again:

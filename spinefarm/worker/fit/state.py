@@ -51,9 +51,14 @@ def pose_error(sim: np.ndarray, rec: np.ndarray, length_cm: float) -> np.ndarray
     (..., nb, 7) COM cm + quaternion (x, y, z, w); length_cm weighs a rotation as the arc it sweeps at that
     radius (a segment's size)."""
     d = np.linalg.norm(sim[..., :3] - rec[..., :3], axis=-1)
+    return np.sqrt(d**2 + (length_cm * rotation_angle(sim, rec)) ** 2)
+
+
+def rotation_angle(sim: np.ndarray, rec: np.ndarray) -> np.ndarray:
+    """Per sample and segment (..., nb): the angle (rad) turning one orientation into the other, poses (..., nb, 7)
+    with the quaternion (x, y, z, w) last (q and -q are one orientation)."""
     dot = np.clip(np.abs(np.einsum("...i,...i->...", sim[..., 3:], rec[..., 3:])), 0.0, 1.0)
-    angle = 2.0 * np.arccos(dot)
-    return np.sqrt(d**2 + (length_cm * angle) ** 2)
+    return 2.0 * np.arccos(dot)
 
 
 def planar_distance_cm(a: np.ndarray, b: np.ndarray) -> float:

@@ -13,6 +13,7 @@ import numpy as np
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.fit.loss import DIVERGED_CM, Prepared, segment_radius_cm
+from spinefarm.worker.fit.state import rotation_angle
 from spinefarm.worker.fit.windows import run_windows
 
 TERMS = ("horizontal_cm", "vertical_cm", "rotation_cm", "tension_n")
@@ -30,11 +31,10 @@ def window_terms(morph: Morphology, cfg: TrialConfig, p: Prepared) -> list[dict[
     for w, sim in zip(p.windows, run_windows(morph, cfg, p.rec, p.windows), strict=True):
         rec = p.poses[list(w.rows)]
         delta = sim.poses[..., :3] - rec[..., :3]
-        dot = np.clip(np.abs(np.einsum("...i,...i->...", sim.poses[..., 3:], rec[..., 3:])), 0.0, 1.0)
         tension = np.nan if p.rec.tension_n is None else _rms(sim.tension_n - p.rec.tension_n[list(w.rows)])
         out.append({"start_s": float(p.rec.time_s[w.start] - p.rec.time_s[0]),
                     "horizontal_cm": _rms(np.hypot(delta[..., 0], delta[..., 2])), "vertical_cm": _rms(delta[..., 1]),
-                    "rotation_cm": _rms(radius * 2.0 * np.arccos(dot)), "tension_n": tension})
+                    "rotation_cm": _rms(radius * rotation_angle(sim.poses, rec)), "tension_n": tension})
     return out
 
 

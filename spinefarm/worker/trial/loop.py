@@ -12,7 +12,10 @@ the same bits either way:
     engine's state array, calling the law and writing its wrench array, and calling the engine's C step
     function (by its address) between them. The engine hands over data and a C function, nothing of the law.
 A world whose law step fails (non-finite string state) drops out of `active`; law.steps says how many steps
-of the phase it took.
+of the phase it took. `checked_runner(engine, law)` runs a one-world trial's whole check intervals in one
+compiled call (run_checked: the engine's look policy taken as data, compiled_look; run_compiled's steps; the
+guard's fast check), the same bits as `advance` and worker.trial.batch's checks; Batch falls back to those
+where it stops early.
 """
 
 from __future__ import annotations
