@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import zenoh
 
 from spinefarm.protocol import keys, limits
+from spinefarm.protocol.credentials import Credentials
 from spinefarm.protocol.envelope import decode_message, encode_message
 from spinefarm.protocol.errors import ConfigError, SpinefarmError
 from spinefarm.protocol.run import WorkerProblem
@@ -45,9 +46,13 @@ class FitNetwork:
 
     listen: Sequence[str] = ()
     connect: Sequence[str] = ()
+    credentials: Credentials | None = None   # authenticate; when listening, refuse sessions without them
 
     def config(self) -> zenoh.Config:
         conf = zenoh.Config()
+        if self.credentials is not None:
+            for key, value in self.credentials.zenoh_settings(accept=bool(self.listen)).items():
+                conf.insert_json5(key, value)
         conf.insert_json5("mode", json.dumps("router" if self.listen and not self.connect else "peer"))
         if self.listen:
             conf.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
