@@ -72,10 +72,10 @@ def runner(tests: tuple[str, ...], no_jit: tuple[str, ...] = ()) -> str:
 
 def run_module(tree: Path, module: str, tests: tuple[str, ...], functions: tuple[str, ...] = (),
                no_jit: tuple[str, ...] = (), time_base_s: float = 20.0) -> None:
-    """mutmut over the module, then the mutants it left untested one by one: those after a mutant it could not
-    look up (that one stays untested), and those on a line whose text repeats an earlier line of the module
-    (mutmut 2.5.1 looks a cached status up by the line's text, so after an interrupted run such a mutant takes
-    the earlier line's status and is never queued)."""
+    """mutmut over the module, then one by one the mutants it left untested or did not re-test: those after a
+    mutant it could not look up (that one stays untested), and those on a line whose text repeats an earlier
+    line of the module (mutmut 2.5.1 looks a cached status up by the line's text, so after an interrupted run
+    or a change of the tests such a mutant takes the earlier line's status and is never queued)."""
     args = ["--paths-to-mutate", module, "--runner", runner(tests, no_jit), "--tests-dir", "tests",
             "--disable-mutation-types", "string,fstring,decorator", "--test-time-base", str(time_base_s),
             "--simple-output", "--no-progress", "--CI"]
@@ -95,9 +95,13 @@ def restore(tree: Path, module: str) -> None:
 
 
 def untested(tree: Path, module: str) -> list[int]:
+    """Mutants not run, and survivors last run against other tests than the current ones (mutmut skipped
+    them: on a line whose text repeats an earlier line, it read that line's status)."""
     db = sqlite3.connect(tree / ".mutmut-cache")
     rows = db.execute("SELECT m.id FROM Mutant m JOIN Line l ON m.line = l.id JOIN SourceFile f "
-                      "ON l.sourcefile = f.id WHERE f.filename = ? AND m.status = 'untested'", (module,)).fetchall()
+                      "ON l.sourcefile = f.id WHERE f.filename = ? AND (m.status = 'untested' OR (m.status IN "
+                      "('bad_survived', 'bad_timeout') AND m.tested_against_hash IS NOT (SELECT value FROM "
+                      "MiscData WHERE key = 'hash_of_tests')))", (module,)).fetchall()
     db.close()
     return [i for (i,) in rows]
 

@@ -41,3 +41,17 @@ def test_the_closing_speed_is_that_of_one_body_relative_to_the_other() -> None:
     assert guard.free_time_s(qpos, qvel, 10.0) == (10.0, math.inf)
     qvel[1, :3] = -v
     assert guard.free_time_s(qpos, qvel, 10.0)[0] == pytest.approx(18.9 / (2 * 26.0), rel=1e-12)
+
+
+@pytest.mark.parametrize("v", [[0.0, 0.0, 20.0], [0.0, 20.0, 0.0], [20.0, 0.0, 0.0]])
+def test_bodies_away_from_the_origin_are_measured_from_each_other(v) -> None:
+    """Rods parallel 20 cm apart along z, both bodies far from the origin (x 100, y 50 cm): body 1 closing at
+    20 cm/s straight at body 0 (or past it, along y or x: the same bound, |v| = 20 cm/s)."""
+    guard = SegmentContactGuard([_rod_body(), _rod_body()], [])
+    qpos = np.array([[100.0, 50.0, -40.0, 1.0, 0.0, 0.0, 0.0], [100.0, 50.0, -20.0, 1.0, 0.0, 0.0, 0.0]])
+    qvel = np.zeros((2, 6))
+    qvel[1, :3] = -np.array(v)
+    # a horizon of 0.5 s: only a pair within 20 cm (+ 0.1) may limit it, so a pair wrongly judged far is skipped
+    t, gap = guard.free_time_s(qpos, qvel, 0.5)
+    assert gap == pytest.approx(19.0, abs=1e-9)
+    assert t == pytest.approx(18.9 / (2 * 20.0), rel=1e-12)
