@@ -123,3 +123,24 @@ def test_a_samplers_best_sets_are_first_rung_rows_in_the_storages_order_each_onc
     assert view.best_ids(4) == [2, 4, 1, 3]
     assert view.best_ids(5) == [2, 4, 1, 3, 0]   # the storage's best five repeat set 4: it asks for more
     assert view.best_ids(9) == [2, 4, 1, 3, 0]
+
+
+def test_a_run_whose_quota_is_used_is_not_done_before_a_new_best_went_on():
+    # every set sampled and every row finished, the rung's quota used: the new best (0.9) still goes on first
+    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    st = _storage_with([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    for source in (5, 4):
+        tid = st.n_trials()
+        st.add_trial(tid, np.full(3, 0.5), np.zeros(3), "promoted", source, 0, 1, 3.0)
+        st.finish_trial(tid, _result(tid, 0.5 + source / 10), 0.5 + source / 10)
+    st.add_trial(8, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 0, 0, 1.0)
+    st.finish_trial(8, _result(8, 0.9), 0.9)
+    assert not rungs.done(st, 7, 9)
+
+
+def test_a_sampler_never_sees_a_promoted_row_cut_from_its_first_rung():
+    # a rung-1 row whose parent is lost (-1) has no first-rung row: it is left out, never an index past the view
+    st = _storage_with([0.1, 0.2])
+    st.add_trial(2, np.full(3, 0.5), np.zeros(3), "promoted", -1, 0, 1, 3.0)
+    st.finish_trial(2, _result(2, 0.9), 0.9)
+    assert FirstRungView(st).best_ids(3) == [1, 0]
