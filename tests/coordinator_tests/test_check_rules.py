@@ -1,0 +1,91 @@
+"""The ladder's checks on storage alone, in-process: where an audit and its referee run (the row exactly as it
+ran), who may not run them, when a judge is due (a run without a judge has none; the best only; not past the
+judge's share while the search runs), and the judge's time starting from the stored rows."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from spinefarm.coordinator.ladder.checks import Checks
+from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, OPINION, REFEREE, task_key
+from spinefarm.protocol.settings import JudgePolicy, Rung, TaskFidelity
+from spinefarm.storage.hdf5 import Hdf5Storage
+from tests.storage_tests.conftest import make_meta, result
+
+ROWS = (  # distance, engine, step, settle, worker
+    (0.111, "mujoco", 0.002, 0.5, "w-a"),
+    (0.213, "", math.nan, math.nan, "w-b"),
+    (0.05, "bullet", 0.001, 1.0, "w-c"),
+)
+
+
+def _checks(path, judged=True, share=0.5, opinion=None):
+    meta = make_meta()
+    settings = dataclasses.replace(meta.settings, judge=JudgePolicy(share=share, opinion=opinion))
+    storage = Hdf5Storage.create(path, dataclasses.replace(meta, settings=settings))
+    for tid, (d, engine, dt, settle, worker) in enumerate(ROWS):
+        storage.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, tid)
+        extras = {"engine": engine, "dt_s": dt, "settle_s": settle} if engine else {}
+        storage.finish_trial(tid, dataclasses.replace(result(tid, d), worker_id=worker, extras=extras), d)
+    return storage, Checks(storage, settings, "mujoco", 7, judged=judged)
+
+
+def test_an_audit_and_its_referee_rerun_the_row_at_its_own_engine_step_and_settle(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5")
+    for kind in (AUDIT, REFEREE):
+        assert checks.task_fidelity(task_key(kind, 0)) == TaskFidelity("audit", "mujoco", 0.002, 0.5)
+        assert checks.task_fidelity(task_key(kind, 2)) == TaskFidelity("audit", "bullet", 0.001, 1.0)
+        # a row that recorded no engine or step: the run's own, left to the worker
+        assert checks.task_fidelity(task_key(kind, 1)) == TaskFidelity("audit", None, None, None)
+    storage.close()
+
+
+def test_an_opinion_without_an_opinion_rung_is_not_an_opinion(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", opinion=Rung("bullet", 2.5e-4))
+    assert checks.task_fidelity(task_key(OPINION, 1)) == TaskFidelity("opinion", "bullet", 2.5e-4, None)
+    assert checks.task_fidelity(task_key(AUDIT, 0)) == TaskFidelity("audit", "mujoco", 0.002, 0.5)   # not one
+    storage.close()
+    storage, checks = _checks(tmp_path / "s.h5")
+    assert checks.task_fidelity(task_key(JUDGE, 1)).task == "judge"
+    storage.close()
+
+
+def test_an_audit_excludes_the_rows_worker_and_a_referee_the_audits_too(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5")
+    storage.set_audit(2, "disputed", 0.06, "w-d")
+    assert checks.excluded(task_key(AUDIT, 2)) == {"w-c"}
+    assert checks.excluded(task_key(REFEREE, 2)) == {"w-c", "w-d"}
+    assert checks.excluded(task_key(JUDGE, 2)) == set()
+    storage.close()
+
+
+def test_a_judge_is_due_for_the_best_only_and_never_in_a_run_without_one(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", judged=False)
+    assert checks.judge_due(0, search_over=True) == (None, [])
+    storage.close()
+    storage, checks = _checks(tmp_path / "s.h5", share=1.0)
+    key, stale = checks.judge_due(0)
+    assert key == task_key(JUDGE, 1) and stale == []          # the 0.213 m set, and only it
+    assert storage.columns()["verification"].tolist() == [b"", b"pending", b""]
+    storage.close()
+
+
+def test_while_the_search_runs_a_judge_waits_for_its_share_and_at_the_end_it_does_not(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", share=0.25)
+    # the trials took 3 x 0.25 s (conftest's wall time): a 0.25 share allows the judge 0.25 s (0.25 x 0.75 / 0.75)
+    checks.judge_wall_s = 0.2
+    assert checks.judge_due(0)[0] == task_key(JUDGE, 1)
+    storage.set_verification(1, "")
+    checks.judge_wall_s = 0.3
+    assert checks.judge_due(0) == (None, [])
+    assert checks.judge_due(0, search_over=True)[0] == task_key(JUDGE, 1)
+    storage.close()
+
+
+def test_the_judges_time_starts_at_zero_in_a_new_run(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5")
+    assert checks.judge_wall_s == 0.0
+    storage.close()
