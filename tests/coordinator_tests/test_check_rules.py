@@ -89,3 +89,44 @@ def test_the_judges_time_starts_at_zero_in_a_new_run(tmp_path):
     storage, checks = _checks(tmp_path / "r.h5")
     assert checks.judge_wall_s == 0.0
     storage.close()
+
+
+def test_a_judge_exactly_at_its_share_may_still_run(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", share=0.25)
+    checks.judge_wall_s = 0.25   # 0.25 x 0.75 = 0.25 x (3 x 0.25 s): at its share, not over it
+    assert checks.over_share(storage.columns()["wall_time_s"]) is False
+    storage.close()
+
+
+def test_an_overtaken_bests_judge_is_named_stale_when_the_new_best_is_judged(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", share=1.0)
+    old, _ = checks.judge_due(0)
+    storage.add_trial(3, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 3)
+    storage.finish_trial(3, dataclasses.replace(result(3, 0.3), worker_id="w-a"), 0.3)
+    checks.pending.add(task_key(AUDIT, 0))    # another kind of check pending: never stale here
+    new, stale = checks.judge_due(0)
+    assert (old, new, stale) == (task_key(JUDGE, 1), task_key(JUDGE, 3), [task_key(JUDGE, 1)])
+    storage.close()
+
+
+def test_a_dropped_judge_or_audit_is_undone_in_the_file_unless_it_is_kept_pending(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", share=1.0)
+    key, _ = checks.judge_due(0)
+    checks.drop(key)
+    assert storage.columns()["verification"][1] == b"" and key not in checks.pending
+    storage.set_audit(2, "pending")
+    checks.drop(task_key(AUDIT, 2))
+    assert storage.columns()["audit"][2] == b""
+    storage.set_audit(2, "pending")
+    checks.drop(task_key(AUDIT, 2), keep_pending=True)   # re-issued on resume, by another identity
+    assert storage.columns()["audit"][2] == b"pending"
+    storage.close()
+
+
+def test_while_the_search_runs_an_opinion_waits_for_the_judges_share(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", share=0.25, opinion=Rung("bullet", 2.5e-4))
+    storage.set_verification(1, "judged", 0.2, "", 1.0)
+    checks.judge_wall_s = 0.3
+    assert checks.opinion_due() == (None, [])
+    assert checks.opinion_due(search_over=True)[0] == task_key(OPINION, 1)
+    storage.close()
