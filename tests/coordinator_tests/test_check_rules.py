@@ -11,7 +11,7 @@ import numpy as np
 
 from spinefarm.coordinator.ladder.checks import Checks
 from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, OPINION, REFEREE, task_key
-from spinefarm.protocol.settings import JudgePolicy, Rung, TaskFidelity
+from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung, TaskFidelity
 from spinefarm.storage.hdf5 import Hdf5Storage
 from tests.storage_tests.conftest import make_meta, result
 
@@ -22,9 +22,10 @@ ROWS = (  # distance, engine, step, settle, worker
 )
 
 
-def _checks(path, judged=True, share=0.5, opinion=None):
+def _checks(path, judged=True, share=0.5, opinion=None, audit=0.0):
     meta = make_meta()
-    settings = dataclasses.replace(meta.settings, judge=JudgePolicy(share=share, opinion=opinion))
+    settings = dataclasses.replace(meta.settings, judge=JudgePolicy(share=share, opinion=opinion),
+                                   audit=AuditPolicy(fraction=audit))
     storage = Hdf5Storage.create(path, dataclasses.replace(meta, settings=settings))
     for tid, (d, engine, dt, settle, worker) in enumerate(ROWS):
         storage.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, tid)
@@ -120,6 +121,9 @@ def test_a_dropped_judge_or_audit_is_undone_in_the_file_unless_it_is_kept_pendin
     storage.set_audit(2, "pending")
     checks.drop(task_key(AUDIT, 2), keep_pending=True)   # re-issued on resume, by another identity
     assert storage.columns()["audit"][2] == b"pending"
+    storage.set_audit(2, "disputed", 0.06, "w-d")
+    checks.drop(task_key(REFEREE, 2))                    # nobody to referee: the result stays disputed
+    assert storage.columns()["audit"][2] == b"disputed"
     storage.close()
 
 
@@ -129,4 +133,24 @@ def test_while_the_search_runs_an_opinion_waits_for_the_judges_share(tmp_path):
     checks.judge_wall_s = 0.3
     assert checks.opinion_due() == (None, [])
     assert checks.opinion_due(search_over=True)[0] == task_key(OPINION, 1)
+    storage.close()
+
+
+def test_the_new_best_is_always_audited_and_other_results_only_when_drawn(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", audit=1e-9)   # auditing on, almost nothing drawn
+    assert [checks.audit_due(t) for t in (0, 2)] == [None, None]
+    assert checks.audit_due(1) == task_key(AUDIT, 1) and storage.columns()["audit"][1] == b"pending"
+    storage.close()
+    storage, checks = _checks(tmp_path / "s.h5")                # auditing off: not even the best
+    assert checks.audit_due(1) is None and checks.best_audit_due() is None
+    storage.close()
+
+
+def test_a_best_without_an_audit_gets_one_once(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", audit=1e-9)
+    assert checks.best_audit_due() == task_key(AUDIT, 1)
+    assert storage.columns()["audit"].tolist() == [b"", b"pending", b""]
+    assert checks.best_audit_due() is None          # pending already
+    storage.set_audit(1, "agrees", 0.213, "w-d")
+    assert checks.best_audit_due() is None          # audited
     storage.close()
