@@ -154,3 +154,34 @@ def test_a_best_without_an_audit_gets_one_once(tmp_path):
     storage.set_audit(1, "agrees", 0.213, "w-d")
     assert checks.best_audit_due() is None          # audited
     storage.close()
+
+
+def test_a_judges_run_stores_the_screen_to_judge_ratio_and_adds_its_time(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", share=1.0)
+    judge = dataclasses.replace(result(1, 0.2), wall_time_s=0.75)
+    checks.settle_judge(1, judge)
+    checks.settle_judge(2, dataclasses.replace(result(2, 0.04), wall_time_s=0.5))
+    cols = storage.columns()
+    assert math.isclose(cols["judge_ratio"][1], 0.213 / 0.2) and math.isclose(cols["judge_ratio"][2], 0.05 / 0.04)
+    checks.settle_judge(0, dataclasses.replace(result(0, 1.0), wall_time_s=0.0))    # a judged 1 m is a distance too
+    assert math.isclose(storage.columns()["judge_ratio"][0], 0.111)
+    assert checks.judge_wall_s == 1.25                              # 0.75 s + 0.5 s
+    ev = storage.evaluations()
+    assert ev["kind"].tolist() == [b"judge"] * 3
+    storage.close()
+
+
+def test_a_quarantined_workers_complete_rows_are_re_run_and_its_disputed_ones_settled_against_it(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5")
+    storage.add_trial(3, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 3)   # w-a's, not finished: nothing
+    storage.set_audit(0, "disputed", 0.09, "w-d")
+    checks.pending.add(task_key(REFEREE, 0))
+    reruns, settled = checks.mark_quarantined(["w-a"])
+    # its only complete row was disputed: the disputing audit was its re-run, so nothing is run again
+    assert (reruns, settled) == ([], [task_key(REFEREE, 0)])
+    audit = storage.columns()["audit"].tolist()
+    assert audit == [b"disagrees", b"", b"", b""]     # the disputed row settled against w-a; others untouched
+    reruns, _ = checks.mark_quarantined(["w-b", "w-c"])
+    assert sorted(reruns) == sorted([task_key(AUDIT, 1), task_key(AUDIT, 2)])
+    assert storage.columns()["audit"].tolist() == [b"disagrees", b"quarantined", b"quarantined", b""]
+    storage.close()
