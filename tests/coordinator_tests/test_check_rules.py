@@ -185,3 +185,42 @@ def test_a_quarantined_workers_complete_rows_are_re_run_and_its_disputed_ones_se
     assert sorted(reruns) == sorted([task_key(AUDIT, 1), task_key(AUDIT, 2)])
     assert storage.columns()["audit"].tolist() == [b"disagrees", b"quarantined", b"quarantined", b""]
     storage.close()
+
+
+def _audited(path, tolerance=0.05):
+    storage, checks = _checks(path, audit=1e-9)
+    checks.settings = dataclasses.replace(checks.settings, audit=AuditPolicy(fraction=1e-9, tolerance=tolerance))
+    return storage, checks
+
+
+def test_an_exact_audit_agrees_only_to_the_bit_and_another_environments_within_the_tolerance(tmp_path):
+    storage, checks = _audited(tmp_path / "r.h5")
+    assert checks.settle_audit(1, result(1, 0.213), "w-d", exact=True) == [("w-b", True), ("w-d", True)]
+    assert storage.columns()["audit"][1] == b"agrees"
+    assert checks.settle_audit(0, result(0, 0.111 * 1.04), "w-d", exact=False) == [("w-a", True), ("w-d", True)]
+    assert checks.settle_audit(2, result(2, 0.05 * 1.000001), "w-d", exact=True) == []   # one bit off: disputed
+    assert storage.columns()["audit"][2] == b"disputed" and task_key(REFEREE, 2) in checks.pending
+    assert storage.evaluations()["kind"].tolist() == [b"audit"] * 3
+    storage.close()
+
+
+def test_an_audit_outside_the_tolerance_is_disputed_and_a_quarantined_rows_re_run_disagrees_outright(tmp_path):
+    storage, checks = _audited(tmp_path / "r.h5")
+    assert checks.settle_audit(0, result(0, 0.111 * 1.06), "w-d", exact=False) == []
+    assert storage.columns()["audit"][0] == b"disputed"
+    storage.set_audit(1, "quarantined")              # a quarantined worker's re-run: no referee, it disagrees
+    assert checks.settle_audit(1, result(1, 0.3), "w-d", exact=True) == []
+    assert storage.columns()["audit"][1] == b"disagrees" and task_key(REFEREE, 1) not in checks.pending
+    storage.close()
+
+
+def test_a_referee_agreeing_with_the_result_overrules_the_audit_else_the_result_is_wrong(tmp_path):
+    storage, checks = _audited(tmp_path / "r.h5")
+    checks.settle_audit(0, result(0, 0.2), "w-d", exact=True)
+    checks.settle_audit(2, result(2, 0.2), "w-d", exact=True)
+    assert checks.settle_referee(0, result(0, 0.111), exact=True) == [("w-d", False), ("w-a", True)]
+    assert checks.settle_referee(2, result(2, 0.07), exact=True) == [("w-c", False)]
+    cols = storage.columns()
+    assert (cols["audit"][0], cols["audit"][2]) == (b"overruled", b"disagrees")
+    assert storage.evaluations()["kind"].tolist() == [b"audit", b"audit", b"referee", b"referee"]
+    storage.close()
