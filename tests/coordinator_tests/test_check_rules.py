@@ -12,6 +12,7 @@ import numpy as np
 from spinefarm.coordinator.ladder.checks import Checks
 from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, OPINION, REFEREE, task_key
 from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung, TaskFidelity
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.hdf5 import Hdf5Storage
 from tests.storage_tests.conftest import make_meta, result
 
@@ -223,4 +224,27 @@ def test_a_referee_agreeing_with_the_result_overrules_the_audit_else_the_result_
     cols = storage.columns()
     assert (cols["audit"][0], cols["audit"][2]) == (b"overruled", b"disagrees")
     assert storage.evaluations()["kind"].tolist() == [b"audit", b"audit", b"referee", b"referee"]
+    storage.close()
+
+
+def test_a_failed_judge_run_has_no_ratio_and_an_opinion_adds_its_time(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", share=1.0)
+    checks.settle_judge(1, result(1, 0.3, status=TrialStatus.FAILED, reason="diverged: nan"))
+    assert math.isnan(storage.columns()["judge_ratio"][1])      # never a drift figure
+    before = checks.judge_wall_s
+    checks.settle_opinion(2, dataclasses.replace(result(2, 0.04), wall_time_s=0.5))
+    checks.settle_opinion(0, dataclasses.replace(result(0, 0.1), wall_time_s=0.25))
+    assert checks.judge_wall_s == before + 0.75
+    storage.close()
+
+
+def test_only_this_sets_own_judge_timeouts_count_towards_its_retries(tmp_path):
+    storage, checks = _checks(tmp_path / "r.h5", share=1.0)
+    timeout = result(0, 0.0, status=TrialStatus.FAILED, reason="timeout: no result within its 55.8 s limit")
+    checks.settle_judge(0, timeout)                                  # another set's timeout
+    checks.settle_judge(1, result(1, 0.0, status=TrialStatus.FAILED, reason="crashed: the trial process died"))
+    storage.set_verification(1, "")
+    for _ in range(2):
+        checks.settle_judge(1, dataclasses.replace(timeout, trial_id=1))
+        assert storage.columns()["verification"][1] == b""            # issued again
     storage.close()
