@@ -122,3 +122,20 @@ def test_bullet_trials_always_run_from_the_start():
     again = _run(p, 0.4, kept, cfg)
     assert again.result.extras["continued_s"] == 0.0
     assert len(next(iter(kept._items.values())).rung_ends) == 0
+
+
+def test_the_workers_evaluator_continues_a_promotion_it_ran_the_rung_of_and_no_other():
+    """Two workers' evaluators (worker.service.assignment): the one that ran the rung goes on from its end, the other
+    and an assignment sent from_start simulate from step 0; all three hold the same bits."""
+    from spinefarm.protocol.work import TrialAssignment
+    from spinefarm.worker.service.assignment import physics_evaluator
+
+    unit = tuple(random_unit_params(MORPH, 71, "sidewinding").tolist())
+    ran_rung, other = (physics_evaluator(MORPH, SCREEN, "sidewinding") for _ in range(2))
+    ran_rung(TrialAssignment(0, 1, unit, 5, 60.0, RUNG_S))
+    promotion = TrialAssignment(1, 2, unit, 6, 60.0, FULL_S)
+    results = [ran_rung(promotion), other(promotion), ran_rung(dataclasses.replace(promotion, from_start=True))]
+    assert [r.extras.get("continued_s") for r in results] == [pytest.approx(SCREEN.settle_s + RUNG_S, abs=1e-12),
+                                                              0.0, None]
+    for name in SCORES:
+        assert len({getattr(r, name) for r in results}) == 1, name
