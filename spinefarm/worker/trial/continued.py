@@ -24,10 +24,11 @@ from typing import Any
 
 import numpy as np
 
-# ends kept per set-up: at ~0.2 MB each (a Tetraspine rung of 5 s at 2 ms: its MjData, law state and a 500-row
-# COM path; bench/continue_rungs.py prints `end_bytes`) about 50 MB; a promotion comes within a few hundred
-# trials of its rung in a search of 2 workers, later ones re-simulate (the same bits)
-DEFAULT_ENDS = 256
+# ends kept per set-up (an LRU by count): an end of the Tetraspine's 5 s rung at 2 ms after a 1 s settle is ~40 kB
+# (its MuJoCo integration state ~1 kB, the law's ~5 kB, the COM path of its checks; `python bench/continue_rungs.py`
+# prints `end_bytes`), so about 40 MB at most; a promotion comes within a few hundred trials of its rung in a
+# search of a few workers, and one whose end was dropped is simulated from the start (the same bits)
+DEFAULT_ENDS = 1024
 
 
 @dataclass
