@@ -91,7 +91,14 @@ def check_step(config: Any) -> None:
 
 
 def open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
-    """(core, storage, run file) of the run the arguments ask for."""
+    """(core, storage, run file) of the run the arguments ask for (--no-continue holds for this session only: it
+    changes no result, only what is simulated again)."""
+    core, storage, path = _open_run(args)
+    core.ladder.continue_rungs = not getattr(args, "no_continue", False)
+    return core, storage, path
+
+
+def _open_run(args: argparse.Namespace) -> tuple[Any, Any, Path]:
     from spinefarm.cli.environment_notes import note_environment
     from spinefarm.coordinator.setup import new_run, resume_run
 

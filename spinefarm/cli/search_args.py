@@ -141,6 +141,10 @@ def _ladder_args(p: argparse.ArgumentParser) -> None:
                         "one (successive halving), e.g. 10,30; the last is the full trial length")
     g.add_argument("--eta", type=int, default=DEFAULT_ETA,
                    help=f"keep the best 1/eta of each rung (default {DEFAULT_ETA}, measured: docs/performance.md)")
+    g.add_argument("--no-continue", action="store_true",
+                   help="simulate every promotion from the start, though the worker that ran its last rung kept "
+                        "that rung's end (by default a MuJoCo promotion goes on from it: the same bits, less "
+                        "simulated; docs/performance.md)")
     g.add_argument("--verify-engine", default=None,
                    help="re-simulate every new best in this engine before it counts, and report its distance "
                         "(default: bullet whenever the search's --engine is not bullet)")

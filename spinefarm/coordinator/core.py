@@ -26,6 +26,7 @@ from typing import Any
 from spinefarm.coordinator.ladder.checks import Checks
 from spinefarm.coordinator.ladder.keys import KINDS, split_key, task_key
 from spinefarm.coordinator.ladder.ladder import Ladder
+from spinefarm.coordinator.ladder.rungs import Asker
 from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
@@ -154,7 +155,11 @@ class CoordinatorCore:
             if self.peers.is_quarantined(req.worker_id) or req.worker_id in self.unservable_workers:
                 return encode_message(WorkGrant(self.run_id, self.config_hash, (), self._idle_retry(), False,
                                                 verdicts, self.holder))
-            leases = self.scheduler.grant(req.worker_id, req.capacity, self.study.ask, self.ladder.eligible)
+            # a promotion goes first to the worker that ran its last rung, which may go on from that rung's end
+            asker = Asker(req.worker_id, lambda w: self.scheduler.speaking(w) and not self.peers.is_quarantined(w)) \
+                if self.ladder.continue_rungs else None
+            leases = self.scheduler.grant(req.worker_id, req.capacity, lambda: self.study.ask(asker),
+                                          self.ladder.eligible)
             self._store_given_up()
             assignments = tuple(self.ladder.assignment(ls, self.clock()) for ls in leases)
             retry = 0.0 if assignments else self._idle_retry()

@@ -277,6 +277,11 @@ class Scheduler:
         w.last_contact_s = now
         return w
 
+    def speaking(self, worker_id: str) -> bool:
+        """The worker is live: its liveliness token is up and it spoke within lease_s."""
+        w = self.workers.get(worker_id)
+        return w is not None and w.alive and self.clock() - w.last_contact_s <= self.lease_s
+
     def worker_lost(self, worker_id: str) -> list[int]:
         """The worker's liveliness token vanished: re-queue its leases at once."""
         w = self.workers.get(worker_id)

@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from spinefarm.coordinator.ladder.rungs import BaseTrialScheduler, PlainTrialScheduler
+from spinefarm.coordinator.ladder.rungs import Asker, BaseTrialScheduler, PlainTrialScheduler
 from spinefarm.coordinator.samplers.base import BaseSampler, LearnedView, Proposal
 from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.results import TrialResult
@@ -71,13 +71,13 @@ class Study:
     def trial_seed(self, trial_id: int) -> int:
         return trial_seed(self.seed, trial_id)
 
-    def ask(self) -> int | None:
-        """Sample and record the next trial (first a promotion to a longer rung, if one is due);
-        None once the budget is allotted."""
+    def ask(self, asker: Asker | None = None) -> int | None:
+        """Sample and record the next trial (first a promotion to a longer rung, if one is due: with `asker`, one
+        whose last rung that worker ran first, coordinator.ladder.rungs); None once the budget is allotted."""
         tid = self.storage.n_trials()
         ts = self.trial_scheduler
         sampling_done = self.n_sampled >= self.budget
-        source = ts.promotion(self.storage, sampling_done)
+        source = ts.promotion(self.storage, sampling_done, asker)
         if source is not None:
             row = self.storage.trial(source)
             unit = np.asarray(row.params_unit)

@@ -85,6 +85,8 @@ class TrialAssignment:
     lease_id identifies this issue of the trial; a result must quote it, so a late result for a
     re-issued trial is recognised and dropped. lease_s: time the coordinator waits for it.
     duration_s: simulated seconds of this evaluation (a multi-fidelity rung); None: the run's duration.
+    from_start: simulate from step 0 and keep nothing (a check, or a run that turned continuation off); otherwise a
+    worker that kept the end of this parameter set's shorter rung goes on from it (worker.trial.continued).
     """
 
     trial_id: int
@@ -94,6 +96,7 @@ class TrialAssignment:
     lease_s: float
     duration_s: float | None = None
     fidelity: TaskFidelity | None = None   # a rung's engine / step / settle, or a judge's or audit's task
+    from_start: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         d = {"trial_id": self.trial_id, "lease_id": self.lease_id, "params_unit": list(self.params_unit),
@@ -102,6 +105,8 @@ class TrialAssignment:
             d["duration_s"] = self.duration_s
         if self.fidelity is not None:
             d["fidelity"] = self.fidelity.to_dict()
+        if self.from_start:
+            d["from_start"] = True
         return d
 
     @classmethod
@@ -126,7 +131,8 @@ class TrialAssignment:
                                    expected="{task, engine, dt_s, settle_s, perturb}") from exc
         return cls(get_field(data, "trial_id", int, what), get_field(data, "lease_id", int, what),
                    tuple(float(p) for p in params), get_field(data, "seed", int, what),
-                   finite(get_field(data, "lease_s", (int, float), what), "lease_s", what), duration, fidelity)
+                   finite(get_field(data, "lease_s", (int, float), what), "lease_s", what), duration, fidelity,
+                   get_field(data, "from_start", bool, what) if "from_start" in data else False)
 
 
 @dataclass(frozen=True)

@@ -133,6 +133,7 @@ class TrialRecord:
     settle_s: float = float("nan")
     time_limit_s: float = float("nan")
     body_hash: str = ""
+    continued_s: float = float("nan")
     pareto_front: int = 0
 
     @classmethod

@@ -42,6 +42,7 @@ class Ladder:
         self.drift = checks.drift()  # why the screen's fidelity was raised (None: it was not)
         self.audit_comparisons = {"exact": 0, "tolerance": 0}   # what audits were held to (checks.settle_audit)
         self.unaudited: dict[int, str] = {}   # rows whose audit stays pending, and why
+        self.continue_rungs = True   # a promotion may go on from its last rung's end (off: --no-continue)
         # the checks a restart cut short first, then the screen rows sampled but never finished
         leases.enqueue(checks.restart() + study.storage.waiting_ids())
         self.issue_due()
@@ -69,9 +70,11 @@ class Ladder:
     def assignment(self, lease: Any, now_s: float) -> TrialAssignment:
         _, tid = split_key(lease.trial_id)
         cols = self.study.storage.columns()
+        # a check (judge, audit, referee, opinion) always simulates from the start: an independent re-run
         return TrialAssignment(tid, lease.lease_id, tuple(cols["params_unit"][tid].tolist()), int(cols["seed"][tid]),
                                lease.deadline_s - now_s, _duration(cols["duration_s"][tid]),
-                               self.fidelity(lease.trial_id))
+                               self.fidelity(lease.trial_id), split_key(lease.trial_id)[0] != "trial"
+                               or not self.continue_rungs)
 
     def issue_due(self) -> None:
         """Issue the checks now due: the best's audit if it has none, its judge unless it is judged or being

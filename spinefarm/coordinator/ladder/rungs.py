@@ -14,6 +14,12 @@ reads. Two schedulers, in the spirit of Ray Tune's TrialScheduler and Optuna's p
   (FirstRungView): every parameter set has exactly one first-rung row, so a model-based sampler learns
   from values of one duration, and proposal n is the same with and without rungs.
 
+A promotion is offered first to the worker that ran the set's last rung (Asker): that worker may have kept the
+rung's end and go on from it instead of simulating the rung again (worker.trial.continued; the same bits either
+way). While new parameter sets are still being sampled, a promotion whose last rung another live worker ran waits
+for that worker (the asker samples a new set instead); once sampling is done, or that worker is gone, whoever
+asks takes it and simulates it from the start.
+
 Everything is decided from which rows exist at which rung with which parents, so a restarted
 coordinator continues exactly where it stopped, and a lost lease re-issues the same row.
 """
@@ -21,6 +27,8 @@ coordinator continues exactly where it stopped, and a lost lease re-issues the s
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -40,6 +48,15 @@ def parse_rungs(text: str) -> tuple[float, ...]:
     except ValueError as exc:
         raise ConfigError("rungs are not numbers", received=text,
                           expected="comma-separated seconds, e.g. 10,30") from exc
+
+
+@dataclass(frozen=True)
+class Asker:
+    """The worker asking for work, for the choice of a promotion (see the module). waits_for(worker): whether a
+    promotion whose last rung `worker` ran may wait for it (it is alive and may go on from that rung's end)."""
+
+    worker_id: str
+    waits_for: Callable[[str], bool] = lambda worker: False
 
 
 class BaseTrialScheduler:
@@ -69,7 +86,7 @@ class BaseTrialScheduler:
         """New parameter sets sampled so far."""
         return storage.n_trials()
 
-    def promotion(self, storage: BaseStorage, sampling_done: bool = False) -> int | None:
+    def promotion(self, storage: BaseStorage, sampling_done: bool = False, asker: Asker | None = None) -> int | None:
         """The row to re-run at its next rung, or None (sample a new set)."""
         return None
 
@@ -118,15 +135,32 @@ class HalvingTrialScheduler(BaseTrialScheduler):
             return False
         return self.promotion(storage, True) is None
 
-    def promotion(self, storage: BaseStorage, sampling_done: bool = False) -> int | None:
-        """The best not-yet-promoted row among the top 1/eta of some rung's complete rows (higher rungs
-        first), while that rung has promoted fewer than 1/eta of its complete rows (so a search that
-        keeps improving, as hill climbing does, promotes about 1/eta, not every row that was once in
-        the top). Once no new parameter set will be sampled (`sampling_done`), each rung's best goes on
-        past the quota too, so the best screened parameter set always reaches the full length."""
+    def promotion(self, storage: BaseStorage, sampling_done: bool = False, asker: Asker | None = None) -> int | None:
+        """The first of the promotable rows (`promotable`); with an asker, the first whose last rung it ran, else the
+        first that need not wait for the worker that ran it (see the module)."""
+        rows = self.promotable(storage, sampling_done)
+        if asker is None:
+            return next(rows, None)
+        ran_by = storage.columns()["worker_id"]
+        own = asker.worker_id.encode("utf-8", "replace")[:64]  # as storage keeps it
+        first = None
+        for tid in rows:
+            if ran_by[tid] == own:
+                return tid
+            if first is None and (sampling_done or not asker.waits_for(ran_by[tid].decode("utf-8", "replace"))):
+                first = tid
+        return first
+
+    def promotable(self, storage: BaseStorage, sampling_done: bool = False) -> Iterator[int]:
+        """The rows due to be re-run at their next rung, in order: the best not-yet-promoted rows among the top
+        1/eta of each rung's complete rows (higher rungs first), while that rung has promoted fewer than 1/eta of
+        its complete rows (so a search that keeps improving, as hill climbing does, promotes about 1/eta, not
+        every row that was once in the top). Once no new parameter set will be sampled (`sampling_done`), each
+        rung's best goes on past the quota too, so the best screened parameter set always reaches the full
+        length."""
         cols = storage.columns()
         if len(cols["trial_id"]) == 0:
-            return None
+            return
         rung, obj = cols["rung"], cols["objective"]
         complete = cols["status"] == TrialStatus.COMPLETE.stored
         promoted = cols["phase"] == _PROMOTED
@@ -144,8 +178,7 @@ class HalvingTrialScheduler(BaseTrialScheduler):
                 order, keep = order[:1], 1
             for tid in order[:keep].tolist():
                 if tid not in promoted_from:
-                    return int(tid)
-        return None
+                    yield int(tid)
 
 
 def trial_scheduler(settings: RunSettings) -> BaseTrialScheduler:

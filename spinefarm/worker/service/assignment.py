@@ -147,7 +147,9 @@ def physics_evaluator(morphology: Any, trial_config: Any, controller: str | None
             k = dataclasses.replace(spec, episodes=spec.episodes_for(a.duration_s), rung_episodes=(),
                                     rung_durations_s=())
             return with_fault(run_episodes(morphology, params, cfg, a.seed, k, controller=controller, setup=setup))
-        r = simulate(morphology, params, cfg, a.seed, controller=controller, setup=setup).result
+        # a rung's promotion goes on from the kept end of its last rung where this worker has it (the same bits)
+        r = simulate(morphology, params, cfg, a.seed, controller=controller, setup=setup,
+                     resume=not a.from_start).result
         if a.fidelity is not None and a.fidelity.perturb:
             friction = cfg.ground_friction if cfg.ground_friction is not None \
                 else ground_friction(morphology, cfg.profile)

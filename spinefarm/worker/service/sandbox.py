@@ -239,7 +239,9 @@ class TrialSandbox:
         elif msg[0] == "ok":
             result = msg[1]
             if result.ok:
-                self.limit.observe(result.wall_time_s, sim_s, kind, dt_s)
+                # per second simulated here: a trial that went on from a kept rung end ran only the rest
+                self.limit.observe(result.wall_time_s, sim_s - float(result.extras.get("continued_s", 0.0)), kind,
+                                   dt_s)
         else:
             result = failed_result(a, str(msg[1]), wall)
         return replace(result, extras={**result.extras, "time_limit_s": limit_s})

@@ -19,6 +19,7 @@ from spinefarm.worker.control.law import ControlLaw
 from spinefarm.worker.engines.base import BasePhysics
 from spinefarm.worker.sim import strings as sk
 from spinefarm.worker.trial import guard, loop, scoring
+from spinefarm.worker.trial.continued import RungEnd
 from spinefarm.worker.trial.episode import STRETCH_BASE_MIN_CM, check_state
 from spinefarm.worker.trial.loop import advance, checked_runner, stepper
 from spinefarm.worker.trial.settled import Settled
@@ -113,20 +114,26 @@ class Batch:
         self._com = np.zeros(3)
         self._work_at = np.zeros(1)
 
-    def run(self, settled: Settled | None = None, keep_settled: bool = False) -> list[WorldLog]:
+    def run(self, settled: Settled | None = None, keep_settled: bool = False, resume: RungEnd | None = None,
+            keep_end: bool = False) -> list[WorldLog]:
         """Both phases, or with `settled` (every world's start pose and string tables those of its key,
         worker.trial.settled) locomotion only, every world starting from that settle's end. keep_settled: keep world
-        0's settle end in self.settled (if it settled and its engine can snapshot it)."""
+        0's settle end in self.settled (if it settled and its engine can snapshot it). resume: world 0 (the only one)
+        goes on from a kept trial end of its key (worker.trial.continued), in its locomotion phase; keep_end: keep
+        world 0's end in self.end (if it ran to its end and its engine can snapshot it)."""
         t = self.timing
         phases = ((t.n_settle, 0), (t.n_steps, t.cpg_every))
         self.settled: Settled | None = None
-        if settled is not None:
-            self._start_settled(settled)
+        self.end: RungEnd | None = None
+        if settled is not None or resume is not None:
+            if settled is not None:
+                self._start_settled(settled)
             phases = phases[1:]
         for phase_steps, every in phases:
             self.law.begin_phase(every, t.dt_s, t.cpg_own_step_s)
-            start = self.done
-            n = 0
+            start, n = self.done, 0
+            if every and resume is not None:  # the locomotion phase from the kept end's step
+                start, n = t.n_settle, self._resume(resume) - t.n_settle
             while n < phase_steps and self.active.any():
                 whole = (phase_steps - n) // t.check_every * t.check_every
                 if whole and self._checked is not None and self._boxes is not None and self.done % t.check_every == 0:
@@ -150,8 +157,20 @@ class Batch:
                 if keep_settled and self.active[0] and 0 not in self.engine.retries:
                     self.settled = Settled(self.engine.snapshot(0), self.law.state[0].copy(),
                                            self.law.work_internal(0), copy.deepcopy(self.worlds[0]), self.done)
+        if keep_end and self.active[0] and not self.worlds[0].reason and 0 not in self.engine.retries:
+            # before _finish, which writes the scored end into the log: a longer trial goes on from here
+            self.end = RungEnd(self.engine.snapshot(0), self.law.snapshot(0), copy.deepcopy(self.worlds[0]), self.done)
         self._finish()
         return self.worlds
+
+    def _resume(self, end: RungEnd) -> int:
+        """World 0 takes a kept end (after begin_phase of the phase it was taken in, which fixes the CPG's plan);
+        returns the steps since the start it had taken."""
+        self.engine.restore(0, end.engine_state)
+        self.law.restore(0, end.law_state)
+        self.worlds[0] = end.world_copy()
+        self.done = end.done
+        return end.done
 
     def _run_checked(self, n_steps: int, phase_start: int) -> int:
         """Up to n_steps (whole check intervals) of world 0 through loop.run_checked, with Batch's bookkeeping

@@ -26,6 +26,7 @@ from spinefarm.robot.spaces import controller_space
 from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.control.law import string_tables
 from spinefarm.worker.engines.base import BasePhysics, EngineFactory, engine_class
+from spinefarm.worker.trial.continued import RungEnds
 from spinefarm.worker.trial.episode import build_poses, choose_step, start_lift_cm, start_rotation
 from spinefarm.worker.trial.settled import SettledStarts
 
@@ -55,6 +56,7 @@ class TrialSetup:
         self.scenes_built = 0
         self._rod_pairs: np.ndarray | None = None
         self.settled = SettledStarts()  # settle ends kept for later trials (worker.trial.settled)
+        self.rung_ends = RungEnds()  # trial ends kept for longer trials of a set (worker.trial.continued)
 
     def string_tables(self, network: CpgNetwork) -> tuple[np.ndarray, np.ndarray]:
         """Fresh copies of the packed string parameters and initial state for this network's node map."""

@@ -34,6 +34,7 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.control.law import ControlLaw, string_tables
 from spinefarm.worker.engines.base import EngineFactory
 from spinefarm.worker.trial.batch import Batch, Timing, Trajectory, WorldLog
+from spinefarm.worker.trial.continued import end_key
 from spinefarm.worker.trial.episode import EpisodeEnd, choose_step, score
 from spinefarm.worker.trial.settled import settle_key
 from spinefarm.worker.trial.setup import SetupCache, TrialSetup, setup_key
@@ -52,30 +53,33 @@ class TrialOutcome:
 
 def simulate(morphology: Morphology | str | Mapping, params: np.ndarray | Mapping[str, float] | list,
              config: TrialConfig | None = None, seed: int = 0, *, controller: str | None = None,
-             scene_factory: EngineFactory | None = None, setup: TrialSetup | SetupCache | None = None
-             ) -> TrialOutcome:
+             scene_factory: EngineFactory | None = None, setup: TrialSetup | SetupCache | None = None,
+             resume: bool = False) -> TrialOutcome:
     """Run one trial and return its result (`.result`, a TrialResult) with the recorded trajectory (if config
     asks for one). `morphology`: a built-in's name, a spec file's path, a spec mapping or a Morphology;
     `params`: a unit-cube vector of the controller space, or a mapping of named physical values. Divergence is a
     failed result, never an exception; bad parameters raise ParameterError.
     `scene_factory` replaces the configured engine's class (same constructor as BasePhysics).
     `setup`: a TrialSetup of this morphology and config, or a SetupCache, to reuse what earlier trials
-    built (the result is the same bits either way)."""
+    built (the result is the same bits either way). resume: go on from the kept end of an earlier, shorter trial of
+    this parameter set in `setup` where there is one, and keep this trial's end (worker.trial.continued; the same
+    bits as from the start; its result's extras say `continued_s`, the simulated seconds taken from that end)."""
     return simulate_batch(morphology, [params], config, [seed], controller=controller, scene_factory=scene_factory,
-                          setup=setup)[0]
+                          setup=setup, resume=resume)[0]
 
 
 def simulate_batch(morphology: Morphology | str | Mapping, params: Sequence, config: TrialConfig | None = None,
                    seeds: Sequence[int] = (0,), *, controller: str | None = None,
-                   scene_factory: EngineFactory | None = None, setup: TrialSetup | SetupCache | None = None
-                   ) -> list[TrialOutcome]:
+                   scene_factory: EngineFactory | None = None, setup: TrialSetup | SetupCache | None = None,
+                   resume: bool = False) -> list[TrialOutcome]:
     """B trials in one batch of worlds: params[b] (unit-cube vector or named physical values) with seeds[b];
     one TrialOutcome per world, each the same bits as simulate(morphology, params[b], config, seeds[b])."""
     cfg = config or TrialConfig()
     if len(params) != len(seeds) or not len(seeds):
         raise ParameterError("one seed per parameter set", received=f"{len(params)} sets, {len(seeds)} seeds",
                              expected="as many seeds as parameter sets, at least one")
-    outcomes, retries = _simulate(morphology, list(params), cfg, list(seeds), controller, scene_factory, setup)
+    outcomes, retries = _simulate(morphology, list(params), cfg, list(seeds), controller, scene_factory, setup,
+                                  resume)
     groups: dict[str, list[int]] = {}
     for b, (options, _) in retries.items():  # the engine's policy: again from the start, in other settings
         groups.setdefault(json.dumps(options, sort_keys=True), []).append(b)
@@ -83,7 +87,7 @@ def simulate_batch(morphology: Morphology | str | Mapping, params: Sequence, con
         again = dataclasses.replace(cfg, engine_options={**cfg.engine_options, **json.loads(options)})
         rerun = simulate_batch(morphology, [params[b] for b in worlds], again, [seeds[b] for b in worlds],
                                controller=controller, scene_factory=scene_factory,
-                               setup=None if isinstance(setup, TrialSetup) else setup)
+                               setup=None if isinstance(setup, TrialSetup) else setup, resume=resume)
         for b, out in zip(worlds, rerun, strict=True):
             out.result.extras.update(retries[b][1])
             outcomes[b] = out
@@ -91,8 +95,8 @@ def simulate_batch(morphology: Morphology | str | Mapping, params: Sequence, con
 
 
 def _simulate(morphology: Morphology | str | Mapping, params: list, cfg: TrialConfig, seeds: list[int],
-              controller: str | None, scene_factory: EngineFactory | None, setup: TrialSetup | SetupCache | None
-              ) -> tuple[list[TrialOutcome | None], dict]:
+              controller: str | None, scene_factory: EngineFactory | None, setup: TrialSetup | SetupCache | None,
+              resume: bool = False) -> tuple[list[TrialOutcome | None], dict]:
     t_wall = time.perf_counter()
     morph = apply_profile(load_morphology(morphology), cfg.profile)
     controller = controller or cfg.controller
@@ -105,7 +109,8 @@ def _simulate(morphology: Morphology | str | Mapping, params: list, cfg: TrialCo
             or setup.controller != controller:
         setup = TrialSetup(morph, cfg, controller)
     space = setup.space
-    networks = [space.network(space.param_space.physical(p)) for p in params]
+    physical = [space.param_space.physical(p) for p in params]
+    networks = [space.network(x) for x in physical]
     geom = setup.geom
     law = ControlLaw(networks, [setup.string_tables(n) for n in networks],
                      (geom.body_a, geom.body_b, geom.anchor_a_cm, geom.anchor_b_cm), len(setup.bodies),
@@ -114,18 +119,26 @@ def _simulate(morphology: Morphology | str | Mapping, params: list, cfg: TrialCo
     offsets = [setup.start_offsets(int(s)) for s in seeds]
     scene, owned = setup.scene(None if offsets[0] is None else np.stack(offsets), scene_factory, len(seeds))
     key = _settle_key(setup, scene_factory, timing, law, offsets)
+    end = _end_key(setup, scene_factory, timing, offsets, physical) if resume else None
+    start = None if end is None else setup.rung_ends.get(end, timing.n_settle + timing.n_steps)
     try:
         batch = Batch(scene, law, timing, cfg, setup.masses, geom.start_length_cm, setup.terrain)
-        worlds = batch.run(None if key is None else setup.settled.get(key), keep_settled=key is not None)
+        worlds = batch.run(None if key is None or start is not None else setup.settled.get(key),
+                           keep_settled=key is not None, resume=start, keep_end=end is not None)
         if key is not None and batch.settled is not None:
             setup.settled.put(key, batch.settled)
+        if end is not None and batch.end is not None:
+            setup.rung_ends.put(end, batch.end)
         retries = dict(scene.retries)
     finally:
         if owned:
             scene.close()
     wall_s = (time.perf_counter() - t_wall) / len(seeds)
-    return [None if w.retry else _outcome(morph, setup, cfg, timing, w, int(s), wall_s)
-            for w, s in zip(worlds, seeds, strict=True)], retries
+    outcomes = [None if w.retry else _outcome(morph, setup, cfg, timing, w, int(s), wall_s)
+                for w, s in zip(worlds, seeds, strict=True)]
+    if resume and outcomes[0] is not None:
+        outcomes[0].result.extras["continued_s"] = 0.0 if start is None else start.done * timing.dt_s
+    return outcomes, retries
 
 
 def _settle_key(setup: TrialSetup, scene_factory: EngineFactory | None, timing: Timing, law: ControlLaw,
@@ -139,6 +152,16 @@ def _settle_key(setup: TrialSetup, scene_factory: EngineFactory | None, timing: 
     keys = {settle_key(timing.n_settle, timing.check_every, o, law.params[b], law.state[b])
             for b, o in enumerate(offsets)}
     return keys.pop() if len(keys) == 1 else None
+
+
+def _end_key(setup: TrialSetup, scene_factory: EngineFactory | None, timing: Timing, offsets: list,
+             physical: list) -> str | None:
+    """The key a one-world trial's end is kept under for a longer trial (worker.trial.continued), or None where it
+    cannot go on from one: a batch of worlds, a recording, a replaced engine or one that cannot snapshot a world."""
+    if len(physical) != 1 or timing.record_every or scene_factory is not None \
+            or not engine_spec(setup.cfg.engine).can("snapshot"):
+        return None
+    return end_key(timing.n_settle, timing.check_every, timing.cpg_every, offsets[0], physical[0])
 
 
 def _timing(morph: Morphology, cfg: TrialConfig, dt: float) -> Timing:
