@@ -26,7 +26,7 @@ def search(*args: str) -> None:
     assert r.returncode == 0, r.stderr
 
 
-@pytest.mark.slow  # three searches: ~15 s on an idle machine, 40 s under load
+@pytest.mark.slow  # three searches: 40 s measured under a load of 10-12
 def test_a_resumed_codesigned_search_continues_exactly(tmp_path: Path):
     spec = tmp_path / "co.yaml"
     spec.write_text(SPEC)
