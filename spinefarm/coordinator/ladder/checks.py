@@ -35,7 +35,7 @@ from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, KIND_CODES, OPINION,
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings, TaskFidelity
-from spinefarm.protocol.states import JUDGED_VERDICTS, AuditState, Verification
+from spinefarm.protocol.states import JUDGED_VERDICTS, AuditState, EvaluationKind, Verification
 from spinefarm.protocol.verdicts import judge_verdict, relative_change
 from spinefarm.robot.chaos_floors import holds_tolerance
 from spinefarm.storage.base import BaseStorage
@@ -103,23 +103,23 @@ class Checks:
 
     def task_fidelity(self, key: int) -> TaskFidelity:
         kind, tid = split_key(key)
-        if kind == "judge":
-            return TaskFidelity.of("judge", self.settings.judge.rung, self.settings.judge.perturb)
-        if kind == "opinion" and self.settings.judge.opinion is not None:
-            return TaskFidelity.of("opinion", self.settings.judge.opinion)
+        if kind == EvaluationKind.JUDGE:
+            return TaskFidelity.of(EvaluationKind.JUDGE, self.settings.judge.rung, self.settings.judge.perturb)
+        if kind == EvaluationKind.OPINION and self.settings.judge.opinion is not None:
+            return TaskFidelity.of(EvaluationKind.OPINION, self.settings.judge.opinion)
         row = self.storage.trial(tid)  # an audit (and its referee) re-runs the row exactly as it ran
         dt = row.dt_s if math.isfinite(row.dt_s) else None
         settle = row.settle_s if math.isfinite(row.settle_s) else None
-        return TaskFidelity("audit", row.engine or None, dt, settle)
+        return TaskFidelity(EvaluationKind.AUDIT, row.engine or None, dt, settle)
 
     def excluded(self, key: int) -> set[str]:
         """Workers that may not run task `key`: an audit goes to another worker than the result's, a
         referee to a third one."""
         kind, tid = split_key(key)
-        if kind not in ("audit", "referee"):
+        if kind not in (EvaluationKind.AUDIT, EvaluationKind.REFEREE):
             return set()
         row = self.storage.trial(tid)
-        return {row.worker_id, row.audit_worker_id} if kind == "referee" else {row.worker_id}
+        return {row.worker_id, row.audit_worker_id} if kind == EvaluationKind.REFEREE else {row.worker_id}
 
     # --- issuing ------------------------------------------------------------------------------------
     def restart(self) -> list[int]:
@@ -150,7 +150,7 @@ class Checks:
             return None, []
         self.storage.set_verification(tid, Verification.PENDING)
         self.pending.add(key)
-        return key, [k for k in self.pending if k != key and split_key(k)[0] == "judge"]
+        return key, [k for k in self.pending if k != key and split_key(k)[0] == EvaluationKind.JUDGE]
 
     def opinion_due(self, search_over: bool = False) -> tuple[int | None, list[int]]:
         """(the current best's opinion task key if it is due, pending opinion keys of overtaken bests to drop).
@@ -161,12 +161,12 @@ class Checks:
         if opinion is None or not (self.judged and self.settings.judge.enabled and best):
             return None, []
         tid, key = best[0], task_key(OPINION, best[0])
-        stale = [k for k in self.pending if k != key and split_key(k)[0] == "opinion"]
+        stale = [k for k in self.pending if k != key and split_key(k)[0] == EvaluationKind.OPINION]
         cols = self.storage.columns()
         if key in self.pending or key in self.unservable or cols["verification"][tid] not in JUDGED_VERDICTS:
             return None, stale
         ev = self.storage.evaluations()
-        if np.any((ev["trial_id"] == tid) & (ev["kind"] == b"opinion")):
+        if np.any((ev["trial_id"] == tid) & (ev["kind"] == EvaluationKind.OPINION.stored)):
             return None, stale
         if not search_over and self.over_share(cols["wall_time_s"]):
             return None, stale
@@ -184,11 +184,11 @@ class Checks:
         audit stays pending in the file (re-issued on resume, when another identity may be there)."""
         self.pending.discard(key)
         kind, tid = split_key(key)
-        if keep_pending or kind == "opinion":   # an opinion is due from storage alone: nothing stored to undo
+        if keep_pending or kind == EvaluationKind.OPINION:   # due from storage alone: nothing stored to undo
             return
-        if kind == "judge":
+        if kind == EvaluationKind.JUDGE:
             self.storage.set_verification(tid, Verification.NOT_CHECKED)
-        elif kind == "audit" and self.storage.columns()["audit"][tid] != AuditState.QUARANTINED.stored:
+        elif kind == EvaluationKind.AUDIT and self.storage.columns()["audit"][tid] != AuditState.QUARANTINED.stored:
             self.storage.set_audit(tid, AuditState.NOT_AUDITED)   # a quarantined worker's row stays untrusted
         # a referee nobody can run leaves the result disputed (it does not count as best)
 
@@ -221,7 +221,7 @@ class Checks:
         return key
 
     # --- results --------------------------------------------------------------------------------------
-    def _record(self, tid: int, kind: str, r: TrialResult, worker_id: str = "") -> None:
+    def _record(self, tid: int, kind: EvaluationKind, r: TrialResult, worker_id: str = "") -> None:
         """Every judge, audit, referee and opinion run is a row of the evaluations table, linked to the row it
         checked."""
         f = self.task_fidelity(task_key(KIND_CODES[kind], tid))
@@ -232,7 +232,7 @@ class Checks:
     def settle_judge(self, tid: int, r: TrialResult) -> None:
         if math.isfinite(r.wall_time_s):
             self.judge_wall_s += r.wall_time_s
-        self._record(tid, "judge", r)
+        self._record(tid, EvaluationKind.JUDGE, r)
         if _timed_out(r) and self._judge_timeouts(tid) <= _JUDGE_TIMEOUT_RETRIES:
             # a wall-clock limit hit on a busy machine says nothing of the physics: the judge is due again
             self.storage.set_verification(tid, Verification.NOT_CHECKED)
@@ -251,14 +251,14 @@ class Checks:
 
     def _judge_timeouts(self, tid: int) -> int:
         ev = self.storage.evaluations()
-        return int(np.count_nonzero((ev["trial_id"] == tid) & (ev["kind"] == b"judge")
+        return int(np.count_nonzero((ev["trial_id"] == tid) & (ev["kind"] == EvaluationKind.JUDGE.stored)
                                     & np.char.startswith(ev["reason"], b"timeout:")))
 
     def settle_opinion(self, tid: int, r: TrialResult) -> None:
         """The other engine's run of a judged best: a row of its own, counted in the judge's share; it never ranks."""
         if math.isfinite(r.wall_time_s):
             self.judge_wall_s += r.wall_time_s
-        self._record(tid, "opinion", r)
+        self._record(tid, EvaluationKind.OPINION, r)
         row = self.storage.trial(tid)
         log.info("best trial %d in the other engine (%s): %.4g m against its judged %.4g m", tid,
                  r.extras.get("engine", ""), r.distance_m, row.verify_distance_m)
@@ -289,7 +289,7 @@ class Checks:
         """Store an audit; (worker, agreed) for each worker it judged. exact: both ran the same code in the same
         environment, so only the same bits agree (else the tolerance). A disagreement is refereed by a third
         worker before anybody is blamed; the re-run of a quarantined worker's row needs no referee."""
-        self._record(tid, "audit", r, worker_id)
+        self._record(tid, EvaluationKind.AUDIT, r, worker_id)
         row = self.storage.trial(tid)
         how = _comparison(exact, self.settings.audit.tolerance)
         tol = 0.0 if exact else self.settings.audit.tolerance
@@ -310,7 +310,7 @@ class Checks:
     def settle_referee(self, tid: int, r: TrialResult, exact: bool) -> list[tuple[str, bool]]:
         """The third worker's run decides a disputed audit: whoever it contradicts is wrong (the result's
         worker when it matches neither)."""
-        self._record(tid, "referee", r)
+        self._record(tid, EvaluationKind.REFEREE, r)
         row = self.storage.trial(tid)
         tol = 0.0 if exact else self.settings.audit.tolerance
         if _same(r, row.status == "complete", row.distance_m, tol):
