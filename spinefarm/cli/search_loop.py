@@ -136,7 +136,7 @@ class SearchSession:
             failure = core.failure or (None if core.done else self.workers.check())
             if failure:
                 return failure
-            kinds = core.pending_task_kinds() if core.search_done and not judging else set()
+            kinds = core.pending_check_kinds() if core.search_done and not judging else set()
             if kinds:  # only when a judge or an audit is still running: with --no-verify there is none
                 judging = True
                 what = ("the judge re-simulates the best before it is reported" if EvaluationKind.JUDGE in kinds

@@ -10,7 +10,7 @@ from pathlib import Path
 import h5py
 import pytest
 
-from spinefarm.coordinator.ladder.keys import KINDS, TRIAL, split_key, task_key
+from spinefarm.coordinator.ladder.keys import KINDS, TRIAL, check_key, split_key
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.settings import TASKS, TaskFidelity
 from spinefarm.protocol.states import EvaluationKind
@@ -55,7 +55,7 @@ def test_a_stored_row_of_an_unknown_kind_is_refused_and_loses_nothing(tmp_path):
 def test_lease_keys_and_tasks_name_the_same_kinds():
     assert set(KINDS.values()) == set(EvaluationKind)
     for code, kind in KINDS.items():
-        assert split_key(task_key(code, 5)) == (kind, 5)
+        assert split_key(check_key(code, 5)) == (kind, 5)
     assert split_key(7) == (TRIAL, 7)
     # a referee re-runs a disputed row as an audit does: the tasks are the screen's and three kinds
     assert set(TASKS) == {"trial", "judge", "audit", "opinion"}

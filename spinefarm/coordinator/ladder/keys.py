@@ -15,7 +15,7 @@ TRIAL = "trial"   # what split_key names a screen row's lease
 _KEY_STRIDE = 8   # more than the kinds: a key's kind is its remainder
 
 
-def task_key(kind: int, trial_id: int) -> int:
+def check_key(kind: int, trial_id: int) -> int:
     return -(_KEY_STRIDE * trial_id + kind)
 
 

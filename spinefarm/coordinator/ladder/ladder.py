@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from spinefarm.coordinator.ladder.checks import Checks
-from spinefarm.coordinator.ladder.keys import REFEREE, TRIAL, split_key, task_key
+from spinefarm.coordinator.ladder.keys import REFEREE, TRIAL, check_key, split_key
 from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
@@ -63,7 +63,7 @@ class Ladder:
     def fidelity(self, key: int) -> TaskFidelity:
         kind, tid = split_key(key)
         if kind != TRIAL:
-            return self.checks.task_fidelity(key)
+            return self.checks.check_fidelity(key)
         return self.checks.trial_fidelity(int(self.study.storage.columns()["rung"][tid]), self.drift is not None)
 
     def assignment(self, lease: Any, now_s: float) -> TrialAssignment:
@@ -116,7 +116,7 @@ class Ladder:
                     self.unaudited[tid] = UNAUDITED
                     log.warning("no other worker identity can audit trial %d: it stays %s", tid, UNAUDITED)
                 elif not overtaken:
-                    log.warning("no worker can run the %s task of trial %d: dropped", kind, tid)
+                    log.warning("no worker can run the %s check of trial %d: dropped", kind, tid)
                     if kind == EvaluationKind.OPINION:
                         self.checks.unservable.add(key)
                 self.leases.withdraw(key)
@@ -177,8 +177,8 @@ class Ladder:
         self.audit_comparisons["exact" if exact else "tolerance"] += 1
         for wid, agrees in judged:
             self.quarantine(self.peers.audited(wid, agrees), "its audited results disagree with other workers'")
-        if kind == EvaluationKind.AUDIT and task_key(REFEREE, tid) in self.checks.pending:
-            self.leases.push_front(task_key(REFEREE, tid))
+        if kind == EvaluationKind.AUDIT and check_key(REFEREE, tid) in self.checks.pending:
+            self.leases.push_front(check_key(REFEREE, tid))
 
 
 def _duration(value: float) -> float | None:
