@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from spinefarm.protocol.columns import column_group
+from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import EvaluationKind
 from spinefarm.storage import side_table
@@ -79,6 +80,16 @@ class EvaluationTable:
         for name in NAMES:
             self._cols[name][:n] = cols[name]
         self.n = self.n_written = n
+
+
+def check_kinds(cols: dict[str, np.ndarray], path: Any) -> None:
+    """Refuse to resume from a table holding a kind not of EvaluationKind (a damaged or foreign file): one line
+    naming the first such row, its kind and the known kinds."""
+    bad = np.flatnonzero(~np.isin(cols["kind"], [k.stored for k in EvaluationKind]))
+    if bad.size:
+        raise StorageError(f"cannot resume {path}: evaluation row {int(bad[0])} of {len(cols['kind'])} has an "
+                           "unknown kind", received=bytes(cols["kind"][bad[0]]),
+                           expected="one of " + ", ".join(k.value for k in EvaluationKind))
 
 
 def judge_wall_s(cols: dict[str, np.ndarray]) -> float:

@@ -69,3 +69,19 @@ def test_no_module_spells_a_stored_kind_of_its_own():
     found = [f"{p.relative_to(ROOT)}:{i}" for p in (ROOT / "spinefarm").rglob("*.py")
              for i, line in enumerate(p.read_text().splitlines(), 1) if pattern.search(line)]
     assert found == []
+
+
+def test_a_file_holding_an_unknown_kind_is_not_resumed_and_stays_as_it_was(tmp_path):
+    path = tmp_path / "k.h5"
+    s = _run(path)
+    s.add_evaluation(row_of(0, "judge", result(0, 0.31), "bullet", 2.5e-4, "w-2"))
+    s.add_evaluation(row_of(0, "audit", result(0, 0.29), "", None, "w-3"))
+    s.close()
+    with h5py.File(path, "r+") as f:   # a foreign writer's row
+        f["evaluations/kind"][1] = b"recheck"
+    before = path.read_bytes()
+    with pytest.raises(StorageError) as err:
+        Hdf5Storage.resume(path)
+    assert str(err.value) == (f"cannot resume {path}: evaluation row 1 of 2 has an unknown kind; "
+                              f"received b'recheck'; expected {KNOWN}")
+    assert path.read_bytes() == before
