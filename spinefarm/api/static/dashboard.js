@@ -182,7 +182,7 @@ async function showRun(runId, gen, first) {
     card("best " + esc(meta.objective), best ? `<a href="#/run/${r}/trial/${best.trial_id}">${fmt(best.objective)}</a>` : "–"),
     card("best distance (m)", best ? `${fmt(status.best_distance_m)}${["holds", "moved", "judged"].includes(best.verification.verdict)
       ? ' <span class="muted">judged</span>' : ""}` : "–"),
-    card("best speed (cm/s)", best ? fmt(best.scores.speed_cm_s) : "–"), card("best COT", best ? bestCot(best) : "–"),
+    card("best speed (cm/s)", best ? fmt(best.scores.speed_cm_s) : "–"), card("best COT", best ? `<span id="best-cot">${bestCot(best)}</span>` : "–"),
     card("best verified", best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.label || best.verification.verdict)}</span>` : "–"),
     // better than the best, but no other identity's audit has agreed yet: shown apart, never as the best
     ...(status.pending_audit ? [card("pending audit", `<a href="#/run/${r}/trial/${status.pending_audit.trial_id}">trial ${
@@ -218,10 +218,10 @@ async function showRun(runId, gen, first) {
 // a judged best's COT is the judge's (the screen's on hover); one the judge did not measure says so
 function bestCot(best) {
   if (best.judged_cot != null) {
-    return `<span id="best-cot" title="screen's COT ${fmt(best.scores.cot)}">${fmt(best.judged_cot)}</span> <span class="muted">judged</span>`;
+    return `<span title="screen's COT ${fmt(best.scores.cot)}">${fmt(best.judged_cot)}</span> <span class="muted">judged</span>`;
   }
   const note = best.judged_cot_note ? ` <span class="muted">screen's; judge's ${esc(best.judged_cot_note)}</span>` : "";
-  return `<span id="best-cot">${fmt(best.scores.cot)}</span>${note}`;
+  return `${fmt(best.scores.cot)}${note}`;
 }
 
 // how `search --engine auto` chose the tier: the calibration's figures, its reason on hover
