@@ -41,6 +41,8 @@ class SpreadSide(BaseModel):
     engine: str
     dt_s: float | None = Field(None, description="the step it ran at (s)")
     distance_m: float | None
+    cot: float | None = Field(None, description="the cost of transport it measured (null: not measured, a run "
+                              "file of schema 8, or the judge's side read from the verdict's columns)")
     status: str | None = Field(None, description="complete or failed (null: from the verdict's columns)")
     reason: str | None = None
     wall_time_s: float | None = None
@@ -80,6 +82,11 @@ class Trial(BaseModel):
     settle_s: float | None = None
     rung: int = 0                    # multi-fidelity rung (0: the screen)
     duration_s: float | None = None  # simulated duration asked for (null: the run's)
+    judged_cot: float | None = Field(None, description="a judged set's cost of transport in the judge's run "
+                                     "(/best, /trials/ID and the run's best; null: not judged, or see "
+                                     "judged_cot_note); scores.cot is the screen's")
+    judged_cot_note: str | None = Field(None, description="why a judged set has no judged_cot: \"not measured "
+                                        "(...)\" in a run file from before the judge's COT was stored")
     model_spread: ModelSpread | None = Field(None, description="a judged best's distance in the other engine "
                                              "too (/best and /trials/ID only; null: no second opinion stored)")
 

@@ -10,8 +10,10 @@ from typing import Any
 import numpy as np
 
 from spinefarm.api.run_state import derive_state, live_figures, read_live
+from spinefarm.protocol.states import JUDGED_VERDICTS
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.codesign_coverage import run_coverage
+from spinefarm.storage.evaluations import judged_cot
 from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
 from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, older_file_note
 
@@ -65,6 +67,15 @@ def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
     }
 
 
+def judged_cot_view(rec: TrialRecord, evaluations: dict[str, np.ndarray]) -> dict[str, Any]:
+    """{judged_cot, judged_cot_note}: the COT the judge's run measured on a judged set (holds, moved, judged), or
+    null and why (not measured in a file from before it was stored); both null for a set not judged."""
+    if rec.verification.encode() not in JUDGED_VERDICTS:
+        return {"judged_cot": None, "judged_cot_note": None}
+    cot, why = judged_cot(evaluations, rec.trial_id)
+    return {"judged_cot": cot, "judged_cot_note": why}
+
+
 def _noted(view: dict[str, Any], unaudited: dict[str, str]) -> dict[str, Any]:
     """A pending audit the coordinator could give to no other identity says so (the status file knows why)."""
     why = unaudited.get(str(view["trial_id"]))
@@ -97,6 +108,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     steps = np.asarray(cols.get("dt_s", []), dtype=float)
     steps = steps[np.isfinite(steps)]
     best, pending = storage.reported_best(1)   # with auditing on: the best another identity's audit agreed with
+    evaluations = storage.evaluations()
     unaudited = (live.get("audit") or {}).get("unaudited") or {}
     shown = str(path)
     tc = meta.trial_config
@@ -106,7 +118,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "objective": meta.objective, "state": state, "trials_budget": meta.trials_budget,
         "trials_planned": planned,
         "parameter_sets_sampled": storage.count_rung(0),
-        **(evaluation_counts(cols, storage.evaluations()) if n_trials
+        **(evaluation_counts(cols, evaluations) if n_trials
            else {"parameter_sets_done": 0, "evaluations_done": 0}),
         "best_distance_m": _num(counted_distance_m(best[0].verification, best[0].distance_m,
                                                    best[0].verify_distance_m)) if best else None,
@@ -114,7 +126,8 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "trials_leased": live.get("trials_leased") if state == "running" else None,
         "trials_queued": live.get("trials_queued") if state == "running" else None,
         **live_figures(state, live, age, finished_at, max(0, planned - finished)),
-        "best": _noted(trial_view(storage, best[0]), unaudited) if best else None,
+        "best": _noted({**trial_view(storage, best[0]), **judged_cot_view(best[0], evaluations)}, unaudited)
+        if best else None,
         "pending_audit": _noted(trial_view(storage, pending), unaudited) if pending is not None else None,
         # a finished run keeps the last the coordinator knew (who ran, who was quarantined); a stopped one shows none
         "workers": live.get("workers", []) if state in ("running", "stalled", "done") else [],

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from spinefarm.storage.codesign_coverage import run_coverage
+from spinefarm.storage.evaluations import judged_cot
 from spinefarm.storage.model_spread import model_spread, spread_text
 from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
 
@@ -113,6 +114,17 @@ def _objective_text(meta: Any, b: Any) -> str:
     return "" if meta.objective in DISTANCE_OBJECTIVES else f"{meta.objective} {_g(b.objective)} · "
 
 
+def _cost_text(storage: Any, b: Any, counted_m: float, judged: bool) -> str:
+    """Speed and COT of the best: a judged set's from the judge's run (its speed from the judged distance, its
+    COT from its evaluation row; "not measured" in a file from before that column), the screen's beside them."""
+    if not judged:
+        return f"speed {_g(b.speed_cm_s)} cm/s · COT {_g(b.cot)} · work {_g(b.work_j)} J"
+    cot, why = judged_cot(storage.evaluations(), b.trial_id)
+    return (f"speed {_g(100.0 * counted_m / b.sim_time_s)} cm/s (judged) · COT "
+            + (f"{_g(cot)} (judged)" if cot is not None else str(why))
+            + f" · screen's COT {_g(b.cot)}, work {_g(b.work_j)} J")
+
+
 def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose: bool = False,
                  notes: tuple[str, ...] = ()) -> str:
     """The whole report as text (ends without a newline); verdict: the judge's word on the best, notes: lines
@@ -140,12 +152,9 @@ def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose:
         engine = f" in {b.engine} at {b.dt_s * 1e3:g} ms" if b.engine and math.isfinite(b.dt_s) else ""
         counted_m = counted_distance_m(b.verification, b.distance_m, b.verify_distance_m)
         judged = b.verification in ("holds", "moved", "judged")
-        # the judge stores its distance only: speed follows from it, COT and work are the screen's
-        speed = f"speed {_g(100.0 * counted_m / b.sim_time_s)} cm/s (judged) · screen's COT" if judged \
-            else f"speed {_g(b.speed_cm_s)} cm/s · COT"
         lines += [f"best trial {b.trial_id} ({b.phase}, {b.sim_time_s:g} s{engine})",
                   "  " + _objective_text(meta, b) + f"distance {_g(counted_m)} m" + (" (judged)" if judged else "")
-                  + f" · {speed} {_g(b.cot)} · work {_g(b.work_j)} J",
+                  + " · " + _cost_text(storage, b, counted_m, judged),
                   f"  verdict: {verdict}"]
         if (spread := model_spread(storage, b)) is not None:  # the judged best in the other engine too
             lines.append("  " + spread_text(spread))

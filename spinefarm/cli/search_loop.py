@@ -20,6 +20,7 @@ from spinefarm.cli.report import describe_best, progress, serve_until_stopped
 from spinefarm.cli.run_setup import check_run_args, credentials, free_port, open_run
 from spinefarm.cli.stop_signals import stop_on_signals
 from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.states import EvaluationKind
 
 PORT_ATTEMPTS = 5  # `search`'s own coordinator port
 
@@ -135,11 +136,12 @@ class SearchSession:
             failure = core.failure or (None if core.done else self.workers.check())
             if failure:
                 return failure
-            kinds = core.pending_task_kinds() if core.search_done and not judging else set()
+            kinds = core.pending_check_kinds() if core.search_done and not judging else set()
             if kinds:  # only when a judge or an audit is still running: with --no-verify there is none
                 judging = True
-                what = ("the judge re-simulates the best before it is reported" if "judge" in kinds
-                        else "the best runs in the other engine for a second opinion" if kinds == {"opinion"}
+                what = ("the judge re-simulates the best before it is reported" if EvaluationKind.JUDGE in kinds
+                        else "the best runs in the other engine for a second opinion"
+                        if kinds == {EvaluationKind.OPINION}
                         else "the last audits run")
                 self.progress.write(f"the search is done; {what} (Ctrl-C skips) ...")
             self.progress.update(*progress(core))

@@ -24,7 +24,7 @@ from dataclasses import replace
 from typing import Any
 
 from spinefarm.coordinator.ladder.checks import Checks
-from spinefarm.coordinator.ladder.keys import KINDS, split_key, task_key
+from spinefarm.coordinator.ladder.keys import KINDS, check_key, split_key
 from spinefarm.coordinator.ladder.ladder import Ladder
 from spinefarm.coordinator.ladder.rungs import Asker
 from spinefarm.coordinator.peers import PeerBook
@@ -99,7 +99,7 @@ class CoordinatorCore:
 
     @property
     def search_done(self) -> bool:
-        """Every evaluation of the search is stored (tasks may still be running)."""
+        """Every evaluation of the search is stored (checks may still be running)."""
         with self.lock:  # a multi-fidelity "done" reads several columns the transport threads write
             return self.study.done
 
@@ -109,7 +109,7 @@ class CoordinatorCore:
         with self.lock:
             return self.ladder.done
 
-    def pending_task_kinds(self) -> set[str]:
+    def pending_check_kinds(self) -> set[str]:
         """What still runs after the search: "judge", "audit", "referee", "opinion" (empty: nothing)."""
         with self.lock:
             return {split_key(k)[0] for k in self.ladder.checks.pending}
@@ -242,7 +242,7 @@ class CoordinatorCore:
         if unreadable:  # a failed stand-in (protocol.submissions): it answers the trial's own seed
             result = replace(result, seed=int(storage.columns()["seed"][tid]))
         for kind in KINDS:  # a check's result quotes the check's lease and the row it checks
-            key = task_key(kind, tid)
+            key = check_key(kind, tid)
             if self.scheduler.is_current(key, lease_id, worker_id):
                 return self.ladder.settle_check(key, worker_id, self._finite_or_failed(result))
             if self.scheduler.was_issued(key, lease_id, worker_id):
@@ -294,8 +294,8 @@ class CoordinatorCore:
         """Store trials the scheduler gave up on (they lost their worker too often) as failed (lock held)."""
         while self.scheduler.given_up:
             tid, reason = self.scheduler.given_up.pop(0)
-            if tid < 0:  # a task: the best goes unchecked rather than holding up the run
-                log.warning("%s task of trial %d %s: dropped", *split_key(tid), reason)
+            if tid < 0:  # a check: the best goes unchecked rather than holding up the run
+                log.warning("%s check of trial %d %s: dropped", *split_key(tid), reason)
                 self.ladder.checks.drop(tid)
                 continue
             seed = int(self.study.storage.columns()["seed"][tid])

@@ -18,6 +18,7 @@ from typing import Any, ClassVar, TypeVar
 
 from spinefarm.protocol.engine_choice import EngineChoice
 from spinefarm.protocol.errors import ConfigError, bounded, check_fields, check_range
+from spinefarm.protocol.states import EvaluationKind
 
 SCHEDULERS = ("plain", "halving")
 _R = TypeVar("_R", bound="_JsonRecord")
@@ -253,7 +254,8 @@ def _known(d: Any, cls: type, what: str) -> dict[str, Any]:
 
 PROMOTED = "promoted"   # the phase of a row that re-runs its parent at the next rung
 ENQUEUED = "enqueued"   # the phase of a parameter set the user gave (--enqueue)
-TASKS = ("trial", "judge", "audit", "opinion")
+# a lease's task: a screen row, or a check at its fidelity (a referee runs as an audit does)
+TASKS = ("trial", EvaluationKind.JUDGE.value, EvaluationKind.AUDIT.value, EvaluationKind.OPINION.value)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,10 @@
-"""The states a trial passes through, and those of its verification and its audit."""
+"""The states a trial passes through, those of its verification and its audit, and the kinds of run that check it."""
 
 from __future__ import annotations
 
 from enum import StrEnum
+
+from spinefarm.protocol.errors import StorageError
 
 
 class TrialStatus(StrEnum):
@@ -53,6 +55,29 @@ class AuditState(StrEnum):
     @property
     def stored(self) -> bytes:
         return self.value.encode()
+
+
+class EvaluationKind(StrEnum):
+    """What a run beside the screen's own rows did (the `kind` of an evaluation row, storage.evaluations; the kind
+    of a check's lease, coordinator.ladder.keys). The one spelling of these names."""
+
+    JUDGE = "judge"        # a finer step or another engine: its distance counts
+    AUDIT = "audit"        # another worker at the same fidelity
+    REFEREE = "referee"    # a third worker on a disputed audit
+    OPINION = "opinion"    # a judged best in the other engine at its converged step: never ranks
+
+    @property
+    def stored(self) -> bytes:
+        return self.value.encode()
+
+    @classmethod
+    def of(cls, name: object) -> EvaluationKind:
+        """The kind named `name` (str or stored bytes); anything else is refused in one line naming it."""
+        try:
+            return cls(name.decode() if isinstance(name, bytes) else name)
+        except (ValueError, UnicodeDecodeError):
+            raise StorageError("unknown evaluation kind", received=name,
+                               expected="one of " + ", ".join(k.value for k in cls)) from None
 
 
 # verdicts after which the judged distance is the set's figure (it ranks by it)

@@ -151,6 +151,7 @@ class Hdf5Storage(InMemoryStorage):
                 meta = replace(meta, trials_budget=trials_budget)
             meta = meta.opened("resume")   # a copy resumed elsewhere gets its own instance too
             episodes, evaluations = read_episodes(path), read_evaluations(path)
+            ev.check_kinds(evaluations, path)   # before anything is written
             real = path.resolve()  # a symlink stays a symlink: its target is what gets replaced
             real.with_name(real.name + ".compress-tmp").unlink(missing_ok=True)  # a close cut short
             try:

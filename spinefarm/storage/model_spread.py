@@ -14,50 +14,42 @@ from typing import Any
 
 import numpy as np
 
-OPINION = "opinion"
-JUDGE = "judge"
+from spinefarm.protocol.states import EvaluationKind
+from spinefarm.storage.evaluations import latest
 
 
 def _num(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def _latest(cols: dict[str, np.ndarray], trial_id: int, kind: str) -> int | None:
-    """The last stored row of `kind` on trial row `trial_id`, a complete one first."""
-    rows = np.flatnonzero((cols["trial_id"] == trial_id) & (cols["kind"] == kind.encode()))
-    if not rows.size:
-        return None
-    complete = rows[cols["status"][rows] == b"complete"]
-    return int((complete if complete.size else rows)[-1])
-
-
 def _side(cols: dict[str, np.ndarray], i: int, engine: str, dt_s: float | None) -> dict[str, Any]:
     stored_dt = float(cols["dt_s"][i])
     return {"engine": cols["engine"][i].decode() or engine,
             "dt_s": stored_dt if math.isfinite(stored_dt) else dt_s,
-            "distance_m": _num(float(cols["distance_m"][i])), "status": cols["status"][i].decode(),
+            "distance_m": _num(float(cols["distance_m"][i])), "cot": _num(float(cols["cot"][i])),
+            "status": cols["status"][i].decode(),
             "reason": cols["reason"][i].decode() or None, "wall_time_s": _num(float(cols["wall_time_s"][i])),
             "worker_id": cols["worker_id"][i].decode() or None}
 
 
 def model_spread(storage: Any, rec: Any, cols: dict[str, np.ndarray] | None = None) -> dict[str, Any] | None:
     """{judge, other, ratio, step_error} for trial record `rec`, or None when no opinion row checked it.
-    judge and other: {engine, dt_s, distance_m, status, reason, wall_time_s, worker_id} (the judge's from its
+    judge and other: {engine, dt_s, distance_m, cot, status, reason, wall_time_s, worker_id} (the judge's from its
     evaluation row, else from the verdict's columns); ratio: other / judge (None when either is missing or the
     judge's is 0); step_error: {engine: median relative change at half the step} from the run's calibration
     (empty when the run chose no engine by calibrating). cols: the evaluations table when read already."""
     cols = storage.evaluations() if cols is None else cols
-    mine = _latest(cols, rec.trial_id, OPINION)
+    mine = latest(cols, rec.trial_id, EvaluationKind.OPINION)
     if mine is None:
         return None
     meta = storage.run_meta()
     rung = meta.settings.judge.rung
     run_engine = (meta.trial_config or {}).get("engine") or rec.engine or ""
     judge_engine = rung.engine or run_engine
-    j = _latest(cols, rec.trial_id, JUDGE)
+    j = latest(cols, rec.trial_id, EvaluationKind.JUDGE)
     judge = _side(cols, j, judge_engine, rung.dt_s) if j is not None else {
         "engine": judge_engine, "dt_s": rung.dt_s, "distance_m": _num(rec.verify_distance_m),
-        "status": None, "reason": None, "wall_time_s": None, "worker_id": None}
+        "cot": None, "status": None, "reason": None, "wall_time_s": None, "worker_id": None}
     other = _side(cols, mine, "", None)
     d_judge, d_other = judge["distance_m"], other["distance_m"]
     ratio = d_other / d_judge if d_judge and d_other is not None and other["status"] == "complete" else None

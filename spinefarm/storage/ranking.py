@@ -2,9 +2,10 @@
 
 A set the judge re-simulated (holds, moved, judged) ranks by the judged distance: for objectives that are a
 distance, a speed or either over (1 + COT), the screen's objective times judged / screen distance (the same
-simulated time and, for the COT ones, the screen's COT, which the judge does not record); `cot:S` keeps the
-screen's value. Any other set ranks by its screen objective. A diverged (or, in older files,
-not-reproduced) judgement and a disputed or failed audit keep a set from being best (base.best_ids).
+simulated time and, for the COT ones, the screen's COT: the judge's COT is in its evaluation row, not in the
+trials table the ranking reads); `cot:S` keeps the screen's value. Any other set ranks by its screen
+objective. A diverged (or, in older files, not-reproduced) judgement and a disputed or failed audit keep a set
+from being best (base.best_ids).
 
 With auditing on, the best a run reports is the best set another identity's audit agreed with (reported_best):
 a better one still waiting for that audit is shown apart as "pending audit", never as the best.
@@ -17,7 +18,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from spinefarm.protocol.states import JUDGED_VERDICTS, REFUTED_VERDICTS, AuditState, TrialStatus
+from spinefarm.protocol.states import JUDGED_VERDICTS, REFUTED_VERDICTS, AuditState, EvaluationKind, TrialStatus
 
 SCALED_OBJECTIVES = ("distance", "speed", "cot_distance", "pareto")  # proportional to the distance
 _TINY_M = 1e-12
@@ -119,7 +120,7 @@ def evaluation_counts(cols: Mapping[str, np.ndarray],
 def _opinions(evaluations: Mapping[str, np.ndarray] | None) -> int:
     if evaluations is None or "kind" not in evaluations:
         return 0
-    return int(np.count_nonzero(evaluations["kind"] == b"opinion"))
+    return int(np.count_nonzero(evaluations["kind"] == EvaluationKind.OPINION.stored))
 
 
 _AUDITED = tuple(a.stored for a in (AuditState.AGREES, AuditState.DISPUTED, AuditState.DISAGREES,

@@ -17,18 +17,21 @@ from spinefarm.protocol.columns import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.protocol.states import STORED_STATUSES, AuditState, Verification
 
-FILE_SCHEMA_VERSION = 8
+FILE_SCHEMA_VERSION = 9
 # Older layouts that still open everywhere (read, served, resumed: a resumed copy is written at the current
-# version). 7: no /evaluations table; "not_reproduced" verdicts (a fixed 5 % tolerance).
-OLDER_SCHEMA_VERSIONS = (7,)
+# version), and what each lacks. 7: no /evaluations table; "not_reproduced" verdicts (a fixed 5 % tolerance).
+# 8: evaluation rows without their cost of transport.
+_LACKS = {7: "its judge, audit and referee runs are only the verdict columns of the rows they checked, not rows "
+             "of their own",
+          8: "its evaluation rows hold no cost of transport: the judge's COT is not measured"}
+OLDER_SCHEMA_VERSIONS = tuple(_LACKS)
 
 
 def older_file_note(version: int) -> str | None:
     """What an older run file lacks, in one line (None for the current version)."""
     if version == FILE_SCHEMA_VERSION:
         return None
-    return (f"an older run file (schema {version}, now {FILE_SCHEMA_VERSION}): its judge, audit and referee runs "
-            "are only the verdict columns of the rows they checked, not rows of their own")
+    return f"an older run file (schema {version}, now {FILE_SCHEMA_VERSION}): {_LACKS.get(version, 'unknown')}"
 
 # A sampler names its own phases: any short lower-case name is a valid phase (no list to extend here).
 PHASE_PATTERN = rb"^[a-z][a-z0-9_]{0,15}$"

@@ -45,9 +45,9 @@ def read_group(f: Any, group: str, columns: Sequence[Column]) -> dict[str, np.nd
     if group not in f:
         return empty_columns(columns)
     g = f[group]
-    names = [c.name for c in columns]
-    n = min(g[name].shape[0] for name in names)
-    cols = {name: g[name][:n] for name in names}
+    n = min(g[c.name].shape[0] for c in columns if c.name in g)
+    # a column added since the file was written reads as its empty value (NaN: not measured)
+    cols = {c.name: g[c.name][:n] if c.name in g else empty_columns((c,), n)[c.name] for c in columns}
     empty = np.flatnonzero(cols["status"] == b"")  # extended, not yet filled: cut there
     return {k: v[: int(empty[0])] for k, v in cols.items()} if empty.size else cols
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from spinefarm.coordinator.ladder.checks import Checks
-from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, OPINION, REFEREE, task_key
+from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, OPINION, REFEREE, check_key
 from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung, TaskFidelity
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.hdf5 import Hdf5Storage
@@ -38,29 +38,29 @@ def _checks(path, judged=True, share=0.5, opinion=None, audit=0.0):
 def test_an_audit_and_its_referee_rerun_the_row_at_its_own_engine_step_and_settle(tmp_path):
     storage, checks = _checks(tmp_path / "r.h5")
     for kind in (AUDIT, REFEREE):
-        assert checks.task_fidelity(task_key(kind, 0)) == TaskFidelity("audit", "mujoco", 0.002, 0.5)
-        assert checks.task_fidelity(task_key(kind, 2)) == TaskFidelity("audit", "bullet", 0.001, 1.0)
+        assert checks.check_fidelity(check_key(kind, 0)) == TaskFidelity("audit", "mujoco", 0.002, 0.5)
+        assert checks.check_fidelity(check_key(kind, 2)) == TaskFidelity("audit", "bullet", 0.001, 1.0)
         # a row that recorded no engine or step: the run's own, left to the worker
-        assert checks.task_fidelity(task_key(kind, 1)) == TaskFidelity("audit", None, None, None)
+        assert checks.check_fidelity(check_key(kind, 1)) == TaskFidelity("audit", None, None, None)
     storage.close()
 
 
 def test_an_opinion_without_an_opinion_rung_is_not_an_opinion(tmp_path):
     storage, checks = _checks(tmp_path / "r.h5", opinion=Rung("bullet", 2.5e-4))
-    assert checks.task_fidelity(task_key(OPINION, 1)) == TaskFidelity("opinion", "bullet", 2.5e-4, None)
-    assert checks.task_fidelity(task_key(AUDIT, 0)) == TaskFidelity("audit", "mujoco", 0.002, 0.5)   # not one
+    assert checks.check_fidelity(check_key(OPINION, 1)) == TaskFidelity("opinion", "bullet", 2.5e-4, None)
+    assert checks.check_fidelity(check_key(AUDIT, 0)) == TaskFidelity("audit", "mujoco", 0.002, 0.5)   # not one
     storage.close()
     storage, checks = _checks(tmp_path / "s.h5")
-    assert checks.task_fidelity(task_key(JUDGE, 1)).task == "judge"
+    assert checks.check_fidelity(check_key(JUDGE, 1)).task == "judge"
     storage.close()
 
 
 def test_an_audit_excludes_the_rows_worker_and_a_referee_the_audits_too(tmp_path):
     storage, checks = _checks(tmp_path / "r.h5")
     storage.set_audit(2, "disputed", 0.06, "w-d")
-    assert checks.excluded(task_key(AUDIT, 2)) == {"w-c"}
-    assert checks.excluded(task_key(REFEREE, 2)) == {"w-c", "w-d"}
-    assert checks.excluded(task_key(JUDGE, 2)) == set()
+    assert checks.excluded(check_key(AUDIT, 2)) == {"w-c"}
+    assert checks.excluded(check_key(REFEREE, 2)) == {"w-c", "w-d"}
+    assert checks.excluded(check_key(JUDGE, 2)) == set()
     storage.close()
 
 
@@ -70,7 +70,7 @@ def test_a_judge_is_due_for_the_best_only_and_never_in_a_run_without_one(tmp_pat
     storage.close()
     storage, checks = _checks(tmp_path / "s.h5", share=1.0)
     key, stale = checks.judge_due(0)
-    assert key == task_key(JUDGE, 1) and stale == []          # the 0.213 m set, and only it
+    assert key == check_key(JUDGE, 1) and stale == []          # the 0.213 m set, and only it
     assert storage.columns()["verification"].tolist() == [b"", b"pending", b""]
     storage.close()
 
@@ -79,11 +79,11 @@ def test_while_the_search_runs_a_judge_waits_for_its_share_and_at_the_end_it_doe
     storage, checks = _checks(tmp_path / "r.h5", share=0.25)
     # the trials took 3 x 0.25 s (conftest's wall time): a 0.25 share allows the judge 0.25 s (0.25 x 0.75 / 0.75)
     checks.judge_wall_s = 0.2
-    assert checks.judge_due(0)[0] == task_key(JUDGE, 1)
+    assert checks.judge_due(0)[0] == check_key(JUDGE, 1)
     storage.set_verification(1, "")
     checks.judge_wall_s = 0.3
     assert checks.judge_due(0) == (None, [])
-    assert checks.judge_due(0, search_over=True)[0] == task_key(JUDGE, 1)
+    assert checks.judge_due(0, search_over=True)[0] == check_key(JUDGE, 1)
     storage.close()
 
 
@@ -105,9 +105,9 @@ def test_an_overtaken_bests_judge_is_named_stale_when_the_new_best_is_judged(tmp
     old, _ = checks.judge_due(0)
     storage.add_trial(3, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 3)
     storage.finish_trial(3, dataclasses.replace(result(3, 0.3), worker_id="w-a"), 0.3)
-    checks.pending.add(task_key(AUDIT, 0))    # another kind of check pending: never stale here
+    checks.pending.add(check_key(AUDIT, 0))    # another kind of check pending: never stale here
     new, stale = checks.judge_due(0)
-    assert (old, new, stale) == (task_key(JUDGE, 1), task_key(JUDGE, 3), [task_key(JUDGE, 1)])
+    assert (old, new, stale) == (check_key(JUDGE, 1), check_key(JUDGE, 3), [check_key(JUDGE, 1)])
     storage.close()
 
 
@@ -117,13 +117,13 @@ def test_a_dropped_judge_or_audit_is_undone_in_the_file_unless_it_is_kept_pendin
     checks.drop(key)
     assert storage.columns()["verification"][1] == b"" and key not in checks.pending
     storage.set_audit(2, "pending")
-    checks.drop(task_key(AUDIT, 2))
+    checks.drop(check_key(AUDIT, 2))
     assert storage.columns()["audit"][2] == b""
     storage.set_audit(2, "pending")
-    checks.drop(task_key(AUDIT, 2), keep_pending=True)   # re-issued on resume, by another identity
+    checks.drop(check_key(AUDIT, 2), keep_pending=True)   # re-issued on resume, by another identity
     assert storage.columns()["audit"][2] == b"pending"
     storage.set_audit(2, "disputed", 0.06, "w-d")
-    checks.drop(task_key(REFEREE, 2))                    # nobody to referee: the result stays disputed
+    checks.drop(check_key(REFEREE, 2))                    # nobody to referee: the result stays disputed
     assert storage.columns()["audit"][2] == b"disputed"
     storage.close()
 
@@ -133,14 +133,14 @@ def test_while_the_search_runs_an_opinion_waits_for_the_judges_share(tmp_path):
     storage.set_verification(1, "judged", 0.2, "", 1.0)
     checks.judge_wall_s = 0.3
     assert checks.opinion_due() == (None, [])
-    assert checks.opinion_due(search_over=True)[0] == task_key(OPINION, 1)
+    assert checks.opinion_due(search_over=True)[0] == check_key(OPINION, 1)
     storage.close()
 
 
 def test_the_new_best_is_always_audited_and_other_results_only_when_drawn(tmp_path):
     storage, checks = _checks(tmp_path / "r.h5", audit=1e-9)   # auditing on, almost nothing drawn
     assert [checks.audit_due(t) for t in (0, 2)] == [None, None]
-    assert checks.audit_due(1) == task_key(AUDIT, 1) and storage.columns()["audit"][1] == b"pending"
+    assert checks.audit_due(1) == check_key(AUDIT, 1) and storage.columns()["audit"][1] == b"pending"
     storage.close()
     storage, checks = _checks(tmp_path / "s.h5")                # auditing off: not even the best
     assert checks.audit_due(1) is None and checks.best_audit_due() is None
@@ -149,7 +149,7 @@ def test_the_new_best_is_always_audited_and_other_results_only_when_drawn(tmp_pa
 
 def test_a_best_without_an_audit_gets_one_once(tmp_path):
     storage, checks = _checks(tmp_path / "r.h5", audit=1e-9)
-    assert checks.best_audit_due() == task_key(AUDIT, 1)
+    assert checks.best_audit_due() == check_key(AUDIT, 1)
     assert storage.columns()["audit"].tolist() == [b"", b"pending", b""]
     assert checks.best_audit_due() is None          # pending already
     storage.set_audit(1, "agrees", 0.213, "w-d")
@@ -176,14 +176,14 @@ def test_a_quarantined_workers_complete_rows_are_re_run_and_its_disputed_ones_se
     storage, checks = _checks(tmp_path / "r.h5")
     storage.add_trial(3, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 3)   # w-a's, not finished: nothing
     storage.set_audit(0, "disputed", 0.09, "w-d")
-    checks.pending.add(task_key(REFEREE, 0))
+    checks.pending.add(check_key(REFEREE, 0))
     reruns, settled = checks.mark_quarantined(["w-a"])
     # its only complete row was disputed: the disputing audit was its re-run, so nothing is run again
-    assert (reruns, settled) == ([], [task_key(REFEREE, 0)])
+    assert (reruns, settled) == ([], [check_key(REFEREE, 0)])
     audit = storage.columns()["audit"].tolist()
     assert audit == [b"disagrees", b"", b"", b""]     # the disputed row settled against w-a; others untouched
     reruns, _ = checks.mark_quarantined(["w-b", "w-c"])
-    assert sorted(reruns) == sorted([task_key(AUDIT, 1), task_key(AUDIT, 2)])
+    assert sorted(reruns) == sorted([check_key(AUDIT, 1), check_key(AUDIT, 2)])
     assert storage.columns()["audit"].tolist() == [b"disagrees", b"quarantined", b"quarantined", b""]
     storage.close()
 
@@ -200,7 +200,7 @@ def test_an_exact_audit_agrees_only_to_the_bit_and_another_environments_within_t
     assert storage.columns()["audit"][1] == b"agrees"
     assert checks.settle_audit(0, result(0, 0.111 * 1.04), "w-d", exact=False) == [("w-a", True), ("w-d", True)]
     assert checks.settle_audit(2, result(2, 0.05 * 1.000001), "w-d", exact=True) == []   # one bit off: disputed
-    assert storage.columns()["audit"][2] == b"disputed" and task_key(REFEREE, 2) in checks.pending
+    assert storage.columns()["audit"][2] == b"disputed" and check_key(REFEREE, 2) in checks.pending
     assert storage.evaluations()["kind"].tolist() == [b"audit"] * 3
     storage.close()
 
@@ -211,7 +211,7 @@ def test_an_audit_outside_the_tolerance_is_disputed_and_a_quarantined_rows_re_ru
     assert storage.columns()["audit"][0] == b"disputed"
     storage.set_audit(1, "quarantined")              # a quarantined worker's re-run: no referee, it disagrees
     assert checks.settle_audit(1, result(1, 0.3), "w-d", exact=True) == []
-    assert storage.columns()["audit"][1] == b"disagrees" and task_key(REFEREE, 1) not in checks.pending
+    assert storage.columns()["audit"][1] == b"disagrees" and check_key(REFEREE, 1) not in checks.pending
     storage.close()
 
 

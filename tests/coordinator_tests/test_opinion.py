@@ -39,7 +39,7 @@ def test_a_judged_best_gets_one_opinion_row_in_the_other_engine_issued_again_aft
         [opinion] = _grant(core, "w2", 4).assignments
         assert opinion.trial_id == best and not core.done
         assert opinion.fidelity == TaskFidelity("opinion", "mujoco", MUJOCO_CONVERGED_DT_S)
-        assert core.pending_task_kinds() == {"opinion"}
+        assert core.pending_check_kinds() == {"opinion"}
     finally:
         storage.close()   # the coordinator dies with the opinion out on a worker
     core, storage = resume_run(out, FakeClock())
@@ -131,10 +131,10 @@ def test_an_opinion_no_worker_can_run_is_dropped_so_the_run_ends_and_an_overtake
     # trial 0's opinion was withdrawn: its late result is stale and stores nothing
     late = _submit(core, "w2", _run(evaluate, WorkGrant("r", "h", (opinion,)), "w2"))
     assert [v.value for _, v in late.verdicts] == ["stale"]
-    assert core.pending_task_kinds() == {"opinion"}                  # the new best's, in MuJoCo
+    assert core.pending_check_kinds() == {"opinion"}                  # the new best's, in MuJoCo
     core.worker_lost("w2")
     assert _ask(core, "w1", bullet) == () and not core.done         # not in Bullet; workers may still reconnect
     clock.advance(11.0)   # past the restart grace: no live worker runs MuJoCo
     _ask(core, "w1", bullet)
-    assert core.done and core.pending_task_kinds() == set()
+    assert core.done and core.pending_check_kinds() == set()
     assert b"opinion" not in storage.evaluations()["kind"].tolist()

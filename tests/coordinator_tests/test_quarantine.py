@@ -46,5 +46,5 @@ def test_a_quarantined_workers_rows_are_marked_re_run_elsewhere_and_kept_across_
     best = storage.best(1)[0]  # a row cleared by its re-run counts again, also in a file opened after its marking
     assert (best.worker_id, best.distance_m, best.audit) == ("w1", 2.1, "agrees")
     # what is left is the audit of w2's best, which needs a third identity
-    assert core.pending_task_kinds() == {"audit"} and not core.done
+    assert core.pending_check_kinds() == {"audit"} and not core.done
     storage.close()

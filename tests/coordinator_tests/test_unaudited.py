@@ -29,7 +29,7 @@ def test_a_best_no_other_identity_can_audit_stays_pending_and_is_said_unaudited(
     items = [(a.lease_id, res(a, worker="w1", distance=d)) for a, d in zip(grant.assignments, distances, strict=True)]
     assert set(submit(core, items, worker="w1").values()) == {"stored"}
     best = grant.assignments[0].trial_id
-    assert storage.best(1)[0].trial_id == best and core.pending_task_kinds() == {"audit"}
+    assert storage.best(1)[0].trial_id == best and core.pending_check_kinds() == {"audit"}
     # the only worker is the result's own identity: once the start's grace for workers to come is over, the run
     # ends, and the audit is neither run nor dropped
     clock.advance(60.0)

@@ -12,7 +12,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from spinefarm.api.deps import run_storage
 from spinefarm.api.errors import NotFound
 from spinefarm.api.schemas import Trial, TrialPage
-from spinefarm.api.views import trial_view
+from spinefarm.api.views import judged_cot_view, trial_view
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.hdf5_reader import Hdf5Reader
 from spinefarm.storage.model_spread import model_spread
@@ -26,7 +26,7 @@ router = APIRouter(prefix="/runs/{run_id}", tags=["trials"])
 def best(storage: Annotated[Hdf5Reader, Depends(run_storage)],
          k: Annotated[int, Query(ge=1, le=1000, description="how many trials")] = 10) -> list[dict[str, Any]]:
     cols = storage.evaluations()
-    return [{**trial_view(storage, rec), "model_spread": model_spread(storage, rec, cols)}
+    return [{**trial_view(storage, rec), **judged_cot_view(rec, cols), "model_spread": model_spread(storage, rec, cols)}
             for rec in storage.reported_best(k)[0]]
 
 
@@ -53,7 +53,8 @@ def trials_page(storage: Annotated[Hdf5Reader, Depends(run_storage)],
 def trial(storage: Annotated[Hdf5Reader, Depends(run_storage)],
           trial_id: Annotated[int, Path(ge=0, le=2**62, description="trial number")]) -> dict[str, Any]:
     rec = _record(storage, trial_id)
-    return {**trial_view(storage, rec), "model_spread": model_spread(storage, rec)}
+    cols = storage.evaluations()
+    return {**trial_view(storage, rec), **judged_cot_view(rec, cols), "model_spread": model_spread(storage, rec, cols)}
 
 
 TrialId = Annotated[int, Path(ge=0, le=2**62, description="trial number")]

@@ -182,7 +182,7 @@ async function showRun(runId, gen, first) {
     card("best " + esc(meta.objective), best ? `<a href="#/run/${r}/trial/${best.trial_id}">${fmt(best.objective)}</a>` : "–"),
     card("best distance (m)", best ? `${fmt(status.best_distance_m)}${["holds", "moved", "judged"].includes(best.verification.verdict)
       ? ' <span class="muted">judged</span>' : ""}` : "–"),
-    card("best speed (cm/s)", best ? fmt(best.scores.speed_cm_s) : "–"), card("best COT", best ? fmt(best.scores.cot) : "–"),
+    card("best speed (cm/s)", best ? fmt(best.scores.speed_cm_s) : "–"), card("best COT", best ? `<span id="best-cot">${bestCot(best)}</span>` : "–"),
     card("best verified", best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.label || best.verification.verdict)}</span>` : "–"),
     // better than the best, but no other identity's audit has agreed yet: shown apart, never as the best
     ...(status.pending_audit ? [card("pending audit", `<a href="#/run/${r}/trial/${status.pending_audit.trial_id}">trial ${
@@ -213,6 +213,15 @@ async function showRun(runId, gen, first) {
   document.body.dataset.trialsShown = String(cols.n_trials);
   schedule(() => showRun(runId, gen, false).catch((e) => serverGone(e, gen, status.reopen_command)),
     status.state === "running");
+}
+
+// a judged best's COT is the judge's (the screen's on hover); one the judge did not measure says so
+function bestCot(best) {
+  if (best.judged_cot != null) {
+    return `<span title="screen's COT ${fmt(best.scores.cot)}">${fmt(best.judged_cot)}</span> <span class="muted">judged</span>`;
+  }
+  const note = best.judged_cot_note ? ` <span class="muted">screen's; judge's ${esc(best.judged_cot_note)}</span>` : "";
+  return `${fmt(best.scores.cot)}${note}`;
 }
 
 // how `search --engine auto` chose the tier: the calibration's figures, its reason on hover
@@ -265,6 +274,8 @@ async function showTrial(runId, trialId, gen) {
         <tr><td class="l">verdict</td><td class="l verdict ${esc(v.verdict)}" id="verdict-label">${esc(v.label || v.verdict)}</td></tr>
         <tr><td class="l">distance at the search's step (m)</td><td>${fmt(t.scores.distance_m, 6)}</td></tr>
         <tr><td class="l">distance re-simulated in ${esc(v.judge || "a finer step")} (m)</td><td>${fmt(v.fine_step_distance_m, 6)}</td></tr>
+        ${t.judged_cot != null || t.judged_cot_note ? `<tr><td class="l">COT in ${esc(v.judge || "a finer step")} (screen's: ${fmt(t.scores.cot, 4)})</td>
+          <td id="judged-cot">${t.judged_cot != null ? fmt(t.judged_cot, 6) : esc(t.judged_cot_note)}</td></tr>` : ""}
         ${v.verdict === "judged" && v.screen_to_judge_ratio != null ? `<tr><td class="l">screen / judge ratio</td><td>${fmt(v.screen_to_judge_ratio, 4)}</td></tr>` : ""}
         ${spreadRows(t.model_spread)}
         ${t.audit && t.audit.state !== "not_audited" ? `<tr><td class="l">audit by ${esc(t.audit.worker_id || "another worker")}</td>

@@ -11,7 +11,7 @@ const RUN_COLUMNS = [  // [key, label, value of a run for sorting, left-aligned]
   ["distance", "best distance (m)", (r) => r.best_distance_m, false],
   ["failed", "failed", (r) => r.trials_failed, false], ["eta", "ETA", (r) => r.eta_s, false],
   ["speed", "best speed (cm/s)", (r) => r.best && r.best.scores.speed_cm_s, false],
-  ["cot", "best COT", (r) => r.best && r.best.scores.cot, false],
+  ["cot", "best COT", (r) => r.best && (r.best.judged_cot != null ? r.best.judged_cot : r.best.scores.cot), false],
   ["verified", "best verified", (r) => r.best && r.best.verification.verdict, true],
 ];
 const runsSort = {key: "started", dir: -1};
@@ -40,7 +40,7 @@ function runCell(key, r) {
     case "failed": return String(r.trials_failed);
     case "eta": return r.state === "running" ? fmtDuration(r.eta_s) : "–";
     case "speed": return best ? fmt(best.scores.speed_cm_s) : "–";
-    case "cot": return best ? fmt(best.scores.cot) : "–";
+    case "cot": return best ? bestCot(best) : "–";   // the judge's beside a judged distance
     case "verified": return best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.label || best.verification.verdict)}</span>` : "–";
   }
   return "";

@@ -31,11 +31,11 @@ import math
 
 import numpy as np
 
-from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, KIND_CODES, OPINION, REFEREE, split_key, task_key
+from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, KIND_CODES, OPINION, REFEREE, check_key, split_key
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings, TaskFidelity
-from spinefarm.protocol.states import JUDGED_VERDICTS, AuditState, Verification
+from spinefarm.protocol.states import JUDGED_VERDICTS, AuditState, EvaluationKind, Verification
 from spinefarm.protocol.verdicts import judge_verdict, relative_change
 from spinefarm.robot.chaos_floors import holds_tolerance
 from spinefarm.storage.base import BaseStorage
@@ -60,7 +60,7 @@ class Checks:
         self.run_engine = run_engine
         self.seed = seed
         self.judged = judged   # the run has a judge (test objectives only when one is named)
-        self.pending: set[int] = set()   # task keys issued and not yet settled
+        self.pending: set[int] = set()   # check keys issued and not yet settled
         self.unservable: set[int] = set()   # opinions no live worker could run (tried again on a restart)
         # the time the judge's runs took, from the stored evaluation rows: a restart keeps the judge's share
         self.judge_wall_s = 0.0
@@ -101,40 +101,40 @@ class Checks:
         step = r.dt_s if r.dt_s is not None else (None if judge.dt_s is None else 4 * judge.dt_s)
         return TaskFidelity("trial", r.engine, None if step is None else step / 2, r.settle_s)
 
-    def task_fidelity(self, key: int) -> TaskFidelity:
+    def check_fidelity(self, key: int) -> TaskFidelity:
         kind, tid = split_key(key)
-        if kind == "judge":
-            return TaskFidelity.of("judge", self.settings.judge.rung, self.settings.judge.perturb)
-        if kind == "opinion" and self.settings.judge.opinion is not None:
-            return TaskFidelity.of("opinion", self.settings.judge.opinion)
+        if kind == EvaluationKind.JUDGE:
+            return TaskFidelity.of(EvaluationKind.JUDGE, self.settings.judge.rung, self.settings.judge.perturb)
+        if kind == EvaluationKind.OPINION and self.settings.judge.opinion is not None:
+            return TaskFidelity.of(EvaluationKind.OPINION, self.settings.judge.opinion)
         row = self.storage.trial(tid)  # an audit (and its referee) re-runs the row exactly as it ran
         dt = row.dt_s if math.isfinite(row.dt_s) else None
         settle = row.settle_s if math.isfinite(row.settle_s) else None
-        return TaskFidelity("audit", row.engine or None, dt, settle)
+        return TaskFidelity(EvaluationKind.AUDIT, row.engine or None, dt, settle)
 
     def excluded(self, key: int) -> set[str]:
-        """Workers that may not run task `key`: an audit goes to another worker than the result's, a
+        """Workers that may not run check `key`: an audit goes to another worker than the result's, a
         referee to a third one."""
         kind, tid = split_key(key)
-        if kind not in ("audit", "referee"):
+        if kind not in (EvaluationKind.AUDIT, EvaluationKind.REFEREE):
             return set()
         row = self.storage.trial(tid)
-        return {row.worker_id, row.audit_worker_id} if kind == "referee" else {row.worker_id}
+        return {row.worker_id, row.audit_worker_id} if kind == EvaluationKind.REFEREE else {row.worker_id}
 
     # --- issuing ------------------------------------------------------------------------------------
     def restart(self) -> list[int]:
-        """Task keys to issue again after a restart: every pending verification, audit and referee (opinions are
+        """Check keys to issue again after a restart: every pending verification, audit and referee (opinions are
         due from storage alone: issue_due finds them)."""
         cols = self.storage.columns()
-        keys = [task_key(JUDGE, int(t)) for t in np.flatnonzero(cols["verification"] == Verification.PENDING.stored)]
+        keys = [check_key(JUDGE, int(t)) for t in np.flatnonzero(cols["verification"] == Verification.PENDING.stored)]
         rerun = np.isin(cols["audit"], (AuditState.PENDING.stored, AuditState.QUARANTINED.stored))
-        keys += [task_key(AUDIT, int(t)) for t in np.flatnonzero(rerun)]
-        keys += [task_key(REFEREE, int(t)) for t in np.flatnonzero(cols["audit"] == AuditState.DISPUTED.stored)]
+        keys += [check_key(AUDIT, int(t)) for t in np.flatnonzero(rerun)]
+        keys += [check_key(REFEREE, int(t)) for t in np.flatnonzero(cols["audit"] == AuditState.DISPUTED.stored)]
         self.pending.update(keys)
         return keys
 
     def judge_due(self, top_rung: int, search_over: bool = False) -> tuple[int | None, list[int]]:
-        """(the best's judge task key if it is due, queued judge keys of overtaken bests to drop). While the
+        """(the best's judge key if it is due, queued judge keys of overtaken bests to drop). While the
         search runs, a judge is due only within the judge's share of the workers' time."""
         if not (self.judged and self.settings.judge.enabled):
             return None, []
@@ -143,30 +143,30 @@ class Checks:
             return None, []
         tid = best[0]
         cols = self.storage.columns()
-        key = task_key(JUDGE, tid)
+        key = check_key(JUDGE, tid)
         if int(cols["rung"][tid]) < top_rung or cols["verification"][tid] != Verification.NOT_CHECKED.stored:
             return None, []  # a screened best is provisional; a judged or pending one is on its way
         if not search_over and self.over_share(cols["wall_time_s"]):
             return None, []
         self.storage.set_verification(tid, Verification.PENDING)
         self.pending.add(key)
-        return key, [k for k in self.pending if k != key and split_key(k)[0] == "judge"]
+        return key, [k for k in self.pending if k != key and split_key(k)[0] == EvaluationKind.JUDGE]
 
     def opinion_due(self, search_over: bool = False) -> tuple[int | None, list[int]]:
-        """(the current best's opinion task key if it is due, pending opinion keys of overtaken bests to drop).
+        """(the current best's opinion key if it is due, pending opinion keys of overtaken bests to drop).
         Due once the best is judged (holds, moved, judged) and has no opinion row: decided from storage alone,
         so a restart issues it again; while the search runs only within the judge's share of the time."""
         opinion = self.settings.judge.opinion
         best = self.storage.best_ids(1)
         if opinion is None or not (self.judged and self.settings.judge.enabled and best):
             return None, []
-        tid, key = best[0], task_key(OPINION, best[0])
-        stale = [k for k in self.pending if k != key and split_key(k)[0] == "opinion"]
+        tid, key = best[0], check_key(OPINION, best[0])
+        stale = [k for k in self.pending if k != key and split_key(k)[0] == EvaluationKind.OPINION]
         cols = self.storage.columns()
         if key in self.pending or key in self.unservable or cols["verification"][tid] not in JUDGED_VERDICTS:
             return None, stale
         ev = self.storage.evaluations()
-        if np.any((ev["trial_id"] == tid) & (ev["kind"] == b"opinion")):
+        if np.any((ev["trial_id"] == tid) & (ev["kind"] == EvaluationKind.OPINION.stored)):
             return None, stale
         if not search_over and self.over_share(cols["wall_time_s"]):
             return None, stale
@@ -180,20 +180,20 @@ class Checks:
         return self.judge_wall_s * (1.0 - share) > share * trials_s
 
     def drop(self, key: int, keep_pending: bool = False) -> None:
-        """A task no longer wanted (an overtaken best's judge, an audit nobody can run). keep_pending: the row's
+        """A check no longer wanted (an overtaken best's judge, an audit nobody can run). keep_pending: the row's
         audit stays pending in the file (re-issued on resume, when another identity may be there)."""
         self.pending.discard(key)
         kind, tid = split_key(key)
-        if keep_pending or kind == "opinion":   # an opinion is due from storage alone: nothing stored to undo
+        if keep_pending or kind == EvaluationKind.OPINION:   # due from storage alone: nothing stored to undo
             return
-        if kind == "judge":
+        if kind == EvaluationKind.JUDGE:
             self.storage.set_verification(tid, Verification.NOT_CHECKED)
-        elif kind == "audit" and self.storage.columns()["audit"][tid] != AuditState.QUARANTINED.stored:
+        elif kind == EvaluationKind.AUDIT and self.storage.columns()["audit"][tid] != AuditState.QUARANTINED.stored:
             self.storage.set_audit(tid, AuditState.NOT_AUDITED)   # a quarantined worker's row stays untrusted
         # a referee nobody can run leaves the result disputed (it does not count as best)
 
     def audit_due(self, tid: int) -> int | None:
-        """The audit task of a just stored result, if it is to be audited: a fraction of them and
+        """The audit key of a just stored result, if it is to be audited: a fraction of them and
         every new best."""
         a = self.settings.audit
         if not a.enabled:
@@ -202,7 +202,7 @@ class Checks:
         drawn = np.random.default_rng([self.seed, tid, 0xA0D17]).random() < a.fraction
         if not (drawn or (best and best[0] == tid)):
             return None
-        key = task_key(AUDIT, tid)
+        key = check_key(AUDIT, tid)
         self.storage.set_audit(tid, AuditState.PENDING)
         self.pending.add(key)
         return key
@@ -215,16 +215,16 @@ class Checks:
             return None
         if self.storage.columns()["audit"][best[0]] != AuditState.NOT_AUDITED.stored:
             return None
-        key = task_key(AUDIT, best[0])
+        key = check_key(AUDIT, best[0])
         self.storage.set_audit(best[0], AuditState.PENDING)
         self.pending.add(key)
         return key
 
     # --- results --------------------------------------------------------------------------------------
-    def _record(self, tid: int, kind: str, r: TrialResult, worker_id: str = "") -> None:
+    def _record(self, tid: int, kind: EvaluationKind, r: TrialResult, worker_id: str = "") -> None:
         """Every judge, audit, referee and opinion run is a row of the evaluations table, linked to the row it
         checked."""
-        f = self.task_fidelity(task_key(KIND_CODES[kind], tid))
+        f = self.check_fidelity(check_key(KIND_CODES[kind], tid))
         dt = r.extras.get("dt_s", f.dt_s)
         self.storage.add_evaluation(row_of(tid, kind, r, str(r.extras.get("engine", f.engine or "")),
                                            None if dt is None else float(dt), worker_id))
@@ -232,7 +232,7 @@ class Checks:
     def settle_judge(self, tid: int, r: TrialResult) -> None:
         if math.isfinite(r.wall_time_s):
             self.judge_wall_s += r.wall_time_s
-        self._record(tid, "judge", r)
+        self._record(tid, EvaluationKind.JUDGE, r)
         if _timed_out(r) and self._judge_timeouts(tid) <= _JUDGE_TIMEOUT_RETRIES:
             # a wall-clock limit hit on a busy machine says nothing of the physics: the judge is due again
             self.storage.set_verification(tid, Verification.NOT_CHECKED)
@@ -251,22 +251,22 @@ class Checks:
 
     def _judge_timeouts(self, tid: int) -> int:
         ev = self.storage.evaluations()
-        return int(np.count_nonzero((ev["trial_id"] == tid) & (ev["kind"] == b"judge")
+        return int(np.count_nonzero((ev["trial_id"] == tid) & (ev["kind"] == EvaluationKind.JUDGE.stored)
                                     & np.char.startswith(ev["reason"], b"timeout:")))
 
     def settle_opinion(self, tid: int, r: TrialResult) -> None:
         """The other engine's run of a judged best: a row of its own, counted in the judge's share; it never ranks."""
         if math.isfinite(r.wall_time_s):
             self.judge_wall_s += r.wall_time_s
-        self._record(tid, "opinion", r)
+        self._record(tid, EvaluationKind.OPINION, r)
         row = self.storage.trial(tid)
         log.info("best trial %d in the other engine (%s): %.4g m against its judged %.4g m", tid,
                  r.extras.get("engine", ""), r.distance_m, row.verify_distance_m)
 
     def mark_quarantined(self, worker_ids: list[str]) -> tuple[list[int], list[int]]:
         """Every complete row of quarantined workers is marked and re-run by another identity (an audit); a row
-        another identity's audit disputes is settled against them (that audit was its re-run). (audit task keys
-        to issue, referee keys no longer wanted); rows already being audited keep their task."""
+        another identity's audit disputes is settled against them (that audit was its re-run). (audit keys
+        to issue, referee keys no longer wanted); rows already being audited keep their audit."""
         cols = self.storage.columns()
         mine = np.isin(cols["worker_id"], [w.encode("utf-8", "replace")[:64] for w in worker_ids]) & (
             cols["status"] == b"complete")
@@ -274,12 +274,12 @@ class Checks:
         for tid in np.flatnonzero(mine & (cols["audit"] == AuditState.DISPUTED.stored)).tolist():
             row = self.storage.trial(tid)
             self.storage.set_audit(tid, AuditState.DISAGREES, row.audit_distance_m, row.audit_worker_id)
-            if task_key(REFEREE, tid) in self.pending:
-                self.pending.discard(task_key(REFEREE, tid))
-                settled.append(task_key(REFEREE, tid))
+            if check_key(REFEREE, tid) in self.pending:
+                self.pending.discard(check_key(REFEREE, tid))
+                settled.append(check_key(REFEREE, tid))
         for tid in np.flatnonzero(mine & (cols["audit"] != AuditState.DISAGREES.stored)).tolist():
             self.storage.set_audit(tid, AuditState.QUARANTINED)
-            key = task_key(AUDIT, tid)
+            key = check_key(AUDIT, tid)
             if key not in self.pending:
                 self.pending.add(key)
                 reruns.append(key)
@@ -289,7 +289,7 @@ class Checks:
         """Store an audit; (worker, agreed) for each worker it judged. exact: both ran the same code in the same
         environment, so only the same bits agree (else the tolerance). A disagreement is refereed by a third
         worker before anybody is blamed; the re-run of a quarantined worker's row needs no referee."""
-        self._record(tid, "audit", r, worker_id)
+        self._record(tid, EvaluationKind.AUDIT, r, worker_id)
         row = self.storage.trial(tid)
         how = _comparison(exact, self.settings.audit.tolerance)
         tol = 0.0 if exact else self.settings.audit.tolerance
@@ -302,7 +302,7 @@ class Checks:
                         "(%s)", tid, row.worker_id, worker_id, r.distance_m, row.distance_m, how)
             return []
         self.storage.set_audit(tid, AuditState.DISPUTED, r.distance_m, worker_id)
-        self.pending.add(task_key(REFEREE, tid))
+        self.pending.add(check_key(REFEREE, tid))
         log.warning("audit of trial %d disputed (%s): worker %s measured %.17g m, worker %s %.17g m; a third "
                     "worker referees", tid, how, row.worker_id, row.distance_m, worker_id, r.distance_m)
         return []
@@ -310,7 +310,7 @@ class Checks:
     def settle_referee(self, tid: int, r: TrialResult, exact: bool) -> list[tuple[str, bool]]:
         """The third worker's run decides a disputed audit: whoever it contradicts is wrong (the result's
         worker when it matches neither)."""
-        self._record(tid, "referee", r)
+        self._record(tid, EvaluationKind.REFEREE, r)
         row = self.storage.trial(tid)
         tol = 0.0 if exact else self.settings.audit.tolerance
         if _same(r, row.status == "complete", row.distance_m, tol):

@@ -16,13 +16,13 @@ from collections.abc import Callable
 from typing import Any
 
 from spinefarm.coordinator.ladder.checks import Checks
-from spinefarm.coordinator.ladder.keys import REFEREE, split_key, task_key
+from spinefarm.coordinator.ladder.keys import REFEREE, TRIAL, check_key, split_key
 from spinefarm.coordinator.peers import PeerBook
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.study import Study
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import TaskFidelity
-from spinefarm.protocol.states import UNAUDITED
+from spinefarm.protocol.states import UNAUDITED, EvaluationKind
 from spinefarm.protocol.submissions import Verdict
 from spinefarm.protocol.work import TrialAssignment
 
@@ -63,8 +63,8 @@ class Ladder:
 
     def fidelity(self, key: int) -> TaskFidelity:
         kind, tid = split_key(key)
-        if kind != "trial":
-            return self.checks.task_fidelity(key)
+        if kind != TRIAL:
+            return self.checks.check_fidelity(key)
         return self.checks.trial_fidelity(int(self.study.storage.columns()["rung"][tid]), self.drift is not None)
 
     def assignment(self, lease: Any, now_s: float) -> TrialAssignment:
@@ -85,7 +85,7 @@ class Ladder:
         for key, stale in (self.checks.judge_due(self.study.trial_scheduler.top, self.study.done),
                            self.checks.opinion_due(self.study.done)):
             for old in stale:
-                if self.leases.queued(old) or split_key(old)[0] == "opinion":
+                if self.leases.queued(old) or split_key(old)[0] == EvaluationKind.OPINION:
                     self.leases.withdraw(old)
                     self.checks.drop(old)
             if key is not None:
@@ -109,18 +109,18 @@ class Ladder:
         alive = [w.worker_id for w in self.leases.workers.values() if w.alive]
         for key in list(self.checks.pending):
             kind, tid = split_key(key)
-            overtaken = kind in ("judge", "opinion") and (not best or best[0] != tid)
+            overtaken = kind in (EvaluationKind.JUDGE, EvaluationKind.OPINION) and (not best or best[0] != tid)
             # a live worker whose identity is still being asked may be the one that can run it
             if overtaken or not (reconnecting or any(self.eligible(key, w) or self.peers.identity(w) is None
                                                      for w in alive)):
                 # an audit no other identity can run stays pending, said as such, never silently dropped
-                unaudited = kind == "audit" and not overtaken
+                unaudited = kind == EvaluationKind.AUDIT and not overtaken
                 if unaudited:
                     self.unaudited[tid] = UNAUDITED
                     log.warning("no other worker identity can audit trial %d: it stays %s", tid, UNAUDITED)
                 elif not overtaken:
-                    log.warning("no worker can run the %s task of trial %d: dropped", kind, tid)
-                    if kind == "opinion":
+                    log.warning("no worker can run the %s check of trial %d: dropped", kind, tid)
+                    if kind == EvaluationKind.OPINION:
                         self.checks.unservable.add(key)
                 self.leases.withdraw(key)
                 self.checks.drop(key, keep_pending=unaudited)
@@ -159,13 +159,13 @@ class Ladder:
             return refused
         self.leases.release(key)
         self.checks.pending.discard(key)
-        if kind == "judge":
+        if kind == EvaluationKind.JUDGE:
             self.checks.settle_judge(tid, result)
             drift = self.checks.drift()
             if drift and not self.drift:
                 log.warning("the judge no longer trusts the screen (%s): raising the screen's fidelity", drift)
             self.drift = drift
-        elif kind == "opinion":
+        elif kind == EvaluationKind.OPINION:
             self.checks.settle_opinion(tid, result)
         else:
             self._settle_audit(kind, tid, worker_id, result)
@@ -175,13 +175,13 @@ class Ladder:
     def _settle_audit(self, kind: str, tid: int, worker_id: str, result: TrialResult) -> None:
         row = self.study.storage.trial(tid)
         exact = self.peers.same_environment(row.worker_id, worker_id)
-        judged = self.checks.settle_audit(tid, result, worker_id, exact) if kind == "audit" \
+        judged = self.checks.settle_audit(tid, result, worker_id, exact) if kind == EvaluationKind.AUDIT \
             else self.checks.settle_referee(tid, result, exact)
         self.audit_comparisons["exact" if exact else "tolerance"] += 1
         for wid, agrees in judged:
             self.quarantine(self.peers.audited(wid, agrees), "its audited results disagree with other workers'")
-        if kind == "audit" and task_key(REFEREE, tid) in self.checks.pending:
-            self.leases.push_front(task_key(REFEREE, tid))
+        if kind == EvaluationKind.AUDIT and check_key(REFEREE, tid) in self.checks.pending:
+            self.leases.push_front(check_key(REFEREE, tid))
 
 
 def _duration(value: float) -> float | None:

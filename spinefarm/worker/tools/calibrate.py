@@ -47,6 +47,10 @@ RATIO_RANGE = (0.9, 1.1)
 MOVING_M = 0.01
 STEP_ERROR_GAITS = 4  # gaits per tier re-run at half the step
 SEARCH_SIGMA = 0.1  # the short search's step in the unit cube
+# gaits the short search proposes a round, whatever the processes (`jobs`): a round's proposals are drawn from
+# the best before it, so a round of `jobs` made the result depend on the machine's processes. 2: what the
+# shipped calibrations were made with (bench/ship_calibrations.py --jobs 2), so they are what a run finds
+CLIMB_ROUND = 2
 TIERS = ("mujoco", JUDGE_ENGINE)  # the screen, and the reference: the judge's engine
 STEP_FIELDS = ("dt_s", "auto_dt")
 
@@ -77,9 +81,11 @@ class CalibrationSettings:
                               expected=f"at most {self.search_trials}")
 
     def key(self) -> str:
-        """What the result depends on besides the robot (not the number of processes; the step only when one
-        is asked for, so the default's key is what it was before the step could be): with a profile, its hash
-        (none without, so that calibrations from before profiles keep their key)."""
+        """What the result depends on besides the robot (the step only when one is asked for, so the default's
+        key is what it was before the step could be): with a profile, its hash (none without, so that
+        calibrations from before profiles keep their key). Not `jobs`: the processes run the same trials in the
+        same order (the climb proposes CLIMB_ROUND gaits a round whatever their number), so the result does not
+        depend on them (tests/worker_tests/test_calibration_jobs.py)."""
         d = dataclasses.asdict(self)
         key = {k: v for k, v in d.items() if k not in ("jobs", "profile") and not (k in STEP_FIELDS and not v)}
         key["reference"] = [JUDGE_ENGINE, JUDGE_DT_S]  # results against Bullet's default step are not reused
@@ -219,8 +225,9 @@ def _step_error(source: str, gaits: list, distances: np.ndarray, engine: str, se
 
 
 def _short_search(source: str, gaits: list, screen: list, s: CalibrationSettings, tally: _Tally) -> list:
-    """A Gaussian hill climb on MuJoCo (sigma SEARCH_SIGMA in the unit cube, `jobs` proposals a round) from the
-    best random gait: [((unit vector, seed), (distance, cost))] of its search_trials trials."""
+    """A Gaussian hill climb on MuJoCo (sigma SEARCH_SIGMA in the unit cube, CLIMB_ROUND proposals a round, run
+    in `jobs` processes) from the best random gait: [((unit vector, seed), (distance, cost))] of its
+    search_trials trials."""
     rng = np.random.default_rng(0)
     distances = np.nan_to_num([d for d, _ in screen], nan=-np.inf)
     best_u, best_d = np.asarray(gaits[int(np.argmax(distances))][0]), float(np.max(distances))
@@ -228,7 +235,7 @@ def _short_search(source: str, gaits: list, screen: list, s: CalibrationSettings
     seed = len(gaits)
     while len(out) < s.search_trials:
         batch = []
-        for _ in range(min(s.jobs, s.search_trials - len(out))):
+        for _ in range(min(CLIMB_ROUND, s.search_trials - len(out))):
             seed += 1
             batch.append((tuple(np.clip(best_u + rng.normal(0.0, SEARCH_SIGMA, best_u.shape), 0.0, 1.0)), seed))
         results = tally.run([(source, u, k, "mujoco", 1.0, s) for u, k in batch], s.jobs)
