@@ -48,8 +48,11 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
                    "test_at_the_end_the_best_goes_on_through_rungs_holding_fewer_rows_than_eta",
                    "test_a_search_that_keeps_improving_promotes_about_a_third_and_always_its_best",
                    "test_samplers_see_the_first_rung_only_so_rungs_do_not_change_their_proposals")))),
+    # the seam's rules on a run file in-process first (seconds), then the core's message-level tests
     "ladder-seam": ("spinefarm/coordinator/ladder/ladder.py",
-                    (f"{C}/test_core.py", f"{C}/test_unaudited.py", f"{C}/test_opinion.py")),
+                    (f"{C}/test_ladder_seam_fidelity.py", f"{C}/test_ladder_seam_drops.py",
+                     f"{C}/test_ladder_seam_audits.py",
+                     f"{C}/test_core.py", f"{C}/test_unaudited.py", f"{C}/test_opinion.py")),
     "calibration": ("spinefarm/worker/tools/calibrate.py",
                     (f"{W}/test_calibration_figures.py", f"{W}/test_calibration_thresholds.py",
                      f"{W}/test_calibrate_judge.py")),
