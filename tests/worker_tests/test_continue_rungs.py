@@ -139,3 +139,18 @@ def test_the_workers_evaluator_continues_a_promotion_it_ran_the_rung_of_and_no_o
                                                               0.0, None]
     for name in SCORES:
         assert len({getattr(r, name) for r in results}) == 1, name
+
+
+def test_the_trial_limit_learns_its_rate_from_the_seconds_a_continued_trial_simulated():
+    """A promotion to 11 s (1 s settle + 10 s) that went on from 6 s ran 5 s in 0.5 s: 0.1 s per simulated s, so a
+    full 11 s trial of its kind gets 8 x 0.1 x 11 = 8.8 s, not 8 x 0.5 / 11 x 11 = 4 s."""
+    from spinefarm.protocol.results import TrialResult
+    from spinefarm.protocol.states import TrialStatus
+    from spinefarm.worker.service.sandbox import TrialLimit, simulated_here_s
+
+    continued = TrialResult(TrialStatus.COMPLETE, "", 0.1, 10.0, 1.0, 1.0, 1.0, 10.0, 0.5, 1.0, 0,
+                            extras={"continued_s": 6.0})
+    limit = TrialLimit(min_s=0.001, factor=8.0)
+    limit.observe(continued.wall_time_s, simulated_here_s(11.0, continued), "promoted")
+    assert limit.limit_s(11.0, "promoted") == pytest.approx(8.8)
+    assert simulated_here_s(11.0, dataclasses.replace(continued, extras={})) == 11.0

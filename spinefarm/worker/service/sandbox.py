@@ -88,6 +88,12 @@ def simulated_s(config: RunConfig, a: TrialAssignment) -> float:
     return duration + float(tc.get("settle_s") or 0.0 if settle is None else settle)
 
 
+def simulated_here_s(sim_s: float, result: TrialResult) -> float:
+    """The simulated seconds a trial of sim_s ran in this worker: a promotion that went on from its last rung's kept
+    end (worker.trial.continued) ran only the rest, and the limit's rate is per second simulated."""
+    return sim_s - float(result.extras.get("continued_s", 0.0))
+
+
 def task_kind(config: RunConfig, a: TrialAssignment) -> tuple[Hashable, float | None]:
     """What a trial's cost per simulated second depends on (its task, engine, step, perturbed re-run and length:
     robust episodes may grow by rung) and its step, where known."""
@@ -239,9 +245,7 @@ class TrialSandbox:
         elif msg[0] == "ok":
             result = msg[1]
             if result.ok:
-                # per second simulated here: a trial that went on from a kept rung end ran only the rest
-                self.limit.observe(result.wall_time_s, sim_s - float(result.extras.get("continued_s", 0.0)), kind,
-                                   dt_s)
+                self.limit.observe(result.wall_time_s, simulated_here_s(sim_s, result), kind, dt_s)
         else:
             result = failed_result(a, str(msg[1]), wall)
         return replace(result, extras={**result.extras, "time_limit_s": limit_s})

@@ -26,8 +26,8 @@ import numpy as np
 
 # ends kept per set-up (an LRU by count): an end of the Tetraspine's 5 s rung at 2 ms after a 1 s settle is ~40 kB
 # (its MuJoCo integration state ~1 kB, the law's ~5 kB, the COM path of its checks; `python bench/continue_rungs.py`
-# prints `end_bytes`), so about 40 MB at most; a promotion comes within a few hundred trials of its rung in a
-# search of a few workers, and one whose end was dropped is simulated from the start (the same bits)
+# prints `end_bytes`), so about 40 MB at most; in its search of 2 workers a promotion came at most 41 rows after its
+# rung, and one whose end was dropped is simulated from the start (the same bits)
 DEFAULT_ENDS = 1024
 
 

@@ -119,16 +119,16 @@ def _simulate(morphology: Morphology | str | Mapping, params: list, cfg: TrialCo
     offsets = [setup.start_offsets(int(s)) for s in seeds]
     scene, owned = setup.scene(None if offsets[0] is None else np.stack(offsets), scene_factory, len(seeds))
     key = _settle_key(setup, scene_factory, timing, law, offsets)
-    end = _end_key(setup, scene_factory, timing, offsets, physical) if resume else None
-    start = None if end is None else setup.rung_ends.get(end, timing.n_settle + timing.n_steps)
+    end_at = _end_key(setup, scene_factory, timing, offsets, physical) if resume else None
+    start = None if end_at is None else setup.rung_ends.get(end_at, timing.n_settle + timing.n_steps)
     try:
         batch = Batch(scene, law, timing, cfg, setup.masses, geom.start_length_cm, setup.terrain)
         worlds = batch.run(None if key is None or start is not None else setup.settled.get(key),
-                           keep_settled=key is not None, resume=start, keep_end=end is not None)
+                           keep_settled=key is not None, resume=start, keep_end=end_at is not None)
         if key is not None and batch.settled is not None:
             setup.settled.put(key, batch.settled)
-        if end is not None and batch.end is not None:
-            setup.rung_ends.put(end, batch.end)
+        if end_at is not None and batch.end is not None:
+            setup.rung_ends.put(end_at, batch.end)
         retries = dict(scene.retries)
     finally:
         if owned:
@@ -136,8 +136,9 @@ def _simulate(morphology: Morphology | str | Mapping, params: list, cfg: TrialCo
     wall_s = (time.perf_counter() - t_wall) / len(seeds)
     outcomes = [None if w.retry else _outcome(morph, setup, cfg, timing, w, int(s), wall_s)
                 for w, s in zip(worlds, seeds, strict=True)]
-    if resume and outcomes[0] is not None:
-        outcomes[0].result.extras["continued_s"] = 0.0 if start is None else start.done * timing.dt_s
+    for out in outcomes if resume else ():  # only a one-world trial may have gone on from a kept end
+        if out is not None:
+            out.result.extras["continued_s"] = 0.0 if start is None else start.done * timing.dt_s
     return outcomes, retries
 
 
