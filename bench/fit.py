@@ -35,6 +35,16 @@ distance in the same time ({"spines": {SPINE: {ENGINE: {"window_error_cm": {V: {
 (horizontal and vertical position, rotation, tension: worker.fit.terms) and each pose term's share of the squared
 error over all windows, the early ones (starting before --early s: the start-up) and the later ones
 ({"spines": {SPINE: {ENGINE: {"shares", "shares_early", "shares_late", "windows": {RECORDING: [...]}}}}}).
+
+--ntrt --precision [--single-python /opt/pb-single/bin/python] [--jitter-seeds 3]: no fit; Bullet at NTRT's own
+constants, built in single precision (as NTRT's Bullet 2.81/2.82, btScalar = float; docs/fitting.md gives the
+build) against the installed double-precision pybullet, side by side in one run: each build measured in its own
+interpreter (--measure, one child process per build; --jobs of them at a time), and the chaos floor, the double
+build with every segment's start position jittered by 1e-6 cm (seeds 1..N). Per spine and build: the window error
+(RMS over every window of its pose error, cm), its terms' shares (as --terms) and NTRT's published gait replayed
+against NTRT's recorded distance (its whole length, or --replay-duration; --no-replay: none)
+({"builds": {BUILD: {"pybullet", "precision"}}, "spines": {SPINE: {BUILD: {"window_error_cm", "shares",
+"replay_ratio", ...}}}}; BUILD "single", "double", "jitter-S").
 """
 
 from __future__ import annotations
@@ -207,6 +217,104 @@ def terms_bench(args: argparse.Namespace) -> dict:
     return out
 
 
+def precision_bench(args: argparse.Namespace) -> dict:
+    """--ntrt --precision: each build of pybullet measured by --measure in its own interpreter (a process holds one
+    pybullet), --jobs of them at a time: the single-precision build, the installed double one, and the double one
+    with a jittered start (seeds 1..--jitter-seeds: the chaos floor)."""
+    import os
+    import subprocess
+
+    runs = {"single": (args.single_python, 0), "double": (sys.executable, 0),
+            **{f"jitter-{s}": (sys.executable, s) for s in range(1, args.jitter_seeds + 1)}}
+    same = ["--spines", *args.spines, "--recordings", args.recordings, "--span", str(args.span), "--stride",
+            str(args.stride), "--window", str(args.window), "--early", str(args.early)]
+    same += ["--no-replay"] if args.no_replay else []
+    same += [f"--engine-option={o}" for o in args.engine_option]
+    same += [] if args.replay_duration is None else ["--replay-duration", str(args.replay_duration)]
+    t0, load, done = time.time(), os.getloadavg(), {}
+    pending = list(runs.items())
+    while pending:
+        batch, pending = pending[:args.jobs], pending[args.jobs:]
+        procs = {name: subprocess.Popen([py, __file__, "--ntrt", "--measure", "--jitter-seed", str(seed), *same],
+                                        stdout=subprocess.PIPE, text=True) for name, (py, seed) in batch}
+        for name, proc in procs.items():
+            text, _ = proc.communicate()
+            if proc.returncode:
+                raise SystemExit(f"--measure for the {name} build failed (exit {proc.returncode})")
+            # pybullet prints its build time on stdout: the report is the JSON line
+            done[name] = json.loads(next(line for line in text.splitlines() if line.startswith("{")))
+    keys = ("pybullet", "precision", "jitter_seed", "wall_s")
+    return {"builds": {n: {k: r[k] for k in keys} for n, r in done.items()},
+            "spines": {sp: {n: r["spines"][sp] for n, r in done.items()} for sp in args.spines},
+            "wall_s": time.time() - t0, "load_before": load, "load_after": os.getloadavg(),
+            "command": "python bench/fit.py --ntrt " + " ".join(sys.argv[2:])}
+
+
+def measure_bench(args: argparse.Namespace) -> dict:
+    """--ntrt --measure (one build, this interpreter's pybullet): Bullet at NTRT's own constants (and any
+    --engine-option), per spine the window error, its terms' shares and NTRT's published gait replayed;
+    --jitter-seed S > 0 jitters every segment's start position by JITTER_CM (the windows' start states, the
+    replay's start pose), seeded by S."""
+    from spinefarm.cli.sim_commands import parse_engine_options
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.terms import term_shares, window_terms
+
+    t0 = time.time()
+    options = parse_engine_options(args.engine_option)
+    cfg = TrialConfig(engine="bullet", engine_options=options)
+    out: dict = {"pybullet": _pybullet_file(), "precision": bullet_precision(), "jitter_seed": args.jitter_seed,
+                 "engine_options": options, "spines": {}, "command": "python bench/fit.py " + " ".join(sys.argv[1:])}
+    for spine in args.spines:
+        morph, folder = load_morphology(spine), Path(args.recordings) / NTRT_FOLDERS[spine]
+        recs = [_jittered(p, args.jitter_seed) for p in ntrt_recordings(folder, args.window, args.stride, args.span)]
+        rows = [r for p in recs for r in window_terms(morph, cfg, p)]
+        pose_sq = [r["horizontal_cm"] ** 2 + r["vertical_cm"] ** 2 + r["rotation_cm"] ** 2 for r in rows]
+        late = [r for r in rows if r["start_s"] >= args.early]
+        ratio = None if args.no_replay else _replay_ratio(morph, "bullet", {}, folder / "published",
+                                                          args.replay_duration, args.jitter_seed, options)
+        out["spines"][spine] = {"window_error_cm": float(np.sqrt(np.mean(pose_sq))), "shares": term_shares(rows),
+                                "shares_late": term_shares(late), "windows": len(rows), "replay_ratio": ratio}
+    out["wall_s"] = time.time() - t0
+    return out
+
+
+JITTER_CM = 1e-6  # as replay_spread's: perturbations this small already spread a chaotic run
+
+
+def _jittered(p: object, seed: int) -> object:
+    """The recording with every segment's recorded track shifted by a seeded Gaussian JITTER_CM (one offset per
+    segment, so velocities are unchanged): the windows start from jittered states and are still checked against
+    the recorded poses (p.poses). Seed 0: unchanged."""
+    import dataclasses
+
+    if not seed:
+        return p
+    nb = p.rec.position_m.shape[1]
+    shift_m = np.random.default_rng(seed).normal(0.0, JITTER_CM / 100.0, (1, nb, 3))
+    return dataclasses.replace(p, rec=dataclasses.replace(p.rec, position_m=p.rec.position_m + shift_m))
+
+
+def bullet_precision() -> str:
+    """"single" or "double": whether this pybullet's btScalar keeps 1 + 2^-40 (a double does, a float does not)."""
+    import pybullet as pb
+
+    c = pb.connect(pb.DIRECT)
+    try:
+        body = pb.createMultiBody(1.0, pb.createCollisionShape(pb.GEOM_SPHERE, radius=1.0, physicsClientId=c),
+                                  basePosition=[1.0 + 2.0**-40, 0.0, 0.0], physicsClientId=c)
+        x = pb.getBasePositionAndOrientation(body, physicsClientId=c)[0][0]
+    finally:
+        pb.disconnect(c)
+    return "double" if x != 1.0 else "single"
+
+
+def _pybullet_file() -> str:
+    import pybullet as pb
+
+    return str(pb.__file__)
+
+
 def ntrt_recordings(folder: Path, window_s: float, stride_s: float, span_s: float) -> list:
     """The published run and the random draws NTRT ran to the end, each cut to its first span_s seconds (the
     published run is 30-60 s, the draws 10 s: cut, no recording outweighs the others in the loss)."""
@@ -227,9 +335,11 @@ def _first(rec: object, span_s: float) -> object:
     return dataclasses.replace(rec, **cut)
 
 
-def _replay_ratio(morph: object, engine: str, profile: dict, published: Path, duration_s: float | None) -> float:
+def _replay_ratio(morph: object, engine: str, profile: dict, published: Path, duration_s: float | None,
+                  jitter_seed: int = 0, options: dict | None = None) -> float:
     """NTRT's published gait replayed on our model: its scored segment's distance over NTRT's recorded one in the
-    same time (the published recording's, at duration_s or its end)."""
+    same time (the published recording's, at duration_s or its end); jitter_seed > 0: the start pose jittered by
+    JITTER_CM, seeded; options: engine options over the replay's own."""
     from spinefarm.worker.fit.readers import read_recording
     from spinefarm.worker.fit.state import planar_distance_cm
     from spinefarm.worker.tools.replay import replay
@@ -238,7 +348,8 @@ def _replay_ratio(morph: object, engine: str, profile: dict, published: Path, du
     seg = json.loads((published / "run-info.json").read_text())["scoring_segment"]
     end = len(rec.time_s) - 1 if duration_s is None else int(np.searchsorted(rec.time_s, duration_s - 1e-9))
     ntrt_cm = planar_distance_cm(rec.position_m[0, seg] * 100, rec.position_m[end, seg] * 100)
-    ours = replay(published, morph, engine=engine, duration_s=float(rec.time_s[end]), profile=profile)
+    ours = replay(published, morph, engine=engine, duration_s=float(rec.time_s[end]), profile=profile,
+                  seed=jitter_seed, pose_jitter_cm=JITTER_CM if jitter_seed else 0.0, engine_options=options)
     return ours.result.ntrt_distance_cm / ntrt_cm
 
 
@@ -259,8 +370,18 @@ def main() -> None:
     ap.add_argument("--fit", default=None, help="with --ntrt: NAME[=LO:HI],... (default per engine: NTRT_FIT)")
     ap.add_argument("--scan", default=None, metavar="NAME=V1,V2,...",
                     help="with --ntrt: no fit; the window error at these values of one constant, and the replays")
-    ap.add_argument("--no-replay", action="store_true", help="with --scan: the window errors only")
+    ap.add_argument("--no-replay", action="store_true", help="with --scan, --precision: the window errors only")
     ap.add_argument("--terms", action="store_true", help="with --ntrt: the window error's terms per window")
+    ap.add_argument("--precision", action="store_true",
+                    help="with --ntrt: Bullet single against double precision and the chaos floor (no fit)")
+    ap.add_argument("--single-python", default="/opt/pb-single/bin/python",
+                    help="with --precision: the interpreter whose pybullet is built in single precision")
+    ap.add_argument("--jitter-seeds", type=int, default=3, help="with --precision: runs of the chaos floor")
+    ap.add_argument("--measure", action="store_true",
+                    help="with --ntrt: this interpreter's Bullet alone at NTRT's constants (no fit)")
+    ap.add_argument("--jitter-seed", type=int, default=0, help="with --measure: jitter the start by 1e-6 cm")
+    ap.add_argument("--engine-option", action="append", default=[], metavar="KEY=VALUE",
+                    help="with --measure, --precision: a Bullet engine option (JSON value)")
     ap.add_argument("--early", type=float, default=1.0, help="with --terms: windows starting before this are early")
     ap.add_argument("--span", type=float, default=10.0, help="with --ntrt: seconds of each recording fitted")
     ap.add_argument("--stride", type=float, default=1.0)
@@ -279,7 +400,8 @@ def main() -> None:
     if args.identify + args.windows + args.ntrt != 1:
         ap.error("say what to measure: --identify, --windows or --ntrt")
     bench = identify_bench if args.identify else windows_bench if args.windows else \
-        scan_bench if args.scan else terms_bench if args.terms else ntrt_bench
+        scan_bench if args.scan else terms_bench if args.terms else precision_bench if args.precision else \
+        measure_bench if args.measure else ntrt_bench
     print(json.dumps(bench(args)))
 
 

@@ -124,6 +124,7 @@ ENGINES: dict[str, EngineSpec] = {spec.name: spec for spec in (
         EngineOption("cone_friction", _B, False),
         _GRAVITY,
         EngineOption("friction_anchor", _B, True),
+        EngineOption("constraint_solver", _S, "sequential_impulse", choices=("sequential_impulse", "mlcp_dantzig")),
     ), frozenset({"velocities", "set_state"}), "pybullet, the judge: hard contacts, 1 ms default step", "pybullet"),
     EngineSpec("mujoco", "spinefarm.worker.engines.mujoco", "MujocoPhysics", 1e-3, (
         EngineOption("integrator", _S, "implicitfast", choices=("euler", "implicit", "implicitfast", "rk4")),

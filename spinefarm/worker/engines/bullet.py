@@ -17,12 +17,15 @@ from itertools import chain
 import numpy as np
 import pybullet as pb
 
-from spinefarm.protocol.errors import bounded, check_fields, whole
+from spinefarm.protocol.errors import ConfigError, bounded, check_fields, whole
 from spinefarm.robot import fixedmath as fm
 from spinefarm.robot.bodies import BodyModel
 from spinefarm.robot.scene import GROUND_TOP_CM, GroundSpec, Terrain, pairs_off
 from spinefarm.worker.engines.base import GRAVITY_CM_S2, BasePhysics, Vector3, world_offsets
 from spinefarm.worker.engines.couple import wrench_to_force_pairs
+
+CONSTRAINT_SOLVERS = {"sequential_impulse": pb.CONSTRAINT_SOLVER_LCP_SI,
+                      "mlcp_dantzig": pb.CONSTRAINT_SOLVER_LCP_DANTZIG}
 
 
 @dataclass(frozen=True)
@@ -39,9 +42,15 @@ class BulletSettings:
     # Bullet's friction anchors hold static contacts in place; without them a resting spine
     # creeps ~0.5 cm/s at dt = 1 ms (a drift proportional to dt). NTRT's Bullet 2.81 had none.
     friction_anchor: bool = True
+    # "mlcp_dantzig": Bullet's MLCP solver with the Dantzig LCP solver, the one NTRT's current code (and its
+    # recordings) use; the default keeps pybullet's sequential impulse, which NTRT's 2014 code used
+    constraint_solver: str = "sequential_impulse"
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if self.constraint_solver not in CONSTRAINT_SOLVERS:
+            raise ConfigError("unknown Bullet constraint_solver", received=self.constraint_solver,
+                              expected=sorted(CONSTRAINT_SOLVERS))
 
 
 def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
@@ -176,6 +185,9 @@ class BulletWorld:
             enableConeFriction=int(engine.cone_friction), deterministicOverlappingPairs=1,
             restitutionVelocityThreshold=0.0, physicsClientId=c)
         pb.setPhysicsEngineParameter(warmStartingFactor=engine.warm_starting_factor, physicsClientId=c)
+        if engine.constraint_solver != "sequential_impulse":  # set only when asked: the default's bits unchanged
+            pb.setPhysicsEngineParameter(constraintSolverType=CONSTRAINT_SOLVERS[engine.constraint_solver],
+                                         physicsClientId=c)
         self.dt_s = dt_s
         self.friction_anchor = engine.friction_anchor
         terrain = ground.to_terrain() if isinstance(ground, GroundSpec) else ground

@@ -204,11 +204,11 @@ def unit_params(morph: Morphology, params: NtrtParameterSet, space: NtrtTableSpa
 def replay(folder: str | Path, morphology: str | Morphology | None = None, *, duration_s: float | None = None,
            suffix: str = "default", seed: int = 0, pose_jitter_cm: float = 0.0,
            engine: str = DEFAULT_ENGINE, profile: Mapping[str, float] | None = None,
-           motor_model: str | None = None) -> ReplayReport:
+           motor_model: str | None = None, engine_options: Mapping[str, object] | None = None) -> ReplayReport:
     """Run NTRT's published parameters on the NTRT-era morphology (the motor of its NTRT code, 1 ms, one
     sub-step, no friction anchors in Bullet; `engine` "mujoco" runs the same on MuJoCo's default contacts),
-    under a profile's constants if given (robot.profile). A recorded run's folder is compared with NTRT's
-    recorded distance."""
+    under a profile's constants if given (robot.profile) and engine options over these. A recorded run's folder
+    is compared with NTRT's recorded distance."""
     from spinefarm.robot.morphology.registry import load_morphology
     from spinefarm.worker.trial.simulation import TrialConfig, simulate
 
@@ -220,8 +220,9 @@ def replay(folder: str | Path, morphology: str | Morphology | None = None, *, du
     # NTRT's Bullet 2.81 had no friction anchors; its motor caps are per 1 ms step (spec 0a.3)
     # and its CPG runs every step, as controlTime 0.001 fixes it (cpg_step_s 0)
     motor_model = motor_model or ntrt_motor(morph)
+    own = {"friction_anchor": False} if engine == "bullet" else {}
     cfg = TrialConfig(duration_s=duration, dt_s=0.001, motor_model=motor_model, controller="ntrt", cpg_step_s=0.0,
-                      engine=engine, engine_options={"friction_anchor": False} if engine == "bullet" else {},
+                      engine=engine, engine_options={**own, **(engine_options or {})},
                       pose_jitter_cm=pose_jitter_cm, profile=dict(profile or {}))
     result = simulate(morph, u, cfg, seed).result
     reference = recorded_run(folder) or REFERENCES.get(morph.name)
