@@ -1,8 +1,9 @@
 """A judged best's cost of transport is the judge's: every evaluation row keeps the COT its run measured, and
 the final report, `/runs/ID`, `/runs/ID/best`, `/runs/ID/trials/ID` and the dashboard show the judge's COT beside
-its distance (the screen's apart), and the dashboard the judged speed. A run file of schema 8 (tests/storage_tests/data/run-schema8.h5, written by
-spinefarm at ce6864d: four trials with screen COTs 1, 2, 3 and 4; trials 1 and 3 judged in Bullet, an opinion
-and an audit on trial 1) has no such column: it opens everywhere and says "not measured".
+its distance (the screen's apart), and the dashboard the judged speed. A run file of schema 8
+(tests/storage_tests/data/run-schema8.h5, written by spinefarm at ce6864d: four trials with screen COTs 1, 2, 3
+and 4; trials 1 and 3 judged in Bullet, an opinion and an audit on trial 1) has no such column: it opens
+everywhere and says "not measured".
 
 The rows here are written through the storage API as the coordinator stores them; the real search whose judged
 COT is held against an independent `spinefarm trial` is tests/coordinator_tests/test_judged_cot_search.py."""
