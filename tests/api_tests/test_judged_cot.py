@@ -1,8 +1,9 @@
 """A judged best's cost of transport is the judge's: every evaluation row keeps the COT its run measured, and
 the final report, `/runs/ID`, `/runs/ID/best`, `/runs/ID/trials/ID` and the dashboard show the judge's COT beside
-its distance (the screen's apart). A run file of schema 8 (tests/storage_tests/data/run-schema8.h5, written by
-spinefarm at ce6864d: four trials with screen COTs 1, 2, 3 and 4; trials 1 and 3 judged in Bullet, an opinion
-and an audit on trial 1) has no such column: it opens everywhere and says "not measured".
+its distance (the screen's apart), and the dashboard the judged speed. A run file of schema 8
+(tests/storage_tests/data/run-schema8.h5, written by spinefarm at ce6864d: four trials with screen COTs 1, 2, 3
+and 4; trials 1 and 3 judged in Bullet, an opinion and an audit on trial 1) has no such column: it opens
+everywhere and says "not measured".
 
 The rows here are written through the storage API as the coordinator stores them; the real search whose judged
 COT is held against an independent `spinefarm trial` is tests/coordinator_tests/test_judged_cot_search.py."""
@@ -136,10 +137,13 @@ def test_the_dashboard_and_the_trial_page_show_the_judges_cot(browser, tmp_path)
             page.goto(f"{server.url}/#/run/{run}")
             page.wait_for_selector("#best-cot")
             shown[run] = page.locator("#best-cot").inner_text()
+            shown[run, "speed"] = page.locator("#best-speed").inner_text()
             page.goto(f"{server.url}/#/")
             page.wait_for_selector(f"tr[data-run='{run}']")
-            column = page.locator("thead th").all_inner_texts().index("best COT")
-            shown[run, "listed"] = page.locator(f"tr[data-run='{run}'] td").all_inner_texts()[column]
+            heads = page.locator("thead th").all_inner_texts()
+            cells = page.locator(f"tr[data-run='{run}'] td").all_inner_texts()
+            shown[run, "listed"] = cells[heads.index("best COT")]
+            shown[run, "listed speed"] = cells[heads.index("best speed (cm/s)")]
             page.goto(f"{server.url}/#/run/{run}/trial/{trial}")
             page.wait_for_selector("#judged-cot")
             shown[(run, trial)] = page.locator("#judged-cot").inner_text()
@@ -148,6 +152,8 @@ def test_the_dashboard_and_the_trial_page_show_the_judges_cot(browser, tmp_path)
         server.stop()
     assert shown["run-c"] == "5.5 judged" and shown[("run-c", 3)] == "6.6"
     assert shown["run-v8"] == f"2 screen's; judge's {NOT_MEASURED}" and shown[("run-v8", 1)] == NOT_MEASURED
+    # the speed beside the judged distance is the judged one: 0.40 m over result()'s 5 s (the screen's: 2 cm/s)
+    assert shown["run-c", "speed"] == shown["run-c", "listed speed"] == "8 judged"
     # the runs list gives the same COT beside the judged distance
     assert shown["run-c", "listed"] == "5.5 judged"
     assert shown["run-v8", "listed"] == f"2 screen's; judge's {NOT_MEASURED}"

@@ -182,7 +182,7 @@ async function showRun(runId, gen, first) {
     card("best " + esc(meta.objective), best ? `<a href="#/run/${r}/trial/${best.trial_id}">${fmt(best.objective)}</a>` : "–"),
     card("best distance (m)", best ? `${fmt(status.best_distance_m)}${["holds", "moved", "judged"].includes(best.verification.verdict)
       ? ' <span class="muted">judged</span>' : ""}` : "–"),
-    card("best speed (cm/s)", best ? fmt(best.scores.speed_cm_s) : "–"), card("best COT", best ? `<span id="best-cot">${bestCot(best)}</span>` : "–"),
+    card("best speed (cm/s)", best ? `<span id="best-speed">${bestSpeed(best)}</span>` : "–"), card("best COT", best ? `<span id="best-cot">${bestCot(best)}</span>` : "–"),
     card("best verified", best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.label || best.verification.verdict)}</span>` : "–"),
     // better than the best, but no other identity's audit has agreed yet: shown apart, never as the best
     ...(status.pending_audit ? [card("pending audit", `<a href="#/run/${r}/trial/${status.pending_audit.trial_id}">trial ${
@@ -213,6 +213,20 @@ async function showRun(runId, gen, first) {
   document.body.dataset.trialsShown = String(cols.n_trials);
   schedule(() => showRun(runId, gen, false).catch((e) => serverGone(e, gen, status.reopen_command)),
     status.state === "running");
+}
+
+// a judged set's speed: its judged distance over its simulated time (null for a set not judged)
+function judgedSpeed(t) {
+  const v = t.verification;
+  return ["holds", "moved", "judged"].includes(v.verdict) && v.counted_distance_m != null && t.scores.sim_time_s
+    ? 100 * v.counted_distance_m / t.scores.sim_time_s : null;
+}
+
+// a judged best's speed is the judged one (the screen's on hover)
+function bestSpeed(best) {
+  const judged = judgedSpeed(best);
+  if (judged == null) return fmt(best.scores.speed_cm_s);
+  return `<span title="screen's speed ${fmt(best.scores.speed_cm_s)} cm/s">${fmt(judged)}</span> <span class="muted">judged</span>`;
 }
 
 // a judged best's COT is the judge's (the screen's on hover); one the judge did not measure says so

@@ -10,7 +10,7 @@ const RUN_COLUMNS = [  // [key, label, value of a run for sorting, left-aligned]
   ["progress", "progress", (r) => runSets(r) / Math.max(1, r.trials_budget), false],
   ["distance", "best distance (m)", (r) => r.best_distance_m, false],
   ["failed", "failed", (r) => r.trials_failed, false], ["eta", "ETA", (r) => r.eta_s, false],
-  ["speed", "best speed (cm/s)", (r) => r.best && r.best.scores.speed_cm_s, false],
+  ["speed", "best speed (cm/s)", (r) => r.best && (judgedSpeed(r.best) ?? r.best.scores.speed_cm_s), false],
   ["cot", "best COT", (r) => r.best && (r.best.judged_cot != null ? r.best.judged_cot : r.best.scores.cot), false],
   ["verified", "best verified", (r) => r.best && r.best.verification.verdict, true],
 ];
@@ -39,7 +39,7 @@ function runCell(key, r) {
     case "distance": return r.best_distance_m != null ? fmt(r.best_distance_m) : "–";
     case "failed": return String(r.trials_failed);
     case "eta": return r.state === "running" ? fmtDuration(r.eta_s) : "–";
-    case "speed": return best ? fmt(best.scores.speed_cm_s) : "–";
+    case "speed": return best ? bestSpeed(best) : "–";
     case "cot": return best ? bestCot(best) : "–";   // the judge's beside a judged distance
     case "verified": return best ? `<span class="verdict ${esc(best.verification.verdict)}">${esc(best.verification.label || best.verification.verdict)}</span>` : "–";
   }
