@@ -34,10 +34,12 @@ def progress(core: Any) -> tuple[int, int, str, str]:
     best_s = "-"
     if best:
         b = best[0]
-        best_s = f"{counted_distance_m(b.verification, b.distance_m, b.verify_distance_m):.3f} m" + (
-            " judged" if b.verification in ("holds", "moved", "judged") else "")
-        if core.study.storage.run_meta().objective not in DISTANCE_OBJECTIVES:
-            best_s += f" ({_g(b.speed_cm_s, 3)} cm/s, COT {_g(b.cot, 3)})"  # what a COT objective trades
+        counted_m, judged = _counted(b), b.verification in ("holds", "moved", "judged")
+        best_s = f"{counted_m:.3f} m" + (" judged" if judged else "")
+        if core.study.storage.run_meta().objective not in DISTANCE_OBJECTIVES:  # what a COT objective trades
+            speed, cot = _judge_figures(core.study.storage, b, counted_m, 3) if judged \
+                else (b.speed_cm_s, _g(b.cot, 3))
+            best_s += f" ({_g(speed, 3)} cm/s, COT {cot})"
     if pending is not None:   # better, but no other identity has reproduced it yet: not the best
         best_s += f" ({_counted(pending):.3f} m pending audit)"
     eta = "-" if st["eta_s"] is None else f"{st['eta_s']:.0f}s"
@@ -114,15 +116,19 @@ def _objective_text(meta: Any, b: Any) -> str:
     return "" if meta.objective in DISTANCE_OBJECTIVES else f"{meta.objective} {_g(b.objective)} · "
 
 
+def _judge_figures(storage: Any, b: Any, counted_m: float, digits: int = 4) -> tuple[float, str]:
+    """(a judged set's speed in cm/s: its judged distance over the simulated time, its COT as shown: the judge's
+    run's from its evaluation row, or why there is none, e.g. "not measured" in a file from before that column)."""
+    cot, why = judged_cot(storage.evaluations(), b.trial_id)
+    return 100.0 * counted_m / b.sim_time_s, f"{_g(cot, digits)} (judged)" if cot is not None else str(why)
+
+
 def _cost_text(storage: Any, b: Any, counted_m: float, judged: bool) -> str:
-    """Speed and COT of the best: a judged set's from the judge's run (its speed from the judged distance, its
-    COT from its evaluation row; "not measured" in a file from before that column), the screen's beside them."""
+    """Speed and COT of the best: a judged set's the judge's, the screen's beside them."""
     if not judged:
         return f"speed {_g(b.speed_cm_s)} cm/s · COT {_g(b.cot)} · work {_g(b.work_j)} J"
-    cot, why = judged_cot(storage.evaluations(), b.trial_id)
-    return (f"speed {_g(100.0 * counted_m / b.sim_time_s)} cm/s (judged) · COT "
-            + (f"{_g(cot)} (judged)" if cot is not None else str(why))
-            + f" · screen's COT {_g(b.cot)}, work {_g(b.work_j)} J")
+    speed, cot = _judge_figures(storage, b, counted_m)
+    return f"speed {_g(speed)} cm/s (judged) · COT {cot} · screen's COT {_g(b.cot)}, work {_g(b.work_j)} J"
 
 
 def final_report(storage: Any, path: Path, *, verdict: str, done: bool, verbose: bool = False,
