@@ -33,3 +33,17 @@ def test_function_lines_by_hand() -> None:
 @pytest.mark.parametrize("name", sorted(FUNCTIONS))
 def test_restricted_modules_name_functions_they_define(name: str) -> None:
     assert function_lines((ROOT / TARGETS[name][0]).read_text(), list(FUNCTIONS[name]))
+
+
+def test_a_mutant_left_in_the_copy_is_replaced_by_the_module_as_copied_not_as_the_checkout_has_it_now(tmp_path):
+    from tests.mutation.main import restore
+
+    module = "spinefarm/coordinator/ladder/ladder.py"
+    copied = tmp_path / module
+    copied.parent.mkdir(parents=True)
+    original = b"x = 1\n"
+    copied.write_bytes(b"x = 2\n")                       # a mutant an ended mutmut left behind
+    (tmp_path / f"{module}.bak").write_bytes(original)
+    restore(tmp_path, module, original)
+    assert copied.read_bytes() == original != (ROOT / module).read_bytes()
+    assert not (tmp_path / f"{module}.bak").exists()

@@ -81,16 +81,19 @@ def run_module(tree: Path, module: str, tests: tuple[str, ...], functions: tuple
             "--simple-output", "--no-progress", "--CI"]
     # restricted to some functions: mutmut started through tests.mutation.lines, which hands it their lines
     tool = ["tests.mutation.lines", module, ",".join(functions), "--"] if functions else ["mutmut"]
+    # the module as copied when the run began: an edit of the checkout meanwhile (a mutant applied there by
+    # hand) must not become the code under mutation
+    original = (tree / module).read_bytes()
     mutmut_run(tree, [sys.executable, "-m", *tool, "run", *args])
     for mutant_id in untested(tree, module):
-        restore(tree, module)
+        restore(tree, module, original)
         mutmut_run(tree, [sys.executable, "-m", "mutmut", "run", str(mutant_id), *args])
-    restore(tree, module)
+    restore(tree, module, original)
 
 
-def restore(tree: Path, module: str) -> None:
-    """The module as tracked, over a mutant an ended mutmut left in the copy."""
-    shutil.copy2(ROOT / module, tree / module)
+def restore(tree: Path, module: str, original: bytes) -> None:
+    """The module as it was copied, over a mutant an ended mutmut left in the copy."""
+    (tree / module).write_bytes(original)
     (tree / f"{module}.bak").unlink(missing_ok=True)
 
 
