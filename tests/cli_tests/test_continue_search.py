@@ -67,3 +67,24 @@ def test_with_no_continue_every_promotion_is_simulated_from_the_start(tmp_path):
     promoted = _promoted(cols)
     assert len(promoted) >= 3 and not (cols["continued_s"] > 0).any()
     _same_as_from_the_start(config, cols, promoted)
+
+
+def test_a_promotion_of_a_rung_run_before_a_restart_is_simulated_from_the_start_with_the_same_bits(tmp_path):
+    """One worker screens four sets; the search is resumed to six with a new worker, which promotes a set the first
+    one screened (seed 4: row 1, third of the first four, makes the top half of six). The new worker has no end
+    of it: it simulates from the start, with the same bits; its own sets' promotions go on from their ends."""
+    out = tmp_path / "run.h5"
+    one = list(SEARCH)
+    for flag, value in (("--seed", "4"), ("--trials", "4"), ("--workers", "1")):
+        one[one.index(flag) + 1] = value
+    for argv in (["search", *one, "--out", str(out)],
+                 ["search", "--resume", str(out), "--trials", "6", "--workers", "1", "--api-port", "-1", "--quiet"]):
+        proc = subprocess.run([sys.executable, "-m", "spinefarm", *argv], cwd=ROOT, capture_output=True, text=True,
+                              timeout=300)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    meta, cols = read_run(out)
+    promoted = _promoted(cols)
+    elsewhere = [i for i in promoted if cols["worker_id"][i] != cols["worker_id"][int(cols["parent"][i])]]
+    assert elsewhere and all(cols["continued_s"][i] == 0.0 for i in elsewhere)
+    assert all(cols["continued_s"][i] > 0 for i in promoted if i not in elsewhere)
+    _same_as_from_the_start(RunConfig.from_dict(meta.run), cols, promoted)

@@ -42,7 +42,7 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     # the rungs' rules on storage alone; the process tests of test_fidelity.py / test_ladder.py (minutes a mutant)
     # hold the same code end to end and are left out
     "ladder": ("spinefarm/coordinator/ladder/rungs.py",
-               (f"{C}/test_rung_rules.py", *(f"{C}/test_fidelity.py::{t}" for t in (
+               (f"{C}/test_rung_rules.py", f"{C}/test_promotion_worker.py", *(f"{C}/test_fidelity.py::{t}" for t in (
                    "test_the_best_third_of_a_rung_is_promoted_best_first_and_once",
                    "test_bad_rungs_are_refused_with_what_was_expected",
                    "test_at_the_end_the_best_goes_on_through_rungs_holding_fewer_rows_than_eta",
