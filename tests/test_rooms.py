@@ -1,7 +1,7 @@
-"""Two rules of the design (DESIGN.md, "Rooms"), read from the syntax tree of every module under spinefarm/:
-no module is entered only to be passed through (it re-exports, or a function of it hands its own parameters
-unchanged to someone else's function), and no call goes back up a layer from an engine into the loop (an engine
-never calls a function it was handed)."""
+"""Two rules of the design (DESIGN.md, "One parameter's walk, sampler to engine"), read from the syntax tree of
+every module under spinefarm/: no module is entered only to be passed through (it re-exports, or a function of it
+hands its own parameters unchanged to someone else's function), and no call goes back up a layer from an engine
+into the loop (an engine never calls a function it was handed)."""
 
 from __future__ import annotations
 

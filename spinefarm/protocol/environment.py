@@ -1,6 +1,6 @@
 """What a result was computed with: Python, package versions, CPU, BLAS kernel, spinefarm's version and commit.
 
-`environment_record()` is stored with every run file (RunMeta.extra["environment"]) and printed by
+`environment_record()` is stored with every run file (RunMeta.environment) and printed by
 `spinefarm trial --json`; `differences(recorded)` says, one line each, what differs here from a recorded one.
 Standard library only (numpy's BLAS is looked up only when numpy is already imported), so any service can
 record itself.

@@ -12,7 +12,7 @@ back with `RunSettings.from_dict`, which refuses unknown fields and wrong types 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields
 from itertools import pairwise
 from typing import Any, ClassVar, TypeVar
 
@@ -199,9 +199,6 @@ class RunSettings:
         if self.scheduler != "halving":
             return budget
         return sum(budget // self.eta**k for k in range(len(self.ladder)))
-
-    def with_judge_rung(self, rung: Rung) -> RunSettings:
-        return replace(self, judge=replace(self.judge, rung=rung))
 
     def to_dict(self) -> dict[str, Any]:
         return {"scheduler": self.scheduler, "ladder": [r.to_dict() for r in self.ladder], "eta": self.eta,

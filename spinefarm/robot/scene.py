@@ -1,7 +1,7 @@
 """Scenes as data: flat ground, slope, rough ground, obstacles; and which contacts they need.
 
-Pure geometry (no engine): physics.py turns a Terrain into bodies. Y is up; the flat ground's top
-is at y = 0.5 cm (NTRT 2014).
+Pure geometry (no engine): each engine (worker/engines/bullet.py, mujoco_model.py) turns a Terrain into
+bodies. Y is up; the flat ground's top is at y = 0.5 cm (NTRT 2014).
 """
 
 from __future__ import annotations

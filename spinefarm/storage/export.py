@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from spinefarm.storage.base import BaseStorage
+from spinefarm.storage.ranking import counted_distance_m
 from spinefarm.storage.schema import COLUMNS, VECTOR_COLUMNS
 
 
@@ -26,13 +27,17 @@ def write_csv(storage: BaseStorage, out: TextIO, ids: Sequence[int] | None = Non
 
 
 def best_table(storage: BaseStorage, k: int) -> str:
+    """The k best sets as the run ranks them: by the distance that counts (the judge's on a judged set, shown as
+    counted_m beside its verdict), so a judged set may rank above a set whose screened objective is higher."""
     meta = storage.run_meta()
-    lines = [f"{'rank':>4} {'trial':>6} {'phase':<11} {'objective':>10} {'distance_m':>10} {'speed_cm_s':>10} "
-             f"{'work_j':>9} {'cot':>8}"]
+    lines = [f"{'rank':>4} {'trial':>6} {'phase':<11} {'objective':>10} {'distance_m':>10} {'counted_m':>10} "
+             f"{'verdict':<12} {'speed_cm_s':>10} {'work_j':>9} {'cot':>8}"]
     best = storage.reported_best(k)[0]   # with auditing on, only sets another identity's audit agreed with
     for rank, r in enumerate(best, 1):
+        counted = counted_distance_m(r.verification, r.distance_m, r.verify_distance_m)
         lines.append(f"{rank:>4} {r.trial_id:>6} {r.phase:<11} {r.objective:>10.4g} {r.distance_m:>10.4g} "
-                     f"{r.speed_cm_s:>10.4g} {r.work_j:>9.4g} {r.cot:>8.4g}")
+                     f"{counted:>10.4g} {r.verification or '-':<12} {r.speed_cm_s:>10.4g} {r.work_j:>9.4g} "
+                     f"{r.cot:>8.4g}")
     if best:
         b = best[0]
         lines.append(f"best trial {b.trial_id} parameters:")

@@ -175,6 +175,24 @@ def test_export_csv_and_best(tmp_path):
     assert "p2 = 0 cm" in table
 
 
+def test_the_best_table_shows_the_distance_each_set_ranks_by(tmp_path):
+    # screened 0.3, 0.2, 0.1 m; the judge moved trial 0 to 0.05 m and held trial 2 at 0.1 m: by the distance
+    # that counts the order is 1 (0.2, not judged), 2 (0.1, holds), 0 (0.05, moved)
+    path = tmp_path / "run.h5"
+    with Hdf5Storage.create(path, make_meta()) as s:
+        for i, d in enumerate((0.3, 0.2, 0.1)):
+            s.add_trial(i, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, i)
+            s.finish_trial(i, result(i, d, seed=i), d)
+        s.set_verification(0, "moved", 0.05, "moved 83% at the finer step")
+        s.set_verification(2, "holds", 0.1)
+    lines = best_table(Hdf5Storage.open_read(path), 3).splitlines()
+    header = lines[0].split()
+    rows = [dict(zip(header, ln.split(), strict=True)) for ln in lines[1:4]]
+    assert [(r["trial"], r["counted_m"], r["verdict"]) for r in rows] == [
+        ("1", "0.2", "-"), ("2", "0.1", "holds"), ("0", "0.05", "moved")]
+    assert rows[2]["distance_m"] == "0.3"   # the screen's distance stays beside it
+
+
 def test_resume_can_raise_the_budget_but_not_below_what_was_sampled(tmp_path):
     path = tmp_path / "run.h5"
     with Hdf5Storage.create(path, make_meta(budget=10)) as s:

@@ -100,18 +100,3 @@ def verify_trial(morphology: Morphology | str, params: np.ndarray, config: Trial
     runs = verification_configs(config, s, morph)
     results = {name: simulate(morph, params, cfg, seed, controller=controller).result for name, cfg in runs}
     return judge(distance_m, results, runs[0][1].dt_s, holds_tolerance(morph.name, morph.to_dict(), s.tolerance))
-
-
-def verify_in_engine(morphology: Morphology | str, params: np.ndarray, config: TrialConfig, seed: int,
-                     distance_m: float, engine: str, dt_s: float, *, controller: str | None = None) -> VerifyReport:
-    """Re-simulate a screened result in the judge engine at its converged step: "judged" (the judge's
-    distance is the one that counts), or "diverged" when the judge's run fails."""
-    morph = load_morphology(morphology)
-    judge_cfg = dataclasses.replace(config, engine=engine, engine_options={}, dt_s=dt_s, auto_dt=False)
-    r = simulate(morph, params, judge_cfg, seed, controller=controller).result
-    verdict, reason = judge_verdict(distance_m, True, engine, r, math.inf)
-    change = relative_change(r.distance_m, distance_m) if r.ok else math.inf
-    return VerifyReport(
-        verdict=verdict, reason=reason, distance_m=distance_m, fine_distance_m=r.distance_m, fine_dt_s=dt_s,
-        fine_status=str(r.status), perturbed_distance_m=None, relative_change=change, tolerance=math.inf,
-        tolerance_source=f"another engine ({engine})")
