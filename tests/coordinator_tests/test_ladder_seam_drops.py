@@ -6,7 +6,7 @@ the grace a restart gives its workers to reconnect (docs/distributed.md)."""
 
 from __future__ import annotations
 
-from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, OPINION, task_key
+from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, OPINION, check_key
 from spinefarm.coordinator.scheduler import START_GRACE_S
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung
@@ -28,15 +28,15 @@ def _live(ladder, **engines):
 def test_an_overtaken_bests_queued_judge_is_withdrawn_and_one_already_out_is_left_to_finish(tmp_path):
     storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"),))
     ladder = ladder_of(storage)
-    j0 = task_key(JUDGE, 0)
+    j0 = check_key(JUDGE, 0)
     assert ladder.leases.queued_keys() == [j0]
     arrive(ladder, 0.9, "w-a")        # a new best while trial 0's judge is still queued
-    j1 = task_key(JUDGE, 1)
+    j1 = check_key(JUDGE, 1)
     assert ladder.leases.queued_keys() == [j1] and ladder.checks.pending == {j1}
     assert storage.columns()["verification"].tolist() == [b"", b"pending"]   # trial 0's undone
     out = lease(ladder, j1, "w-j")
     arrive(ladder, 2.0, "w-a")        # another, while trial 1's judge is out on w-j
-    j2 = task_key(JUDGE, 2)
+    j2 = check_key(JUDGE, 2)
     assert ladder.checks.pending == {j1, j2} and ladder.leases.queued_keys() == [j2]
     assert ladder.leases.is_current(j1, out.lease_id, "w-j")
     assert storage.columns()["verification"].tolist() == [b"", b"pending", b"pending"]
@@ -47,14 +47,14 @@ def test_an_overtaken_bests_opinion_is_withdrawn_even_while_a_worker_runs_it(tmp
     judge = JudgePolicy(rung=Rung("bullet", 2.5e-4), share=1.0, opinion=Rung("mujoco", 1e-3))
     storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"),), judge=judge)
     ladder = ladder_of(storage)
-    run_check(ladder, task_key(JUDGE, 0), "w-j", outcome(0, 0.4, "w-j"))
-    o0 = task_key(OPINION, 0)
+    run_check(ladder, check_key(JUDGE, 0), "w-j", outcome(0, 0.4, "w-j"))
+    o0 = check_key(OPINION, 0)
     assert ladder.leases.queued_keys() == [o0]
     lease(ladder, o0, "w-o")
     arrive(ladder, 0.9, "w-a")
     # its late result finds no lease (stale); the new best's judge comes first
     assert ladder.leases.lease_of(o0) is None and o0 not in ladder.checks.pending
-    assert ladder.leases.queued_keys() == [task_key(JUDGE, 1)]
+    assert ladder.leases.queued_keys() == [check_key(JUDGE, 1)]
     storage.close()
 
 
@@ -63,7 +63,7 @@ def test_within_the_restarts_grace_nothing_is_dropped_after_it_an_audit_is_said_
     storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"), (0.9, "w-a")), audit=BESTS, trials=2)
     clock = FakeClock()
     ladder = ladder_of(storage, clock)
-    a1, j1 = task_key(AUDIT, 1), task_key(JUDGE, 1)
+    a1, j1 = check_key(AUDIT, 1), check_key(JUDGE, 1)
     assert ladder.study.done and ladder.checks.pending == {a1, j1}
     _live(ladder, **{"w-a": MUJOCO})                       # the row's own worker, not running Bullet
     clock.advance(START_GRACE_S - 0.5)                      # the workers may still be reconnecting
@@ -87,11 +87,11 @@ def test_once_the_search_is_over_an_overtaken_bests_judge_is_stopped_and_checks_
     storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"), (0.9, "w-a")), audit=BESTS, trials=3)
     clock = FakeClock()
     ladder = ladder_of(storage, clock)
-    j1 = task_key(JUDGE, 1)
+    j1 = check_key(JUDGE, 1)
     out = lease(ladder, j1, "w-j")                      # out on a worker: not withdrawn when overtaken
     arrive(ladder, 2.0, "w-b")
     assert ladder.study.done
-    a1, a2, j2 = task_key(AUDIT, 1), task_key(AUDIT, 2), task_key(JUDGE, 2)
+    a1, a2, j2 = check_key(AUDIT, 1), check_key(AUDIT, 2), check_key(JUDGE, 2)
     assert ladder.checks.pending == {j1, a1, a2, j2}
     clock.advance(START_GRACE_S + 1.0)
     _live(ladder, **{"w-a": MUJOCO, "w-b": BOTH, "w-j": BULLET})
@@ -109,8 +109,8 @@ def test_an_opinion_no_live_worker_may_run_is_dropped_for_good_once_the_grace_is
     storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"),), judge=judge, trials=1)
     clock = FakeClock()
     ladder = ladder_of(storage, clock)
-    run_check(ladder, task_key(JUDGE, 0), "w-j", outcome(0, 0.4, "w-j"))
-    o0 = task_key(OPINION, 0)
+    run_check(ladder, check_key(JUDGE, 0), "w-j", outcome(0, 0.4, "w-j"))
+    o0 = check_key(OPINION, 0)
     assert ladder.checks.pending == {o0}
     _live(ladder, **{"w-j": BULLET})
     ladder.drop_unservable()
@@ -128,7 +128,7 @@ def test_a_failed_result_changes_nothing_and_a_best_that_diverges_hands_the_audi
     storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"), (0.3, "w-b"), (0.9, "w-c")), audit=BESTS)
     storage.set_audit(2, "agrees", 0.9, "w-d")             # the best, audited already
     ladder = ladder_of(storage)
-    j2 = task_key(JUDGE, 2)
+    j2 = check_key(JUDGE, 2)
     assert ladder.checks.pending == {j2}
     tid = storage.n_trials()
     storage.add_trial(tid, [0.5] * 3, [0.0] * 3, "monte_carlo", -1, 0)
@@ -139,5 +139,5 @@ def test_a_failed_result_changes_nothing_and_a_best_that_diverges_hands_the_audi
     # the best diverges in the judge's run: it never counts, and trial 0, now the best, is audited and judged
     run_check(ladder, j2, "w-j", TrialResult.failed("diverged: nan", outcome(2, 0, "").seed, 2))
     assert storage.best_ids(1) == [0]
-    assert sorted(ladder.leases.queued_keys()) == sorted([task_key(AUDIT, 0), task_key(JUDGE, 0)])
+    assert sorted(ladder.leases.queued_keys()) == sorted([check_key(AUDIT, 0), check_key(JUDGE, 0)])
     storage.close()

@@ -9,7 +9,7 @@ import math
 
 import pytest
 
-from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, REFEREE, task_key
+from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, REFEREE, check_key
 from spinefarm.coordinator.study import trial_seed
 from spinefarm.protocol.settings import AuditPolicy, TaskFidelity
 from spinefarm.protocol.submissions import Verdict
@@ -37,7 +37,7 @@ def test_a_worker_gets_keys_in_its_own_engines_only_and_none_once_quarantined(tm
     ladder = ladder_of(storage)
     for worker, engines in (("w-m", ("mujoco",)), ("w-b", ("bullet",)), ("w-any", None)):
         ladder.peers.heard(worker, engines, ENV_A)
-    judge = task_key(JUDGE, 1)
+    judge = check_key(JUDGE, 1)
     assert judge in ladder.checks.pending
     # a screen row runs in the run's engine (MuJoCo), the judge in Bullet; a worker that names none takes any
     assert [ladder.eligible(0, w) for w in ("w-m", "w-b", "w-any")] == [True, False, True]
@@ -51,7 +51,7 @@ def test_an_audit_goes_to_another_worker_and_a_referee_to_a_third(tmp_path):
     storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"), (0.9, "w-b")), audit=BESTS)
     storage.set_audit(0, "disputed", 0.5, "w-c")
     ladder = ladder_of(storage)
-    audit, referee = task_key(AUDIT, 1), task_key(REFEREE, 0)
+    audit, referee = check_key(AUDIT, 1), check_key(REFEREE, 0)
     assert {audit, referee} <= ladder.checks.pending        # the best's audit, the disputed row's referee
     assert [ladder.eligible(audit, w) for w in ("w-a", "w-b", "w-c")] == [True, False, True]
     assert [ladder.eligible(referee, w) for w in ("w-a", "w-b", "w-c")] == [False, True, False]
@@ -61,7 +61,7 @@ def test_an_audit_goes_to_another_worker_and_a_referee_to_a_third(tmp_path):
 def test_with_identities_verified_an_audit_needs_a_known_single_identity_not_the_rows(tmp_path):
     storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"), (0.9, "w-b")), audit=BESTS)
     ladder = ladder_of(storage, verify_identity=True)
-    audit = task_key(AUDIT, 1)
+    audit = check_key(AUDIT, 1)
     assert audit in ladder.checks.pending
     ladder.peers.identified("w-b", {"session-b"})
     assert not ladder.eligible(audit, "w-new")              # its identity is not known yet
@@ -99,7 +99,7 @@ def _judge_in_turn(ladder, ratios):
     for ratio in ratios:
         distance_m = 2.0 ** ladder.study.storage.n_trials()   # each beats the last one's judged distance
         r = arrive(ladder, distance_m, "w-a")
-        key = task_key(JUDGE, r.trial_id)
+        key = check_key(JUDGE, r.trial_id)
         assert run_check(ladder, key, "w-j", outcome(r.trial_id, distance_m / ratio, "w-j")) == Verdict.STORED
 
 
