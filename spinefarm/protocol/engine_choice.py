@@ -85,7 +85,8 @@ class EngineChoice:
         """One line for the search's report."""
         rho = "-" if self.spearman is None else f"{self.spearman:.3f}"
         ratio = "-" if self.median_distance_ratio is None else f"{self.median_distance_ratio:.3f}"
-        cost = ", ".join(f"{t} {v['cpu_s_per_sim_s']:.3f}" for t, v in self.tiers.items()
+        # by name: a run file stores the tiers with sorted keys, so a resumed run says it in the same order
+        cost = ", ".join(f"{t} {v['cpu_s_per_sim_s']:.3f}" for t, v in sorted(self.tiers.items())
                          if v.get("cpu_s_per_sim_s") is not None)
         return (f"engine auto chose {self.engine}: Spearman rho {rho}, top-{self.top_k} overlap {self.top_overlap}, "
                 f"median distance ratio {ratio} (MuJoCo/Bullet, {self.n_moving} gaits that move); "

@@ -47,7 +47,6 @@ AUDITS = tuple(a.value for a in AuditState)
 COLUMN_BY_NAME = {c.name: c for c in COLUMNS}
 VECTOR_COLUMNS = ("params_unit", "params")
 SCORE_COLUMNS = SCORE_NAMES
-EXTRA_COLUMNS = tuple(e.name for e in RECORDED_EXTRAS)
 
 
 @dataclass(frozen=True)

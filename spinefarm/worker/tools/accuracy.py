@@ -1,9 +1,9 @@
 """Speed against error: the same seeded trials over a sweep of numerical settings and scenes.
 
 Each setting is a set of TrialConfig overrides. Every parameter set is run once per setting and
-compared with a converged reference of the same parameter set: the physics step is halved from
-`reference_start_dt_s` until the final distance changes by less than `converge_tol` (or the floor
-is reached; the report says which). The model itself does not change with the step (motor limits
+compared with a converged reference of the same parameter set: the physics step is halved from 0.25 ms
+until the final distance changes by less than 0.1 % (or the floor is reached: 0.25 ms with --quick,
+else 0.03125 ms; the report says which). The model itself does not change with the step (motor limits
 and control rates are in physical units). Chaotic gaits are caught by a "chaos floor": the
 difference between two references whose start poses differ by 1e-6 cm; errors below it are noise.
 """
