@@ -45,6 +45,9 @@ build with every segment's start position jittered by 1e-6 cm (seeds 1..N). Per 
 against NTRT's recorded distance (its whole length, or --replay-duration; --no-replay: none)
 ({"builds": {BUILD: {"pybullet", "precision"}}, "spines": {SPINE: {BUILD: {"window_error_cm", "shares",
 "replay_ratio", ...}}}}; BUILD "single", "double", "jitter-S").
+
+--ntrt --measure [--engine-option KEY=VALUE ...] [--jitter-seed S]: one build's part of --precision, in this
+interpreter, under Bullet engine options (e.g. constraint_solver=mlcp_dantzig, NTRT's current solver; docs/fitting.md).
 """
 
 from __future__ import annotations

@@ -74,3 +74,46 @@ def test_scan_reports_each_recording_and_their_rms():
     recs = _bench().ntrt_recordings(NTRT / "TetraSpine", 0.2, 1.0, 0.4)
     plain = window_error_cm(load_morphology("tetraspine-ntrt2026"), TrialConfig(engine="mujoco"), recs[:1])
     assert rows["0.5"]["published"] == plain
+
+
+def test_precision_is_read_from_the_build():
+    """The installed pybullet wheel is built with BT_USE_DOUBLE_PRECISION (its setup.py): 1 + 2^-40 survives."""
+    assert _bench().bullet_precision() == "double"
+
+
+def test_the_jitter_shifts_each_segments_start_and_keeps_the_recorded_poses():
+    bench = _bench()
+    p = bench.ntrt_recordings(NTRT / "TetraSpine", 0.2, 1.0, 0.4)[0]
+    assert bench._jittered(p, 0) is p
+    q = bench._jittered(p, 1)
+    shift_cm = (q.rec.position_m - p.rec.position_m) * 100
+    assert np.allclose(shift_cm, shift_cm[:1], rtol=0, atol=1e-12)  # one offset a segment: velocities unchanged
+    assert 1e-8 < np.abs(shift_cm).max() < 1e-5  # the size of a 1e-6 cm Gaussian over 9 numbers
+    assert q.poses is p.poses  # still checked against the recorded poses
+
+
+def test_measure_reports_the_window_error_over_every_window():
+    """--measure: the RMS over the windows of their pose error is loss.window_error_cm's (windows of equal size),
+    and a 1e-6 cm jitter of the start moves it, by far less than 1 %."""
+    import argparse
+
+    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.trial_config import TrialConfig
+    from spinefarm.worker.fit.loss import window_error_cm
+
+    def measure(seed: int) -> dict:
+        args = argparse.Namespace(spines=["tetraspine-ntrt2026"], recordings=str(NTRT), window=0.2, stride=1.0,
+                                  span=0.4, early=1.0, no_replay=True, replay_duration=None, jitter_seed=seed,
+                                  engine_option=["friction_anchor=false"])
+        return _bench().measure_bench(args)
+
+    out = measure(0)
+    assert out["precision"] == "double" and out["engine_options"] == {"friction_anchor": False}
+    row = out["spines"]["tetraspine-ntrt2026"]
+    recs = _bench().ntrt_recordings(NTRT / "TetraSpine", 0.2, 1.0, 0.4)
+    cfg = TrialConfig(engine="bullet", engine_options={"friction_anchor": False})
+    assert row["windows"] == 5 and row["replay_ratio"] is None
+    assert row["window_error_cm"] == pytest.approx(window_error_cm(load_morphology("tetraspine-ntrt2026"), cfg, recs),
+                                                   rel=1e-12)
+    jittered = measure(1)["spines"]["tetraspine-ntrt2026"]["window_error_cm"]
+    assert jittered != row["window_error_cm"] and jittered == pytest.approx(row["window_error_cm"], rel=0.01)
