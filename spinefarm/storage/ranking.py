@@ -24,6 +24,12 @@ SCALED_OBJECTIVES = ("distance", "speed", "cot_distance", "pareto")  # proportio
 _TINY_M = 1e-12
 
 
+def judged_speed_cm_s(judged_distance_m: float, sim_time_s: float) -> float:
+    """A judged set's speed: its judged distance over the simulated time (the judge runs as long as the screen);
+    NaN without a simulated time."""
+    return 100.0 * judged_distance_m / sim_time_s if sim_time_s else math.nan
+
+
 def ranked_value(objective_name: str, objective: float, distance_m: float, verification: bytes,
                  verify_distance_m: float) -> float:
     """The value a complete set ranks by (see the module's doc)."""
