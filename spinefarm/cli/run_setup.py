@@ -69,9 +69,10 @@ def check_run_args(args: argparse.Namespace) -> None:
 def search_flags(args: argparse.Namespace) -> None:
     """The search's own number flags, each named with the range the run's settings hold it to."""
     for flag, attr, low in (("--trials", "trials", 1), ("--top-k", "top_k", 1), ("--startup-trials",
-                            "startup_trials", 0), ("--batch", "batch", 1), ("--workers", "workers", 0),
+                            "startup_trials", 0), ("--workers", "workers", 0),
                             ("--eta", "eta", 2)):
         checks.at_least(flag, getattr(args, attr, None), low, "a whole number")
+    checks.in_range("--batch", getattr(args, "batch", None), 1, 4096)  # a worker's own limit (zenoh_worker)
     checks.in_range("--sigma", getattr(args, "sigma", None), 0.0, 1.0, low_inclusive=False)
     checks.in_range("--lease", getattr(args, "lease", None), 0.0, low_inclusive=False)
     checks.in_range("--audit", getattr(args, "audit", None), 0.0, 1.0)
