@@ -72,3 +72,14 @@ def test_a_bad_number_flag_is_named_with_its_value_and_range(command, flag, valu
     r = run(command, "tetraspine", flag, value, *out, timeout=60)
     one_line_error(r, f"error: {flag} out of range", f"received {received};", expected)
     assert not (tmp_path / "r.h5").exists()
+
+
+def test_a_gait_file_may_record_the_spec_itself(tmp_path):
+    from spinefarm.robot.morphology.registry import load_morphology
+
+    spec = {**load_morphology("tetraspine-ntrt").to_dict(), "name": "recorded-spine"}
+    gait = {**json.loads(GAIT.read_text()), "morphology": "tetraspine", "morphology_spec": spec}
+    (tmp_path / "gait.json").write_text(json.dumps(gait))
+    taken, said = _trial_json("--params", str(tmp_path / "gait.json"))
+    assert taken["morphology"] == "recorded-spine"  # the recorded spec, exact, over the name beside it
+    assert "the spec it records (recorded-spine)" in said
