@@ -83,3 +83,17 @@ def test_a_gait_file_may_record_the_spec_itself(tmp_path):
     taken, said = _trial_json("--params", str(tmp_path / "gait.json"))
     assert taken["morphology"] == "recorded-spine"  # the recorded spec, exact, over the name beside it
     assert "the spec it records (recorded-spine)" in said
+
+
+def test_a_gait_exported_from_a_spec_files_run_runs_alone(tmp_path):
+    """A user's robot is as good as a built-in: its run's gait file carries the spec, no robot argument needed."""
+    spec = run("spec", "tetraspine-ntrt", "--name", "exported-spine", timeout=60)
+    (tmp_path / "exported-spine.yaml").write_text(spec.stdout)
+    out = tmp_path / "r.h5"
+    r = run("search", str(tmp_path / "exported-spine.yaml"), "--trials", "2", "--workers", "1", "--duration", "0.2",
+            "--engine", "bullet", "--no-verify", "--api-port", "-1", "--quiet", "--out", str(out), timeout=180)
+    assert r.returncode == 0, r.stderr
+    (tmp_path / "exported-spine.yaml").unlink()  # the gait file alone must say which robot
+    assert run("export", str(out), "--gait", str(tmp_path / "best.json"), timeout=60).returncode == 0
+    taken, said = _trial_json("--params", str(tmp_path / "best.json"))
+    assert taken["morphology"] == "exported-spine" and "the spec it records" in said
