@@ -23,6 +23,8 @@ class Verification(BaseModel):
     judge: str | None = None  # how it was re-simulated: "bullet at 0.25 ms", or a finer step of the same engine
     counted_distance_m: float | None = Field(None, description="the distance that counts: the judge's when it "
                                              "judged the set, else the screen's")
+    judged_speed_cm_s: float | None = Field(None, description="a judged set's speed: the judged distance over "
+                                            "the simulated time (null for a set not judged)")
 
 
 class Audit(BaseModel):

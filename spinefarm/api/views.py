@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 from typing import Any
@@ -10,16 +9,13 @@ from typing import Any
 import numpy as np
 
 from spinefarm.api.run_state import derive_state, live_figures, read_live
+from spinefarm.protocol.columns import SCORE_NAMES
 from spinefarm.protocol.states import JUDGED_VERDICTS
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.codesign_coverage import run_coverage
 from spinefarm.storage.evaluations import judged_cot
-from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
-from spinefarm.storage.schema import SCORE_COLUMNS, TrialRecord, older_file_note
-
-
-def _num(x: float) -> float | None:
-    return x if math.isfinite(x) else None
+from spinefarm.storage.ranking import counted_distance_m, evaluation_counts, judged_speed_cm_s
+from spinefarm.storage.schema import TrialRecord, json_number, older_file_note
 
 
 def judge_of(meta: Any) -> str:
@@ -40,30 +36,39 @@ def verdict_label(rec: TrialRecord, meta: Any) -> str:
     return rec.verification or "not_checked"
 
 
+def verification_view(rec: TrialRecord, meta: Any) -> dict[str, Any]:
+    """The judge's word on a set. `judge_distance_m` and its older name `fine_step_distance_m` (both interface,
+    docs/distributed.md) are one value; `judged_speed_cm_s` is the speed the report shows (null unless judged)."""
+    judge_m = json_number(rec.verify_distance_m)
+    judged = rec.verification.encode() in JUDGED_VERDICTS and judge_m is not None
+    return {"verdict": rec.verification or "not_checked", "label": verdict_label(rec, meta),
+            "fine_step_distance_m": judge_m, "screen_distance_m": json_number(rec.distance_m),
+            "judge_distance_m": judge_m, "screen_to_judge_ratio": json_number(rec.judge_ratio),
+            "reason": rec.verify_reason or None, "judge": judge_of(meta),
+            "counted_distance_m": json_number(counted_distance_m(rec.verification, rec.distance_m,
+                                                                 rec.verify_distance_m)),
+            "judged_speed_cm_s": json_number(judged_speed_cm_s(rec.verify_distance_m, rec.sim_time_s))
+            if judged else None}
+
+
 def trial_view(storage: BaseStorage, rec: TrialRecord) -> dict[str, Any]:
     meta = storage.run_meta()
     names = meta.param_names
     return {
         "trial_id": rec.trial_id, "status": rec.status, "reason": rec.reason, "phase": rec.phase,
         "parent": rec.parent if rec.parent >= 0 else None, "seed": rec.seed,
-        "objective": _num(rec.objective),
-        "scores": {k: _num(getattr(rec, k)) for k in SCORE_COLUMNS},
+        "objective": json_number(rec.objective),
+        "scores": {k: json_number(getattr(rec, k)) for k in SCORE_NAMES},
         "params": dict(zip(names, rec.params, strict=True)),
         "params_unit": dict(zip(names, rec.params_unit, strict=True)),
         "worker_id": rec.worker_id or None,
-        "finished_at_unix_s": _num(rec.finished_at_unix_s),
-        "verification": {"verdict": rec.verification or "not_checked", "label": verdict_label(rec, meta),
-                         "fine_step_distance_m": _num(rec.verify_distance_m),
-                         "screen_distance_m": _num(rec.distance_m), "judge_distance_m": _num(rec.verify_distance_m),
-                         "screen_to_judge_ratio": _num(rec.judge_ratio),
-                         "reason": rec.verify_reason or None, "judge": judge_of(meta),
-                         "counted_distance_m": _num(counted_distance_m(rec.verification, rec.distance_m,
-                                                                       rec.verify_distance_m))},
-        "audit": {"state": rec.audit or "not_audited", "distance_m": _num(rec.audit_distance_m),
+        "finished_at_unix_s": json_number(rec.finished_at_unix_s),
+        "verification": verification_view(rec, meta),
+        "audit": {"state": rec.audit or "not_audited", "distance_m": json_number(rec.audit_distance_m),
                   "worker_id": rec.audit_worker_id or None},
         "pareto_front": bool(rec.pareto_front),
-        "engine": rec.engine or None, "dt_s": _num(rec.dt_s), "settle_s": _num(rec.settle_s),
-        "rung": rec.rung, "duration_s": _num(rec.duration_s),
+        "engine": rec.engine or None, "dt_s": json_number(rec.dt_s), "settle_s": json_number(rec.settle_s),
+        "rung": rec.rung, "duration_s": json_number(rec.duration_s),
     }
 
 
@@ -120,7 +125,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "parameter_sets_sampled": storage.count_rung(0),
         **(evaluation_counts(cols, evaluations) if n_trials
            else {"parameter_sets_done": 0, "evaluations_done": 0}),
-        "best_distance_m": _num(counted_distance_m(best[0].verification, best[0].distance_m,
+        "best_distance_m": json_number(counted_distance_m(best[0].verification, best[0].distance_m,
                                                    best[0].verify_distance_m)) if best else None,
         "trials_done": finished, "trials_complete": counts["complete"], "trials_failed": counts["failed"],
         "trials_leased": live.get("trials_leased") if state == "running" else None,
@@ -141,7 +146,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "unservable_workers": (live.get("unservable_workers") or {}) if state in ("running", "stalled", "done") else {},
         "status_age_s": age if live else None,
         "status_file_error": status_error,
-        "started_at_unix_s": _num(meta.created_at_unix_s),
+        "started_at_unix_s": json_number(meta.created_at_unix_s),
         "controller": meta.controller or (tc.get("controller") if tc else None),
         "engine": (tc.get("engine") or "bullet") if meta.morphology_spec else None,
         "step_s": float(np.median(steps)) if steps.size else None,

@@ -7,12 +7,13 @@ ends with a clear message (and no run file or half a simulation left behind).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import re
 from collections.abc import Iterable
 from pathlib import Path
 
-from spinefarm.protocol.errors import ConfigError
+from spinefarm.protocol.errors import ConfigError, check_range
 
 # Zenoh endpoint locators a user types: proto/host:port (IPv6 hosts in brackets); unix sockets take a path.
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.\-]+):(\d{1,5})(#.*)?$")
@@ -71,6 +72,35 @@ def at_least(flag: str, value: int | None, low: int, what: str) -> int | None:
     if value is not None and value < low:
         raise ConfigError(f"{flag} out of range", received=value, expected=f"{what} (at least {low})")
     return value
+
+
+def in_range(flag: str, value: float | None, low: float | None = None, high: float | None = None, *,
+             low_inclusive: bool = True) -> None:
+    """A number flag in its range (None: not given), the error naming the flag as typed."""
+    if value is not None:
+        check_range(flag, value, low, high, low_inclusive=low_inclusive)
+
+
+# (flag, argparse attribute, the TrialConfig field it sets): a bad value names the flag with the field's range
+TRIAL_FLAGS = (("--duration", "duration", "duration_s"), ("--settle", "settle", "settle_s"),
+               ("--dt", "dt", "dt_s"), ("--cpg-step", "cpg_step", "cpg_step_s"),
+               ("--record-every", "record_every", "record_every_s"), ("--verify-dt", "verify_dt", "dt_s"))
+
+
+def trial_flags(args: argparse.Namespace) -> None:
+    """The trial-setting flags a command has, each in the range of its TrialConfig field (--dt may be 'auto')."""
+    from spinefarm.robot.trial_config import TrialConfig
+
+    bounds = {f.name: f.metadata["bounds"] for f in dataclasses.fields(TrialConfig) if "bounds" in f.metadata}
+    for flag, attr, field in TRIAL_FLAGS:
+        value = getattr(args, attr, None)
+        if isinstance(value, str):
+            try:
+                value = float(value)
+            except ValueError:
+                continue  # 'auto', or a word the step parser names
+        low, high, low_inclusive = bounds[field]
+        in_range(flag, value, low, high, low_inclusive=low_inclusive)
 
 
 def seed(text: str) -> int:

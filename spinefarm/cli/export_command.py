@@ -61,10 +61,21 @@ def cmd_export(args: argparse.Namespace) -> int:
             from spinefarm.robot.codesign import BODY_PREFIX
 
             gait["params"] = {k: v for k, v in gait["params"].items() if not k.startswith(BODY_PREFIX)}
+        else:
+            _record_spec(storage.run_meta(), gait)
         write_gait(args.gait, gait)
         which = "the best trial" if args.trial is None else f"trial {args.trial}"
         print(f"wrote the parameters of {which} to {args.gait}", file=sys.stderr)
     return 0
+
+
+def _record_spec(meta: Any, gait: dict[str, Any]) -> None:
+    """A robot of a spec file goes into its gait file (`morphology_spec`), so `spinefarm trial --params` alone
+    runs it; a built-in's name says enough."""
+    from spinefarm.robot.morphology.registry import builtin_names
+
+    if meta.morphology_spec and meta.morphology not in builtin_names():
+        gait["morphology_spec"] = meta.morphology_spec
 
 
 def _write_body(storage: Any, out: str, trial_id: int | None) -> None:

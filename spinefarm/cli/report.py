@@ -17,7 +17,7 @@ from typing import Any
 from spinefarm.storage.codesign_coverage import run_coverage
 from spinefarm.storage.evaluations import judged_cot
 from spinefarm.storage.model_spread import model_spread, spread_text
-from spinefarm.storage.ranking import counted_distance_m, evaluation_counts
+from spinefarm.storage.ranking import counted_distance_m, evaluation_counts, judged_speed_cm_s
 
 DISTANCE_OBJECTIVES = ("distance", "speed")  # an objective that is a score part already, shown as that part
 
@@ -53,7 +53,7 @@ def verdict_text(b: Any, judge_engine: str | None) -> str:
     """What the judge found, in words: "holds" only within tolerance at the same engine; a cross-engine
     judgement says "judged in ENGINE" with both distances and their ratio."""
     if b.verification == "judged":
-        speed = 100 * b.verify_distance_m / b.sim_time_s if b.sim_time_s else math.nan
+        speed = judged_speed_cm_s(b.verify_distance_m, b.sim_time_s)
         return (f"judged in {judge_engine or 'the judge engine'}: {b.verify_distance_m:.4g} m, {speed:.4g} cm/s "
                 f"(the distance that counts; screen {b.distance_m:.4g} m, screen/judge ratio {b.judge_ratio:.3g})")
     if b.verification == "holds":
@@ -120,7 +120,7 @@ def _judge_figures(storage: Any, b: Any, counted_m: float, digits: int = 4) -> t
     """(a judged set's speed in cm/s: its judged distance over the simulated time, its COT as shown: the judge's
     run's from its evaluation row, or why there is none, e.g. "not measured" in a file from before that column)."""
     cot, why = judged_cot(storage.evaluations(), b.trial_id)
-    return 100.0 * counted_m / b.sim_time_s, f"{_g(cot, digits)} (judged)" if cot is not None else str(why)
+    return judged_speed_cm_s(counted_m, b.sim_time_s), f"{_g(cot, digits)} (judged)" if cot is not None else str(why)
 
 
 def _cost_text(storage: Any, b: Any, counted_m: float, judged: bool) -> str:

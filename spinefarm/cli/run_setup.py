@@ -60,12 +60,23 @@ def check_run_args(args: argparse.Namespace) -> None:
         check_range("--verify-tolerance", args.verify_tolerance, 0.0, 10.0, low_inclusive=False)
     check_range("--judge-drift", args.judge_drift, 0.0, 10.0, low_inclusive=False)
     check_range("--judge-share", args.judge_share, 0.0, 1.0, low_inclusive=False)
-    if args.duration is not None:  # before an `--engine auto` calibration, as the trial config will
-        from spinefarm.robot.trial_config import MAX_DURATION_S
-
-        check_range("--duration", args.duration, 0.0, MAX_DURATION_S, low_inclusive=False)
+    checks.trial_flags(args)  # before an `--engine auto` calibration, as the trial config will
+    search_flags(args)
     if args.out:
         checks.output_path("--out", args.out, (".h5", ".hdf5"))
+
+
+def search_flags(args: argparse.Namespace) -> None:
+    """The search's own number flags, each named with the range the run's settings hold it to."""
+    for flag, attr, low in (("--trials", "trials", 1), ("--top-k", "top_k", 1), ("--startup-trials",
+                            "startup_trials", 0), ("--workers", "workers", 0),
+                            ("--eta", "eta", 2)):
+        checks.at_least(flag, getattr(args, attr, None), low, "a whole number")
+    checks.in_range("--batch", getattr(args, "batch", None), 1, 4096)  # a worker's own limit (zenoh_worker)
+    checks.in_range("--sigma", getattr(args, "sigma", None), 0.0, 1.0, low_inclusive=False)
+    checks.in_range("--lease", getattr(args, "lease", None), 0.0, low_inclusive=False)
+    checks.in_range("--audit", getattr(args, "audit", None), 0.0, 1.0)
+    checks.in_range("--audit-tolerance", getattr(args, "audit_tolerance", None), 0.0, 10.0)
 
 
 def check_step(config: Any) -> None:

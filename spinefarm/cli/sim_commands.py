@@ -183,6 +183,7 @@ def cmd_trial(args: argparse.Namespace) -> int:
     from spinefarm.protocol.environment import environment_record
     from spinefarm.worker.trial.simulation import simulate
 
+    checks.trial_flags(args)
     if args.record is not None:
         checks.output_path("--record", args.record, (".npz",))
     if args.trial_id is not None and args.run is None:
@@ -228,14 +229,19 @@ def _trial_inputs(args: argparse.Namespace) -> tuple[Any, str | None, np.ndarray
         seed = args.seed if args.seed is not None else seed
         note_environment(args.run, recorded_environment(args.run))
         return morph, controller, params, seed, base, stored_id
-    if args.morphology is None:
-        raise ParameterError("no robot to run", received="nothing", expected="a morphology or --run RUN.h5")
-    morph = load_morphology(args.morphology)
+    if args.morphology is None and args.params is None:
+        raise ParameterError("no robot to run", received="nothing",
+                             expected="a morphology, a --params gait file naming one, or --run RUN.h5")
     controller = args.controller
     if args.params is not None:
         params, file_controller = load_params_file(args.params)
         controller = controller or file_controller
-    else:
+    if args.morphology is None:
+        from spinefarm.cli.gait_robot import gait_robot
+
+        args.morphology = gait_robot(args.params)
+    morph = load_morphology(args.morphology)
+    if args.params is None:
         rseed = 0 if args.random_seed is None else args.random_seed
         params = random_unit_params(morph, rseed, controller)
     seed = args.seed if args.seed is not None else (args.random_seed or 0)

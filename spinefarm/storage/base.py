@@ -13,7 +13,7 @@ from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import REFUTED_VERDICTS, STORED_STATUSES, AuditState, TrialStatus, Verification
 from spinefarm.storage import pareto
-from spinefarm.storage.ranking import agreeing, ranked_values
+from spinefarm.storage.ranking import COT_OBJECTIVES, agreeing, judge_cots, ranked_values
 from spinefarm.storage.schema import FILE_SCHEMA_VERSION, RunMeta, TrialRecord
 
 # A result whose audit found it wrong, or is still refereeing it, or whose worker was quarantined (until
@@ -198,7 +198,11 @@ class BaseStorage:
         ids = ids[valid] if agreed_only else np.flatnonzero(valid)
         if k <= 0 or ids.size == 0:
             return []
-        value = ranked_values({c: cols[c][ids] for c in _RANKED_BY}, self.run_meta().objective)
+        objective = self.run_meta().objective
+        ranked = {c: cols[c][ids] for c in _RANKED_BY}
+        if objective in COT_OBJECTIVES:  # a judged set ranks by the judge's COT too
+            ranked |= {"cot": cols["cot"][ids], "judge_cot": judge_cots(self.evaluations(), ids)}
+        value = ranked_values(ranked, objective)
         order = np.lexsort((ids, -value, -cols["rung"][ids]))
         return [int(i) for i in ids[order[:k]]]
 

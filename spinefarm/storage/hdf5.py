@@ -166,6 +166,7 @@ class Hdf5Storage(InMemoryStorage):
             storage = cls._open_writer(path, meta, table, lock)
             storage._episodes.load(episodes)
             storage._evaluations.load(evaluations)
+            storage._rebuild_ranking()   # a COT objective ranks a judged set by its judge's COT
             return storage
         except BaseException:
             lock.release()
@@ -204,6 +205,7 @@ class Hdf5Storage(InMemoryStorage):
         storage = cls(Path(path), None, meta, table)
         storage._episodes.load(read_episodes(path))
         storage._evaluations.load(read_evaluations(path))
+        storage._rebuild_ranking()   # a COT objective ranks a judged set by its judge's COT
         storage.file_schema_version = schema_version(path)
         return storage
 

@@ -9,11 +9,11 @@ from typing import Any
 import numpy as np
 
 from spinefarm.protocol.errors import StorageError
-from spinefarm.protocol.states import REFUTED_VERDICTS, TrialStatus
+from spinefarm.protocol.states import JUDGED_VERDICTS, REFUTED_VERDICTS, TrialStatus
 from spinefarm.storage.base import DISQUALIFYING_AUDITS, BaseStorage
 from spinefarm.storage.episodes import EpisodeTable, rows_of
 from spinefarm.storage.evaluations import EvaluationTable
-from spinefarm.storage.ranking import ranked_value
+from spinefarm.storage.ranking import COT_OBJECTIVES, judge_cots, ranked_value
 from spinefarm.storage.schema import RunMeta
 from spinefarm.storage.table import TrialTable
 
@@ -55,8 +55,13 @@ class InMemoryStorage(BaseStorage):
             self._rerank(trial_id)   # a result, or a judged figure it now ranks by
 
     def _rank_key(self, cols: dict[str, np.ndarray], i: int) -> tuple[int, float, int]:
-        value = ranked_value(self.run_meta().objective, float(cols["objective"][i]), float(cols["distance_m"][i]),
-                             cols["verification"][i], float(cols["verify_distance_m"][i]))
+        objective = self.run_meta().objective
+        judge_cot = math.nan   # read only for the few judged rows of a COT objective
+        if objective in COT_OBJECTIVES and cols["verification"][i] in JUDGED_VERDICTS:
+            judge_cot = judge_cots(self.evaluations(), np.array([i]))[0]
+        value = ranked_value(objective, float(cols["objective"][i]), float(cols["distance_m"][i]),
+                             cols["verification"][i], float(cols["verify_distance_m"][i]), float(cols["cot"][i]),
+                             judge_cot)
         return -int(cols["rung"][i]), -value, i
 
     def _rerank(self, trial_id: int) -> None:
@@ -97,6 +102,8 @@ class InMemoryStorage(BaseStorage):
         self._writable()
         self._check_id(int(row["trial_id"]))
         self._evaluations.append(row)
+        if self.table.columns()["status"][int(row["trial_id"])] == TrialStatus.COMPLETE.stored:
+            self._rerank(int(row["trial_id"]))  # a judge's COT a COT objective ranks by
 
     def evaluations(self) -> dict[str, np.ndarray]:
         return self._evaluations.columns()

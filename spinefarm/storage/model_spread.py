@@ -16,19 +16,16 @@ import numpy as np
 
 from spinefarm.protocol.states import EvaluationKind
 from spinefarm.storage.evaluations import latest
-
-
-def _num(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
+from spinefarm.storage.schema import json_number
 
 
 def _side(cols: dict[str, np.ndarray], i: int, engine: str, dt_s: float | None) -> dict[str, Any]:
     stored_dt = float(cols["dt_s"][i])
     return {"engine": cols["engine"][i].decode() or engine,
             "dt_s": stored_dt if math.isfinite(stored_dt) else dt_s,
-            "distance_m": _num(float(cols["distance_m"][i])), "cot": _num(float(cols["cot"][i])),
+            "distance_m": json_number(float(cols["distance_m"][i])), "cot": json_number(float(cols["cot"][i])),
             "status": cols["status"][i].decode(),
-            "reason": cols["reason"][i].decode() or None, "wall_time_s": _num(float(cols["wall_time_s"][i])),
+            "reason": cols["reason"][i].decode() or None, "wall_time_s": json_number(float(cols["wall_time_s"][i])),
             "worker_id": cols["worker_id"][i].decode() or None}
 
 
@@ -48,7 +45,7 @@ def model_spread(storage: Any, rec: Any, cols: dict[str, np.ndarray] | None = No
     judge_engine = rung.engine or run_engine
     j = latest(cols, rec.trial_id, EvaluationKind.JUDGE)
     judge = _side(cols, j, judge_engine, rung.dt_s) if j is not None else {
-        "engine": judge_engine, "dt_s": rung.dt_s, "distance_m": _num(rec.verify_distance_m),
+        "engine": judge_engine, "dt_s": rung.dt_s, "distance_m": json_number(rec.verify_distance_m),
         "cot": None, "status": None, "reason": None, "wall_time_s": None, "worker_id": None}
     other = _side(cols, mine, "", None)
     d_judge, d_other = judge["distance_m"], other["distance_m"]

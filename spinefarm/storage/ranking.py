@@ -2,9 +2,11 @@
 
 A set the judge re-simulated (holds, moved, judged) ranks by the judged distance: for objectives that are a
 distance, a speed or either over (1 + COT), the screen's objective times judged / screen distance (the same
-simulated time and, for the COT ones, the screen's COT: the judge's COT is in its evaluation row, not in the
-trials table the ranking reads); `cot:S` keeps the screen's value. Any other set ranks by its screen
-objective. A diverged (or, in older files, not-reproduced) judgement and a disputed or failed audit keep a set
+simulated time); for the COT ones (cot_distance, pareto) also times (1 + screen COT) / (1 + judge's COT), the
+judge's COT read from its evaluation row (`judge_cot`; a judge that did not move scores 0; a file from before
+that column, or a judge's run without a row, keeps the screen's COT). `cot:S` keeps the screen's value. Any
+other set ranks by its screen objective.
+A diverged (or, in older files, not-reproduced) judgement and a disputed or failed audit keep a set
 from being best (base.best_ids).
 
 With auditing on, the best a run reports is the best set another identity's audit agreed with (reported_best):
@@ -21,19 +23,23 @@ import numpy as np
 from spinefarm.protocol.states import JUDGED_VERDICTS, REFUTED_VERDICTS, AuditState, EvaluationKind, TrialStatus
 
 SCALED_OBJECTIVES = ("distance", "speed", "cot_distance", "pareto")  # proportional to the distance
+COT_OBJECTIVES = ("cot_distance", "pareto")  # a distance or speed over (1 + COT)
 _TINY_M = 1e-12
 
 
+def judged_speed_cm_s(judged_distance_m: float, sim_time_s: float) -> float:
+    """A judged set's speed: its judged distance over the simulated time (the judge runs as long as the screen);
+    NaN without a simulated time."""
+    return 100.0 * judged_distance_m / sim_time_s if sim_time_s else math.nan
+
+
 def ranked_value(objective_name: str, objective: float, distance_m: float, verification: bytes,
-                 verify_distance_m: float) -> float:
-    """The value a complete set ranks by (see the module's doc)."""
-    if verification not in JUDGED_VERDICTS or not math.isfinite(verify_distance_m):
-        return objective
-    if objective_name == "distance":
-        return verify_distance_m
-    if objective_name in SCALED_OBJECTIVES and abs(distance_m) > _TINY_M:
-        return objective * verify_distance_m / distance_m
-    return objective
+                 verify_distance_m: float, cot: float = math.nan, judge_cot: float = math.nan) -> float:
+    """The value a complete set ranks by (see the module's doc); cot: the screen's, judge_cot: the judge's."""
+    cols = {"objective": np.array([objective]), "distance_m": np.array([distance_m]),
+            "verification": np.array([verification]), "verify_distance_m": np.array([verify_distance_m]),
+            "cot": np.array([cot]), "judge_cot": np.array([judge_cot])}
+    return float(ranked_values(cols, objective_name)[0])
 
 
 def ranked_values(cols: Mapping[str, np.ndarray], objective_name: str) -> np.ndarray:
@@ -47,7 +53,30 @@ def ranked_values(cols: Mapping[str, np.ndarray], objective_name: str) -> np.nda
     d = np.asarray(cols["distance_m"], dtype=float)
     judged &= np.abs(d) > _TINY_M
     ratio = np.divide(cols["verify_distance_m"], d, out=np.ones_like(obj), where=judged)
+    if objective_name in COT_OBJECTIVES and "judge_cot" in cols:
+        ratio = ratio * _cot_factor(np.asarray(cols["cot"], dtype=float), np.asarray(cols["judge_cot"], dtype=float))
     return np.where(judged, obj * ratio, obj)
+
+
+def _cot_factor(screen_cot: np.ndarray, judge_cot: np.ndarray) -> np.ndarray:
+    """(1 + screen COT) / (1 + judge's COT), negative COTs as 0 as the objectives take them: 0 where the judge did
+    not move (COT inf), 1 where its COT is unknown (NaN) or the screen's is not finite (its objective is 0)."""
+    known = np.isfinite(judge_cot) & np.isfinite(screen_cot)
+    factor = np.divide(1.0 + np.maximum(screen_cot, 0.0), 1.0 + np.maximum(judge_cot, 0.0),
+                       out=np.ones_like(screen_cot), where=known)
+    return np.where(np.isposinf(judge_cot) & np.isfinite(screen_cot), 0.0, factor)
+
+
+def judge_cots(evaluations: Mapping[str, np.ndarray], trial_ids: np.ndarray) -> np.ndarray:
+    """The COT of each set's latest complete judge run (NaN: none, or stored before the column)."""
+    out = np.full(len(trial_ids), math.nan)
+    if "cot" not in evaluations or not len(evaluations["cot"]):
+        return out
+    judge = (evaluations["kind"] == EvaluationKind.JUDGE.stored) & (evaluations["status"] == b"complete")
+    for row in np.flatnonzero(judge):  # few rows: the judged bests; a later run overwrites an earlier
+        hit = np.flatnonzero(trial_ids == evaluations["trial_id"][row])
+        out[hit] = evaluations["cot"][row]
+    return out
 
 
 # another identity reproduced the result (or a referee upheld it against its auditor): it may be reported best

@@ -6,6 +6,7 @@ sampled (status "waiting") and filled once when its result arrives (complete | f
 
 from __future__ import annotations
 
+import math
 import secrets
 import time
 from dataclasses import dataclass, field, replace
@@ -13,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from spinefarm.protocol.columns import RECORDED_EXTRAS, SCORE_NAMES, SCORE_PARTS, Column, column_group
+from spinefarm.protocol.columns import RECORDED_EXTRAS, SCORE_PARTS, Column, column_group
 from spinefarm.protocol.settings import RunSettings
 from spinefarm.protocol.states import STORED_STATUSES, AuditState, Verification
 
@@ -46,7 +47,11 @@ VERIFICATIONS = tuple(v.value for v in Verification)
 AUDITS = tuple(a.value for a in AuditState)
 COLUMN_BY_NAME = {c.name: c for c in COLUMNS}
 VECTOR_COLUMNS = ("params_unit", "params")
-SCORE_COLUMNS = SCORE_NAMES
+
+
+def json_number(x: float) -> float | None:
+    """A stored float as JSON holds it: NaN (not measured) and infinities become null."""
+    return float(x) if math.isfinite(x) else None
 
 
 @dataclass(frozen=True)

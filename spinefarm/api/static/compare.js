@@ -31,6 +31,13 @@ function bestSoFar(cols, key, sense) {
     rows};
 }
 
+// the best's figure as it ranks: a judged set's judged distance, speed and COT (the screen's without them)
+function bestFigure(b, key) {
+  const v = b.verification || {};
+  const judged = {distance_m: v.counted_distance_m, speed_cm_s: v.judged_speed_cm_s, cot: b.judged_cot}[key];
+  return judged !== undefined && judged !== null ? judged : b.scores[key];
+}
+
 function extreme(cols, rows, key, sense) {
   const vals = rows.map((i) => cols.columns[key][i]).filter((v) => v !== null && Number.isFinite(v));
   return vals.length ? (sense > 0 ? Math.max(...vals) : Math.min(...vals)) : null;
@@ -98,7 +105,7 @@ function drawCompare(ids, data) {
     `<td class="l">${esc(st.sampler || "–")}</td>`, `<td class="l">${esc(st.objective)}</td>`,
     `<td>${st.trials_done} / ${st.trials_planned}</td>`,
     `<td data-best="objective">${b ? `<a href="#/run/${enc(st.run_id)}/trial/${b.trial_id}">${fmt(b.objective)}</a>` : "–"}</td>`,
-    ...["distance_m", "speed_cm_s", "cot"].map((s) => `<td data-best="${s}">${b ? fmt(b.scores[s]) : "–"}</td>`),
+    ...["distance_m", "speed_cm_s", "cot"].map((s) => `<td data-best="${s}">${b ? fmt(bestFigure(b, s)) : "–"}</td>`),
     `<td data-extreme="distance_m">${fmt(extreme(cols, counted, "distance_m", 1))}</td>`,
     `<td data-extreme="speed_cm_s">${fmt(extreme(cols, counted, "speed_cm_s", 1))}</td>`,
     `<td data-extreme="cot">${fmt(extreme(cols, counted, "cot", -1))}</td>`];

@@ -215,9 +215,10 @@ async function showRun(runId, gen, first) {
     status.state === "running");
 }
 
-// a judged set's speed: its judged distance over its simulated time (null for a set not judged)
+// a judged set's speed: the API's judged_speed_cm_s (the report's figure); computed the same way from an older API
 function judgedSpeed(t) {
   const v = t.verification;
+  if (v.judged_speed_cm_s !== undefined) return v.judged_speed_cm_s;
   return ["holds", "moved", "judged"].includes(v.verdict) && v.counted_distance_m != null && t.scores.sim_time_s
     ? 100 * v.counted_distance_m / t.scores.sim_time_s : null;
 }

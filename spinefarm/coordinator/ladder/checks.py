@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, KIND_CODES, OPINION, REFEREE, check_key, split_key
+from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, KIND_CODES, OPINION, REFEREE, TRIAL, check_key, split_key
 from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import RunSettings, TaskFidelity
@@ -94,12 +94,12 @@ class Checks:
     def trial_fidelity(self, rung: int, raised: bool) -> TaskFidelity:
         r = self.settings.ladder[rung]
         if not raised:
-            return TaskFidelity.of("trial", r)
+            return TaskFidelity.of(TRIAL, r)
         judge = self.settings.judge.rung
         if judge.engine is not None and judge.engine != (r.engine or self.run_engine):
-            return TaskFidelity("trial", judge.engine, None if judge.dt_s is None else 4 * judge.dt_s, r.settle_s)
+            return TaskFidelity(TRIAL, judge.engine, None if judge.dt_s is None else 4 * judge.dt_s, r.settle_s)
         step = r.dt_s if r.dt_s is not None else (None if judge.dt_s is None else 4 * judge.dt_s)
-        return TaskFidelity("trial", r.engine, None if step is None else step / 2, r.settle_s)
+        return TaskFidelity(TRIAL, r.engine, None if step is None else step / 2, r.settle_s)
 
     def check_fidelity(self, key: int) -> TaskFidelity:
         kind, tid = split_key(key)

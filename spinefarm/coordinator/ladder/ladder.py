@@ -73,7 +73,7 @@ class Ladder:
         # a check (judge, audit, referee, opinion) always simulates from the start: an independent re-run
         return TrialAssignment(tid, lease.lease_id, tuple(cols["params_unit"][tid].tolist()), int(cols["seed"][tid]),
                                lease.deadline_s - now_s, _duration(cols["duration_s"][tid]),
-                               self.fidelity(lease.trial_id), split_key(lease.trial_id)[0] != "trial"
+                               self.fidelity(lease.trial_id), split_key(lease.trial_id)[0] != TRIAL
                                or not self.continue_rungs)
 
     def issue_due(self) -> None:
