@@ -15,10 +15,13 @@ paper's COT (<= 3.2) at those medians. With `--keep DIR` the run files stay in D
 spec file searched) and the first judged trial of each search is exported by `spinefarm export RUN.h5 --gait
 (--spec for a co-designed body)` and re-run by `spinefarm trial`: its distance against the stored one.
 
-Measured runs (docs/results.md):
+Measured runs (docs/results.md; ~70 min on the shared 2-core machine at a load of 10-13):
+    nice -n 10 python bench/codesign.py --budget 200 --seeds 3 --duration 30 --rungs 5,10,30 --eta 4 \
+        --controller sidewinding --engine mujoco --dt 0.002 --engine-option segment_contacts=off \
+        --judged 1 --episodes 16 --objective cot:9.46 --keep DIR
+    and the small-budget row (then without the ladder, trials in the bench's own process pool):
     nice -n 10 python bench/codesign.py --budget 100 --seeds 2 --duration 5 --controller sidewinding \
         --engine mujoco --dt 0.002 --engine-option segment_contacts=off --judged 1 --episodes 16
-    (the larger one, with --rungs, --objective and --keep, is quoted with its figures there)
 Smoke run:  python bench/codesign.py --budget 10 --seeds 1 --duration 2 --episodes 4 --judged 2
 
 Prints one JSON object (last line).
