@@ -25,8 +25,8 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     "scheduler": ("spinefarm/coordinator/scheduler.py",
                   (f"{C}/test_scheduler.py", f"{C}/test_scheduler_liveness.py")),
     "judge-audit": ("spinefarm/coordinator/ladder/checks.py",
-                    (f"{C}/test_check_rules.py", f"{C}/test_judge_rules.py", f"{C}/test_best_judged.py",
-                     f"{C}/test_opinion.py")),
+                    (f"{C}/test_check_rules.py", f"{C}/test_check_row_engine.py", f"{C}/test_judge_rules.py",
+                     f"{C}/test_best_judged.py", f"{C}/test_opinion.py")),
     # not test_no_locks.py's searches on a file system without locks (minutes per mutant on two busy cores):
     # test_runlock_no_locks.py takes the lock there in one process
     "runlock": ("spinefarm/storage/runlock.py",
