@@ -141,3 +141,20 @@ def test_a_failed_result_changes_nothing_and_a_best_that_diverges_hands_the_audi
     assert storage.best_ids(1) == [0]
     assert sorted(ladder.leases.queued_keys()) == sorted([check_key(AUDIT, 0), check_key(JUDGE, 0)])
     storage.close()
+
+
+def test_a_judge_no_live_worker_can_run_is_said_to_wait_once_not_dropped_at_every_request(tmp_path, caplog):
+    storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"), (0.9, "w-a")), trials=2)
+    clock = FakeClock()
+    ladder = ladder_of(storage, clock)
+    j1 = check_key(JUDGE, 1)
+    clock.advance(START_GRACE_S + 1.0)
+    caplog.set_level("WARNING")
+    for _ in range(3):                                      # three work requests from a MuJoCo-only worker
+        _live(ladder, **{"w-a": MUJOCO})
+        ladder.drop_unservable()
+    assert j1 in ladder.checks.pending and ladder.leases.queued_keys() == [j1]
+    said = [r.getMessage() for r in caplog.records if "judge of trial 1" in r.getMessage()]
+    assert said == ["no live worker can run the judge of trial 1: it waits for one"]
+    assert not any("dropped" in r.getMessage() for r in caplog.records)
+    storage.close()

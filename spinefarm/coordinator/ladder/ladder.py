@@ -43,6 +43,7 @@ class Ladder:
         self.audit_comparisons = {"exact": 0, "tolerance": 0}   # what audits were held to (checks.settle_audit)
         self.unaudited: dict[int, str] = {}   # rows whose audit stays pending, and why
         self.continue_rungs = True   # a promotion may go on from its last rung's end (off: --no-continue)
+        self.waiting_judges: set[int] = set()   # bests whose judge waits for a worker of its engine (said once)
         # the checks a restart cut short first, then the screen rows sampled but never finished
         leases.enqueue(checks.restart() + study.storage.waiting_ids())
         self.issue_due()
@@ -118,6 +119,11 @@ class Ladder:
                 if unaudited:
                     self.unaudited[tid] = UNAUDITED
                     log.warning("no other worker identity can audit trial %d: it stays %s", tid, UNAUDITED)
+                elif kind == EvaluationKind.JUDGE and not overtaken:
+                    # issue_due queues the best's judge again: it waits, and is said so once
+                    if tid not in self.waiting_judges:
+                        self.waiting_judges.add(tid)
+                        log.warning("no live worker can run the judge of trial %d: it waits for one", tid)
                 elif not overtaken:
                     log.warning("no worker can run the %s check of trial %d: dropped", kind, tid)
                     if kind == EvaluationKind.OPINION:
