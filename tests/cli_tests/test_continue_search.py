@@ -88,3 +88,24 @@ def test_a_promotion_of_a_rung_run_before_a_restart_is_simulated_from_the_start_
     assert elsewhere and all(cols["continued_s"][i] == 0.0 for i in elsewhere)
     assert all(cols["continued_s"][i] > 0 for i in promoted if i not in elsewhere)
     _same_as_from_the_start(RunConfig.from_dict(meta.run), cols, promoted)
+
+
+def test_a_users_spec_file_continues_as_a_built_in_does(tmp_path):
+    """A robot from the user's own file (the Tetraspine written out, its ground friction changed so it is no built-in
+    in disguise): its promotions go on from their rungs' ends with the bits of a run from the start."""
+    spec = subprocess.run([sys.executable, "-m", "spinefarm", "spec", "tetraspine", "--name", "my-spine"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60, check=True).stdout
+    assert "ground_friction: 0.5" in spec
+    path = tmp_path / "my-spine.yaml"
+    path.write_text(spec.replace("ground_friction: 0.5", "ground_friction: 0.7"))
+    out = tmp_path / "mine.h5"
+    argv = [str(path), *SEARCH[1:], "--out", str(out)]
+    proc = subprocess.run([sys.executable, "-m", "spinefarm", "search", *argv], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    meta, cols = read_run(out)
+    config = RunConfig.from_dict(meta.run)
+    assert config.morphology == "my-spine" and config.morphology_spec["ground_friction"] == 0.7
+    promoted = _promoted(cols)
+    assert len(promoted) >= 3 and (cols["continued_s"][promoted] > 0).any()
+    _same_as_from_the_start(config, cols, promoted)
