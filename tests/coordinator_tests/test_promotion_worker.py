@@ -92,7 +92,7 @@ def test_the_asker_chooses_among_the_promotable_rows_in_their_order():
         st.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 0, 0, 1.0)
         st.finish_trial(tid, dataclasses.replace(_result(tid, obj), worker_id=worker), obj)
     live = Asker("w-c", lambda w: True)
-    assert list(rungs.promotable(st)) == [1, 5]
+    assert list(rungs.promotable(st, False)) == [1, 5]
     assert rungs.promotion(st) == 1 and rungs.promotion(st, asker=Asker("w-b", lambda w: True)) == 5
     assert rungs.promotion(st, asker=live) is None                        # both wait for their live workers
     assert rungs.promotion(st, asker=Asker("w-c", lambda w: w == "w-a")) == 5  # w-b is gone: 5 goes

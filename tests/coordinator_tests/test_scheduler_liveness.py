@@ -23,3 +23,22 @@ def test_a_retried_trial_waits_for_a_live_worker_until_it_has_been_silent_a_leas
     clock.t = 1005.1                    # silent 5.1 s > lease_s: no longer live, w0 is the only one left
     assert [ls.trial_id for ls in s.grant("w0", 1, ids)] == [0]
     assert s.failed_on(0) == ["w0"]
+
+
+def test_a_worker_is_speaking_while_its_token_is_up_and_it_spoke_within_a_lease():
+    """`speaking` (whether a promotion may wait for the worker that ran its rung): never for a worker never heard,
+    for one heard 4.9 s ago on a 5 s lease, not 5.1 s after, not once its liveliness token went, on a clock far
+    from zero so a sum in place of the difference shows."""
+    clock = FakeClock(1000.0)
+    s = Scheduler(clock, lease_s=5.0, start_grace_s=0.0)
+    assert not s.speaking("w-never")
+    s.contact("w1")
+    s.contact("w2")
+    clock.t = 1004.9
+    assert s.speaking("w1") and s.speaking("w2")
+    s.worker_lost("w2")
+    assert s.speaking("w1") and not s.speaking("w2")
+    clock.t = 1005.1
+    assert not s.speaking("w1")
+    s.contact("w1")
+    assert s.speaking("w1")

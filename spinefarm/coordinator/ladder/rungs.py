@@ -56,7 +56,7 @@ class Asker:
     promotion whose last rung `worker` ran may wait for it (it is alive and may go on from that rung's end)."""
 
     worker_id: str
-    waits_for: Callable[[str], bool] = lambda worker: False
+    waits_for: Callable[[str], bool]
 
 
 class BaseTrialScheduler:
@@ -151,7 +151,7 @@ class HalvingTrialScheduler(BaseTrialScheduler):
                 first = tid
         return first
 
-    def promotable(self, storage: BaseStorage, sampling_done: bool = False) -> Iterator[int]:
+    def promotable(self, storage: BaseStorage, sampling_done: bool) -> Iterator[int]:
         """The rows due to be re-run at their next rung, in order: the best not-yet-promoted rows among the top
         1/eta of each rung's complete rows (higher rungs first), while that rung has promoted fewer than 1/eta of
         its complete rows (so a search that keeps improving, as hill climbing does, promotes about 1/eta, not
