@@ -51,7 +51,7 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     # the seam's rules on a run file in-process first (seconds), then the core's message-level tests
     "ladder-seam": ("spinefarm/coordinator/ladder/ladder.py",
                     (f"{C}/test_ladder_seam_fidelity.py", f"{C}/test_ladder_seam_drops.py",
-                     f"{C}/test_ladder_seam_audits.py",
+                     f"{C}/test_ladder_seam_audits.py", f"{C}/test_promotion_worker.py",
                      f"{C}/test_core.py", f"{C}/test_unaudited.py", f"{C}/test_opinion.py")),
     "calibration": ("spinefarm/worker/tools/calibrate.py",
                     (f"{W}/test_calibration_figures.py", f"{W}/test_calibration_thresholds.py",
