@@ -26,6 +26,10 @@ engine options), and beside each key above stands its `_judge` twin ranked again
 `spearman_rho_judge_*` and `best_survives_judge` (the full screen length too, as a rung), per ladder
 `best_survives_judge` (the judge's best gait survives every cut before the full length) and `chosen_judge`
 (the same rule); `screen_judge_rho` is the full screen length's rho against the judge, per seed.
+
+With --around GAIT.json (a gait file of the spine, e.g. examples/gaits/) the gaits are that gait's parameter set
+moved uniformly by up to --spread of each parameter's range (clipped to it) instead of uniform random: a space
+whose random gaits barely move ranks nothing worth ranking.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from scipy.stats import spearmanr
 
+from spinefarm.protocol.params import ParamSpace
 from spinefarm.protocol.settings import JUDGE_DT_S, JUDGE_ENGINE
 from spinefarm.robot.morphology.registry import builtin_names, load_morphology
 from spinefarm.worker.trial import scoring
@@ -145,12 +150,14 @@ def spine(name: str, args: argparse.Namespace, pool: ProcessPoolExecutor) -> dic
                       engine_options=options).to_dict()
     from spinefarm.robot.spaces import param_space
 
-    n_dim = len(param_space(morph, args.controller))
+    space = param_space(morph, args.controller)
+    centre = None if args.around is None else _gait_unit(args.around, name, space)
     jobs, judged = [], []
     for seed in range(args.seeds):
         rng = np.random.default_rng([seed, 46])
         for g in range(args.gaits):
-            u = rng.random(n_dim).tolist()
+            u = rng.random(len(space)) if centre is None else centre + rng.uniform(-1, 1, len(space)) * args.spread
+            u = np.clip(u, 0.0, 1.0).tolist()
             jobs.append(pool.submit(rung_distances_cm, name, args.controller, cfg, u, g, lengths))
             if args.judge:
                 judged.append(pool.submit(judge_distance_cm, name, args.controller, cfg, u, g))
@@ -162,7 +169,8 @@ def spine(name: str, args: argparse.Namespace, pool: ProcessPoolExecutor) -> dic
     out = {"lengths_s": lengths, "config": cfg, "controller": args.controller, "rungs": table,
            "ladders": all_ladders, "chosen": choose(table, all_ladders, args.seeds, args.min_rho),
            "prefix_exact": _prefix_exact(name, args.controller, cfg, lengths),
-           "full_distance_cm_median": float(np.nanmedian(dist[:, :, -1]))}
+           "full_distance_cm_median": float(np.nanmedian(dist[:, :, -1])),
+           "full_distance_cm_range": [float(np.nanmin(dist[:, :, -1])), float(np.nanmax(dist[:, :, -1]))]}
     if ref is not None:
         against = rung_table(dist, lengths, etas, ref, "_judge")
         for k, v in against.items():
@@ -183,6 +191,15 @@ def _prefix_exact(name: str, controller: str | None, cfg: dict, lengths: list[fl
     short = TrialConfig.from_dict({**cfg, "duration_s": lengths[0]})
     alone = simulate(morph, u, short, 7, controller=controller).result.distance_m * 100.0
     return bool(abs(alone - from_path) <= 1e-12 * max(1.0, abs(alone)))
+
+
+def _gait_unit(path: str, name: str, space: ParamSpace) -> np.ndarray:
+    """The unit-cube point of a gait file's parameter set (its robot must be `name`)."""
+    with open(path) as f:
+        gait = json.load(f)
+    if gait.get("morphology") != name:
+        raise SystemExit(f"--around {path}: a gait of {gait.get('morphology')!r} received, one of {name!r} expected")
+    return space.to_unit(space.physical(gait["params"]))
 
 
 def _value(text: str) -> object:
@@ -206,6 +223,9 @@ def main() -> None:
     ap.add_argument("--lengths", default="1,2,3,5,10", help="rung lengths in s below the full length")
     ap.add_argument("--etas", default="2,3,4")
     ap.add_argument("--min-rho", type=float, default=0.8, help="the first rung's least median Spearman rho")
+    ap.add_argument("--around", default=None, metavar="GAIT.json",
+                    help="sample gaits around this gait file's parameter set instead of uniformly")
+    ap.add_argument("--spread", type=float, default=0.1, help="with --around: the largest move, share of a range")
     ap.add_argument("--judge", action="store_true",
                     help="also rank against each gait's full length in the judge's engine and step")
     ap.add_argument("--jobs", type=int, default=2)
@@ -214,7 +234,8 @@ def main() -> None:
     t0 = time.time()
     with ProcessPoolExecutor(args.jobs) as pool:
         spines = {n: spine(n, args, pool) for n in names}
-    print(json.dumps({"benchmark": "ladder", "seeds": args.seeds, "gaits": args.gaits, "spines": spines,
+    print(json.dumps({"benchmark": "ladder", "seeds": args.seeds, "gaits": args.gaits, "around": args.around,
+                      "spread": args.spread if args.around else None, "spines": spines,
                       "wall_s": time.time() - t0}))
 
 
