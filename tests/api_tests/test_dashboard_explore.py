@@ -201,8 +201,10 @@ def test_comparing_runs_of_two_robots(page, views_server):
         assert row.locator("td").nth(1).inner_text() == robot
         shown = float(row.locator('td[data-best="objective"]').inner_text())
         assert shown == pytest.approx(status["best"]["objective"], rel=1e-3)
-        assert float(row.locator('td[data-best="speed_cm_s"]').inner_text()) == pytest.approx(
-            status["best"]["scores"]["speed_cm_s"], rel=1e-3)
+        # a judged best shows the judge's speed (docs/distributed.md), an unjudged one the screen's
+        judged = (status["best"].get("verification") or {}).get("judged_speed_cm_s")
+        speed = judged if judged is not None else status["best"]["scores"]["speed_cm_s"]
+        assert float(row.locator('td[data-best="speed_cm_s"]').inner_text()) == pytest.approx(speed, rel=1e-3)
     wait_for(lambda: page.locator("#compare-time .scatterlayer .trace").count() == 2, timeout_s=10, poll_s=0.05,
              what="the curves against time")
     assert page.locator("#compare-trials .scatterlayer .trace").count() == 2
