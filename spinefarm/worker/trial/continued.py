@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import copy
 import hashlib
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from spinefarm.worker.trial.lru import LRU
 
 # ends kept per set-up (an LRU by count): an end of the Tetraspine's 5 s rung at 2 ms after a 1 s settle is ~40 kB
 # (its MuJoCo integration state ~1 kB, the law's ~5 kB, the COM path of its checks; `python bench/continue_rungs.py`
@@ -55,32 +56,12 @@ def end_key(n_settle: int, check_every: int, cpg_every: int, offsets_cm: np.ndar
     return h.hexdigest()
 
 
-class RungEnds:
-    """Trial ends by end_key, the `size` most recently used kept (an LRU by count)."""
+class RungEnds(LRU[RungEnd]):
+    """Trial ends by end_key, the `size` most recently used kept (worker.trial.lru)."""
 
     def __init__(self, size: int = DEFAULT_ENDS) -> None:
-        if size < 0:
-            raise ValueError(f"size of the kept trial ends is negative: received {size}, expected >= 0")
-        self.size = size
-        self._ends: OrderedDict[str, RungEnd] = OrderedDict()
-        self.hits = 0
-        self.misses = 0
+        super().__init__(size, "kept trial ends")
 
-    def __len__(self) -> int:
-        return len(self._ends)
-
-    def get(self, key: str, total_steps: int) -> RungEnd | None:
+    def get(self, key: str, total_steps: int) -> RungEnd | None:  # type: ignore[override]
         """The kept end of `key` if the trial asking runs at least as far (total_steps, settle included)."""
-        end = self._ends.get(key)
-        if end is None or end.done > total_steps:
-            self.misses += 1
-            return None
-        self._ends.move_to_end(key)
-        self.hits += 1
-        return end
-
-    def put(self, key: str, end: RungEnd) -> None:
-        self._ends[key] = end
-        self._ends.move_to_end(key)
-        while len(self._ends) > self.size:
-            self._ends.popitem(last=False)
+        return super().get(key, lambda end: end.done <= total_steps)

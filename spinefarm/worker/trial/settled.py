@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import copy
 import hashlib
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from spinefarm.worker.sim import strings as sk
+from spinefarm.worker.trial.lru import LRU
 
 
 @dataclass
@@ -47,23 +47,8 @@ def settle_key(n_settle: int, check_every: int, offsets_cm: np.ndarray | None, p
     return h.hexdigest()
 
 
-class SettledStarts:
-    """Settled ends by settle_key, the most recent `size` kept."""
+class SettledStarts(LRU[Settled]):
+    """Settled ends by settle_key, the `size` most recently used kept (worker.trial.lru)."""
 
     def __init__(self, size: int = 4) -> None:
-        self.size = size
-        self._ends: OrderedDict[str, Settled] = OrderedDict()
-        self.hits = 0
-
-    def get(self, key: str) -> Settled | None:
-        end = self._ends.get(key)
-        if end is not None:
-            self._ends.move_to_end(key)
-            self.hits += 1
-        return end
-
-    def put(self, key: str, end: Settled) -> None:
-        self._ends[key] = end
-        self._ends.move_to_end(key)
-        while len(self._ends) > self.size:
-            self._ends.popitem(last=False)
+        super().__init__(size, "kept settled starts")
