@@ -4,6 +4,10 @@ The expectations are pybullet's own report of the solver it switched to, and gra
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +19,7 @@ from spinefarm.robot.trial_config import TrialConfig
 from spinefarm.worker.tools.replay import read_parameter_set, unit_params
 from spinefarm.worker.trial.simulation import simulate
 
+ROOT = Path(__file__).resolve().parents[2]
 RUN = Path(__file__).parent / "data" / "ntrt-recordings" / "TetraSpine" / "random-00"
 
 
@@ -28,9 +33,10 @@ def _trial(options: dict) -> tuple[float, np.ndarray]:
 
 def test_the_mlcp_dantzig_solver_is_the_one_bullet_runs(capfd):
     default_cm, _ = _trial({})
-    assert "MLCP + Dantzig" not in capfd.readouterr().out
+    assert "MLCP + Dantzig" not in "".join(capfd.readouterr())
     mlcp_cm, pos_cm = _trial({"constraint_solver": "mlcp_dantzig"})
-    assert "MLCP + Dantzig" in capfd.readouterr().out  # pybullet's own message on switching
+    said = capfd.readouterr()
+    assert "MLCP + Dantzig" in said.err and "MLCP + Dantzig" not in said.out  # pybullet's own message, on stderr
     assert mlcp_cm != default_cm
     # the robot lands and stays up: no segment's centre falls through the ground (top at 0.5 cm) under it
     assert np.isfinite(pos_cm).all() and pos_cm[..., 1].min() > 0.5
@@ -39,3 +45,30 @@ def test_the_mlcp_dantzig_solver_is_the_one_bullet_runs(capfd):
 def test_an_unknown_solver_is_refused():
     with pytest.raises(ConfigError, match="constraint_solver"):
         TrialConfig(engine="bullet", engine_options={"constraint_solver": "lemke"})
+
+
+def test_trial_json_stays_clean_json_under_the_mlcp_solver():
+    """pybullet prints its switch of solver from C on file descriptor 1; `spinefarm trial --json` keeps it off
+    stdout (on stderr), so that its stdout is one JSON document."""
+    argv = ["trial", "tetraspine-ntrt", "--engine", "bullet", "--engine-option", "constraint_solver=mlcp_dantzig",
+            "--duration", "0.2", "--json"]
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # C's stdout buffered, as usually
+    proc = subprocess.run([sys.executable, "-m", "spinefarm", *argv], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "MLCP + Dantzig" in proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["status"] == "complete" and out["sim_time_s"] == 0.2
+
+
+def test_c_text_still_buffered_when_the_redirect_ends_goes_to_stderr():
+    """C's stdout is fully buffered into a pipe: text printed without a flush inside the redirect must be flushed
+    while file descriptor 1 is still stderr, or it would reach stdout at exit."""
+    code = ("import ctypes; from spinefarm.worker.engines.bullet import _stdout_to_stderr\n"
+            "with _stdout_to_stderr():\n    ctypes.CDLL(None).printf(b'unflushed C text')\n"
+            "print('{}')\n")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # it would unbuffer C's stdout too
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert "unflushed C text" in proc.stderr and json.loads(proc.stdout) == {}

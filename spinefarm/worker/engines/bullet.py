@@ -10,7 +10,13 @@ apply as they are.
 
 from __future__ import annotations
 
+import ctypes
 import math
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from itertools import chain
 
@@ -70,6 +76,42 @@ def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
     return (float(x), float(y), float(z), float(w))
 
 
+@contextmanager
+def _stdout_to_stderr() -> Iterator[None]:
+    """File descriptor 1 sent to stderr for a while: pybullet's C code prints there (the MLCP solver's "Constraint
+    Solver: MLCP + Dantzig" when it is chosen), which would break `spinefarm trial --json`. Process-wide: only
+    for the calls that set a world up."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        yield
+    finally:
+        ctypes.CDLL(None).fflush(None)  # C's buffered text goes out now, to stderr, not to stdout later
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _connect(engine: BulletSettings, dt_s: float) -> int:
+    """A DIRECT client set up by the engine's settings, pybullet's banners sent to stderr."""
+    with _stdout_to_stderr():
+        c = pb.connect(pb.DIRECT)
+        pb.resetSimulation(physicsClientId=c)
+        pb.setGravity(0.0, -engine.gravity_cm_s2, 0.0, physicsClientId=c)
+        pb.setPhysicsEngineParameter(
+            fixedTimeStep=dt_s, numSubSteps=1, numSolverIterations=engine.solver_iterations,
+            erp=engine.erp, contactERP=engine.erp, frictionERP=engine.erp,
+            useSplitImpulse=int(engine.split_impulse),
+            splitImpulsePenetrationThreshold=engine.split_impulse_threshold,
+            enableConeFriction=int(engine.cone_friction), deterministicOverlappingPairs=1,
+            restitutionVelocityThreshold=0.0, physicsClientId=c)
+        pb.setPhysicsEngineParameter(warmStartingFactor=engine.warm_starting_factor, physicsClientId=c)
+        if engine.constraint_solver != "sequential_impulse":  # set only when asked: the default's bits unchanged
+            pb.setPhysicsEngineParameter(constraintSolverType=CONSTRAINT_SOLVERS[engine.constraint_solver],
+                                         physicsClientId=c)
+    return c
+
+
 # pybullet cylinders run along Z; our rods along their frame's Y.
 _Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 # createCollisionShapeArray silently keeps only the first 16 shapes (MAX_COMPOUND_COLLISION_SHAPES);
@@ -88,8 +130,6 @@ def _rpy(r: np.ndarray) -> tuple[float, float, float]:
 
 
 def _load_compound_urdf(body: BodyModel, pos: np.ndarray, quat: tuple[float, ...], client: int) -> int:
-    import os
-    import tempfile
 
     parts = []
     for rod in body.rods:
@@ -173,21 +213,7 @@ class BulletWorld:
                  start_rotation: tuple[float, float, float, float] | None,
                  collision_pairs_off: list[tuple[int, int]] | None) -> None:
         engine = settings or BulletSettings()
-        self.client = pb.connect(pb.DIRECT)
-        c = self.client
-        pb.resetSimulation(physicsClientId=c)
-        pb.setGravity(0.0, -engine.gravity_cm_s2, 0.0, physicsClientId=c)
-        pb.setPhysicsEngineParameter(
-            fixedTimeStep=dt_s, numSubSteps=1, numSolverIterations=engine.solver_iterations,
-            erp=engine.erp, contactERP=engine.erp, frictionERP=engine.erp,
-            useSplitImpulse=int(engine.split_impulse),
-            splitImpulsePenetrationThreshold=engine.split_impulse_threshold,
-            enableConeFriction=int(engine.cone_friction), deterministicOverlappingPairs=1,
-            restitutionVelocityThreshold=0.0, physicsClientId=c)
-        pb.setPhysicsEngineParameter(warmStartingFactor=engine.warm_starting_factor, physicsClientId=c)
-        if engine.constraint_solver != "sequential_impulse":  # set only when asked: the default's bits unchanged
-            pb.setPhysicsEngineParameter(constraintSolverType=CONSTRAINT_SOLVERS[engine.constraint_solver],
-                                         physicsClientId=c)
+        self.client = c = _connect(engine, dt_s)
         self.dt_s = dt_s
         self.friction_anchor = engine.friction_anchor
         terrain = ground.to_terrain() if isinstance(ground, GroundSpec) else ground
