@@ -4,12 +4,14 @@ that never finished a trial, a damaged file, and a run of a robot from a spec fi
 
 from __future__ import annotations
 
+import shutil
 import signal
 import subprocess
 import sys
 
 import pytest
 
+from tests.api_tests.judged import OLD, write_cot_run
 from tests.api_tests.test_dashboard_browser import ARTIFACTS, Server, chromium_path, free_port, spinefarm
 from tests.coordinator_tests.helpers import wait_for
 from tests.coordinator_tests.procs import ROOT
@@ -58,5 +60,18 @@ def views_runs(tmp_path_factory):
 def views_server(views_runs):
     port = free_port()
     s = Server(["api", "--runs-dir", str(views_runs), "--port", str(port)], port)
+    yield s
+    s.stop()
+
+
+@pytest.fixture(scope="session")
+def judged_server(tmp_path_factory):
+    """One `spinefarm api` over two judged run files, for the pages that only read them: run-c (judged, each row
+    with its COT: tests.api_tests.judged) and run-v8 (a schema 8 file, no COT column)."""
+    d = tmp_path_factory.mktemp("judged")
+    write_cot_run(d / "c.h5")
+    shutil.copy(OLD, d / "old.h5")
+    port = free_port()
+    s = Server(["api", "--runs-dir", str(d), "--port", str(port)], port)
     yield s
     s.stop()

@@ -2,26 +2,13 @@
 
 from __future__ import annotations
 
-import shutil
 
-from tests.api_tests.test_judged_cot import OLD, _judged_run
-
-
-def test_the_compare_page_shows_the_judged_bests_figures(browser, tmp_path):
-    from tests.api_tests.test_dashboard_browser import Server, free_port
-
-    _judged_run(tmp_path / "c.h5")
-    shutil.copy(OLD, tmp_path / "old.h5")
-    port = free_port()
-    server = Server(["api", "--runs-dir", str(tmp_path), "--port", str(port)], port)
-    try:
-        page = browser.new_page()
-        page.goto(f"{server.url}/#/compare/run-c,run-v8")
-        page.wait_for_selector("#compare-table tbody tr >> nth=1")
-        row = page.locator('#compare-table tr[data-run="run-c"]')
-        shown = {k: row.locator(f'td[data-best="{k}"]').inner_text() for k in ("distance_m", "speed_cm_s", "cot")}
-        page.close()
-    finally:
-        server.stop()
+def test_the_compare_page_shows_the_judged_bests_figures(browser, judged_server):
+    page = browser.new_page()
+    page.goto(f"{judged_server.url}/#/compare/run-c,run-v8")
+    page.wait_for_selector("#compare-table tbody tr >> nth=1")
+    row = page.locator('#compare-table tr[data-run="run-c"]')
+    shown = {k: row.locator(f'td[data-best="{k}"]').inner_text() for k in ("distance_m", "speed_cm_s", "cot")}
+    page.close()
     # run-c's best, trial 1: screened 0.30 m, COT 2.2 (6 cm/s over 5 s); judged 0.40 m, COT 5.5: 8 cm/s
     assert shown == {"distance_m": "0.4", "speed_cm_s": "8", "cot": "5.5"}

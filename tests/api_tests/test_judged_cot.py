@@ -10,10 +10,8 @@ COT is held against an independent `spinefarm trial` is tests/coordinator_tests/
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import shutil
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -21,46 +19,19 @@ import pytest
 
 from spinefarm.api.app import create_app
 from spinefarm.cli.report import final_report
-from spinefarm.protocol.settings import JudgePolicy, Rung
-from spinefarm.protocol.states import AuditState, Verification
 from spinefarm.storage.evaluations import NOT_MEASURED, row_of
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.schema import FILE_SCHEMA_VERSION
+from tests.api_tests.judged import OLD, result_with_cot, write_cot_run
 from tests.http_server import served
-from tests.storage_tests.conftest import make_meta, result
 
-OLD = Path(__file__).parents[1] / "storage_tests" / "data" / "run-schema8.h5"
-SCREEN = {0: (0.05, 1.1), 1: (0.30, 2.2), 2: (0.02, 3.3), 3: (0.21, 4.4)}   # trial: (distance m, COT)
-JUDGE = {1: (0.40, 5.5), 3: (0.25, 6.6)}     # Bullet at 0.25 ms judges trials 1 and 3
-OPINION = {1: (0.32, 7.7)}                    # MuJoCo at 1 ms, the other engine's run of trial 1
-AUDIT = {1: (0.30, 8.8)}                      # another worker, the screen's fidelity
-
-
-def _ran(tid: int, distance_m: float, cot: float):
-    return dataclasses.replace(result(tid, distance_m), cot=cot)
-
-
-def _judged_run(path: Path) -> None:
-    meta = make_meta("run-c", budget=4)
-    meta = dataclasses.replace(meta, settings=dataclasses.replace(meta.settings, judge=JudgePolicy(
-        rung=Rung("bullet", 2.5e-4))), run={**meta.run, "trial_config": {"duration_s": 0.5, "engine": "mujoco"}})
-    s = Hdf5Storage.create(path, meta)
-    for tid, (d, cot) in SCREEN.items():
-        s.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, tid)
-        s.finish_trial(tid, _ran(tid, d, cot), d)
-    for tid, (d, cot) in JUDGE.items():
-        s.add_evaluation(row_of(tid, "judge", _ran(tid, d, cot), "bullet", 2.5e-4, "w-judge"))
-        s.set_verification(tid, Verification.JUDGED, d, "judged in bullet", SCREEN[tid][0] / d)
-    for tid, (d, cot) in OPINION.items():
-        s.add_evaluation(row_of(tid, "opinion", _ran(tid, d, cot), "mujoco", 1e-3, "w-opinion"))
-    for tid, (d, cot) in AUDIT.items():
-        s.add_evaluation(row_of(tid, "audit", _ran(tid, d, cot), "", None, "w-audit"))
-        s.set_audit(tid, AuditState.AGREES, d, "w-audit")
-    s.close()
+# run-c (tests.api_tests.judged): trials 0-3 screened at 0.05, 0.30, 0.02, 0.21 m with COTs 1.1, 2.2, 3.3, 4.4;
+# Bullet at 0.25 ms judges trial 1 (0.40 m, COT 5.5) and trial 3 (0.25 m, 6.6); MuJoCo at 1 ms gives its opinion
+# on trial 1 (0.32 m, 7.7), another worker audits it (0.30 m, 8.8)
 
 
 def test_every_evaluation_row_keeps_its_cot_with_its_unit(tmp_path):
-    _judged_run(tmp_path / "c.h5")
+    write_cot_run(tmp_path / "c.h5")
     with Hdf5Storage.open_read(tmp_path / "c.h5") as s:
         ev = s.evaluations()
     got = {(int(t), k.decode()): float(c) for t, k, c in zip(ev["trial_id"], ev["kind"], ev["cot"], strict=True)}
@@ -70,7 +41,7 @@ def test_every_evaluation_row_keeps_its_cot_with_its_unit(tmp_path):
 
 
 def test_best_the_trial_page_and_the_run_show_the_judges_cot_not_the_screens(tmp_path):
-    _judged_run(tmp_path / "c.h5")
+    write_cot_run(tmp_path / "c.h5")
     with served(create_app(runs_dir=tmp_path)) as c:
         best = c.get("/runs/run-c/best", params={"k": 3}).json()
         page = c.get("/runs/run-c/trials/3").json()
@@ -86,7 +57,7 @@ def test_best_the_trial_page_and_the_run_show_the_judges_cot_not_the_screens(tmp
 
 
 def test_the_final_report_gives_the_judges_cot_beside_its_distance(tmp_path):
-    _judged_run(tmp_path / "c.h5")
+    write_cot_run(tmp_path / "c.h5")
     with Hdf5Storage.open_read(tmp_path / "c.h5") as s:
         text = final_report(s, tmp_path / "c.h5", verdict="", done=True)
     [line] = [x for x in text.splitlines() if "distance 0.4 m (judged)" in x]
@@ -113,7 +84,7 @@ def test_a_schema_8_file_opens_everywhere_says_not_measured_and_resumes_at_the_c
     assert best["model_spread"]["other"]["cot"] is None and best["model_spread"]["other"]["distance_m"] == 0.32
     resumed = Hdf5Storage.resume(path)   # rewritten at the current schema; the rows keep their NaN COT
     try:
-        resumed.add_evaluation(row_of(3, "opinion", _ran(3, 0.2, 9.9), "mujoco", 1e-3, "w-opinion"))
+        resumed.add_evaluation(row_of(3, "opinion", result_with_cot(3, 0.2, 9.9), "mujoco", 1e-3, "w-opinion"))
     finally:
         resumed.close()
     with h5py.File(path, "r") as f:
@@ -123,33 +94,24 @@ def test_a_schema_8_file_opens_everywhere_says_not_measured_and_resumes_at_the_c
 
 
 @pytest.mark.integration
-def test_the_dashboard_and_the_trial_page_show_the_judges_cot(browser, tmp_path):
-    from tests.api_tests.test_dashboard_browser import Server, free_port
-
-    _judged_run(tmp_path / "c.h5")
-    shutil.copy(OLD, tmp_path / "old.h5")
-    port = free_port()
-    server = Server(["api", "--runs-dir", str(tmp_path), "--port", str(port)], port)
-    try:
-        page = browser.new_page()
-        shown = {}
-        for run, trial in (("run-c", 3), ("run-v8", 1)):
-            page.goto(f"{server.url}/#/run/{run}")
-            page.wait_for_selector("#best-cot")
-            shown[run] = page.locator("#best-cot").inner_text()
-            shown[run, "speed"] = page.locator("#best-speed").inner_text()
-            page.goto(f"{server.url}/#/")
-            page.wait_for_selector(f"tr[data-run='{run}']")
-            heads = page.locator("thead th").all_inner_texts()
-            cells = page.locator(f"tr[data-run='{run}'] td").all_inner_texts()
-            shown[run, "listed"] = cells[heads.index("best COT")]
-            shown[run, "listed speed"] = cells[heads.index("best speed (cm/s)")]
-            page.goto(f"{server.url}/#/run/{run}/trial/{trial}")
-            page.wait_for_selector("#judged-cot")
-            shown[(run, trial)] = page.locator("#judged-cot").inner_text()
-        page.close()
-    finally:
-        server.stop()
+def test_the_dashboard_and_the_trial_page_show_the_judges_cot(browser, judged_server):
+    page = browser.new_page()
+    shown = {}
+    for run, trial in (("run-c", 3), ("run-v8", 1)):
+        page.goto(f"{judged_server.url}/#/run/{run}")
+        page.wait_for_selector("#best-cot")
+        shown[run] = page.locator("#best-cot").inner_text()
+        shown[run, "speed"] = page.locator("#best-speed").inner_text()
+        page.goto(f"{judged_server.url}/#/")
+        page.wait_for_selector(f"tr[data-run='{run}']")
+        heads = page.locator("thead th").all_inner_texts()
+        cells = page.locator(f"tr[data-run='{run}'] td").all_inner_texts()
+        shown[run, "listed"] = cells[heads.index("best COT")]
+        shown[run, "listed speed"] = cells[heads.index("best speed (cm/s)")]
+        page.goto(f"{judged_server.url}/#/run/{run}/trial/{trial}")
+        page.wait_for_selector("#judged-cot")
+        shown[(run, trial)] = page.locator("#judged-cot").inner_text()
+    page.close()
     assert shown["run-c"] == "5.5 judged" and shown[("run-c", 3)] == "6.6"
     assert shown["run-v8"] == f"2 screen's; judge's {NOT_MEASURED}" and shown[("run-v8", 1)] == NOT_MEASURED
     # the speed beside the judged distance is the judged one: 0.40 m over result()'s 5 s (the screen's: 2 cm/s)

@@ -5,20 +5,17 @@ storage API, as the coordinator stores a judge's and an opinion's runs."""
 
 from __future__ import annotations
 
-import dataclasses
-
-import numpy as np
 import pytest
 
 from spinefarm.api.app import create_app
 from spinefarm.cli.report import final_report, verdict_text
 from spinefarm.protocol.engine_choice import EngineChoice
-from spinefarm.protocol.settings import JudgePolicy, Rung
-from spinefarm.protocol.states import TrialStatus, Verification
+from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.evaluations import row_of
 from spinefarm.storage.hdf5 import Hdf5Storage
+from tests.api_tests.judged import judged_run
 from tests.http_server import served
-from tests.storage_tests.conftest import make_meta, result
+from tests.storage_tests.conftest import result
 
 SCREEN_M = [0.05, 0.30, 0.02, 0.21, 0.03]  # MuJoCo screens; trial 1 is best, trial 3 next
 JUDGE_M = {1: 0.40, 3: 0.25}  # Bullet at 0.25 ms judges both
@@ -30,22 +27,11 @@ STEP_ERROR = {"mujoco": 0.017, "bullet": 0.046}
 def _judged_run(path, opinion_fails: bool = False):
     choice = EngineChoice(engine="mujoco", spearman=0.95, top_overlap=9, top_k=10, median_distance_ratio=1.0,
                           tiers={t: {"cpu_s_per_sim_s": 0.1, "step_error": e} for t, e in STEP_ERROR.items()})
-    meta = make_meta("run-s", budget=5)
-    settings = dataclasses.replace(meta.settings, judge=JudgePolicy(rung=Rung("bullet", 2.5e-4)),
-                                   engine_choice=choice)
-    meta = dataclasses.replace(meta, settings=settings,
-                               run={**meta.run, "trial_config": {"duration_s": 0.5, "engine": "mujoco"}})
-    s = Hdf5Storage.create(path, meta)
-    for tid, d in enumerate(SCREEN_M):
-        s.add_trial(tid, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, tid)
-        s.finish_trial(tid, result(tid, d), d)
-    for tid, d in JUDGE_M.items():
-        s.add_evaluation(row_of(tid, "judge", result(tid, d), "bullet", 2.5e-4, "w-judge"))
-        s.set_verification(tid, Verification.JUDGED, d, "judged in bullet", SCREEN_M[tid] / d)
-    for tid, d in OPINION_M.items():
-        r = result(tid, d, status=TrialStatus.FAILED, reason="diverged") if opinion_fails else result(tid, d)
-        s.add_evaluation(row_of(tid, "opinion", r, "mujoco", 5e-4, "w-opinion"))
-    s.close()
+    with judged_run(path, "run-s", {t: result(t, d) for t, d in enumerate(SCREEN_M)},
+                    {t: result(t, d) for t, d in JUDGE_M.items()}, engine_choice=choice) as s:
+        for tid, d in OPINION_M.items():
+            r = result(tid, d, status=TrialStatus.FAILED, reason="diverged") if opinion_fails else result(tid, d)
+            s.add_evaluation(row_of(tid, "opinion", r, "mujoco", 5e-4, "w-opinion"))
 
 
 def test_best_and_the_trial_page_serve_both_distances_their_ratio_and_the_step_errors(tmp_path):
