@@ -198,9 +198,6 @@ class Scheduler:
             self.push_front(key)
         return keys
 
-    def queued_keys(self) -> list[int]:
-        return list(self._queue)
-
     def is_current(self, trial_id: int, lease_id: int, worker_id: str) -> bool:
         lease = self._leases.get(trial_id)
         return lease is not None and lease.lease_id == lease_id and lease.worker_id == worker_id
@@ -251,7 +248,7 @@ class Scheduler:
 
     def _on_whom(self, key: int) -> str:
         """' on 2 workers: w1, w2': the distinct workers the trial failed on, for its reason."""
-        names = list(self._failed_on.get(key, {}))
+        names = self.failed_on(key)
         text = ", ".join(n[:24] for n in names)
         return f" on {len(names)} worker{'s' if len(names) != 1 else ''}: {text}" if names else ""
 

@@ -1,8 +1,10 @@
-"""Shared pieces of the coordinator tests: a clock tests move by hand, a small sphere run."""
+"""Shared pieces of the coordinator tests: a clock tests move by hand, a small sphere run, what a scheduler has
+queued."""
 
 from __future__ import annotations
 
 from spinefarm.coordinator.problem import build_run_config
+from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.setup import SearchSettings, new_run
 
 
@@ -15,6 +17,11 @@ class FakeClock:
 
     def advance(self, dt: float) -> None:
         self.t += dt
+
+
+def queued_keys(leases: Scheduler) -> list[int]:
+    """The keys a scheduler has queued, in the order it issues them (its queue, read as it is)."""
+    return list(leases._queue)
 
 
 def sphere_core(trials: int = 20, *, lease_s: float = 10.0, clock=None, out=None, seed: int = 3,

@@ -20,7 +20,7 @@ from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung
 from spinefarm.protocol.submissions import Verdict
 from spinefarm.storage.hdf5 import Hdf5Storage
-from tests.coordinator_tests.helpers import FakeClock
+from tests.coordinator_tests.helpers import FakeClock, queued_keys
 from tests.storage_tests.conftest import result
 
 SEED = 3
@@ -61,7 +61,7 @@ def arrive(ladder: Ladder, distance_m: float, worker: str) -> TrialResult:
 
 def lease(ladder: Ladder, key: int, worker: str) -> Lease:
     """Lease the queued `key` to `worker` (the keys queued before it keep their places)."""
-    queued = ladder.leases.queued_keys()
+    queued = queued_keys(ladder.leases)
     assert key in queued, f"{key} not queued: {queued}"
     for other in queued:
         ladder.leases.withdraw(other)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from spinefarm.coordinator.ladder.keys import AUDIT, JUDGE, REFEREE, check_key
 from spinefarm.protocol.settings import AuditPolicy
 from spinefarm.protocol.submissions import Verdict
+from tests.coordinator_tests.helpers import queued_keys
 from tests.coordinator_tests.ladder_run import (
     ENV_A,
     ENV_B,
@@ -54,7 +55,7 @@ def test_audits_count_what_they_were_held_to_and_only_a_disputed_one_queues_its_
     run_check(ladder, check_key(AUDIT, 0), "w-d", outcome(0, 0.4 * 1.000001, "w-d"))
     assert ladder.audit_comparisons == {"exact": 2, "tolerance": 1}
     referee = check_key(REFEREE, 0)
-    assert storage.columns()["audit"][0] == b"disputed" and ladder.leases.queued_keys()[0] == referee
+    assert storage.columns()["audit"][0] == b"disputed" and queued_keys(ladder.leases)[0] == referee
     # the referee (w-e, the other environment) agrees with the row: the audit was wrong
     assert not ladder.eligible(referee, "w-d") and ladder.eligible(referee, "w-e")
     run_check(ladder, referee, "w-e", outcome(0, 0.4 * 1.01, "w-e"))
@@ -69,7 +70,7 @@ def test_a_result_drawn_for_an_audit_is_audited_though_it_is_not_the_best(tmp_pa
     ladder = ladder_of(storage)
     r = arrive(ladder, 0.2, "w-b")
     assert storage.best_ids(1) == [0] and check_key(AUDIT, r.trial_id) in ladder.checks.pending
-    assert ladder.leases.queued_keys()[0] == check_key(AUDIT, r.trial_id)
+    assert queued_keys(ladder.leases)[0] == check_key(AUDIT, r.trial_id)
     assert storage.columns()["audit"].tolist() == [b"pending", b"pending"]
     storage.close()
 
@@ -87,12 +88,12 @@ def test_a_worker_a_referee_contradicts_is_quarantined_its_leases_taken_back_and
     # row 0 disagrees; w-a's other complete row (3) is marked and re-run by another worker first
     assert storage.columns()["audit"][[0, 3]].tolist() == [b"disagrees", b"quarantined"]
     a3 = check_key(AUDIT, 3)
-    assert a3 in ladder.checks.pending and ladder.leases.queued_keys()[:2] == [a3, waiting]
+    assert a3 in ladder.checks.pending and queued_keys(ladder.leases)[:2] == [a3, waiting]
     assert not ladder.leases.is_current(waiting, held.lease_id, "w-a")       # taken back from w-a
     assert not ladder.eligible(waiting, "w-a") and ladder.eligible(waiting, "w-b")
     # a result w-a sends now is refused, and the key goes to another worker first
     assert ladder.refuse_quarantined(waiting, "w-a") == Verdict.STALE
-    assert ladder.leases.queued_keys()[0] == waiting
+    assert queued_keys(ladder.leases)[0] == waiting
     assert ladder.refuse_quarantined(waiting, "w-b") is None
     storage.close()
 
@@ -123,5 +124,5 @@ def test_a_checks_result_with_another_seed_is_refused_and_stores_nothing(tmp_pat
     ladder.peers.heard("w-j", None, ENV_A)
     assert ladder.peers.quarantine_identity("w-j") == ["w-j"]
     assert ladder.settle_check(judge, "w-j", outcome(1, 0.8, "w-j")) == Verdict.STALE
-    assert storage.columns()["verification"][1] == b"pending" and ladder.leases.queued_keys()[0] == judge
+    assert storage.columns()["verification"][1] == b"pending" and queued_keys(ladder.leases)[0] == judge
     storage.close()

@@ -11,7 +11,7 @@ from spinefarm.coordinator.scheduler import START_GRACE_S
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.settings import AuditPolicy, JudgePolicy, Rung
 from spinefarm.protocol.states import UNAUDITED
-from tests.coordinator_tests.helpers import FakeClock
+from tests.coordinator_tests.helpers import FakeClock, queued_keys
 from tests.coordinator_tests.ladder_run import ENV_A, arrive, ladder_of, lease, outcome, run_check, run_file
 
 BESTS = AuditPolicy(fraction=1e-9)    # auditing on, drawing almost nothing: the bests only
@@ -29,15 +29,15 @@ def test_an_overtaken_bests_queued_judge_is_withdrawn_and_one_already_out_is_lef
     storage = run_file(tmp_path / "r.h5", ((0.4, "w-a"),))
     ladder = ladder_of(storage)
     j0 = check_key(JUDGE, 0)
-    assert ladder.leases.queued_keys() == [j0]
+    assert queued_keys(ladder.leases) == [j0]
     arrive(ladder, 0.9, "w-a")        # a new best while trial 0's judge is still queued
     j1 = check_key(JUDGE, 1)
-    assert ladder.leases.queued_keys() == [j1] and ladder.checks.pending == {j1}
+    assert queued_keys(ladder.leases) == [j1] and ladder.checks.pending == {j1}
     assert storage.columns()["verification"].tolist() == [b"", b"pending"]   # trial 0's undone
     out = lease(ladder, j1, "w-j")
     arrive(ladder, 2.0, "w-a")        # another, while trial 1's judge is out on w-j
     j2 = check_key(JUDGE, 2)
-    assert ladder.checks.pending == {j1, j2} and ladder.leases.queued_keys() == [j2]
+    assert ladder.checks.pending == {j1, j2} and queued_keys(ladder.leases) == [j2]
     assert ladder.leases.is_current(j1, out.lease_id, "w-j")
     assert storage.columns()["verification"].tolist() == [b"", b"pending", b"pending"]
     storage.close()
@@ -49,12 +49,12 @@ def test_an_overtaken_bests_opinion_is_withdrawn_even_while_a_worker_runs_it(tmp
     ladder = ladder_of(storage)
     run_check(ladder, check_key(JUDGE, 0), "w-j", outcome(0, 0.4, "w-j"))
     o0 = check_key(OPINION, 0)
-    assert ladder.leases.queued_keys() == [o0]
+    assert queued_keys(ladder.leases) == [o0]
     lease(ladder, o0, "w-o")
     arrive(ladder, 0.9, "w-a")
     # its late result finds no lease (stale); the new best's judge comes first
     assert ladder.leases.lease_of(o0) is None and o0 not in ladder.checks.pending
-    assert ladder.leases.queued_keys() == [check_key(JUDGE, 1)]
+    assert queued_keys(ladder.leases) == [check_key(JUDGE, 1)]
     storage.close()
 
 
@@ -76,7 +76,7 @@ def test_within_the_restarts_grace_nothing_is_dropped_after_it_an_audit_is_said_
     assert ladder.unaudited == {1: UNAUDITED} and storage.columns()["audit"].tolist() == [b"", b"pending"]
     # the best's judge waits for a worker with Bullet (the search is done once its best is judged)
     assert ladder.checks.pending == {j1} and not ladder.done
-    assert storage.columns()["verification"][1] == b"pending" and ladder.leases.queued_keys() == [j1]
+    assert storage.columns()["verification"][1] == b"pending" and queued_keys(ladder.leases) == [j1]
     _live(ladder, **{"w-b": BULLET})
     ladder.drop_unservable()
     assert ladder.checks.pending == {j1} and ladder.eligible(j1, "w-b")
@@ -120,7 +120,7 @@ def test_an_opinion_no_live_worker_may_run_is_dropped_for_good_once_the_grace_is
     ladder.drop_unservable()
     assert ladder.checks.pending == set() and ladder.checks.unservable == {o0} and ladder.done
     ladder.drop_unservable()                                   # not issued again
-    assert ladder.checks.pending == set() and ladder.leases.queued_keys() == []
+    assert ladder.checks.pending == set() and queued_keys(ladder.leases) == []
     storage.close()
 
 
@@ -135,11 +135,11 @@ def test_a_failed_result_changes_nothing_and_a_best_that_diverges_hands_the_audi
     failed = TrialResult.failed("diverged: nan", 0, tid)
     assert ladder.study.tell(failed)
     ladder.after_trial(failed)
-    assert ladder.checks.pending == {j2} and ladder.leases.queued_keys() == [j2]
+    assert ladder.checks.pending == {j2} and queued_keys(ladder.leases) == [j2]
     # the best diverges in the judge's run: it never counts, and trial 0, now the best, is audited and judged
     run_check(ladder, j2, "w-j", TrialResult.failed("diverged: nan", outcome(2, 0, "").seed, 2))
     assert storage.best_ids(1) == [0]
-    assert sorted(ladder.leases.queued_keys()) == sorted([check_key(AUDIT, 0), check_key(JUDGE, 0)])
+    assert sorted(queued_keys(ladder.leases)) == sorted([check_key(AUDIT, 0), check_key(JUDGE, 0)])
     storage.close()
 
 
@@ -153,7 +153,7 @@ def test_a_judge_no_live_worker_can_run_is_said_to_wait_once_not_dropped_at_ever
     for _ in range(3):                                      # three work requests from a MuJoCo-only worker
         _live(ladder, **{"w-a": MUJOCO})
         ladder.drop_unservable()
-    assert j1 in ladder.checks.pending and ladder.leases.queued_keys() == [j1]
+    assert j1 in ladder.checks.pending and queued_keys(ladder.leases) == [j1]
     said = [r.getMessage() for r in caplog.records if "judge of trial 1" in r.getMessage()]
     assert said == ["no live worker can run the judge of trial 1: it waits for one"]
     assert not any("dropped" in r.getMessage() for r in caplog.records)
