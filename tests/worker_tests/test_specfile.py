@@ -10,8 +10,9 @@ import pytest
 
 from spinefarm.cli.main import main
 from spinefarm.protocol.errors import MorphologySpecError, UnknownMorphologyError
-from spinefarm.robot.morphology.registry import builtin_names, load_morphology
-from spinefarm.robot.morphology.specfile import SPEC_DIR, builtin_spec, load_spec_file, parse_spec
+from spinefarm.robot.morphology.model import Morphology
+from spinefarm.robot.morphology.registry import builtin_names, builtin_path, load_morphology
+from spinefarm.robot.morphology.specfile import SPEC_DIR, load_spec_file, parse_spec
 from spinefarm.robot.spaces import param_space
 
 GOOD = textwrap.dedent("""\
@@ -78,6 +79,11 @@ def test_spec_file_runs_through_the_registry_and_trial_command(tmp_path: Path, c
     assert load_morphology(str(path)).spec_hash() == load_spec_file(path).spec_hash()
     assert main(["trial", str(path), "--random-seed", "2", "--duration", "0.2", "--json"]) == 0
     assert '"morphology": "bar-chain"' in capsys.readouterr().out
+
+
+def builtin_spec(stem: str, *, segments: int | None = None, name: str | None = None) -> Morphology:
+    """A built-in's spec file loaded at another segment count or under another name."""
+    return load_spec_file(builtin_path(stem), segments=segments, name=name)
 
 
 def test_a_spec_starts_from_a_base_and_overrides_what_it_names(tmp_path: Path):

@@ -255,8 +255,3 @@ def load_search(path: str | Path) -> tuple[BodyField, ...]:
     if "search" not in doc:
         return ()
     return check_search(spec, doc, from_document(spec, doc))
-
-
-def builtin_spec(stem: str, *, segments: int | None = None, name: str | None = None) -> Morphology:
-    """A built-in morphology from robot/morphology/specs/<stem>.yaml."""
-    return load_spec_file(SPEC_DIR / f"{stem}.yaml", segments=segments, name=name)
