@@ -94,10 +94,6 @@ def infeasible_result(verdict: Feasibility, seed: int, trial_id: int = -1) -> Tr
     return TrialResult.failed(INFEASIBLE + verdict.reason, seed, trial_id)
 
 
-def is_infeasible(result: TrialResult) -> bool:
-    return result.reason.startswith(INFEASIBLE)
-
-
 class FeasibilityCache:
     """Verdicts by (body hash, engine), the most recent `size` kept: every trial of a body after its first
     costs a lookup."""
