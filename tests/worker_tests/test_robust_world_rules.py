@@ -9,9 +9,10 @@ import dataclasses
 import pytest
 
 from spinefarm.protocol.robust import EpisodeDraw, RobustSpec, draw_episode
+from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.morphology.registry import load_morphology
 from spinefarm.robot.scene import SceneConfig
-from spinefarm.worker.trial.robust import episode_world, first_episode
+from spinefarm.worker.trial.robust import episode_world
 from spinefarm.worker.trial.simulation import TrialConfig
 
 
@@ -63,11 +64,12 @@ def test_a_rough_seed_makes_the_ground_rough_with_that_seed(morph, rough_seed: i
 def test_episode_zero_of_a_stored_robust_block_is_its_first_draw(morph) -> None:
     cfg = TrialConfig(duration_s=1.0, ground_friction=1.0)
     robust = {"episodes": 3, "randomize": {"friction": 0.5, "mass": 0.2}}
-    m, c, seed = first_episode(morph.to_dict(), cfg, 42, robust)
-    again = first_episode(morph, cfg, 42, robust)
-    assert (c, seed) == (again[1], again[2]) and densities(m) == densities(again[0])
     zero = draw_episode(RobustSpec.from_dict(robust), 42, 0)          # episode 0 of protocol.robust's draws
-    assert seed == zero.seed and c.ground_friction == pytest.approx(zero.friction_scale)
+    w = episode_world(morph, cfg, zero)
+    again = episode_world(Morphology.from_dict(morph.to_dict()), cfg, zero)   # the robot as a run file stores it
+    assert w.config == again.config and densities(w.morph) == densities(again.morph)
+    c, m = w.config, w.morph
+    assert c.ground_friction == pytest.approx(zero.friction_scale)
     # drawn, not the run's own: friction within 1 +- 0.5 of 1.0, masses within 1 +- 0.2, and not both unchanged
     assert 0.5 <= c.ground_friction <= 1.5
     ratio = densities(m)[0] / densities(morph)[0]

@@ -97,10 +97,3 @@ def _episode(r: TrialResult, d: EpisodeDraw) -> EpisodeResult:
                          friction_scale=d.friction_scale, mass_scale=d.mass_scale,
                          start_jitter_cm=d.start_jitter_cm, rough_seed=d.rough_seed)
 
-
-def first_episode(morphology: Morphology | Mapping, cfg: TrialConfig, trial_seed: int, robust: Mapping
-                  ) -> tuple[Morphology, TrialConfig, int]:
-    """(morphology, trial config, seed) of a robust trial's episode 0, for re-simulating it elsewhere."""
-    morph = morphology if isinstance(morphology, Morphology) else Morphology.from_dict(dict(morphology))
-    world = episode_world(morph, cfg, draw_episode(RobustSpec.from_dict(dict(robust)), trial_seed, 0))
-    return world.morph, world.config, world.draw.seed
