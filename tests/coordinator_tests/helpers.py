@@ -1,11 +1,13 @@
 """Shared pieces of the coordinator tests: a clock tests move by hand, a small sphere run, what a scheduler has
-queued."""
+queued, a halving ladder."""
 
 from __future__ import annotations
 
+from spinefarm.coordinator.ladder.rungs import HalvingTrialScheduler
 from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.scheduler import Scheduler
 from spinefarm.coordinator.setup import SearchSettings, new_run
+from spinefarm.protocol.settings import Rung, RunSettings
 
 
 class FakeClock:
@@ -22,6 +24,12 @@ class FakeClock:
 def queued_keys(leases: Scheduler) -> list[int]:
     """The keys a scheduler has queued, in the order it issues them (its queue, read as it is)."""
     return list(leases._queue)
+
+
+def halving_ladder(durations_s: tuple[float, ...], eta: int) -> HalvingTrialScheduler:
+    """Successive halving over rungs of these simulated seconds, keeping 1/eta of each, as a run stores it."""
+    return HalvingTrialScheduler(RunSettings(scheduler="halving", ladder=tuple(Rung(duration_s=d) for d in durations_s),
+                                             eta=eta))
 
 
 def sphere_core(trials: int = 20, *, lease_s: float = 10.0, clock=None, out=None, seed: int = 3,

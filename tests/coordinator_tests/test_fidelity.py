@@ -16,7 +16,7 @@ from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.hdf5 import Hdf5Storage
 from spinefarm.storage.hdf5_reader import read_run
 from spinefarm.storage.memory import InMemoryStorage
-from tests.coordinator_tests.helpers import free_endpoint
+from tests.coordinator_tests.helpers import free_endpoint, halving_ladder
 from tests.coordinator_tests.procs import coordinator, stop, wait_status, worker
 
 
@@ -37,7 +37,7 @@ def _storage_with(objectives: list[float]) -> InMemoryStorage:
 
 
 def test_the_best_third_of_a_rung_is_promoted_best_first_and_once():
-    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    rungs = halving_ladder((1.0, 3.0), 3)
     st = _storage_with([0.1, 0.9, 0.5, 0.7, 0.2, 0.8])  # top third of 6: ids 1 and 5
     assert rungs.promotion(st) == 1
     st.add_trial(6, np.full(3, 0.5), np.zeros(3), "promoted", 1, 0, 1, 3.0)
@@ -51,7 +51,7 @@ def test_the_best_third_of_a_rung_is_promoted_best_first_and_once():
 @pytest.mark.parametrize(("text", "eta"), [("30,10", 3), ("10,10", 3), ("0,10", 3), ("ten", 3), ("10,30", 1)])
 def test_bad_rungs_are_refused_with_what_was_expected(text, eta):
     with pytest.raises(ConfigError):
-        HalvingTrialScheduler.from_durations(parse_rungs(text), eta)
+        halving_ladder(parse_rungs(text), eta)
 
 
 def _check_fidelity(out, budget: int, rungs: HalvingTrialScheduler) -> None:
@@ -76,7 +76,7 @@ def _check_fidelity(out, budget: int, rungs: HalvingTrialScheduler) -> None:
 
 def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(tmp_path):
     ep, out = free_endpoint(), tmp_path / "run.h5"
-    rungs = HalvingTrialScheduler.from_durations((0.01, 0.02, 0.04), 3)
+    rungs = halving_ladder((0.01, 0.02, 0.04), 3)
     coord = coordinator(ep, out, "sphere:3", "--trials", "27", "--rungs", "0.01,0.02,0.04", "--eta", "3",
                         "--run-id", "mf")
     workers = [worker(ep, "mf", f"w{i}", batch=2) for i in range(2)]
@@ -98,7 +98,7 @@ def test_a_multi_fidelity_search_stores_every_evaluation_once_with_its_fidelity(
 
 def test_a_multi_fidelity_search_killed_mid_rung_resumes_to_its_exact_budget(tmp_path):
     ep, out = free_endpoint(), tmp_path / "run.h5"
-    rungs = HalvingTrialScheduler.from_durations((0.05, 0.1), 3)
+    rungs = halving_ladder((0.05, 0.1), 3)
     coord = coordinator(ep, out, "sphere:3", "--trials", "60", "--rungs", "0.05,0.1", "--eta", "3", "--run-id", "mfk")
     workers = [worker(ep, "mfk", f"w{i}", batch=1) for i in range(2)]
     resumed = None
@@ -176,7 +176,7 @@ def test_a_mujoco_screen_with_a_bullet_judge_reports_the_judges_distance(tmp_pat
 def test_at_the_end_the_best_goes_on_through_rungs_holding_fewer_rows_than_eta():
     """Six sets on three rungs at eta 4: the first rung's quota is one set (6 // 4), the second rung then holds
     one row, of which 1 // 4 = 0 would go on; once sampling is done, its best still reaches the full length."""
-    rungs = HalvingTrialScheduler.from_durations((0.5, 1.0, 3.0), 4)
+    rungs = halving_ladder((0.5, 1.0, 3.0), 4)
     st = _storage_with([0.1, 0.9, 0.5, 0.7, 0.2, 0.8])
     assert rungs.promotion(st) == 1  # the quota of the first rung: its best
     st.add_trial(6, np.full(3, 0.5), np.zeros(3), "promoted", 1, 0, 1, 1.0)
@@ -190,7 +190,7 @@ def test_at_the_end_the_best_goes_on_through_rungs_holding_fewer_rows_than_eta()
 def test_a_search_that_keeps_improving_promotes_about_a_third_and_always_its_best():
     """Hill climbing makes each new trial better than the last: every one enters the top third when it
     finishes, but only a third (plus late bests) may go on."""
-    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    rungs = halving_ladder((1.0, 3.0), 3)
     st = _storage_with([])
     n_promoted = 0
     for i in range(30):
@@ -230,7 +230,7 @@ def _drive(study, st) -> None:
 def test_samplers_see_the_first_rung_only_so_rungs_do_not_change_their_proposals(sampler):
     plain, plain_st = _study(sampler, None)
     _drive(plain, plain_st)
-    screened, screened_st = _study(sampler, HalvingTrialScheduler.from_durations((1.0, 3.0), 3))
+    screened, screened_st = _study(sampler, halving_ladder((1.0, 3.0), 3))
     _drive(screened, screened_st)
     c = screened_st.columns()
     assert int((c["phase"] == b"promoted").sum()) >= 4  # promotions were interleaved with sampling

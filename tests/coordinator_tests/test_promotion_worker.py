@@ -9,11 +9,11 @@ import dataclasses
 
 import numpy as np
 
-from spinefarm.coordinator.ladder.rungs import Asker, HalvingTrialScheduler
+from spinefarm.coordinator.ladder.rungs import Asker
 from spinefarm.coordinator.problem import build_run_config
 from spinefarm.coordinator.setup import SearchSettings, new_run
 from spinefarm.protocol.settings import AuditPolicy
-from tests.coordinator_tests.helpers import FakeClock
+from tests.coordinator_tests.helpers import FakeClock, halving_ladder
 from tests.coordinator_tests.test_core import ask, res, submit
 from tests.coordinator_tests.test_fidelity import _result, _storage_with
 
@@ -85,7 +85,7 @@ def test_with_continuation_off_the_order_is_the_plain_one_and_every_trial_starts
 
 def test_the_asker_chooses_among_the_promotable_rows_in_their_order():
     """Storage alone: rows 1 (0.9, w-a) and 5 (0.8, w-b) are the top third of six."""
-    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    rungs = halving_ladder((1.0, 3.0), 3)
     st = _storage_with([])
     for tid, (obj, worker) in enumerate([(0.1, "w-a"), (0.9, "w-a"), (0.5, "w-b"), (0.7, "w-c"), (0.2, "w-b"),
                                          (0.8, "w-b")]):

@@ -9,6 +9,7 @@ import numpy as np
 
 from spinefarm.coordinator.ladder.rungs import FirstRungView, HalvingTrialScheduler, PlainTrialScheduler
 from spinefarm.protocol.settings import Rung, RunSettings
+from tests.coordinator_tests.helpers import halving_ladder
 from tests.coordinator_tests.test_fidelity import _result, _storage_with
 
 
@@ -23,7 +24,7 @@ def test_a_plain_run_is_done_at_its_budget_exactly():
 
 
 def test_a_halving_run_is_done_once_every_set_is_sampled_finished_and_nothing_is_left_to_promote():
-    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    rungs = halving_ladder((1.0, 3.0), 3)
     st = _storage_with([0.1, 0.9, 0.5])
     assert not rungs.done(st, 4, 3)     # a set of the budget not sampled yet
     assert not rungs.done(st, 3, 3)     # all sampled and finished, but the best has not gone on
@@ -35,7 +36,7 @@ def test_a_halving_run_is_done_once_every_set_is_sampled_finished_and_nothing_is
 
 
 def test_a_proposals_parent_is_the_storage_row_of_its_view_row_and_none_stays_none():
-    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    rungs = halving_ladder((1.0, 3.0), 3)
     st = _storage_with([0.1, 0.9, 0.5])
     st.add_trial(3, np.full(3, 0.5), np.zeros(3), "promoted", 1, 0, 1, 3.0)
     st.add_trial(4, np.full(3, 0.5), np.zeros(3), "monte_carlo", -1, 0, 0, 1.0)
@@ -45,14 +46,14 @@ def test_a_proposals_parent_is_the_storage_row_of_its_view_row_and_none_stays_no
 
 
 def test_a_rung_of_one_row_sends_it_on_once_sampling_is_done_and_an_empty_one_sends_nothing():
-    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    rungs = halving_ladder((1.0, 3.0), 3)
     assert rungs.promotion(_storage_with([]), True) is None
     one = _storage_with([0.4])
     assert rungs.promotion(one) is None and rungs.promotion(one, True) == 0
 
 
 def test_once_a_rungs_quota_is_used_a_new_best_waits_for_the_end_to_go_on():
-    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    rungs = halving_ladder((1.0, 3.0), 3)
     st = _storage_with([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])   # 6 // 3: two of rung 0 go on
     for expected in (5, 4):
         assert rungs.promotion(st) == expected
@@ -65,7 +66,7 @@ def test_once_a_rungs_quota_is_used_a_new_best_waits_for_the_end_to_go_on():
 
 
 def test_a_rung_whose_quota_is_used_leaves_the_rungs_below_free_to_promote():
-    rungs = HalvingTrialScheduler.from_durations((1.0, 2.0, 3.0), 2)
+    rungs = halving_ladder((1.0, 2.0, 3.0), 2)
     st = _storage_with([0.1, 0.2, 0.3, 0.4])          # rung 0: 4 // 2, two go on
     for source in (3, 2):
         tid = st.n_trials()
@@ -79,7 +80,7 @@ def test_a_rung_whose_quota_is_used_leaves_the_rungs_below_free_to_promote():
 
 
 def test_at_the_end_only_a_rungs_best_goes_past_its_quota_and_once():
-    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    rungs = halving_ladder((1.0, 3.0), 3)
     st = _storage_with([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     for source in (5, 4):
         st.add_trial(st.n_trials(), np.full(3, 0.5), np.zeros(3), "promoted", source, 0, 1, 3.0)
@@ -127,7 +128,7 @@ def test_a_samplers_best_sets_are_first_rung_rows_in_the_storages_order_each_onc
 
 def test_a_run_whose_quota_is_used_is_not_done_before_a_new_best_went_on():
     # every set sampled and every row finished, the rung's quota used: the new best (0.9) still goes on first
-    rungs = HalvingTrialScheduler.from_durations((1.0, 3.0), 3)
+    rungs = halving_ladder((1.0, 3.0), 3)
     st = _storage_with([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     for source in (5, 4):
         tid = st.n_trials()

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from spinefarm.protocol.errors import ConfigError
-from spinefarm.protocol.settings import DEFAULT_ETA, PROMOTED, Rung, RunSettings
+from spinefarm.protocol.settings import PROMOTED, Rung, RunSettings
 from spinefarm.protocol.states import TrialStatus
 from spinefarm.storage.base import BaseStorage
 
@@ -108,11 +108,6 @@ class PlainTrialScheduler(BaseTrialScheduler):
 
 class HalvingTrialScheduler(BaseTrialScheduler):
     """Asynchronous successive halving over the ladder, keeping 1/eta of each rung (see the module)."""
-
-    @classmethod
-    def from_durations(cls, durations_s: tuple[float, ...], eta: int = DEFAULT_ETA) -> HalvingTrialScheduler:
-        ladder = tuple(Rung(duration_s=d) for d in durations_s)
-        return cls(RunSettings(scheduler="halving", ladder=ladder, eta=eta))
 
     @property
     def eta(self) -> int:
