@@ -59,3 +59,7 @@ def test_verdicts_are_kept_per_body_hash():
     assert cache.checked == 1
     assert not cache.check(crossed).ok and cache.checked == 2
     assert not cache.check(crossed).ok and cache.checked == 2
+    far = body(segments__spacing_scale=3.0)
+    assert not cache.check(far).ok and cache.checked == 3  # size 2: the least recently used, `good`, goes
+    assert not cache.check(crossed).ok and cache.checked == 3
+    assert cache.check(good).ok and cache.checked == 4

@@ -8,7 +8,7 @@ from spinefarm.worker.trial.lru import LRU
 
 
 def test_a_touched_value_outlives_an_untouched_older_one():
-    kept: LRU[int] = LRU(2, "probes")
+    kept: LRU[str, int] = LRU(2, "probes")
     kept.put("first", 1)
     kept.put("second", 2)
     kept.put("third", 3)                       # over size 2: "first", the least recently used, goes
@@ -21,7 +21,7 @@ def test_a_touched_value_outlives_an_untouched_older_one():
 
 
 def test_touching_the_first_of_three_evicts_the_second_at_the_fourth():
-    kept: LRU[str] = LRU(2, "probes")
+    kept: LRU[str, str] = LRU(2, "probes")
     kept.put("a", "A")
     kept.put("b", "B")
     assert kept.get("a") == "A"                # touch the first
@@ -30,7 +30,7 @@ def test_touching_the_first_of_three_evicts_the_second_at_the_fourth():
 
 
 def test_hits_and_misses_and_an_unusable_value_is_a_miss_left_untouched():
-    kept: LRU[int] = LRU(2, "probes")
+    kept: LRU[str, int] = LRU(2, "probes")
     kept.put("x", 5)
     kept.put("y", 7)
     assert kept.get("x", lambda v: v > 6) is None      # kept but not usable: a miss, "x" not touched
@@ -40,13 +40,13 @@ def test_hits_and_misses_and_an_unusable_value_is_a_miss_left_untouched():
 
 
 def test_size_zero_keeps_nothing():
-    kept: LRU[int] = LRU(0, "probes")
+    kept: LRU[str, int] = LRU(0, "probes")
     kept.put("a", 1)
     assert len(kept) == 0 and kept.get("a") is None
 
 
 def test_a_smaller_size_trims_the_oldest_at_the_next_put():
-    kept: LRU[int] = LRU(3, "probes")
+    kept: LRU[str, int] = LRU(3, "probes")
     for i, key in enumerate("abc"):
         kept.put(key, i)
     kept.size = 1

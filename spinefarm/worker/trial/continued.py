@@ -56,7 +56,7 @@ def end_key(n_settle: int, check_every: int, cpg_every: int, offsets_cm: np.ndar
     return h.hexdigest()
 
 
-class RungEnds(LRU[RungEnd]):
+class RungEnds(LRU[str, RungEnd]):
     """Trial ends by end_key, the `size` most recently used kept (worker.trial.lru)."""
 
     def __init__(self, size: int = DEFAULT_ENDS) -> None:

@@ -9,7 +9,6 @@ The verdict depends on the body and the engine only, so it is kept per body hash
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +21,7 @@ from spinefarm.robot.morphology.bodycheck import static_problem
 from spinefarm.robot.morphology.model import Morphology
 from spinefarm.robot.spaces import param_space
 from spinefarm.robot.trial_config import TrialConfig
+from spinefarm.worker.trial.lru import LRU
 
 INFEASIBLE = "infeasible: "
 SETTLE_S = 2.0  # passive seconds: the built-ins reach rest (< 0.2 cm/s) well within them
@@ -95,22 +95,20 @@ def infeasible_result(verdict: Feasibility, seed: int, trial_id: int = -1) -> Tr
 
 
 class FeasibilityCache:
-    """Verdicts by (body hash, engine), the most recent `size` kept: every trial of a body after its first
-    costs a lookup."""
+    """Verdicts by (body hash, engine), the most recent `size` kept (worker.trial.lru): every trial of a body after
+    its first costs a lookup. `checked`: the bodies checked so far."""
 
     def __init__(self, size: int = 256) -> None:
-        self.size = size
-        self._verdicts: OrderedDict[tuple[str, str], Feasibility] = OrderedDict()
-        self.checked = 0
+        self._verdicts: LRU[tuple[str, str], Feasibility] = LRU(size, "kept feasibility verdicts")
+
+    @property
+    def checked(self) -> int:
+        return self._verdicts.misses
 
     def check(self, morph: Morphology, engine: str = DEFAULT_ENGINE) -> Feasibility:
         key = (morph.spec_hash(), engine)
-        if key in self._verdicts:
-            self._verdicts.move_to_end(key)
-            return self._verdicts[key]
-        verdict = check_body(morph, engine)
-        self.checked += 1
-        self._verdicts[key] = verdict
-        while len(self._verdicts) > self.size:
-            self._verdicts.popitem(last=False)
+        verdict = self._verdicts.get(key)
+        if verdict is None:
+            verdict = check_body(morph, engine)
+            self._verdicts.put(key, verdict)
         return verdict

@@ -1,22 +1,24 @@
-"""One least-recently-used dict by count: what a worker keeps of its trials to run no step twice (the settle ends of
-worker.trial.settled, the trial ends of worker.trial.continued). A value is touched when a get returns it."""
+"""One least-recently-used dict by count: what a worker keeps so as to do nothing twice (the settle ends of
+worker.trial.settled, the trial ends of worker.trial.continued, the verdicts on bodies of worker.trial.feasibility).
+A value is touched when a get returns it."""
 
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from typing import Generic, TypeVar
 
+K = TypeVar("K", bound=Hashable)
 V = TypeVar("V")
 
 
-class LRU(Generic[V]):
+class LRU(Generic[K, V]):
     """Values by key, the `size` most recently used kept (size 0 keeps nothing); `what` names them in errors."""
 
     def __init__(self, size: int, what: str) -> None:
         self.what = what
         self.size = size
-        self._items: OrderedDict[str, V] = OrderedDict()
+        self._items: OrderedDict[K, V] = OrderedDict()
         self.hits = 0
         self.misses = 0
 
@@ -34,7 +36,7 @@ class LRU(Generic[V]):
     def __len__(self) -> int:
         return len(self._items)
 
-    def get(self, key: str, usable: Callable[[V], bool] | None = None) -> V | None:
+    def get(self, key: K, usable: Callable[[V], bool] | None = None) -> V | None:
         """The value of `key`, touched, if kept (and `usable` says yes to it); else None, nothing touched."""
         value = self._items.get(key)
         if value is None or (usable is not None and not usable(value)):
@@ -44,7 +46,7 @@ class LRU(Generic[V]):
         self.hits += 1
         return value
 
-    def put(self, key: str, value: V) -> None:
+    def put(self, key: K, value: V) -> None:
         self._items[key] = value
         self._items.move_to_end(key)
         while len(self._items) > self._size:

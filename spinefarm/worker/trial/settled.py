@@ -47,7 +47,7 @@ def settle_key(n_settle: int, check_every: int, offsets_cm: np.ndarray | None, p
     return h.hexdigest()
 
 
-class SettledStarts(LRU[Settled]):
+class SettledStarts(LRU[str, Settled]):
     """Settled ends by settle_key, the `size` most recently used kept (worker.trial.lru)."""
 
     def __init__(self, size: int = 4) -> None:
