@@ -72,3 +72,32 @@ def test_c_text_still_buffered_when_the_redirect_ends_goes_to_stderr():
                           timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert "unflushed C text" in proc.stderr and json.loads(proc.stdout) == {}
+
+
+def test_two_threads_setting_worlds_up_leave_stdout_on_stdout():
+    """Thread B enters the redirect while A is inside it and leaves after A: were they not taken in turn, B would
+    restore the descriptor it saved (stderr) last, and stdout would stay on stderr."""
+    code = """
+import os, threading
+from spinefarm.worker.engines.bullet import _stdout_to_stderr
+a_in, b_in, a_out = threading.Event(), threading.Event(), threading.Event()
+def a():
+    with _stdout_to_stderr():
+        a_in.set()
+        b_in.wait(0.5)   # B, taken in turn, cannot come in before A leaves
+    a_out.set()
+def b():
+    a_in.wait()
+    with _stdout_to_stderr():
+        b_in.set()
+        a_out.wait()
+threads = [threading.Thread(target=f) for f in (a, b)]
+for t in threads:
+    t.start()
+for t in threads:
+    t.join()
+os.write(1, b"{}")
+"""
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == {}

@@ -15,6 +15,7 @@ import math
 import os
 import sys
 import tempfile
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -76,20 +77,24 @@ def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
     return (float(x), float(y), float(z), float(w))
 
 
+_FD1_LOCK = threading.Lock()
+
+
 @contextmanager
 def _stdout_to_stderr() -> Iterator[None]:
     """File descriptor 1 sent to stderr for a while: pybullet's C code prints there (the MLCP solver's "Constraint
     Solver: MLCP + Dantzig" when it is chosen), which would break `spinefarm trial --json`. Process-wide: only
-    for the calls that set a world up."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    try:
-        os.dup2(2, 1)
-        yield
-    finally:
-        ctypes.CDLL(None).fflush(None)  # C's buffered text goes out now, to stderr, not to stdout later
-        os.dup2(saved, 1)
-        os.close(saved)
+    for the calls that set a world up, one thread at a time (two overlapping would leave stdout on stderr)."""
+    with _FD1_LOCK:
+        sys.stdout.flush()
+        saved = os.dup(1)
+        try:
+            os.dup2(2, 1)
+            yield
+        finally:
+            ctypes.CDLL(None).fflush(None)  # C's buffered text goes out now, to stderr, not to stdout later
+            os.dup2(saved, 1)
+            os.close(saved)
 
 
 def _connect(engine: BulletSettings, dt_s: float) -> int:
