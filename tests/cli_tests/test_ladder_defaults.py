@@ -49,3 +49,13 @@ def test_each_builtins_ladder_is_the_one_the_per_robot_table_names():
     for name, (rungs, eta) in rows.items():
         ladder = load_ladder(name)
         assert (ladder.rungs(30.0), ladder.eta) == (rungs, eta), name
+
+
+def test_a_builtins_measured_ladder_names_a_command_the_docs_quote():
+    """A built-in's `ladder:` block with a `source` names the bench command of a docs table (the line breaks of
+    the docs aside); the tetrahedral complex's is the 27-gait sample's."""
+    quoted = " ".join(_section().split())
+    measured = {n: load_ladder(n).source for n in builtin_names() if load_ladder(n).source}
+    assert set(measured) == {"tetrahedral-complex"}
+    for name, command in measured.items():
+        assert command.startswith("python bench/ladder.py") and f"`{command} --jobs 2`" in quoted, name

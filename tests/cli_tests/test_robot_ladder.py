@@ -67,6 +67,15 @@ def test_a_file_without_a_ladder_takes_its_bases_and_else_the_default(tmp_path, 
     assert parent.exists()
 
 
+def test_a_files_own_ladder_replaces_its_bases_whole(tmp_path):
+    # the tetrahedral complex's is measured (its block names the command); a file's own block is not that one
+    path = _spec(tmp_path, "own.yaml", "ladder:\n  rungs: [1/2, 1]\n  eta: 2\n", base="tetrahedral-complex")
+    assert load_ladder("tetrahedral-complex").source.startswith("python bench/ladder.py")
+    ladder = load_ladder(str(path))
+    assert (ladder.rungs(30.0), ladder.eta, ladder.source, ladder.reason) == (
+        "15,30", 2, "", "the robot's ladder, own.yaml")
+
+
 def test_a_typed_rungs_or_eta_wins(tmp_path, mujoco):
     from spinefarm.cli.run_setup import search_settings
     from spinefarm.protocol.settings import JudgePolicy
@@ -139,3 +148,14 @@ def test_a_search_of_a_users_file_screens_with_its_ladder_and_stores_it(tmp_path
     assert (choice.rungs_added, choice.eta_added, choice.ladder_reason) == ("0.5,1.5,3", 2, "the robot's ladder, "
                                                                                             "mine.yaml")
     assert "rungs 0.5,1.5,3 eta 2 (the robot's ladder, mine.yaml)" in err and "calibrating" not in err
+
+
+def test_a_search_of_the_tetrahedral_complex_screens_with_its_measured_ladder(tmp_path):
+    from spinefarm.storage.hdf5_reader import read_run
+
+    err = _search("tetrahedral-complex", tmp_path / "tc.h5")
+    settings = read_run(tmp_path / "tc.h5")[0].settings
+    # docs/performance.md, "Per robot": a sixth, a third and the whole at eta 4, measured on this robot
+    assert ([r.duration_s for r in settings.ladder], settings.eta) == ([0.5, 1.0, 3.0], 4)
+    assert settings.engine_choice.ladder_reason == "the robot's measured ladder, tetrahedral-complex.yaml"
+    assert "rungs 0.5,1,3 eta 4 (the robot's measured ladder, tetrahedral-complex.yaml)" in err

@@ -140,6 +140,8 @@ def _with_base(spec: SpecSource, doc: LineDict, seen: set[str]) -> LineDict:
     base_doc = _with_base(base_spec, mapping(base_spec, compose(base_text, base_spec), "(document)", 1,
                                              allowed=TOP_KEYS), seen | {key})
     merged = _merged(base_doc, LineDict({k: v for k, v in doc.items() if k != "base"}))
+    if "ladder" in doc:  # a ladder of its own replaces the base's whole: the base's measurement is not its own
+        merged["ladder"] = doc["ladder"]
     merged.key_lines = {**base_doc.key_lines, **doc.key_lines}
     return merged
 
