@@ -1,8 +1,8 @@
 """A robot's screening ladder: the rungs `search --engine auto` screens it with on MuJoCo when no `--rungs` are
 given, as fractions of the trial, and the eta that goes with them (docs/morphology-format.md, "The screening
 ladder"; the measured ones in docs/performance.md). A spec file carries its own in a `ladder:` block, or takes its
-`base:` spec's; like the `search:` block it is no part of the robot (its spec hash, and so its calibration, stay
-the same):
+`base:` spec's (a block of its own replaces the base's whole, its `source` too); like the `search:` block it is
+no part of the robot (its spec hash, and so its calibration, stay the same):
 
     ladder:
       rungs: [2/30, 5/30, 1]      # fractions of the trial, increasing, the last the whole trial
@@ -21,7 +21,7 @@ from spinefarm.protocol.errors import ConfigError
 from spinefarm.protocol.settings import DEFAULT_ETA
 from spinefarm.robot.morphology.specyaml import SpecSource, line_of, mapping, number
 
-WHOLE_TOLERANCE = 1e-9  # the last fraction is 1 up to this (2/30 * 15 need not be exactly 1)
+WHOLE_TOLERANCE = 1e-9  # the last fraction is 1 up to this (an expression such as 0.1 * 10 need not give 1.0)
 
 
 @dataclass(frozen=True)
