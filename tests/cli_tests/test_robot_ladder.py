@@ -159,3 +159,14 @@ def test_a_search_of_the_tetrahedral_complex_screens_with_its_measured_ladder(tm
     assert ([r.duration_s for r in settings.ladder], settings.eta) == ([0.5, 1.0, 3.0], 4)
     assert settings.engine_choice.ladder_reason == "the robot's measured ladder, tetrahedral-complex.yaml"
     assert "rungs 0.5,1,3 eta 4 (the robot's measured ladder, tetrahedral-complex.yaml)" in err
+
+
+def test_check_shows_a_files_ladder(tmp_path, capsys):
+    from tests.worker_tests.test_specfile import GOOD
+
+    path = tmp_path / "chain.yaml"
+    path.write_text(GOOD + LADDER)  # a 10 s trial
+    main(["check", str(path), "--json"])
+    ladder = json.loads(capsys.readouterr().out)["ladder"]
+    # 10 * 2/30 and 10 * 5/30 s, to six digits
+    assert ladder == {"rungs": "0.666667,1.66667,10", "eta": 3, "reason": "the robot's ladder, chain.yaml"}
