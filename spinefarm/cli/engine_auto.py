@@ -26,10 +26,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_calibration_arguments(g, prefix="calibrate-")
 
 
-def default_rungs(duration_s: float) -> str:
-    """Successive halving over a sixth of the trial, a third and the whole of it (5,10,30 for 30 s: the ladder
-    bench/ladder.py chose, docs/performance.md)."""
-    return f"{duration_s / 6:g},{duration_s / 3:g},{duration_s:g}"
+def screen_ladder(args: argparse.Namespace, duration_s: float) -> tuple[str, int, str]:
+    """The rungs, eta and reason `--engine auto` screens with when no `--rungs` are given: the robot's ladder
+    (its spec's `ladder:` block, docs/performance.md's measured table for a built-in), else a sixth, a third
+    and the whole trial at eta 4; a typed `--eta` wins."""
+    from spinefarm.robot.morphology.registry import load_ladder
+
+    ladder = load_ladder(args.morphology)
+    if args.eta is not None:
+        return ladder.rungs(duration_s), args.eta, f"{ladder.reason}; --eta {args.eta} given"
+    return ladder.rungs(duration_s), ladder.eta, ladder.reason
 
 
 def wants_auto(args: argparse.Namespace) -> bool:
@@ -37,7 +43,8 @@ def wants_auto(args: argparse.Namespace) -> bool:
 
 
 def choose_engine(args: argparse.Namespace) -> Any:
-    """Resolve --engine auto in place (args.engine, and args.rungs when screening on MuJoCo without rungs):
+    """Resolve --engine auto in place (args.engine, and args.rungs and args.eta when screening on MuJoCo without
+    rungs: screen_ladder):
     the EngineChoice stored with the run, or None when the engine was given or nothing is simulated. A
     calibration that cannot run falls back to Bullet (the default engine) and says why."""
     from spinefarm.coordinator.problem import is_test_objective
@@ -75,12 +82,14 @@ def choose_engine(args: argparse.Namespace) -> Any:
             args.engine = None
             return None
     args.engine = result["decision"]
-    rungs = None
+    rungs, why = None, ""
     if args.engine == "mujoco" and args.rungs is None:
         from spinefarm.robot.morphology.registry import load_morphology
 
-        args.rungs = rungs = default_rungs(args.duration or load_morphology(args.morphology).duration_s)
-    choice = EngineChoice.from_calibration(result, cached, rungs)
+        duration_s = args.duration or load_morphology(args.morphology).duration_s
+        rungs, args.eta, why = screen_ladder(args, duration_s)
+        args.rungs = rungs
+    choice = EngineChoice.from_calibration(result, cached, rungs, args.eta if rungs else None, why)
     print(choice.describe(), file=sys.stderr)
     return choice
 

@@ -112,11 +112,12 @@ def _search_fields(source: str) -> tuple:
 
 def cmd_check(args: argparse.Namespace) -> int:
     from spinefarm.cli.waiting import Waiting
-    from spinefarm.robot.morphology.registry import load_morphology
+    from spinefarm.robot.morphology.registry import load_ladder, load_morphology
     from spinefarm.worker.tools.contract import run_contract
 
     morph = load_morphology(args.morphology)
     body_fields = _search_fields(args.morphology)
+    ladder = load_ladder(args.morphology)
     with Waiting(f"checking {morph.name}", "checks") as wait:
         results = run_contract(morph, args.engine, progress=wait)
     ok = all(r.passed for r in results)
@@ -124,11 +125,15 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(json.dumps({"morphology": morph.name, "passed": ok,
                           "checks": [{"name": r.name, "passed": r.passed, "detail": r.detail} for r in results],
                           "search": [{"field": f.path, "low": f.low, "high": f.high, "unit": f.unit}
-                                     for f in body_fields]}, indent=2))
+                                     for f in body_fields],
+                          "ladder": {"rungs": ladder.rungs(morph.duration_s), "eta": ladder.eta,
+                                     "reason": ladder.reason}}, indent=2))
     else:
         for f in body_fields:
             unit = "x the geometry as written" if f.unit == "1" else f.unit
             print(f"search {f.path}: {f.low:g} to {f.high:g} {unit}")
+        print(f"ladder (a MuJoCo screen without --rungs): rungs {ladder.rungs(morph.duration_s)} eta {ladder.eta} "
+              f"({ladder.reason})")
         for r in results:
             print(f"{'ok  ' if r.passed else 'FAIL'} {r.name}: {r.detail}")
         print(f"{morph.name}: {'every check passed' if ok else 'FAILED'}")

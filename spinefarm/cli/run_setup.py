@@ -226,13 +226,14 @@ def search_settings(args: argparse.Namespace, rungs: Any, lease_s: float, judge:
     """The SearchSettings the flags ask for (each value checked as it is built)."""
     from spinefarm.coordinator.samplers import DEFAULT_SAMPLER
     from spinefarm.coordinator.setup import SearchSettings
-    from spinefarm.protocol.settings import AuditPolicy
+    from spinefarm.protocol.settings import DEFAULT_ETA, AuditPolicy
 
     return SearchSettings(trials=2000 if args.trials is None else args.trials,
                           sampler=args.sampler or DEFAULT_SAMPLER, sigma=args.sigma, top_k=args.top_k,
                           startup_trials=args.startup_trials, lease_s=lease_s, judge=judge,
                           audit=AuditPolicy(args.audit, args.audit_tolerance), rungs=rungs or None,
-                          eta=args.eta, engine_choice=choice, enqueued=enqueued)
+                          eta=DEFAULT_ETA if args.eta is None else args.eta, engine_choice=choice,
+                          enqueued=enqueued)
 
 
 def judge_policy(args: argparse.Namespace, config: Any) -> Any:

@@ -139,8 +139,9 @@ def _ladder_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rungs", metavar="S,S,...", default=None,
                    help="screen every parameter set with a short trial and promote the best 1/eta to each longer "
                         "one (successive halving), e.g. 10,30; the last is the full trial length")
-    g.add_argument("--eta", type=int, default=DEFAULT_ETA,
-                   help=f"keep the best 1/eta of each rung (default {DEFAULT_ETA}, measured: docs/performance.md)")
+    g.add_argument("--eta", type=int, default=None,
+                   help=f"keep the best 1/eta of each rung (default {DEFAULT_ETA} with --rungs; when --engine auto "
+                        "adds the rungs, the robot's ladder's, measured: docs/performance.md)")
     g.add_argument("--no-continue", action="store_true",
                    help="simulate every promotion from the start, though the worker that ran its last rung kept "
                         "that rung's end (by default a MuJoCo promotion goes on from it: the same bits, less "

@@ -20,7 +20,8 @@ class EngineChoice:
     from the cache or the package; shipped: from the package (robot/calibrations, made by
     bench/ship_calibrations.py); screen_fit: what fitting the screen to the judge did when the unfitted screen
     failed (worker.tools.screen_fit: its decision, the fitted profile and its hash, the figures before and after),
-    None when no fit ran; rungs_added: the screening rungs auto added ("S,S", None: none added); spearman,
+    None when no fit ran; rungs_added: the screening rungs auto added ("S,S", None: none added), eta_added its
+    eta and ladder_reason why that ladder (the robot's own or the default, cli.engine_auto.screen_ladder); spearman,
     top_overlap of top_k, median_distance_ratio (MuJoCo/Bullet over n_moving gaits that move): the
     agreement; n_random, n_bests: the gaits compared; spec_hash: the robot calibrated; reason: the decision
     in words; tiers: {tier: {cpu_s_per_sim_s, step_error}}."""
@@ -31,6 +32,8 @@ class EngineChoice:
     shipped: bool = False
     screen_fit: dict[str, Any] | None = None
     rungs_added: str | None = None
+    eta_added: int | None = None
+    ladder_reason: str = ""
     spearman: float | None = None
     top_overlap: int = 0
     top_k: int = 0
@@ -69,12 +72,14 @@ class EngineChoice:
         return cls(**d)
 
     @classmethod
-    def from_calibration(cls, result: dict[str, Any], cached: bool, rungs_added: str | None) -> EngineChoice:
+    def from_calibration(cls, result: dict[str, Any], cached: bool, rungs_added: str | None,
+                         eta_added: int | None = None, ladder_reason: str = "") -> EngineChoice:
         """The choice a calibration result (worker.tools.calibrate.calibration) makes."""
         tiers = {t: {k: v.get(k) for k in ("cpu_s_per_sim_s", "step_error")}
                  for t, v in (result.get("tiers") or {}).items()}
         return cls(engine=result["decision"], cached=cached, shipped=bool(result.get("shipped")),
-                   screen_fit=result.get("screen_fit"), rungs_added=rungs_added,
+                   screen_fit=result.get("screen_fit"), rungs_added=rungs_added, eta_added=eta_added,
+                   ladder_reason=ladder_reason,
                    spearman=result.get("spearman"), top_overlap=int(result.get("top_overlap") or 0),
                    top_k=int(result.get("top_k") or 0), median_distance_ratio=result.get("median_distance_ratio"),
                    n_moving=int(result.get("n_moving") or 0), n_random=int(result.get("n_random") or 0),
@@ -92,5 +97,7 @@ class EngineChoice:
                 f"median distance ratio {ratio} (MuJoCo/Bullet, {self.n_moving} gaits that move); "
                 f"CPU s per simulated s {cost}"
                 + (f"; rungs {self.rungs_added}" if self.rungs_added else "")
+                + (f" eta {self.eta_added}" if self.rungs_added and self.eta_added else "")
+                + (f" ({self.ladder_reason})" if self.rungs_added and self.ladder_reason else "")
                 + (" [shipped calibration]" if self.shipped else " [calibration cached]" if self.cached else "")
                 + ("" if self.screen_fit is None else f"\n  {self.screen_fit.get('summary', '')}"))

@@ -155,9 +155,9 @@ class RunSettings:
         "judge": "{enabled, rung, tolerance, perturb, drift, share in (0, 1], opinion (null or a rung)}",
         "audit": "{fraction in [0, 1], tolerance >= 0, quarantine}",
         "lease_s": "seconds > 0",
-        "engine_choice": "null, or how --engine auto chose the tier: {engine, mode, cached, rungs_added, spearman, "
-                         "top_overlap, top_k, median_distance_ratio, n_moving, n_random, n_bests, spec_hash, "
-                         "reason, tiers}",
+        "engine_choice": "null, or how --engine auto chose the tier: {engine, mode, cached, rungs_added, "
+                         "eta_added, ladder_reason, spearman, top_overlap, top_k, median_distance_ratio, n_moving, "
+                         "n_random, n_bests, spec_hash, reason, tiers}",
         "enqueued": "list of parameter sets, each a list of numbers in [0, 1] (the unit cube), all one length",
     }
 

@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import argparse
 
-from spinefarm.cli.engine_auto import choose_engine, default_rungs, wants_auto
+from spinefarm.cli.engine_auto import choose_engine, wants_auto
+from spinefarm.robot.morphology.specladder import DEFAULT_LADDER
 
 
 def test_the_default_rungs_are_a_sixth_a_third_of_the_trial_and_the_whole():
-    assert default_rungs(30.0) == "5,10,30"
-    assert default_rungs(5.0) == "0.833333,1.66667,5"
+    assert DEFAULT_LADDER.rungs(30.0) == "5,10,30" and DEFAULT_LADDER.eta == 4
+    assert DEFAULT_LADDER.rungs(5.0) == "0.833333,1.66667,5"
 
 
 def _args(**kw) -> argparse.Namespace:
@@ -55,8 +56,8 @@ def test_a_mujoco_decision_screens_on_mujoco_over_a_sixth_a_third_and_the_whole(
     _shipped(tmp_path, monkeypatch, "mujoco")
     args = _search()                         # tetraspine's trial: 30 s
     choice = choose_engine(args)
-    assert (args.engine, args.rungs) == ("mujoco", "5,10,30")
-    assert (choice.engine, choice.cached, choice.rungs_added) == ("mujoco", True, "5,10,30")
+    assert (args.engine, args.rungs, args.eta) == ("mujoco", "5,10,30", 4)
+    assert (choice.engine, choice.cached, choice.rungs_added, choice.eta_added) == ("mujoco", True, "5,10,30", 4)
     args = _search("--duration", "12")
     assert choose_engine(args).rungs_added == "2,4,12" and args.rungs == "2,4,12"
     args = _search("--rungs", "1,3")         # the user's rungs are kept

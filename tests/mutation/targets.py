@@ -75,7 +75,7 @@ FUNCTIONS: dict[str, tuple[str, ...]] = {
     # the thresholds, the ranks behind rho, the judge's step and the key (docs/engines.md)
     "calibration": ("ranks", "spearman", "agreement", "decide", "reference_step", "CalibrationSettings"),
     # when auto calibrates, and the rungs it screens with (docs/engines.md)
-    "engine-auto": ("default_rungs", "wants_auto", "choose_engine"),
+    "engine-auto": ("screen_ladder", "wants_auto", "choose_engine"),
     # the wall-clock limit's rule (docs/reliability.md), the death signal, the name of a trial process's end
     "sandbox": ("TrialLimit", "_die_with_parent", "_exit_text"),
 }

@@ -9,7 +9,9 @@ from pathlib import Path
 
 from spinefarm.protocol.errors import UnknownMorphologyError
 from spinefarm.robot.morphology.model import Morphology
-from spinefarm.robot.morphology.specfile import SPEC_DIR, load_spec_file
+from spinefarm.robot.morphology.specfile import SPEC_DIR, load_spec_file, spec_document
+from spinefarm.robot.morphology.specladder import DEFAULT_LADDER, RobotLadder, parse_ladder
+from spinefarm.robot.morphology.specyaml import line_of
 
 
 def builtin_names() -> list[str]:
@@ -46,3 +48,16 @@ def load_morphology(source: str | Mapping | Morphology) -> Morphology:
                          f"{', '.join(builtin_names())} (`spinefarm spec NAME > FILE.yaml` starts a new one)")
     raise UnknownMorphologyError("unknown morphology", received=source,
                                  expected=f"one of {builtin_names()} or a path to a .yaml spec file")
+
+
+def load_ladder(source: str) -> RobotLadder:
+    """The screening ladder of a built-in or a spec file (its own `ladder:` or its base's), else the default
+    (robot.morphology.specladder)."""
+    if source in builtin_names():
+        path: Path | None = builtin_path(source)
+    else:
+        path = Path(source) if Path(source).suffix.lower() in (".yaml", ".yml") else None
+    if path is None:
+        return DEFAULT_LADDER
+    spec, doc = spec_document(path.read_text(encoding="utf-8"), str(path))  # its `base:`'s ladder if not its own
+    return parse_ladder(spec, doc["ladder"], line_of(doc, "ladder")) if "ladder" in doc else DEFAULT_LADDER

@@ -16,6 +16,7 @@ import numpy as np
 from spinefarm.protocol.errors import ConfigError, MorphologySpecError
 from spinefarm.robot.morphology.bodycheck import static_problem
 from spinefarm.robot.morphology.model import ControlSpec, ImpedanceGains, Morphology
+from spinefarm.robot.morphology.specladder import parse_ladder
 from spinefarm.robot.morphology.specsearch import BodyField, parse_search, with_body
 from spinefarm.robot.morphology.specstructure import build_structure
 from spinefarm.robot.morphology.specyaml import (
@@ -34,7 +35,7 @@ from spinefarm.robot.morphology.structure import (
 
 SPEC_DIR = Path(__file__).parent / "specs"
 TOP_KEYS = ("base", "name", "description", "segments", "placement", "joints", "rod_materials", "string_materials",
-            "control", "scored_segment", "duration_s", "ground_friction", "controllers", "extra", "search")
+            "control", "scored_segment", "duration_s", "ground_friction", "controllers", "extra", "search", "ladder")
 BODY_PROBES = 5  # values tried along each searched range before it is said to admit no valid body
 SEGMENT_KEYS = ("count", "nodes", "rods", "transforms", "rod_length_scale", "spacing_scale")
 
@@ -139,6 +140,8 @@ def _with_base(spec: SpecSource, doc: LineDict, seen: set[str]) -> LineDict:
     base_doc = _with_base(base_spec, mapping(base_spec, compose(base_text, base_spec), "(document)", 1,
                                              allowed=TOP_KEYS), seen | {key})
     merged = _merged(base_doc, LineDict({k: v for k, v in doc.items() if k != "base"}))
+    if "ladder" in doc:  # a ladder of its own replaces the base's whole: the base's measurement is not its own
+        merged["ladder"] = doc["ladder"]
     merged.key_lines = {**base_doc.key_lines, **doc.key_lines}
     return merged
 
@@ -154,9 +157,12 @@ def spec_document(text: str, source: str = "<string>") -> tuple[SpecSource, Line
 def parse_spec(text: str, source: str = "<string>", *, segments: int | None = None,
                name: str | None = None) -> Morphology:
     """Morphology from spec-file text. `segments` and `name` override the file's values. A `search:` block is
-    checked (robot.morphology.specsearch) and is no part of the robot."""
+    checked (robot.morphology.specsearch) and is no part of the robot, nor is a `ladder:` block
+    (robot.morphology.specladder), checked here too."""
     spec, doc = spec_document(text, source)
     morph = from_document(spec, doc, segments=segments, name=name)
+    if "ladder" in doc:
+        parse_ladder(spec, doc["ladder"], line_of(doc, "ladder"))
     if "search" in doc:
         check_search(spec, doc, morph, segments=segments, name=name)
     return morph
