@@ -13,7 +13,7 @@ from spinefarm.protocol.errors import StorageError
 from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.states import REFUTED_VERDICTS, STORED_STATUSES, AuditState, TrialStatus, Verification
 from spinefarm.storage import pareto
-from spinefarm.storage.ranking import COT_OBJECTIVES, agreeing, judge_cots, ranked_values
+from spinefarm.storage.ranking import COT_OBJECTIVES, agreeing, judge_cots, ranked_values, screen_bias
 from spinefarm.storage.schema import FILE_SCHEMA_VERSION, RunMeta, TrialRecord
 
 # A result whose audit found it wrong, or is still refereeing it, or whose worker was quarantined (until
@@ -202,7 +202,7 @@ class BaseStorage:
         ranked = {c: cols[c][ids] for c in _RANKED_BY}
         if objective in COT_OBJECTIVES:  # a judged set ranks by the judge's COT too
             ranked |= {"cot": cols["cot"][ids], "judge_cot": judge_cots(self.evaluations(), ids)}
-        value = ranked_values(ranked, objective)
+        value = ranked_values(ranked, objective, screen_bias(cols))   # the bias from every row, not these
         order = np.lexsort((ids, -value, -cols["rung"][ids]))
         return [int(i) for i in ids[order[:k]]]
 

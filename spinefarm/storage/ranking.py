@@ -25,6 +25,30 @@ from spinefarm.protocol.states import JUDGED_VERDICTS, REFUTED_VERDICTS, AuditSt
 SCALED_OBJECTIVES = ("distance", "speed", "cot_distance", "pareto")  # proportional to the distance
 COT_OBJECTIVES = ("cot_distance", "pareto")  # a distance or speed over (1 + COT)
 _TINY_M = 1e-12
+# a best that barely moves says nothing of the screen: a few millimetres of step error are a factor of 4 on the
+# first bests of a search, which move a few centimetres (the judge's drift rule reads the same population)
+MOVED_M = 0.1
+BIAS_MIN_JUDGED = 3   # the drift rule's window: one or two ratios are a single gait's luck
+
+
+def judge_ratios(cols: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The screen-to-judge ratios the judge measured on bests that moved MOVED_M or more, in trial-id order."""
+    ratio = np.asarray(cols["judge_ratio"], dtype=float)
+    moved = np.fmax(cols["distance_m"], cols["verify_distance_m"]) >= MOVED_M
+    return ratio[np.isfinite(ratio) & moved]
+
+
+def screen_bias(cols: Mapping[str, np.ndarray]) -> float:
+    """Judged over screen distance as the judge found it: 1 / the median of the judged bests' judge_ratios
+    (judged verdicts only), once BIAS_MIN_JUDGED of them moved; 1 before, or for a file without the column."""
+    if "judge_ratio" not in cols:
+        return 1.0
+    judged = np.isin(cols["verification"], JUDGED_VERDICTS)
+    ratios = judge_ratios({k: np.asarray(cols[k])[judged] for k in ("judge_ratio", "distance_m", "verify_distance_m")})
+    if ratios.size < BIAS_MIN_JUDGED:
+        return 1.0
+    median = float(np.median(ratios))
+    return 1.0 / median if median > 0 else 1.0
 
 
 def judged_speed_cm_s(judged_distance_m: float, sim_time_s: float) -> float:
@@ -34,28 +58,38 @@ def judged_speed_cm_s(judged_distance_m: float, sim_time_s: float) -> float:
 
 
 def ranked_value(objective_name: str, objective: float, distance_m: float, verification: bytes,
-                 verify_distance_m: float, cot: float = math.nan, judge_cot: float = math.nan) -> float:
-    """The value a complete set ranks by (see the module's doc); cot: the screen's, judge_cot: the judge's."""
+                 verify_distance_m: float, cot: float = math.nan, judge_cot: float = math.nan,
+                 bias: float = 1.0) -> float:
+    """The value a complete set ranks by (see the module's doc); cot: the screen's, judge_cot: the judge's,
+    bias: the run's screen_bias."""
     cols = {"objective": np.array([objective]), "distance_m": np.array([distance_m]),
             "verification": np.array([verification]), "verify_distance_m": np.array([verify_distance_m]),
             "cot": np.array([cot]), "judge_cot": np.array([judge_cot])}
-    return float(ranked_values(cols, objective_name)[0])
+    return float(ranked_values(cols, objective_name, bias)[0])
 
 
-def ranked_values(cols: Mapping[str, np.ndarray], objective_name: str) -> np.ndarray:
-    """ranked_value of every row at once."""
-    obj = np.asarray(cols["objective"], dtype=float)
+def is_judged(cols: Mapping[str, np.ndarray], objective_name: str) -> np.ndarray:
+    """Rows that rank by the judge's figure rather than the screen's."""
     judged = np.isin(cols["verification"], JUDGED_VERDICTS) & np.isfinite(cols["verify_distance_m"])
-    if objective_name == "distance":
-        return np.where(judged, cols["verify_distance_m"], obj)
+    if objective_name != "distance":
+        judged &= np.abs(np.asarray(cols["distance_m"], dtype=float)) > _TINY_M
+    return judged
+
+
+def ranked_values(cols: Mapping[str, np.ndarray], objective_name: str, bias: float = 1.0) -> np.ndarray:
+    """ranked_value of every row at once; bias: the run's screen_bias (computed over all its rows, not these)."""
+    obj = np.asarray(cols["objective"], dtype=float)
     if objective_name not in SCALED_OBJECTIVES:
         return obj
+    judged = is_judged(cols, objective_name)
+    screened = np.where(obj > 0, obj * bias, obj)   # a set that went backwards is not made to look better
+    if objective_name == "distance":
+        return np.where(judged, cols["verify_distance_m"], screened)
     d = np.asarray(cols["distance_m"], dtype=float)
-    judged &= np.abs(d) > _TINY_M
     ratio = np.divide(cols["verify_distance_m"], d, out=np.ones_like(obj), where=judged)
     if objective_name in COT_OBJECTIVES and "judge_cot" in cols:
         ratio = ratio * _cot_factor(np.asarray(cols["cot"], dtype=float), np.asarray(cols["judge_cot"], dtype=float))
-    return np.where(judged, obj * ratio, obj)
+    return np.where(judged, obj * ratio, screened)
 
 
 def _cot_factor(screen_cot: np.ndarray, judge_cot: np.ndarray) -> np.ndarray:

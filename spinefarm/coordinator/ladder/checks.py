@@ -40,14 +40,12 @@ from spinefarm.protocol.verdicts import judge_verdict, relative_change
 from spinefarm.robot.chaos_floors import holds_tolerance
 from spinefarm.storage.base import BaseStorage
 from spinefarm.storage.evaluations import judge_wall_s, row_of
+from spinefarm.storage.ranking import BIAS_MIN_JUDGED, judge_ratios
 
 log = logging.getLogger("spinefarm.coordinator")
 # a judge run stopped by its wall-clock limit is issued again this many times before it counts as diverged
 _JUDGE_TIMEOUT_RETRIES = 2
-_DRIFT_WINDOW = 3
-# a best that barely moves says nothing of the screen: a few millimetres of step error are a factor of 4 on the
-# first bests of a search, which move a few centimetres, and once halved the step stays halved all run
-_DRIFT_MIN_DISTANCE_M = 0.1
+_DRIFT_WINDOW = BIAS_MIN_JUDGED   # three ratios, as the screen's bias the ranking applies
 
 
 class Checks:
@@ -80,9 +78,7 @@ class Checks:
 
     def drift(self) -> str | None:
         """Why the screen is no longer trusted (three judged ratios in a row drifted), or None."""
-        cols = self.storage.columns()
-        moved = np.fmax(cols["distance_m"], cols["verify_distance_m"]) >= _DRIFT_MIN_DISTANCE_M
-        ratios = cols["judge_ratio"][np.isfinite(cols["judge_ratio"]) & moved]
+        ratios = judge_ratios(self.storage.columns())
         d = self.settings.judge.drift
         for i in range(len(ratios) - _DRIFT_WINDOW + 1):
             m = float(np.median(ratios[i:i + _DRIFT_WINDOW]))
