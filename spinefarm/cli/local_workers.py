@@ -26,7 +26,7 @@ from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
 
-from spinefarm.cli.stop_signals import die_with_parent
+from spinefarm.worker.service.parent_death import HELPER_PREEXEC
 
 MAX_FAILURES = 3            # start failures in a row before the search stops
 DEATH_WINDOW_S = 60.0
@@ -83,7 +83,7 @@ class LocalWorkers:
         with open(log_path, "wb") as err:
             proc = subprocess.Popen(self.command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err,
                                     env=env,
-                                    preexec_fn=die_with_parent)
+                                    preexec_fn=HELPER_PREEXEC)
         return _Slot(proc, log_path, ready_path)
 
     @staticmethod
