@@ -22,7 +22,9 @@ signum, out = int(sys.argv[1]), sys.argv[2]
 if {ask_itself}:
     die_with_parent(signum)
 def got(n, _frame):
-    open(out, "w").write(str(n))
+    with open(out + ".part", "w") as fh:
+        fh.write(str(n))
+    os.rename(out + ".part", out)  # whole when it appears
     os._exit(0)
 signal.signal(signum, got)
 print(os.getpid(), flush=True)
