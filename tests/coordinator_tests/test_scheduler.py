@@ -256,3 +256,40 @@ def test_tasks_go_first_withdrawn_keys_are_forgotten_and_a_late_result_is_known_
     assert s.take_back("w1") == [held[0].trial_id, held[2].trial_id]
     assert queued_keys(s) == [held[0].trial_id, held[2].trial_id, -4, 11] and s.workers["w1"].leases == set()
     assert s.take_back("nobody") == []
+
+
+def test_a_worker_asking_three_times_without_its_grant_loses_it_to_another_worker():
+    """The rule as documented (scheduler.MAX_UNREPORTED = 3): the first two asks without a granted trial take it
+    back and issue it first again (to the asker); the third bars it from that worker while another live one may run
+    it; from then on the asker gets one new trial at a time, which waits out its lease if it is not run."""
+    clock = FakeClock(0.0)
+    s, ids = Scheduler(clock, lease_s=5.0, start_grace_s=0.0), new_ids()
+    s.contact("w2")
+    assert [ls.trial_id for ls in s.grant("w1", 2, ids)] == [0, 1]
+    for _ in range(2):   # a lost reply: the same trials go back to the same asker
+        assert s.take_back_unreported("w1") == ([0, 1], False)
+        assert [ls.trial_id for ls in s.grant("w1", 2, ids)] == [0, 1]
+    assert s.take_back_unreported("w1") == ([0, 1], True)
+    assert [ls.trial_id for ls in s.grant("w1", 2, ids)] == [2]  # a new one, one at a time
+    assert [ls.trial_id for ls in s.grant("w2", 4, ids)] == [0, 1, 3, 4]
+    assert s.take_back_unreported("w1") == ([], False)  # it keeps failing: its lease runs out as a silent one's
+    assert s.grant("w1", 2, ids) == [] and s.workers["w1"].leases == {2}
+    for tid in (0, 1, 3, 4):
+        s.release(tid)   # w2 ran them
+    clock.advance(5.0)
+    assert s.expire() == [2]
+    assert [ls.trial_id for ls in s.grant("w1", 2, ids)] == [5]  # not trial 2: w2 may run it
+    assert [ls.trial_id for ls in s.grant("w2", 1, ids)] == [2]
+
+
+def test_a_worker_that_returns_a_result_again_gets_its_grants_again():
+    clock = FakeClock(0.0)
+    s, ids = Scheduler(clock, lease_s=5.0, start_grace_s=0.0, max_unreported=2), new_ids()
+    s.contact("w2")
+    s.grant("w1", 1, ids)
+    s.take_back_unreported("w1")
+    s.grant("w1", 1, ids)
+    assert s.take_back_unreported("w1") == ([0], True)
+    (lease,) = s.grant("w1", 3, ids)
+    s.release(lease.trial_id)   # it ran one after all: back to full batches and lost grants re-issued to it
+    assert len(s.grant("w1", 3, ids)) == 3 and s.take_back_unreported("w1")[1] is False
