@@ -19,6 +19,10 @@ lease_s (a worker that never asks does not hold a trial back). For `start_grace_
 starts, while workers are still (re)connecting, a timed-out or crashed trial waits for another worker
 rather than going back to the only one known. Kept in memory with the attempt count, so both start
 again after a coordinator restart.
+
+A worker asking for work without trials it holds never got or could not run their grant: they are issued again
+first (`take_back_unreported`), and after MAX_UNREPORTED such asks in a row they go to other workers; the worker
+then gets one trial per lease_s, lost as a silent worker's lease is, until it returns a result.
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ class WorkerState:
     last_contact_s: float
     leases: set[int] = field(default_factory=set)
     unreported: int = 0   # asks in a row without trials it was granted (reset when it returns one)
+    probe_after_s: float = 0.0   # while unreported >= max_unreported: when it may be granted a trial again
 
 
 class Scheduler:
@@ -125,8 +130,8 @@ class Scheduler:
         worker = self.contact(worker_id)
         capacity = min(capacity, self.max_grant - len(worker.leases))
         suspect = worker.unreported >= self.max_unreported   # its grants do not reach it, or it cannot run them
-        if suspect:  # one trial at a time, none it lost that others could take; an unrun one waits out its lease
-            capacity = 0 if worker.leases else min(capacity, 1)
+        if suspect:  # one trial per lease_s, none it lost that others could take: it may have come right
+            capacity = 0 if worker.leases or now < worker.probe_after_s else min(capacity, 1)
         ok = eligible or (lambda key, wid: True)
         out: list[Lease] = []
         fresh = True   # new trials may still come (before a trial this worker lost goes back to it)
@@ -149,6 +154,8 @@ class Scheduler:
             heapq.heappush(self._deadlines, (lease.deadline_s, tid, lease.lease_id))
             worker.leases.add(tid)
             out.append(lease)
+        if suspect and out:
+            worker.probe_after_s = now + self.lease_s
         return out
 
     def _next_queued(self, worker_id: str, ok: Callable[[int, str], bool], now: float, *,
@@ -212,13 +219,15 @@ class Scheduler:
         """The worker asks for work without results of keys it holds: (keys taken back, whether they are barred).
         Below max_unreported asks in a row they are taken back and issued first again (a lost reply: it may
         well be the asker that gets them). At the max_unreported-th they are taken back and barred: counted as
-        lost on it, they go to other live workers first. Beyond it the worker keeps failing: what it holds is
-        left to run out as a silent worker's lease does ([], False)."""
+        lost on it, they go to other live workers first. Beyond it the worker keeps failing: what it holds is lost
+        as a silent worker's lease is (an attempt counted, max_attempts end it), at once rather than at its
+        deadline, and it is granted one trial per lease_s ([], False: nothing more to say)."""
         w = self.workers.get(worker_id)
         if w is None or not w.leases:
             return [], False
         w.unreported += 1
         if w.unreported > self.max_unreported:
+            self._reissue(sorted(w.leases), f"worker {worker_id} asked for work without it")
             return [], False
         keys = self.take_back(worker_id)
         barred = w.unreported == self.max_unreported
