@@ -2,7 +2,10 @@
 stored, and the processes around it (a coordinator, witnesses, the acknowledgement logs, the file checked
 against them). bench/faults.py and its tests use it.
 
-usage (spawned by witness()): python bench/fault_witness.py ENDPOINT RUN_ID WORKER_ID LOG_PATH
+A witness started with the fault "drop-grants" asks for work and drops every grant it gets, as a worker whose grants
+never reach it (a lost reply, a run config it cannot fetch) does: it never runs a trial.
+
+usage (spawned by witness()): python bench/fault_witness.py ENDPOINT RUN_ID WORKER_ID LOG_PATH [drop-grants]
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from spinefarm.protocol import keys  # noqa: E402
 from spinefarm.storage.hdf5_reader import read_run  # noqa: E402
 
 
-def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) -> int:
+def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str, fault: str = "") -> int:
     """The worker protocol (pull, run, carry results with the next request) with an acknowledgement log."""
     import zenoh
 
@@ -59,6 +62,9 @@ def witness_worker(endpoint: str, run_id: str, worker_id: str, log_path: str) ->
             if g.run_done:
                 session.close()
                 return 0
+            if fault == "drop-grants":
+                time.sleep(0.2)   # a worker's back-off before it asks again
+                continue
             if g.config_hash not in evaluators:
                 cfgs = [decode_message(r.ok.payload.to_bytes(), RunConfig)
                         for r in session.get(keys.config(run_id, g.config_hash), timeout=5.0) if r.ok]
@@ -81,8 +87,8 @@ def coordinator(ep: str, out: Path, *args: str) -> subprocess.Popen:
     return spawn("-m", "spinefarm", "coordinator", *tail, "--listen", ep, "--api-port", "-1", "--quiet")
 
 
-def witness(ep: str, run_id: str, wid: str, log: Path) -> subprocess.Popen:
-    return spawn(str(Path(__file__).resolve()), ep, run_id, wid, str(log))
+def witness(ep: str, run_id: str, wid: str, log: Path, fault: str = "") -> subprocess.Popen:
+    return spawn(str(Path(__file__).resolve()), ep, run_id, wid, str(log), *((fault,) if fault else ()))
 
 
 def acked(logs: list[Path]) -> list[tuple[int, float]]:
@@ -122,4 +128,4 @@ def check_file(out: Path, budget: int, acks: list[tuple[int, float]]) -> dict:
 
 
 if __name__ == "__main__":
-    sys.exit(witness_worker(*sys.argv[1:5]))
+    sys.exit(witness_worker(*sys.argv[1:6]))

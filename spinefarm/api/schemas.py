@@ -104,6 +104,17 @@ class TrialPage(BaseModel):
     limit: int
     trials: list[Trial]
 
+class Ladder(BaseModel):
+    """The rungs a run screens with and why (`search --engine auto` stores its reason with the ladder it adds)."""
+
+    rungs: str = Field(description="the rungs' trial lengths in s, as --rungs takes them, e.g. \"0.5,1.5,3\"")
+    eta: int = Field(description="the halving scheduler keeps the best 1/eta of each rung")
+    reason: str | None = Field(description="why this ladder: the robot's own (its spec file named), the default, "
+                               "\"--eta N given\", or \"typed (--rungs)\"; null: auto added it before the reason "
+                               "was stored")
+    engine_auto: bool = Field(description="`search --engine auto` added this ladder (else the rungs were typed)")
+
+
 class Worker(BaseModel):
     worker_id: str
     alive: bool
@@ -157,6 +168,8 @@ class RunStatus(BaseModel):
     step_s: float | None = Field(None, description="the physics step the trials ran with (median)")
     sampler: str | None = None
     rungs_s: list[float] | None = Field(None, description="a multi-fidelity run's trial lengths, short to full")
+    ladder: Ladder | None = Field(None, description="a multi-fidelity run's screening ladder and why it is this "
+                                  "one (null: a run of one length)")
     reopen_command: str = Field(description="the command that serves this run file again")
     resume_command: str | None = Field(None, description="the command that continues a stopped run")
     audit: dict[str, Any] | None = Field(None, description="audits_pending/agrees/disagrees/quarantined, fraction, "

@@ -96,6 +96,20 @@ def rung_lengths_s(settings: Any) -> list[float] | None:
     return [float(d) for d in settings.durations_s()]
 
 
+def ladder_view(settings: Any) -> dict[str, Any] | None:
+    """A multi-fidelity run's screening ladder, named as `spinefarm check --json` names a robot's (rungs as
+    --rungs takes them, eta), and why it is this one: the reason `search --engine auto` stored with the ladder
+    it added (the robot's own or the default; --eta given), else the rungs were typed (null for a ladder auto
+    added before its reason was stored)."""
+    lengths = rung_lengths_s(settings)
+    if lengths is None:
+        return None
+    choice = settings.engine_choice
+    auto = choice is not None and bool(choice.rungs_added)
+    return {"rungs": ",".join(f"{d:g}" for d in lengths), "eta": settings.eta,
+            "reason": (choice.ladder_reason or None) if auto else "typed (--rungs)", "engine_auto": auto}
+
+
 def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
     """The run's status from its file alone (state, counts, best, rate and ETA), with what only a live
     coordinator knows (leases, workers) from its status file when there is one. path: the file as the API
@@ -151,7 +165,7 @@ def run_view(storage: BaseStorage, path: Path) -> dict[str, Any]:
         "engine": (tc.get("engine") or "bullet") if meta.morphology_spec else None,
         "step_s": float(np.median(steps)) if steps.size else None,
         "sampler": (meta.sampler or {}).get("name"),
-        "rungs_s": rung_lengths_s(meta.settings),
+        "rungs_s": rung_lengths_s(meta.settings), "ladder": ladder_view(meta.settings),
         "reopen_command": f"spinefarm api {shown}",
         "resume_command": f"spinefarm search --resume {shown}" if state in ("stopped", "failed", "empty") else None,
     }

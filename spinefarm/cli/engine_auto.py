@@ -14,7 +14,7 @@ import sys
 import threading
 from typing import Any
 
-from spinefarm.cli.stop_signals import die_with_parent
+from spinefarm.worker.service.parent_death import HELPER_PREEXEC
 
 AUTO = "auto"
 
@@ -116,7 +116,7 @@ def calibrate_in_child(morphology: str, settings: Any, fit_evaluations: int = 0,
         cmd += ["--dt", "auto" if settings.auto_dt else repr(settings.dt_s)]
     env = {**os.environ, PROGRESS_ENV: "off" if quiet else "tty" if sys.stderr.isatty() else "lines"}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, env=env,
-                            preexec_fn=die_with_parent)
+                            preexec_fn=HELPER_PREEXEC)
     tail = bytearray()
     relay = threading.Thread(target=_relay, args=(proc.stderr, tail), name="calibration-stderr", daemon=True)
     relay.start()

@@ -11,12 +11,17 @@ business (it is stored as failed after 3 lost leases), not a reason to stop the 
 budgeted per time window: beyond DEATH_BUDGET in DEATH_WINDOW_S a restart waits until the window has
 room, so a crash loop costs little CPU. Only workers that cannot start at all stop the search: MAX_FAILURES
 start failures in a row (exits before the ready file) with no start in between.
+
+The workers' logs and ready files live in the temp folder, in spinefarm-workers-PID-XXXX (PID: the search's);
+the search removes it when it stops. A search killed outright (SIGKILL) cannot, so each new pool first removes
+the folders of searches whose process is gone.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -26,13 +31,14 @@ from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
 
-from spinefarm.cli.stop_signals import die_with_parent
+from spinefarm.worker.service.parent_death import HELPER_PREEXEC
 
 MAX_FAILURES = 3            # start failures in a row before the search stops
 DEATH_WINDOW_S = 60.0
 DEATH_BUDGET = 10           # restarts after deaths per window and worker slot; more wait for room
 EXIT_UNSERVABLE = 3  # worker.service.zenoh_worker: the run cannot be built on this worker
 READY_ENV = "SPINEFARM_READY_FILE"   # worker.service.zenoh_worker writes this file once it has started
+LOGS_PREFIX = "spinefarm-workers-"  # + the search's PID + "-" + a random tail
 
 
 def worker_command(endpoint: str, run_id: str, batch: int | None, zenoh_config: str | None,
@@ -48,6 +54,28 @@ def worker_command(endpoint: str, run_id: str, batch: int | None, zenoh_config: 
     return cmd
 
 
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # another user's process
+    return True
+
+
+def remove_orphaned_logs(root: Path) -> list[Path]:
+    """Remove the log folders under `root` of searches whose process is gone; the ones removed. A folder
+    without a PID in its name (older versions) is left alone: nothing says whether its search still runs."""
+    removed = []
+    for folder in root.glob(f"{LOGS_PREFIX}*-*"):
+        pid = folder.name[len(LOGS_PREFIX):].split("-", 1)[0]
+        if folder.is_dir() and pid.isdigit() and not _process_alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed
+
+
 class _Slot:
     """One worker process of the pool and where it writes its log and its ready file."""
 
@@ -59,7 +87,8 @@ class LocalWorkers:
     """n worker processes; `check()` restarts those that died and says when to give up."""
 
     def __init__(self, command: Sequence[str], n: int, max_failures: int = MAX_FAILURES,
-                 death_budget: int = DEATH_BUDGET, death_window_s: float = DEATH_WINDOW_S) -> None:
+                 death_budget: int = DEATH_BUDGET, death_window_s: float = DEATH_WINDOW_S,
+                 logs_root: Path | None = None) -> None:
         self.command = list(command)
         self.max_failures = max_failures
         self.death_budget = death_budget * max(n, 1)
@@ -67,7 +96,9 @@ class LocalWorkers:
         self.start_failures = 0          # in a row, since the last worker that started
         self.deaths: deque[float] = deque()   # when started workers died (monotonic s), within the window
         self.restarts = 0
-        self._logs = tempfile.TemporaryDirectory(prefix="spinefarm-workers-")
+        root = Path(tempfile.gettempdir()) if logs_root is None else logs_root
+        remove_orphaned_logs(root)
+        self._logs = tempfile.TemporaryDirectory(prefix=f"{LOGS_PREFIX}{os.getpid()}-", dir=root)
         self._spawned = 0
         self.slots: list[_Slot] = [self._spawn() for _ in range(n)]
 
@@ -83,7 +114,7 @@ class LocalWorkers:
         with open(log_path, "wb") as err:
             proc = subprocess.Popen(self.command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err,
                                     env=env,
-                                    preexec_fn=die_with_parent)
+                                    preexec_fn=HELPER_PREEXEC)
         return _Slot(proc, log_path, ready_path)
 
     @staticmethod

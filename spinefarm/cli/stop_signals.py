@@ -1,5 +1,4 @@
-"""Stop a long-running command on SIGINT / SIGTERM without a handler that can hang it; and helper
-processes that stop with the command that started them.
+"""Stop a long-running command on SIGINT / SIGTERM without a handler that can hang it.
 
 A Python signal handler runs in the main thread between two bytecodes, possibly while that thread holds
 the lock inside a threading.Event (in Event.wait, several times a second): a handler calling Event.set()
@@ -13,15 +12,11 @@ without a timeout (Event.wait()) would never run it: wait with `wait_for_stop`, 
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import signal
-import sys
 import threading
 import time
 
 POLL_S = 0.05  # how soon the event follows the signal
-PR_SET_PDEATHSIG = 1
 
 
 def stop_on_signals(stop: threading.Event, signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> list[int]:
@@ -50,12 +45,3 @@ def wait_for_stop(stop: threading.Event) -> None:
     while not stop.wait(POLL_S):
         pass
 
-
-def _die_with_parent() -> None:  # runs in the child between fork and exec
-    with contextlib.suppress(OSError, AttributeError):  # elsewhere the command's own cleanup stops them
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-
-
-# preexec_fn of a helper process (local workers, the engine calibration): it gets SIGTERM when the command
-# that started it dies, even of SIGKILL, instead of running on alone
-die_with_parent = _die_with_parent if sys.platform.startswith("linux") else None

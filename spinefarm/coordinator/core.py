@@ -1,15 +1,14 @@
 """CoordinatorCore: the run's state machine behind the transport (bytes in, bytes out).
 
-Every handler decodes and validates its message, so a malformed or foreign message is logged and
-answered with an error, never raised into the transport and never touching what is stored. One
-lock serialises the handlers, which the transport may call from several threads.
+Every handler decodes and validates its message, so a malformed or foreign message is logged and answered with an
+error, never raised into the transport and never touching what is stored. One lock serialises the handlers, which
+the transport may call from several threads.
 
-A result is acknowledged ("stored") only after the storage has written it out and synced it to the
-disk (`commit`: one fsync per request, however many results it carries), so the file holds every
-acknowledged result after a killed coordinator, a crashed machine or a power cut. A failed write or
-sync (disk full, I/O error) sets `write_failure` (and `failure`): from then on no handler answers
-(workers keep their unacknowledged results and retry), and the process running the core stops with
-that reason.
+A result is acknowledged ("stored") only after the storage has written it out and synced it to the disk (`commit`:
+one fsync per request, however many results it carries), so the file holds every acknowledged result after a killed
+coordinator, a crashed machine or a power cut. A failed write or sync (disk full, I/O error) sets `write_failure`
+(and `failure`): from then on no handler answers (workers keep their unacknowledged results and retry), and the
+process running the core stops with that reason.
 """
 
 from __future__ import annotations
@@ -180,12 +179,15 @@ class CoordinatorCore:
         self._leave_out(worker_id, f"runs other simulating code: {said}, the run's is {self.code_digest[:12]}")
 
     def _take_back_unreported(self, worker_id: str) -> None:
-        """A worker asks for work with every trial it ran in hand (results ride along, or went before): a lease it
-        still holds was in a grant it never received (the reply came after its query timed out, or was lost), or
-        one it gave up (its coordinator fell silent, its engine failed to start). Issued again at once, no attempt
-        counted, rather than after the lease runs out."""
-        lost = self.scheduler.take_back(worker_id)
-        if lost:
+        """A worker asks without results of trials it holds: a grant it never received (its query timed out, the reply
+        was lost) or could not run (no run config): issued again at once, no attempt counted; after max_unreported
+        asks in a row they go to other workers (scheduler)."""
+        lost, barred = self.scheduler.take_back_unreported(worker_id)
+        if barred:
+            log.warning("worker %s asked for work %d times in a row without trial(s) %s it was granted: it does not "
+                        "get or cannot run its grants; they go to other workers", worker_id,
+                        self.scheduler.max_unreported, ", ".join(map(str, lost[:8])))
+        elif lost:
             log.warning("worker %s asked for work without the %d trial(s) it holds (%s): a grant it never got; "
                         "issued again", worker_id, len(lost), ", ".join(map(str, lost[:8])))
 
@@ -252,8 +254,7 @@ class CoordinatorCore:
         if not self.scheduler.is_current(tid, lease_id, worker_id):
             if not self.scheduler.was_issued(tid, lease_id, worker_id):
                 self.forged_results += 1
-                log.warning("result for trial %d from %s quotes a lease it was never given: dropped", tid,
-                            worker_id)
+                log.warning("result for trial %d from %s quotes a lease it was never given: dropped", tid, worker_id)
             return Verdict.STALE
         refused = self.ladder.refuse_quarantined(tid, worker_id)
         if refused is not None:
@@ -282,9 +283,8 @@ class CoordinatorCore:
         """A complete result whose score is NaN or infinite is a failure (it could never rank)."""
         if not result.ok:
             return result
-        parts = {"distance_m": result.distance_m, "ntrt_distance_cm": result.ntrt_distance_cm,
-                 "speed_cm_s": result.speed_cm_s, "work_j": result.work_j,
-                 "objective": self.study.objective(result)}
+        parts = {"distance_m": result.distance_m, "ntrt_distance_cm": result.ntrt_distance_cm, "speed_cm_s":
+                 result.speed_cm_s, "work_j": result.work_j, "objective": self.study.objective(result)}
         bad = [f"{k}={v!r}" for k, v in parts.items() if not math.isfinite(v)]
         if not bad:
             return result

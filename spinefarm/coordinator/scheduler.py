@@ -19,6 +19,10 @@ lease_s (a worker that never asks does not hold a trial back). For `start_grace_
 starts, while workers are still (re)connecting, a timed-out or crashed trial waits for another worker
 rather than going back to the only one known. Kept in memory with the attempt count, so both start
 again after a coordinator restart.
+
+A worker asking for work without trials it holds never got or could not run their grant: they are issued again
+first (`take_back_unreported`), and after MAX_UNREPORTED such asks in a row they go to other workers; the worker
+then gets one trial per lease_s, lost as a silent worker's lease is, until it returns a result.
 """
 
 from __future__ import annotations
@@ -37,6 +41,9 @@ MAX_GRANT = 64       # trials per request and per worker at a time
 MAX_ATTEMPTS = 3     # lost leases before a trial is stored as failed
 _TRIAL_TIME_MARGIN = 4.0
 START_GRACE_S = 10.0  # after a (re)start, workers reconnect within a few seconds
+# Asks in a row without the trials a worker was granted before they go to others: one lost reply happens (a query
+# timed out under load), three in a row (~5 s at a worker's back-off) is a worker that cannot get or run its grants.
+MAX_UNREPORTED = 3
 
 
 @dataclass(frozen=True)
@@ -53,20 +60,25 @@ class WorkerState:
     alive: bool
     last_contact_s: float
     leases: set[int] = field(default_factory=set)
+    unreported: int = 0   # asks in a row without trials it was granted (reset when it returns one)
+    probe_after_s: float = 0.0   # while unreported >= max_unreported: when it may be granted a trial again
 
 
 class Scheduler:
     """Not thread-safe: the coordinator calls it under its own lock."""
 
     def __init__(self, clock: Callable[[], float], lease_s: float = 60.0, *, max_grant: int = MAX_GRANT,
-                 max_attempts: int = MAX_ATTEMPTS, start_grace_s: float = START_GRACE_S) -> None:
+                 max_attempts: int = MAX_ATTEMPTS, start_grace_s: float = START_GRACE_S,
+                 max_unreported: int = MAX_UNREPORTED) -> None:
         check_range("lease_s", lease_s, 0.0, low_inclusive=False)
         check_range("max_grant", max_grant, 1)
         check_range("max_attempts", max_attempts, 1)
+        check_range("max_unreported", max_unreported, 1)
         self.clock = clock
         self.lease_s = float(lease_s)
         self.max_grant = int(max_grant)
         self.max_attempts = int(max_attempts)
+        self.max_unreported = int(max_unreported)
         self.grace_until_s = clock() + start_grace_s
         self.expected_trial_s = self.lease_s       # until trials are measured (observe_trial)
         self._measured = False
@@ -117,6 +129,9 @@ class Scheduler:
         self.expire()
         worker = self.contact(worker_id)
         capacity = min(capacity, self.max_grant - len(worker.leases))
+        suspect = worker.unreported >= self.max_unreported   # its grants do not reach it, or it cannot run them
+        if suspect:  # one trial per lease_s, none it lost that others could take: it may have come right
+            capacity = 0 if worker.leases or now < worker.probe_after_s else min(capacity, 1)
         ok = eligible or (lambda key, wid: True)
         out: list[Lease] = []
         fresh = True   # new trials may still come (before a trial this worker lost goes back to it)
@@ -128,7 +143,7 @@ class Scheduler:
                     self._queue.append(tid)
                     tid = None
                 fresh = tid is not None
-            if tid is None:
+            if tid is None and not suspect:
                 tid = self._next_queued(worker_id, ok, now, again=True)
             if tid is None:
                 break
@@ -139,6 +154,8 @@ class Scheduler:
             heapq.heappush(self._deadlines, (lease.deadline_s, tid, lease.lease_id))
             worker.leases.add(tid)
             out.append(lease)
+        if suspect and out:
+            worker.probe_after_s = now + self.lease_s
         return out
 
     def _next_queued(self, worker_id: str, ok: Callable[[int, str], bool], now: float, *,
@@ -198,6 +215,32 @@ class Scheduler:
             self.push_front(key)
         return keys
 
+    def take_back_unreported(self, worker_id: str) -> tuple[list[int], bool]:
+        """The worker asks for work without results of keys it holds: (keys taken back, whether they are barred).
+        Below max_unreported asks in a row they are taken back and issued first again (a lost reply: it may
+        well be the asker that gets them). At the max_unreported-th they are taken back and barred: counted as
+        lost on it, they go to other live workers first. Beyond it the worker keeps failing: what it holds is lost
+        as a silent worker's lease is (an attempt counted, max_attempts end it), at once rather than at its
+        deadline, and it is granted one trial per lease_s ([], False: nothing more to say)."""
+        w = self.workers.get(worker_id)
+        if w is None or not w.leases:
+            return [], False
+        w.unreported += 1
+        if w.unreported > self.max_unreported:
+            self._reissue(sorted(w.leases), f"worker {worker_id} asked for work without it")
+            return [], False
+        keys = self.take_back(worker_id)
+        barred = w.unreported == self.max_unreported
+        for key in keys if barred else ():
+            self._failed_on.setdefault(key, {})[worker_id] = False
+        return keys, barred
+
+    def _answered(self, key: int) -> None:
+        """The holder of `key`'s lease returned it (stored, or given back failed): it gets its grants."""
+        lease = self._leases.get(key)
+        if lease is not None and lease.worker_id in self.workers:
+            self.workers[lease.worker_id].unreported = 0
+
     def is_current(self, trial_id: int, lease_id: int, worker_id: str) -> bool:
         lease = self._leases.get(trial_id)
         return lease is not None and lease.lease_id == lease_id and lease.worker_id == worker_id
@@ -213,6 +256,7 @@ class Scheduler:
 
     def release(self, trial_id: int) -> None:
         """The trial's result was stored: forget its lease and its history."""
+        self._answered(trial_id)
         self._drop_lease(trial_id)
         self._issued.pop(trial_id, None)
         self._attempts.pop(trial_id, None)
@@ -244,6 +288,7 @@ class Scheduler:
     def retry(self, trial_id: int, why: str) -> None:
         """The lease holder gave the trial back unfinished (it timed out or crashed its simulator there):
         re-queued like a lost lease, and given up after max_attempts with `why` leading its reason."""
+        self._answered(trial_id)
         self._reissue([trial_id], why, hard=True)
 
     def _on_whom(self, key: int) -> str:

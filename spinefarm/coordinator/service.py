@@ -131,12 +131,13 @@ class CoordinatorService:
         self.core.code_digest = self.core.code_digest or code_digest()
         self.core.peers.verify_identity = True
         self._hold(s, run)
+        # work last: a worker granted trials before the config queryable is declared finds no config to run them
         self._entities += [
+            s.declare_queryable(f"{keys.run_prefix(run)}/config/*", self._on_config),
+            s.declare_queryable(keys.results(run), self._guard(self.core.handle_results)),
+            s.declare_queryable(keys.problem(run), self._guard(self.core.handle_problem)),
             s.declare_queryable(keys.run_info(run), self._on_info),
             s.declare_queryable(keys.work(run), self._guard(_timed_work(self.core.handle_work))),
-            s.declare_queryable(keys.results(run), self._guard(self.core.handle_results)),
-            s.declare_queryable(f"{keys.run_prefix(run)}/config/*", self._on_config),
-            s.declare_queryable(keys.problem(run), self._guard(self.core.handle_problem)),
             s.liveliness().declare_subscriber(keys.all_worker_tokens(), self._on_liveliness, history=True),
         ]
         self._thread = threading.Thread(target=self._housekeeping, name="coordinator-housekeeping",

@@ -54,6 +54,11 @@ def test_best_the_trial_page_and_the_run_show_the_judges_cot_not_the_screens(tmp
     assert (page["judged_cot"], unjudged["judged_cot"]) == (6.6, None)
     assert run["best"]["trial_id"] == 1 and run["best"]["judged_cot"] == 5.5
     assert best[0]["model_spread"]["judge"]["cot"] == 5.5 and best[0]["model_spread"]["other"]["cot"] == 7.7
+    # the ratio the judge stores is the screen's distance over the judge's (coordinator/ladder/checks.py), by
+    # hand from the rows above: trial 1 0.30 / 0.40 m, trial 3 0.21 / 0.25 m; none for a trial not judged
+    assert best[0]["verification"]["screen_to_judge_ratio"] == pytest.approx(0.75, rel=1e-12)
+    assert page["verification"]["screen_to_judge_ratio"] == pytest.approx(0.84, rel=1e-12)
+    assert unjudged["verification"]["screen_to_judge_ratio"] is None
 
 
 def test_the_final_report_gives_the_judges_cot_beside_its_distance(tmp_path):
@@ -111,8 +116,11 @@ def test_the_dashboard_and_the_trial_page_show_the_judges_cot(browser, judged_se
         page.goto(f"{judged_server.url}/#/run/{run}/trial/{trial}")
         page.wait_for_selector("#judged-cot")
         shown[(run, trial)] = page.locator("#judged-cot").inner_text()
+        ratio = page.locator("#verification tr", has_text="screen / judge ratio").locator("td")
+        shown[(run, trial), "ratio"] = ratio.nth(1).inner_text() if ratio.count() else None
     page.close()
     assert shown["run-c"] == "5.5 judged" and shown[("run-c", 3)] == "6.6"
+    assert shown[("run-c", 3), "ratio"] == "0.84"   # the screen's 0.21 m over the judge's 0.25 m
     assert shown["run-v8"] == f"2 screen's; judge's {NOT_MEASURED}" and shown[("run-v8", 1)] == NOT_MEASURED
     # the speed beside the judged distance is the judged one: 0.40 m over result()'s 5 s (the screen's: 2 cm/s)
     assert shown["run-c", "speed"] == shown["run-c", "listed speed"] == "8 judged"

@@ -256,3 +256,55 @@ def test_tasks_go_first_withdrawn_keys_are_forgotten_and_a_late_result_is_known_
     assert s.take_back("w1") == [held[0].trial_id, held[2].trial_id]
     assert queued_keys(s) == [held[0].trial_id, held[2].trial_id, -4, 11] and s.workers["w1"].leases == set()
     assert s.take_back("nobody") == []
+
+
+def test_a_worker_asking_three_times_without_its_grant_loses_it_to_another_worker():
+    """The rule as documented (scheduler.MAX_UNREPORTED = 3): the first two asks without a granted trial take it
+    back and issue it first again (to the asker); the third bars it from that worker while another live one may run
+    it; from then on the asker is granted one new trial per lease_s, lost as a silent worker's lease is (an attempt
+    counted) when it asks again without it."""
+    clock = FakeClock(0.0)
+    s, ids = Scheduler(clock, lease_s=5.0, start_grace_s=0.0), new_ids()
+    s.contact("w2")
+    assert [ls.trial_id for ls in s.grant("w1", 2, ids)] == [0, 1]
+    for _ in range(2):   # a lost reply: the same trials go back to the same asker
+        assert s.take_back_unreported("w1") == ([0, 1], False)
+        assert [ls.trial_id for ls in s.grant("w1", 2, ids)] == [0, 1]
+    assert s.take_back_unreported("w1") == ([0, 1], True)
+    assert [ls.trial_id for ls in s.grant("w1", 2, ids)] == [2]  # a new one, one at a time
+    assert [ls.trial_id for ls in s.grant("w2", 4, ids)] == [0, 1, 3, 4]
+    assert s.take_back_unreported("w1") == ([], False)  # it keeps failing: trial 2 lost as a silent worker's
+    assert s.workers["w1"].leases == set() and queued_keys(s) == [2] and s.failed_on(2) == ["w1"]
+    assert s.grant("w1", 2, ids) == []   # nothing until lease_s after its last trial
+    assert [ls.trial_id for ls in s.grant("w2", 1, ids)] == [2]
+    for tid in (0, 1, 2, 3, 4):
+        s.release(tid)   # w2 ran them
+    clock.advance(5.0)
+    assert [ls.trial_id for ls in s.grant("w1", 2, ids)] == [5]
+
+
+def test_a_worker_that_never_runs_its_grants_alone_ends_each_trial_by_the_lease_rules():
+    """Alone, it gets its lost trials back; each is stored as failed after max_attempts (3) lost leases."""
+    clock = FakeClock(0.0)
+    s, ids = Scheduler(clock, lease_s=5.0, start_grace_s=0.0), new_ids()
+    for _ in range(3):
+        s.grant("w1", 1, ids)
+        s.take_back_unreported("w1")
+    for _ in range(3):
+        assert [ls.trial_id for ls in s.grant("w1", 1, ids)] == [0]
+        s.take_back_unreported("w1")
+        clock.advance(5.0)
+    assert [tid for tid, _ in s.given_up] == [0] and "lost its worker 3 times" in s.given_up[0][1]
+
+
+def test_a_worker_that_returns_a_result_again_gets_its_grants_again():
+    clock = FakeClock(0.0)
+    s, ids = Scheduler(clock, lease_s=5.0, start_grace_s=0.0, max_unreported=2), new_ids()
+    s.contact("w2")
+    s.grant("w1", 1, ids)
+    s.take_back_unreported("w1")
+    s.grant("w1", 1, ids)
+    assert s.take_back_unreported("w1") == ([0], True)
+    (lease,) = s.grant("w1", 3, ids)
+    s.release(lease.trial_id)   # it ran one after all: back to full batches and lost grants re-issued to it
+    assert len(s.grant("w1", 3, ids)) == 3 and s.take_back_unreported("w1")[1] is False

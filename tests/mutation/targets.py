@@ -64,6 +64,9 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     "sandbox": ("spinefarm/worker/service/sandbox.py",
                 (f"{W}/test_trial_limit_rule.py",
                  f"{W}/test_trial_limit.py::test_a_trial_process_dies_with_its_worker_even_mid_trial")),
+    "parent-death": ("spinefarm/worker/service/parent_death.py",
+                     (f"{W}/test_parent_death.py",
+                      f"{W}/test_trial_limit.py::test_a_trial_process_dies_with_its_worker_even_mid_trial")),
 }
 
 # Modules whose every mutant would take hours here (their tests start searches, trial processes or whole
@@ -76,8 +79,8 @@ FUNCTIONS: dict[str, tuple[str, ...]] = {
     "calibration": ("ranks", "spearman", "agreement", "decide", "reference_step", "CalibrationSettings"),
     # when auto calibrates, and the rungs it screens with (docs/engines.md)
     "engine-auto": ("screen_ladder", "wants_auto", "choose_engine"),
-    # the wall-clock limit's rule (docs/reliability.md), the death signal, the name of a trial process's end
-    "sandbox": ("TrialLimit", "_die_with_parent", "_exit_text"),
+    # the wall-clock limit's rule (docs/reliability.md), the name of a trial process's end
+    "sandbox": ("TrialLimit", "_exit_text"),
 }
 
 # Test files run first with numba's compiler off (NUMBA_DISABLE_JIT=1): a mutant of a numba kernel would

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import random
 import threading
 import time
@@ -154,7 +155,8 @@ def test_bad_worker_waits_name_the_flag_and_the_value(capsys):
 class HandRolledCoordinator:
     """A minimal peer speaking the protocol over real Zenoh: grants one trial, then says done."""
 
-    def __init__(self, endpoint: str, config: RunConfig, refuse_results: bool) -> None:
+    def __init__(self, endpoint: str, config: RunConfig, refuse_results: bool, served: RunConfig | None = None) -> None:
+        """served: the config its config queryable answers with (default: the run's)."""
         import zenoh
 
         from spinefarm.coordinator.service import zenoh_config
@@ -181,7 +183,7 @@ class HandRolledCoordinator:
 
         def cfg(q):
             with q:
-                q.reply(q.key_expr, encode_message(config))
+                q.reply(q.key_expr, encode_message(served or config))
 
         def info(q):
             with q:
@@ -197,9 +199,9 @@ class HandRolledCoordinator:
         self.session.close()
 
 
-def run_worker_against(peer_config: RunConfig, refuse_results: bool):
+def run_worker_against(peer_config: RunConfig, refuse_results: bool, served: RunConfig | None = None):
     endpoint = free_endpoint()
-    peer = HandRolledCoordinator(endpoint, peer_config, refuse_results)
+    peer = HandRolledCoordinator(endpoint, peer_config, refuse_results, served)
     w = WorkerService(ZenohAccess([endpoint]), run_id=peer_config.run_id, exit_when_done=True,
                       timings=WorkerTimings(query_timeout_s=1.0))
     t = threading.Thread(target=w.run, daemon=True)
@@ -223,6 +225,20 @@ def test_a_run_this_worker_cannot_serve_does_not_crash_it():
     config = replace(sphere_config(), morphology="no-such-robot")
     w, _ = run_worker_against(config, refuse_results=False)
     assert w.trials_run == 0
+
+
+def test_a_grant_whose_run_config_does_not_come_is_not_run_and_the_worker_says_why(caplog):
+    """The coordinator answers the config query with another config (a stand-in for one that did not come): the
+    worker runs nothing and says so in one line, naming the hash it received and the one it expected."""
+    from dataclasses import replace
+
+    config = sphere_config()
+    other = replace(config, seed=config.seed + 1)
+    caplog.set_level(logging.WARNING, logger="spinefarm.worker")
+    w, _ = run_worker_against(config, refuse_results=False, served=other)
+    lines = [r.getMessage() for r in caplog.records if "cannot run the trials granted" in r.getMessage()]
+    assert w.trials_run == 0 and len(lines) == 1
+    assert "\n" not in lines[0] and other.config_hash() in lines[0] and config.config_hash() in lines[0]
 
 
 def test_zenoh_json5_config_file_is_passed_through(tmp_path):

@@ -192,6 +192,7 @@ async function showRun(runId, gen, first) {
     meta.physical ? card("engine, step", `${esc(status.engine || "bullet")}, ${step ? fmt(step * 1000) + " ms" : "not run yet"}`) : "",
     card("sampler", esc(status.sampler || "–")), card("started", fmtDate(status.started_at_unix_s)),
     meta.engine_choice ? engineChoiceCard(meta.engine_choice) : "",
+    status.ladder ? ladderCard(status.ladder) : "",
   ].join("");
   document.getElementById("run-notice").innerHTML = runNotice(status, r);
   const empty = !cols.columns.status.some((x) => x === "complete" || x === "failed");
@@ -246,6 +247,12 @@ function engineChoiceCard(c) {
   return `<div class="card" title="${esc(why)}" data-engine-choice="${esc(c.engine)}"><div class="v">${text}</div>`
     + `<div class="k">engine auto${c.shipped ? " (shipped calibration)" : c.cached ? " (cached calibration)" : ""}`
     + `${c.screen_fit ? `; screen fitted to the judge (profile ${esc(c.screen_fit.profile_hash)}), then ${esc(c.screen_fit.decision)}` : ""}</div></div>`;
+}
+
+// the rungs the run screens with, and why these (the robot's ladder, the default, typed)
+function ladderCard(l) {
+  return `<div class="card" id="ladder"><div class="v">rungs ${esc(l.rungs)} s, eta ${l.eta}</div>`
+    + `<div class="k">screening ladder: <span id="ladder-reason">${esc(l.reason || "reason not stored")}</span></div></div>`;
 }
 
 // ---------------------------------------------------------------- one trial

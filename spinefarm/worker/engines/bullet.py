@@ -135,7 +135,6 @@ def _rpy(r: np.ndarray) -> tuple[float, float, float]:
 
 
 def _load_compound_urdf(body: BodyModel, pos: np.ndarray, quat: tuple[float, ...], client: int) -> int:
-
     parts = []
     for rod in body.rods:
         x, y, z = (f"{v:.17g}" for v in rod.centre_cm)

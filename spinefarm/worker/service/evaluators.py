@@ -106,3 +106,11 @@ def build_evaluator(config: RunConfig) -> Evaluator:
 
 def failed_result(a: TrialAssignment, reason: str, wall_time_s: float) -> TrialResult:
     return TrialResult.failed(reason[:150], a.seed, wall_time_s=wall_time_s)
+
+
+def missing_config(run_id: str, config_hash: str, received: list[RunConfig], refused: int, timeout_s: float) -> str:
+    """Why granted trials cannot run here, in one line: no config of the grant's hash came back."""
+    hashes = ", ".join(c.config_hash() for c in received) or "none"
+    return (f"cannot run the trials granted in run {run_id}: received {len(received)} run config(s) (hashes: {hashes}) "
+            f"and {refused} refused or malformed replies within {timeout_s:g} s, expected the config of hash "
+            f"{config_hash}; the trials go back to the coordinator with the next request")

@@ -19,7 +19,6 @@ The child asks the kernel for SIGKILL when the worker dies.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import multiprocessing as mp
 import signal
 import time
@@ -33,6 +32,7 @@ from spinefarm.protocol.results import TrialResult
 from spinefarm.protocol.run import RunConfig
 from spinefarm.protocol.work import TrialAssignment
 from spinefarm.worker.service.evaluators import build_evaluator, failed_result
+from spinefarm.worker.service.parent_death import die_with_parent
 
 MIN_LIMIT_S = 30.0
 LIMIT_FACTOR = 8.0
@@ -104,13 +104,8 @@ def task_kind(config: RunConfig, a: TrialAssignment) -> tuple[Hashable, float | 
     return (*kind, a.duration_s), dt_s
 
 
-def _die_with_parent() -> None:
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-
-
 def _child(conn: Connection, config: RunConfig) -> None:
-    _die_with_parent()
+    die_with_parent(signal.SIGKILL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the worker's to handle
     try:
         _serve(conn, config)

@@ -1,10 +1,9 @@
 """The worker's Zenoh loop: stateless, pulls leased trials, returns results until acknowledged.
 
-A worker declares a liveliness token (the coordinator re-issues its leases the moment it vanishes),
-finds a run (given, or discovered on the network), asks its work queryable for a batch, fetches the
-run's config by hash once (cached, so one worker can serve any run), runs each trial and resends
-results until the coordinator acknowledges every one. An absent coordinator means back off and
-retry, never exit. The only worker module that imports zenoh.
+A worker declares a liveliness token (the coordinator re-issues its leases the moment it vanishes), finds a run
+(given, or discovered on the network), asks its work queryable for a batch, fetches the run's config by hash once
+(cached, so one worker can serve any run), runs each trial and resends results until the coordinator acknowledges
+every one. An absent coordinator means back off and retry, never exit. The only worker module that imports zenoh.
 """
 
 from __future__ import annotations
@@ -31,7 +30,7 @@ from spinefarm.protocol.submissions import ResultAck, ResultSubmission, Submitte
 from spinefarm.protocol.work import RunInfo, TrialAssignment, WorkGrant, WorkRequest
 from spinefarm.worker.service.assignment import available_engines, environment
 from spinefarm.worker.service.connect import Connector, timed_out
-from spinefarm.worker.service.evaluators import Evaluator, build_evaluator, failed_result, sphere_result
+from spinefarm.worker.service.evaluators import Evaluator, build_evaluator, failed_result, missing_config, sphere_result
 from spinefarm.worker.service.pacing import Backoff, BatchSizer, default_worker_id, mark_ready
 from spinefarm.worker.service.sandbox import MIN_LIMIT_S, SandboxStopped, TrialLimit, TrialSandbox
 
@@ -183,9 +182,10 @@ class WorkerService:
     def _evaluator(self, session: zenoh.Session, run_id: str, config_hash: str,
                    lease: TrialAssignment) -> Evaluator | None:
         if config_hash not in self._evaluators:
-            configs = self._ask(session, keys.config(run_id, config_hash), None, RunConfig)
-            configs = [c for c in configs if c.config_hash() == config_hash]
-            if not configs:
+            replies, refused = self._query(session, keys.config(run_id, config_hash), None, RunConfig)
+            configs = [c for c in replies if c.config_hash() == config_hash]
+            if not configs:  # not silently: the coordinator sees only a worker asking again without its trials
+                log.error("%s", missing_config(run_id, config_hash, replies, refused, self.timings.query_timeout_s))
                 return None
             try:
                 self._evaluators[config_hash] = self._build(configs[0])
@@ -248,8 +248,7 @@ class WorkerService:
                 pending.clear()
             elif refused and not acks:
                 # The coordinator answered but refused the batch: resending it would loop forever.
-                log.error("run %s refused %d results; dropping them (their leases will expire)",
-                          run_id, len(pending))
+                log.error("run %s refused %d results; dropping them (their leases will expire)", run_id, len(pending))
                 pending.clear()
         return not any(pending for run_id, pending in self._pending.items() if run_id != skip)
 
