@@ -5,7 +5,12 @@ distance, a speed or either over (1 + COT), the screen's objective times judged 
 simulated time); for the COT ones (cot_distance, pareto) also times (1 + screen COT) / (1 + judge's COT), the
 judge's COT read from its evaluation row (`judge_cot`; a judge that did not move scores 0; a file from before
 that column, or a judge's run without a row, keeps the screen's COT). `cot:S` keeps the screen's value. Any
-other set ranks by its screen objective.
+other set ranks by its screen objective times the screen's bias as the judge measured it (screen_bias: one over
+the median screen-to-judge ratio of the last three judged bests that moved 10 cm or more; 1 before there are
+three): the screen's value as the judge would likely see it. Without it a screen that reads a few per cent high
+ranks every near-copy of a judged best above it, and the judge walks down a converged search's plateau one set
+at a time (a paper-size search judged 54 such sets, 30 s of Bullet each, with 2,140 more waiting at its end).
+Scaling every screened set alike keeps their order among themselves, so promotions do not change.
 A diverged (or, in older files, not-reproduced) judgement and a disputed or failed audit keep a set
 from being best (base.best_ids).
 
@@ -39,15 +44,17 @@ def judge_ratios(cols: Mapping[str, np.ndarray]) -> np.ndarray:
 
 
 def screen_bias(cols: Mapping[str, np.ndarray]) -> float:
-    """Judged over screen distance as the judge found it: 1 / the median of the judged bests' judge_ratios
-    (judged verdicts only), once BIAS_MIN_JUDGED of them moved; 1 before, or for a file without the column."""
+    """Judged over screen distance as the judge found it where the search is now: 1 / the median of the last
+    BIAS_MIN_JUDGED judge_ratios (trial-id order, judged verdicts only, bests that moved); 1 before there are
+    that many, or for a file without the column. The last ones, not all: a search's first bests (tens of
+    centimetres, ratios of 1.4-2.6 in the paper-size search) say little of the screen near its best (1.05)."""
     if "judge_ratio" not in cols:
         return 1.0
     judged = np.isin(cols["verification"], JUDGED_VERDICTS)
     ratios = judge_ratios({k: np.asarray(cols[k])[judged] for k in ("judge_ratio", "distance_m", "verify_distance_m")})
     if ratios.size < BIAS_MIN_JUDGED:
         return 1.0
-    median = float(np.median(ratios))
+    median = float(np.median(ratios[-BIAS_MIN_JUDGED:]))
     return 1.0 / median if median > 0 else 1.0
 
 

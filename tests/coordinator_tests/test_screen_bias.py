@@ -79,3 +79,21 @@ def test_the_judge_stops_walking_down_a_plateau(tmp_path):
     assert storage.best_ids(1) == [1]
     assert abs(storage.trial(1).verify_distance_m - 3.5599 / 1.04) < 1e-12
     storage.close()
+
+
+def test_the_bias_is_the_last_three_judged_bests_not_a_search_s_first_ones(tmp_path):
+    # a search's first bests moved tens of centimetres and the screen read them 2.6 and 1.4 times the judge's
+    # (0.587 / 0.2257, 0.64 / 0.4571: the paper-size search's first two); the last three read 1.05, 1.06 and
+    # 1.04 (3.50 / 3.3333, 3.40 / 3.2075, 3.30 / 3.1731). The median of the last three, 1.05, makes a 3.58 m
+    # screen count 3.58 / 1.05 = 3.4095 m, above the judged 3.3333 m: it ranks first and is the judge's next.
+    # (The median of all five, 1.06, would make it 3.3774 m, still above; with a third early ratio of 1.9 the
+    # median of all six would be 1.4 and the 3.58 m set would count 2.557 m, never judged.)
+    screens = [0.587, 0.64, 0.70, 3.50, 3.40, 3.30, 3.58]
+    storage, book = _run(tmp_path / "r.h5", screens)
+    _judge(storage, book, {0: 0.587 / 2.6, 1: 0.64 / 1.4, 2: 0.70 / 1.9, 3: 3.50 / 1.05, 4: 3.40 / 1.06,
+                           5: 3.30 / 1.04})
+    assert storage.best_ids(3) == [6, 3, 4]
+    assert book.judge_due(0, search_over=True)[0] is not None and storage.trial(6).verification == "pending"
+    storage.close()
+    with Hdf5Reader(tmp_path / "r.h5") as reader:
+        assert reader.best_ids(3) == [6, 3, 4]

@@ -27,6 +27,9 @@ TARGETS: dict[str, tuple[str, tuple[str, ...]]] = {
     "judge-audit": ("spinefarm/coordinator/ladder/checks.py",
                     (f"{C}/test_check_rules.py", f"{C}/test_check_row_engine.py", f"{C}/test_judge_rules.py",
                      f"{C}/test_best_judged.py", f"{C}/test_opinion.py")),
+    # what a set ranks by: the judged figure, the COT factor, the screen's bias the judge measured (docs/distributed.md)
+    "ranking": ("spinefarm/storage/ranking.py",
+                (f"{C}/test_screen_bias.py", f"{C}/test_best_judged.py", f"{S}/test_judged_cot_ranking.py")),
     # not test_no_locks.py's searches on a file system without locks (minutes per mutant on two busy cores):
     # test_runlock_no_locks.py takes the lock there in one process
     "runlock": ("spinefarm/storage/runlock.py",
