@@ -6,8 +6,8 @@ simulated time); for the COT ones (cot_distance, pareto) also times (1 + screen 
 judge's COT read from its evaluation row (`judge_cot`; a judge that did not move scores 0; a file from before
 that column, or a judge's run without a row, keeps the screen's COT). `cot:S` keeps the screen's value. Any
 other set ranks by its screen objective times the screen's bias as the judge measured it (screen_bias: one over
-the median screen-to-judge ratio of the last three judged bests that moved 10 cm or more; 1 before there are
-three): the screen's value as the judge would likely see it. Without it a screen that reads a few per cent high
+the smallest screen-to-judge ratio of the last three judged bests that moved 10 cm or more; 1 before there are
+three): the best the judge could find it, by the closest recent reading. Without it a screen that reads a few per cent high
 ranks every near-copy of a judged best above it, and the judge walks down a converged search's plateau one set
 at a time (a paper-size search judged 54 such sets, 30 s of Bullet each, with 2,140 more waiting at its end).
 Scaling every screened set alike keeps their order among themselves, so promotions do not change.
@@ -44,18 +44,20 @@ def judge_ratios(cols: Mapping[str, np.ndarray]) -> np.ndarray:
 
 
 def screen_bias(cols: Mapping[str, np.ndarray]) -> float:
-    """Judged over screen distance as the judge found it where the search is now: 1 / the median of the last
-    BIAS_MIN_JUDGED judge_ratios (trial-id order, judged verdicts only, bests that moved); 1 before there are
-    that many, or for a file without the column. The last ones, not all: a search's first bests (tens of
-    centimetres, ratios of 1.4-2.6 in the paper-size search) say little of the screen near its best (1.05)."""
+    """Judged over screen distance as the judge found it where the search is now, at its most favourable: 1 / the
+    smallest of the last BIAS_MIN_JUDGED judge_ratios (trial-id order, judged verdicts only, bests that moved);
+    1 before there are that many, or for a file without the column. The smallest: a screened set is passed over
+    only if it could not beat the judged best even as close to the judge as the closest recent reading (a
+    median of a search's first ratios, 2.6 and 1.4 in the paper-size search against 1.05 near its best, kept
+    its best sets from ever being judged). The last ones: an early reading says little of the screen now."""
     if "judge_ratio" not in cols:
         return 1.0
     judged = np.isin(cols["verification"], JUDGED_VERDICTS)
     ratios = judge_ratios({k: np.asarray(cols[k])[judged] for k in ("judge_ratio", "distance_m", "verify_distance_m")})
     if ratios.size < BIAS_MIN_JUDGED:
         return 1.0
-    median = float(np.median(ratios[-BIAS_MIN_JUDGED:]))
-    return 1.0 / median if median > 0 else 1.0
+    closest = float(np.min(ratios[-BIAS_MIN_JUDGED:]))
+    return 1.0 / closest if closest > 0 else 1.0
 
 
 def judged_speed_cm_s(judged_distance_m: float, sim_time_s: float) -> float:
