@@ -7,10 +7,11 @@ judge's COT read from its evaluation row (`judge_cot`; a judge that did not move
 that column, or a judge's run without a row, keeps the screen's COT). `cot:S` keeps the screen's value. Any
 other set ranks by its screen objective times the screen's bias as the judge measured it (screen_bias: one over
 the smallest screen-to-judge ratio of the last three judged bests that moved 10 cm or more; 1 before there are
-three): the best the judge could find it, by the closest recent reading. Without it a screen that reads a few per cent high
-ranks every near-copy of a judged best above it, and the judge walks down a converged search's plateau one set
-at a time (a paper-size search judged 54 such sets, 30 s of Bullet each, with 2,140 more waiting at its end).
-Scaling every screened set alike keeps their order among themselves, so promotions do not change.
+three): the best the judge could find it, by the closest recent reading. Without it a screen that reads a few
+per cent high ranks every near-copy of a judged best above it, and the judge walks down a converged search's
+plateau one set at a time (a paper-size search judged 54 such sets, 30 s of Bullet each, with 2,140 more
+waiting at its end). Scaling every screened set alike keeps their order among themselves, so promotions do not
+change.
 A diverged (or, in older files, not-reproduced) judgement and a disputed or failed audit keep a set
 from being best (base.best_ids).
 
