@@ -47,13 +47,11 @@ def judge_ratios(cols: Mapping[str, np.ndarray]) -> np.ndarray:
 def screen_bias(cols: Mapping[str, np.ndarray]) -> float:
     """Judged over screen distance as the judge found it where the search is now, at its most favourable: 1 / the
     smallest of the last BIAS_MIN_JUDGED judge_ratios (trial-id order, judged verdicts only, bests that moved);
-    1 before there are that many, or for a file without the column. The smallest: a screened set is passed over
+    1 before there are that many. The smallest: a screened set is passed over
     only if it could not beat the judged best even as close to the judge as the closest recent reading (a
     median of a search's first ratios, 2.6 and 1.4 in the paper-size search against 1.05 near its best, kept
     its best sets from ever being judged). The last ones: an early reading says little of the screen now."""
-    if "judge_ratio" not in cols:
-        return 1.0
-    judged = np.isin(cols["verification"], JUDGED_VERDICTS)
+    judged = np.isin(cols["verification"], JUDGED_VERDICTS)   # every schema has the column (NaN where unjudged)
     ratios = judge_ratios({k: np.asarray(cols[k])[judged] for k in ("judge_ratio", "distance_m", "verify_distance_m")})
     if ratios.size < BIAS_MIN_JUDGED:
         return 1.0

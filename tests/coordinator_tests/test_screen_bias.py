@@ -62,6 +62,16 @@ def test_two_judged_bests_or_bests_that_barely_moved_leave_the_screen_as_it_is(t
     storage.close()
 
 
+def test_a_best_that_moved_exactly_10_cm_counts(tmp_path):
+    # the drift rule's population: bests that moved 10 cm or more. A third best screened 0.10 m and judged
+    # 0.05 m (ratio 2) makes three ratios (1.0511, 1.0625, 2): the smallest, 1.0511, makes 3.48 m count
+    # 3.3108 m, below the judged 3.33 m
+    storage, book = _run(tmp_path / "r.h5", [3.50, 3.40, 0.10, 3.48])
+    _judge(storage, book, {0: 3.33, 1: 3.20, 2: 0.05})
+    assert storage.best_ids(3) == [0, 3, 1]
+    storage.close()
+
+
 def test_the_judge_stops_walking_down_a_plateau(tmp_path):
     # 40 near-copies screened 3.5600 .. 3.5561 m; the judge finds each 1.06, 1.04, 1.05, 1.06, ... times shorter.
     # Before three ratios the screen counts as it is, so the first three bests are judged (3.3585, 3.4230 and
