@@ -49,6 +49,12 @@ def wait_until(test, timeout_s: float, every_s: float = 0.1) -> bool:
     return test()
 
 
+def _as_from_a_terminal() -> None:
+    """SIGINT as a terminal or a script gives it: a suite started in the background of a non-interactive shell
+    (`make test &`) inherits SIGINT ignored (POSIX), and an ignored signal stays ignored across exec."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 COMMANDS = {
     "search": ["search", "tetraspine-ntrt", "--trials", "4", "--workers", "2", "--duration", "1", "--api-port", "-1",
                "--calibrate-gaits", "200", "--calibrate-duration", "3", "--quiet"],
@@ -67,7 +73,8 @@ def test_a_stop_signal_during_a_pool_leaves_no_process(tmp_path, command, how):
             *(["--out", str(tmp_path / "acc")] if command == "accuracy" else [])]
     log = (tmp_path / "stderr.log").open("w")
     proc = subprocess.Popen([sys.executable, "-m", "spinefarm", *args], cwd=tmp_path, env=env,
-                            stdout=subprocess.DEVNULL, stderr=log, start_new_session=True)
+                            stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
+                            preexec_fn=_as_from_a_terminal)
     try:
         # the command, (a search's calibration child,) and a pool of 2 at work
         want = 4 if command == "search" else 3
